@@ -1,0 +1,59 @@
+"""Typed configuration: dataclasses with defaults, loadable from TOML files in `configs/`."""
+
+from __future__ import annotations
+
+import dataclasses
+import tomllib
+from pathlib import Path
+from typing import Any, TypeVar
+
+import dacite
+
+T = TypeVar("T")
+
+
+class ConfigError(ValueError):
+    """A configuration file or value is invalid; the message names the file and the key."""
+
+
+def from_dict(cls: type[T], data: dict[str, Any], where: str = "config") -> T:
+    """Build dataclass `cls` from `data`; unknown keys and wrong types raise ConfigError naming `where`."""
+    try:
+        return dacite.from_dict(
+            cls, data, config=dacite.Config(strict=True, cast=[tuple], type_hooks={float: _to_float})
+        )
+    except (dacite.DaciteError, TypeError, ValueError) as exc:
+        raise ConfigError(f"{where}: {exc}") from exc
+
+
+def _to_float(value: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise TypeError(f"expected a number, got {value!r}")
+    return float(value)
+
+
+def load_toml(path: str | Path) -> dict[str, Any]:
+    """Read a TOML file; a missing or malformed file raises ConfigError naming it."""
+    path = Path(path)
+    try:
+        with path.open("rb") as fh:
+            return tomllib.load(fh)
+    except FileNotFoundError as exc:
+        raise ConfigError(f"config file not found: {path}") from exc
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{path}: not valid TOML: {exc}") from exc
+
+
+def load_section(cls: type[T], path: str | Path | None, section: str) -> T:
+    """Load `[section]` of TOML file `path` into `cls`; defaults when `path` is None or the section is absent."""
+    if path is None:
+        return cls()
+    data = load_toml(path).get(section, {})
+    if not isinstance(data, dict):
+        raise ConfigError(f"{path}: [{section}] must be a table")
+    return from_dict(cls, data, where=f"{path} [{section}]")
+
+
+def to_dict(obj: Any) -> dict[str, Any]:
+    """A dataclass as a plain dict (tuples become lists), for metadata and logs."""
+    return dataclasses.asdict(obj)

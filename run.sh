@@ -1,0 +1,28 @@
+#!/usr/bin/env bash
+# Quick start entry point: sets up .venv (first run only) and runs the main job or the tests.
+#   ./run.sh main [args]   the main job (see README)
+#   ./run.sh test [args]   the test suite (pytest args pass through)
+set -euo pipefail
+cd "$(dirname "$0")"
+PY=${PYTHON:-python3}
+VENV=.venv
+STAMP="$VENV/.installed-$(sha1sum pyproject.toml | cut -c1-12)"
+
+if [ ! -f "$STAMP" ]; then
+  echo "[run.sh] setting up $VENV (first run takes a few minutes)..." >&2
+  "$PY" -m venv "$VENV"
+  "$VENV/bin/python" -m pip install --quiet --upgrade pip
+  # torch is pinned to the CPU build; install it first so nothing pulls a CUDA build.
+  "$VENV/bin/python" -m pip install --quiet "torch==2.13.0"
+  "$VENV/bin/python" -m pip install --quiet -e ".[dev]"
+  rm -f "$VENV"/.installed-*
+  touch "$STAMP"
+fi
+
+cmd=${1:-main}
+shift || true
+case "$cmd" in
+  main) exec "$VENV/bin/mrguide" main "$@" ;;
+  test) exec "$VENV/bin/python" -m pytest -q "$@" ;;
+  *) echo "usage: ./run.sh {main|test} [args]" >&2; exit 2 ;;
+esac
