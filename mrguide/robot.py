@@ -33,7 +33,7 @@ class Workspace:
     """Axis-aligned box in the robot base frame that the normalized action [-1, 1]^3 maps onto (m)."""
 
     low: tuple[float, float, float] = (0.30, -0.20, 0.045)
-    high: tuple[float, float, float] = (0.65, 0.40, 0.40)
+    high: tuple[float, float, float] = (0.65, 0.40, 0.35)
 
     def __post_init__(self) -> None:
         if not np.all(np.asarray(self.high) > np.asarray(self.low)):
@@ -138,7 +138,7 @@ def resolve_urdf(name: str) -> tuple[Path, Path]:
     urdf = Path(str(dist.locate_file(KNOWN_ROBOTS[name])))
     if not urdf.is_file():
         raise RobotSpecError(f"URDF of robot {name!r} not found at {urdf} (example-robot-data {dist.version})")
-    package_dir = urdf.parents[3]  # .../share, against which package://example-robot-data/... resolves
+    package_dir = urdf.parents[4]  # .../share, against which package://example-robot-data/... resolves
     return urdf, package_dir
 
 

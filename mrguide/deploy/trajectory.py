@@ -1,0 +1,91 @@
+"""Ruckig jerk-limited joint trajectories, streamed one control period at a time."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from ruckig import InputParameter, OutputParameter, Result, Ruckig
+
+from mrguide.robot import RobotSpec
+
+
+class TrajectoryError(RuntimeError):
+    """Ruckig rejected the input (target outside the position limits, non-finite values, ...)."""
+
+
+@dataclass
+class JointSetpoint:
+    """One control-period sample of the joint trajectory."""
+
+    q: np.ndarray
+    dq: np.ndarray
+    ddq: np.ndarray
+    finished: bool
+
+
+class JointStreamer:
+    """Online trajectory generation: re-targetable at any cycle, continuous in position/velocity/acceleration."""
+
+    def __init__(self, spec: RobotSpec, control_period: float = 0.004):
+        if not control_period > 0:
+            raise ValueError(f"control period must be > 0, got {control_period}")
+        self.spec = spec
+        self.control_period = control_period
+        n = spec.dof
+        self._otg = Ruckig(n, control_period)
+        self._inp = InputParameter(n)
+        self._out = OutputParameter(n)
+        self._inp.max_velocity = spec.v_max.tolist()
+        self._inp.max_acceleration = spec.a_max.tolist()
+        self._inp.max_jerk = spec.j_max.tolist()
+        self._inp.min_position = spec.q_lower.tolist()
+        self._inp.max_position = spec.q_upper.tolist()
+        self.reset(spec.q_home)
+
+    def reset(self, q: np.ndarray, dq: np.ndarray | None = None, ddq: np.ndarray | None = None) -> None:
+        """Restart from state (q, dq, ddq), holding q as target."""
+        n = self.spec.dof
+        q = np.asarray(q, dtype=float)
+        self._inp.current_position = q.tolist()
+        self._inp.current_velocity = (np.zeros(n) if dq is None else np.asarray(dq, float)).tolist()
+        self._inp.current_acceleration = (np.zeros(n) if ddq is None else np.asarray(ddq, float)).tolist()
+        self._inp.target_position = q.tolist()
+        self._inp.target_velocity = [0.0] * n
+        self._inp.target_acceleration = [0.0] * n
+
+    def set_target(self, q_target: np.ndarray) -> None:
+        """New target configuration, reached at rest; motion continues smoothly from the current state."""
+        q_target = np.asarray(q_target, dtype=float)
+        if q_target.shape != (self.spec.dof,) or not np.all(np.isfinite(q_target)):
+            raise TrajectoryError(f"trajectory target must be {self.spec.dof} finite values, got {q_target}")
+        if not self.spec.within_limits(q_target):
+            raise TrajectoryError(f"trajectory target {np.round(q_target, 4).tolist()} outside the joint limits")
+        self._inp.target_position = q_target.tolist()
+
+    def state(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Current commanded (q, dq, ddq)."""
+        i = self._inp
+        return np.array(i.current_position), np.array(i.current_velocity), np.array(i.current_acceleration)
+
+    def snapshot(self) -> tuple[list[float], ...]:
+        """Full streamer state (current and target), for save/restore."""
+        i = self._inp
+        return (list(i.current_position), list(i.current_velocity), list(i.current_acceleration), list(i.target_position))
+
+    def restore(self, snap: tuple[list[float], ...]) -> None:
+        q, dq, ddq, target = snap
+        self.reset(np.array(q), np.array(dq), np.array(ddq))
+        self._inp.target_position = list(target)
+
+    def step(self) -> JointSetpoint:
+        """Advance one control period and return the new setpoint."""
+        result = self._otg.update(self._inp, self._out)
+        if result not in (Result.Working, Result.Finished):
+            raise TrajectoryError(f"Ruckig failed with {result}")
+        out = self._out
+        sp = JointSetpoint(
+            np.array(out.new_position), np.array(out.new_velocity), np.array(out.new_acceleration), result == Result.Finished
+        )
+        out.pass_to_input(self._inp)
+        return sp

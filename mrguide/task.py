@@ -1,0 +1,188 @@
+"""The paper's five-phase pick-and-place task model and reward (Sec. III-A/B, Eq. 4-6). No PyBullet here.
+
+Everything is a pure function of (tcp, gripper, object, goal, phase), so the twin and the robot's task
+monitor run the same code. Positions are in the robot base frame (m); `object` is the centre of the
+object, `goal` the centre the object should end at.
+
+Interpretation notes (the paper leaves these open):
+- The gripper state g is +1 when the vacuum is on, -1 when off (Eq. 2). Eq. 6 writes the success
+  condition as "g_t = 0"; with g in {-1, +1} we read it as "open" (g = -1, the release state ḡ_4).
+- The grasp phase completes only when the vacuum generator reports a part (the real cell's signal),
+  and losing the part during lift or transport ends the episode as a drop.
+- Success also requires the released object to lie within `place_tolerance` of the goal (xy).
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+
+import numpy as np
+
+from mrguide.config import ConfigError
+
+PHASES: tuple[str, ...] = ("approach", "grasp", "lift", "transport", "release")
+#: Required gripper state per phase, ḡ = [-1, 1, 1, 1, -1] (paper, Eq. 5).
+G_REQUIRED: tuple[int, ...] = (-1, 1, 1, 1, -1)
+N_PHASES = len(PHASES)
+
+
+class Outcome(str, enum.Enum):
+    """How an episode ended."""
+
+    SUCCESS = "success"
+    NO_GRASP = "no_grasp"  # horizon reached before the object was grasped
+    DROPPED = "dropped"  # part lost during lift or transport (or before release)
+    MISPLACED = "misplaced"  # released outside the tolerance region
+    TIMEOUT = "timeout"  # horizon reached after the grasp
+
+
+@dataclass(frozen=True)
+class TaskConfig:
+    """Reward weights and task geometry. The paper gives the form of Eq. 4-6 but no values."""
+
+    alpha: float = 1.0  # α, weight of the tracking error d_t (Eq. 4; value ours)
+    eta: float = 1.0  # η, premature-closure penalty (Eq. 4; value ours)
+    step_penalty: float = 0.1  # λ, constant step penalty (Eq. 4; value ours)
+    epsilon: float = 0.02  # ε, phase tolerance radius (m) (Eq. 5; value ours)
+    r_success: float = 20.0  # R_success (Eq. 6; value ours)
+    r_fail: float = 10.0  # R_fail (Eq. 6; value ours)
+    object_height: float = 0.05  # edge of the cube-shaped object (m)
+    approach_height: float = 0.08  # pre-grasp height of the TCP above the object top (m)
+    lift_height: float = 0.15  # TCP height of the lift and transport targets (m)
+    place_tolerance: float = 0.03  # success radius of the placed object around the goal, xy (m)
+    horizon: int = 60  # T, decisions per episode
+
+    def __post_init__(self) -> None:
+        for name in ("alpha", "eta", "step_penalty", "epsilon", "object_height", "place_tolerance"):
+            if not getattr(self, name) > 0:
+                raise ConfigError(f"task.{name} must be > 0 (paper: α, η, λ, ε > 0), got {getattr(self, name)}")
+        if self.horizon < 1:
+            raise ConfigError(f"task.horizon must be >= 1, got {self.horizon}")
+
+    @property
+    def bonuses(self) -> tuple[float, ...]:
+        """Phase bonuses b_κ = κ + 1 (paper, Eq. 5)."""
+        return tuple(float(k + 1) for k in range(N_PHASES))
+
+
+def phase_target(phase: int, obj: np.ndarray, goal: np.ndarray, cfg: TaskConfig) -> np.ndarray:
+    """TCP target p^tar_κ of a phase (Eq. 4): pre-grasp, object top, lift, above goal, place pose."""
+    obj = np.asarray(obj, dtype=float)
+    goal = np.asarray(goal, dtype=float)
+    top = obj[2] + 0.5 * cfg.object_height
+    if phase == 0:
+        return np.array([obj[0], obj[1], top + cfg.approach_height])
+    if phase == 1:
+        return np.array([obj[0], obj[1], top])
+    if phase == 2:
+        return np.array([obj[0], obj[1], cfg.lift_height])
+    if phase == 3:
+        return np.array([goal[0], goal[1], cfg.lift_height])
+    if phase == 4:
+        return np.array([goal[0], goal[1], goal[2] + 0.5 * cfg.object_height])
+    raise ValueError(f"phase must be in 0..{N_PHASES - 1}, got {phase}")
+
+
+def progress(phase: int, success: bool = False) -> float:
+    """Task-progress indicator φ ∈ [0, 1]: completed phases / 5 (1.0 once released at the goal)."""
+    return 1.0 if success else phase / N_PHASES
+
+
+def phase_from_progress(phi: float) -> int:
+    """Inverse of `progress` for observations (φ = 1 maps to the release phase)."""
+    return int(min(N_PHASES - 1, max(0, round(float(phi) * N_PHASES))))
+
+
+@dataclass(frozen=True)
+class StepResult:
+    """Outcome of one task-model step: reward and its terms, the next phase, and the episode outcome."""
+
+    reward: float
+    terms: dict[str, float]
+    phase: int
+    outcome: Outcome | None
+    distance: float
+
+    @property
+    def done(self) -> bool:
+        return self.outcome is not None
+
+
+def task_step(
+    cfg: TaskConfig,
+    phase: int,
+    tcp: np.ndarray,
+    g: int,
+    part_present: bool,
+    obj: np.ndarray,
+    goal: np.ndarray,
+    t: int,
+) -> StepResult:
+    """Evaluate Eq. 4-6 for the state reached after decision `t` (0-based) in phase κ = `phase`.
+
+    `g` is the gripper state (+1 vacuum on, -1 off); `part_present` the vacuum generator's part signal.
+    """
+    if g not in (-1, 1):
+        raise ValueError(f"gripper state must be -1 or +1, got {g}")
+    tcp = np.asarray(tcp, dtype=float)
+    d = float(np.linalg.norm(tcp - phase_target(phase, obj, goal, cfg)))
+    terms = {
+        "tracking": -cfg.alpha * d,
+        "premature_close": -cfg.eta if (phase == 0 and g == 1) else 0.0,
+        "phase_bonus": 0.0,
+        "step": -cfg.step_penalty,
+        "terminal": 0.0,
+    }
+    outcome: Outcome | None = None
+    next_phase = phase
+    reached = d < cfg.epsilon and g == G_REQUIRED[phase]
+    holding_needed = phase in (2, 3) or (phase == 4 and g == 1)
+    if holding_needed and not part_present:
+        outcome = Outcome.DROPPED
+    elif phase == 4 and g == -1:
+        placed = float(np.linalg.norm(np.asarray(obj)[:2] - np.asarray(goal)[:2])) < cfg.place_tolerance
+        if reached and placed:
+            terms["phase_bonus"] = cfg.bonuses[phase]
+            terms["terminal"] = cfg.r_success
+            outcome = Outcome.SUCCESS
+        else:
+            outcome = Outcome.MISPLACED
+    elif reached and (phase != 1 or part_present):
+        terms["phase_bonus"] = cfg.bonuses[phase]
+        next_phase = phase + 1
+    if outcome is None and t + 1 >= cfg.horizon:
+        outcome = Outcome.NO_GRASP if next_phase <= 1 else Outcome.TIMEOUT
+    if outcome is not None and outcome is not Outcome.SUCCESS:
+        terms["terminal"] = -cfg.r_fail
+    return StepResult(float(sum(terms.values())), terms, next_phase, outcome, d)
+
+
+def observation(tcp: np.ndarray, g: int, phi: float, obj: np.ndarray, goal: np.ndarray) -> np.ndarray:
+    """The policy's observation [tcp xyz, g, φ, object xyz, goal xyz] (float32, shape (11,))."""
+    return np.concatenate([np.asarray(tcp, float), [float(g), float(phi)], np.asarray(obj, float), np.asarray(goal, float)]).astype(np.float32)
+
+
+OBS_DIM = 11
+ACT_DIM = 4
+OBS_LAYOUT = ("tcp_x", "tcp_y", "tcp_z", "g", "phi", "obj_x", "obj_y", "obj_z", "goal_x", "goal_y", "goal_z")
+ACT_LAYOUT = ("target_x", "target_y", "target_z", "gripper")
+
+
+def oracle_action(obs: np.ndarray, cfg: TaskConfig, to_normalized) -> np.ndarray:
+    """The scripted expert: the current phase's target and required gripper state (from the task model).
+
+    `to_normalized` maps a base-frame point to the normalized action space (the workspace's
+    `to_normalized`). In the grasp phase the target lies 3 mm into the object top so the cup seals; in
+    the release phase the vacuum stays on until the TCP is at the place pose.
+    """
+    obs = np.asarray(obs, dtype=float)
+    tcp, phase = obs[0:3], phase_from_progress(obs[4])
+    obj, goal = obs[5:8], obs[8:11]
+    target = phase_target(phase, obj, goal, cfg)
+    grip = float(G_REQUIRED[phase])
+    if phase == 1:
+        target = target - np.array([0.0, 0.0, 0.003])
+    elif phase == 4 and np.linalg.norm(tcp - target) > 0.5 * cfg.epsilon:
+        grip = 1.0
+    return np.concatenate([np.clip(to_normalized(target), -1.0, 1.0), [grip]]).astype(np.float32)

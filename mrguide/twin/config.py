@@ -1,0 +1,84 @@
+"""Configuration of the twin: timing, randomization regions, reality-gap parameters, camera."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from mrguide.config import ConfigError
+from mrguide.twin.camera import CameraConfig
+
+
+@dataclass(frozen=True)
+class RealityGap:
+    """Physical parameters that differ between the training twin and the 'real' cell.
+
+    The defaults are the training twin's (ideal actuators, noise-free sensors). A second twin playing
+    the real robot loads other values, e.g. from `configs/real_cell.toml`.
+    """
+
+    object_mass: float = 0.20  # kg
+    object_friction: float = 0.8  # lateral friction coefficient
+    suction_break_force: float = 40.0  # N; the cup lets go above this constraint force
+    actuator_latency: int = 0  # control periods between a setpoint and its application
+    actuator_lag: float = 0.0  # s; first-order time constant of the joint servo on its setpoint
+    joint_noise: float = 0.0  # rad; std of the measured joint positions
+    vacuum_noise: float = 0.0  # kPa; std of the vacuum-level reading
+
+    def __post_init__(self) -> None:
+        for name in ("object_mass", "object_friction", "suction_break_force"):
+            if not getattr(self, name) > 0:
+                raise ConfigError(f"reality_gap.{name} must be > 0, got {getattr(self, name)}")
+        for name in ("actuator_latency", "actuator_lag", "joint_noise", "vacuum_noise"):
+            if getattr(self, name) < 0:
+                raise ConfigError(f"reality_gap.{name} must be >= 0, got {getattr(self, name)}")
+
+
+@dataclass(frozen=True)
+class Region:
+    """Axis-aligned xy rectangle on the table (m)."""
+
+    low: tuple[float, float] = (0.40, -0.15)
+    high: tuple[float, float] = (0.60, 0.00)
+
+    def __post_init__(self) -> None:
+        if not (self.high[0] >= self.low[0] and self.high[1] >= self.low[1]):
+            raise ConfigError(f"region: high {self.high} must not be below low {self.low}")
+
+
+@dataclass(frozen=True)
+class VacuumConfig:
+    """Vacuum generator model, gauge pressures in kPa (negative = below atmosphere)."""
+
+    level_sealed: float = -65.0  # kPa with a part on the cup
+    level_open: float = -8.0  # kPa with the vacuum on and no part (flow through the open cup)
+    part_threshold: float = -35.0  # kPa; part-present when the level is below this
+    time_constant: float = 0.03  # s; first-order response of the level
+    seal_distance: float = 0.006  # m; the cup seals when its lip is within this of the object top
+
+
+@dataclass(frozen=True)
+class TwinConfig:
+    """The twin of the cell ([twin] in a TOML config)."""
+
+    control_period: float = 0.004  # s; Ruckig/physics step (default 4 ms, as the bus SYNC period)
+    decision_period: float = 0.1  # s; one policy decision is executed for this long
+    object_region: Region = field(default_factory=Region)
+    goal_region: Region = field(default_factory=lambda: Region((0.40, 0.12), (0.60, 0.30)))
+    reality_gap: RealityGap = field(default_factory=RealityGap)
+    vacuum: VacuumConfig = field(default_factory=VacuumConfig)
+    camera: CameraConfig = field(default_factory=CameraConfig)
+    gui: bool = False
+
+    def __post_init__(self) -> None:
+        if not self.control_period > 0:
+            raise ConfigError(f"twin.control_period must be > 0, got {self.control_period}")
+        ratio = self.decision_period / self.control_period
+        if self.decision_period <= 0 or abs(ratio - round(ratio)) > 1e-6:
+            raise ConfigError(
+                f"twin.decision_period ({self.decision_period}) must be a positive multiple of the "
+                f"control period ({self.control_period})"
+            )
+
+    @property
+    def cycles_per_decision(self) -> int:
+        return int(round(self.decision_period / self.control_period))

@@ -1,0 +1,230 @@
+"""The PyBullet cell: table, UR5 with suction cup, one cube, a goal marker, and a camera.
+
+The arm is loaded from example-robot-data's URDF with a cup link (and a `tcp` link at its lip) added
+on the fly into a cached copy; the package's own file is never changed or copied into the repo. The
+arm follows joint setpoints through PyBullet's position servos, one physics step per control period,
+with the reality-gap actuator latency/lag and sensor noise applied on the way.
+"""
+
+from __future__ import annotations
+
+import collections
+import hashlib
+import logging
+import os
+import tempfile
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pybullet as pb
+
+from mrguide.robot import RobotSpec
+from mrguide.twin.camera import Camera
+from mrguide.twin.config import TwinConfig
+from mrguide.twin.suction import SuctionCup, SuctionState
+
+log = logging.getLogger(__name__)
+
+CUP_RADIUS = 0.02  # m
+TABLE_CENTER = (0.45, 0.10, -0.02)
+TABLE_HALF_EXTENTS = (0.55, 0.60, 0.02)  # top face at z = 0
+
+
+def urdf_with_cup(spec: RobotSpec) -> Path:
+    """Path of a (content-addressed) URDF = the package's URDF + `suction_cup` and `tcp` links on the flange."""
+    root = ET.fromstring(spec.urdf_path.read_text().replace("package://", f"{spec.package_dir.as_posix()}/"))
+    length = float(spec.T_flange_tcp[2, 3])
+    cyl = f'<cylinder radius="{CUP_RADIUS}" length="{length}"/>'
+    origin = f'<origin xyz="0 0 {length / 2}" rpy="0 0 0"/>'
+    root.append(ET.fromstring(
+        f'<link name="suction_cup"><inertial><mass value="0.1"/>{origin}'
+        f'<inertia ixx="1e-4" ixy="0" ixz="0" iyy="1e-4" iyz="0" izz="1e-4"/></inertial>'
+        f'<visual>{origin}<geometry>{cyl}</geometry><material name="cup"><color rgba="0.15 0.15 0.15 1"/></material></visual>'
+        f'<collision>{origin}<geometry>{cyl}</geometry></collision></link>'
+    ))
+    root.append(ET.fromstring(
+        f'<joint name="flange_cup_joint" type="fixed"><parent link="{spec.flange_frame}"/><child link="suction_cup"/>'
+        f'<origin xyz="0 0 0" rpy="0 0 0"/></joint>'
+    ))
+    root.append(ET.fromstring(
+        '<link name="tcp"><inertial><mass value="0"/><origin xyz="0 0 0" rpy="0 0 0"/>'
+        '<inertia ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"/></inertial></link>'
+    ))
+    root.append(ET.fromstring(
+        f'<joint name="cup_tcp_joint" type="fixed"><parent link="suction_cup"/><child link="tcp"/>'
+        f'<origin xyz="0 0 {length}" rpy="0 0 0"/></joint>'
+    ))
+    text = ET.tostring(root, encoding="unicode")
+    out = Path(tempfile.gettempdir()) / "mrguide-urdf" / f"{spec.name}-cup-{hashlib.sha1(text.encode()).hexdigest()[:12]}.urdf"
+    if not out.exists():
+        out.parent.mkdir(parents=True, exist_ok=True)
+        tmp = out.with_suffix(f".{os.getpid()}.tmp")
+        tmp.write_text(text)
+        tmp.replace(out)
+    return out
+
+
+@dataclass
+class SceneSnapshot:
+    """A restorable state: PyBullet's in-memory state plus what lives outside it."""
+
+    pb_state: int
+    suction: SuctionState
+    applied: np.ndarray
+    pending: list[np.ndarray]
+    servo: tuple[np.ndarray, np.ndarray]
+    rng_state: dict
+
+
+class Scene:
+    """One PyBullet world with the cell in it."""
+
+    def __init__(self, spec: RobotSpec, cfg: TwinConfig, object_size: float = 0.05, seed: int | None = None):
+        self.spec, self.cfg = spec, cfg
+        self.object_size = object_size
+        self.client = pb.connect(pb.GUI if cfg.gui else pb.DIRECT)
+        c = self.client
+        pb.setGravity(0, 0, -9.81, physicsClientId=c)
+        pb.setTimeStep(cfg.control_period, physicsClientId=c)
+        pb.setPhysicsEngineParameter(deterministicOverlappingPairs=1, physicsClientId=c)
+        table_col = pb.createCollisionShape(pb.GEOM_BOX, halfExtents=TABLE_HALF_EXTENTS, physicsClientId=c)
+        table_vis = pb.createVisualShape(pb.GEOM_BOX, halfExtents=TABLE_HALF_EXTENTS, rgbaColor=(0.75, 0.72, 0.66, 1), physicsClientId=c)
+        self.table = pb.createMultiBody(0, table_col, table_vis, TABLE_CENTER, physicsClientId=c)
+        self.robot = pb.loadURDF(str(urdf_with_cup(spec)), useFixedBase=True, physicsClientId=c)
+        links = {pb.getJointInfo(self.robot, j, physicsClientId=c)[12].decode(): j for j in range(pb.getNumJoints(self.robot, physicsClientId=c))}
+        joints = {pb.getJointInfo(self.robot, j, physicsClientId=c)[1].decode(): j for j in range(pb.getNumJoints(self.robot, physicsClientId=c))}
+        self.joint_ids = [joints[name] for name in spec.joint_names]
+        self.tcp_link = links["tcp"]
+        self.cup_link = links["suction_cup"]
+        for link in (-1, 0, 1):  # the arm is bolted to the table: no contacts between its base and the top
+            pb.setCollisionFilterPair(self.table, self.robot, -1, link, 0, physicsClientId=c)
+        self.efforts = np.array([pb.getJointInfo(self.robot, j, physicsClientId=c)[10] for j in self.joint_ids])
+        h = object_size / 2
+        obj_col = pb.createCollisionShape(pb.GEOM_BOX, halfExtents=(h, h, h), physicsClientId=c)
+        obj_vis = pb.createVisualShape(pb.GEOM_BOX, halfExtents=(h, h, h), rgbaColor=(0.85, 0.1, 0.1, 1), physicsClientId=c)
+        gap = cfg.reality_gap
+        self.object = pb.createMultiBody(gap.object_mass, obj_col, obj_vis, (0.5, -0.1, h), physicsClientId=c)
+        pb.changeDynamics(self.object, -1, lateralFriction=gap.object_friction,
+                          activationState=pb.ACTIVATION_STATE_DISABLE_SLEEPING, physicsClientId=c)
+        goal_vis = pb.createVisualShape(pb.GEOM_CYLINDER, radius=0.03, length=0.002, rgbaColor=(0.1, 0.8, 0.2, 0.6), physicsClientId=c)
+        self.goal_marker = pb.createMultiBody(0, -1, goal_vis, (0.5, 0.2, 0.001), physicsClientId=c)
+        self.suction = SuctionCup(c, self.robot, self.tcp_link, self.object, object_size, cfg.vacuum, cfg.control_period)
+        self.suction.break_force = gap.suction_break_force
+        self.rng = np.random.default_rng(seed)
+        self._applied = spec.q_home.copy()
+        self._pending: collections.deque[np.ndarray] = collections.deque()
+        self.goal = np.array([0.5, 0.2, h])
+        self._last_servo = (spec.q_home.copy(), np.zeros(spec.dof))
+        self._initial_state: int | None = None
+        self.place(spec.q_home, np.array([0.5, -0.1, h]), self.goal)
+        self._initial_state = pb.saveState(physicsClientId=c)
+
+    # -- set-up ----------------------------------------------------------------------------------
+    def place(self, q: np.ndarray, obj: np.ndarray, goal: np.ndarray) -> None:
+        """Arm at rest at q, object at rest at `obj` (upright), goal marker at `goal`, vacuum off."""
+        c = self.client
+        if self._initial_state is not None:
+            self.suction.set_vacuum(False)
+            pb.restoreState(self._initial_state, physicsClientId=c)
+        self.suction.restore(SuctionState())
+        for j, qj in zip(self.joint_ids, q):
+            pb.resetJointState(self.robot, j, float(qj), 0.0, physicsClientId=c)
+        self._servo(np.asarray(q, float), np.zeros(self.spec.dof))
+        # Park the object far away for one collision pass: this empties the contact manifolds that
+        # restoreState leaves behind, so a seeded episode does not depend on the previous one.
+        pb.resetBasePositionAndOrientation(self.object, (0, 0, -10), (0, 0, 0, 1), physicsClientId=c)
+        pb.performCollisionDetection(physicsClientId=c)
+        pb.resetBasePositionAndOrientation(self.object, obj.tolist(), (0, 0, 0, 1), physicsClientId=c)
+        pb.resetBaseVelocity(self.object, (0, 0, 0), (0, 0, 0), physicsClientId=c)
+        pb.resetBasePositionAndOrientation(self.goal_marker, (goal[0], goal[1], 0.001), (0, 0, 0, 1), physicsClientId=c)
+        self.goal = np.asarray(goal, float).copy()
+        self._applied = np.asarray(q, float).copy()
+        self._pending.clear()
+
+    def reseed(self, seed: int | None) -> None:
+        self.rng = np.random.default_rng(seed)
+
+    # -- actuation -------------------------------------------------------------------------------
+    def command(self, q: np.ndarray, dq: np.ndarray) -> None:
+        """Send one control-period joint setpoint to the servos, through the latency/lag of the gap."""
+        gap = self.cfg.reality_gap
+        self._pending.append(np.asarray(q, float))
+        if len(self._pending) <= gap.actuator_latency:
+            return
+        q_cmd = self._pending.popleft()
+        if gap.actuator_lag > 0:
+            k = 1.0 - np.exp(-self.cfg.control_period / gap.actuator_lag)
+            q_cmd = self._applied + k * (q_cmd - self._applied)
+            dq = (q_cmd - self._applied) / self.cfg.control_period
+        self._applied = q_cmd
+        self._servo(q_cmd, dq)
+
+    def _servo(self, q: np.ndarray, dq: np.ndarray) -> None:
+        self._last_servo = (q, dq)
+        pb.setJointMotorControlArray(
+            self.robot, self.joint_ids, pb.POSITION_CONTROL,
+            targetPositions=q.tolist(), targetVelocities=np.asarray(dq).tolist(),
+            forces=self.efforts.tolist(), positionGains=[0.6] * len(q), velocityGains=[1.0] * len(q),
+            physicsClientId=self.client,
+        )
+
+    def set_vacuum(self, on: bool) -> None:
+        self.suction.set_vacuum(on)
+
+    def step(self) -> None:
+        """Advance one control period."""
+        pb.stepSimulation(physicsClientId=self.client)
+        self.suction.update()
+
+    # -- sensing ---------------------------------------------------------------------------------
+    def joint_positions(self, noisy: bool = True) -> np.ndarray:
+        states = pb.getJointStates(self.robot, self.joint_ids, physicsClientId=self.client)
+        q = np.array([s[0] for s in states])
+        sigma = self.cfg.reality_gap.joint_noise
+        return q + self.rng.normal(0.0, sigma, q.shape) if noisy and sigma > 0 else q
+
+    def joint_velocities(self) -> np.ndarray:
+        return np.array([s[1] for s in pb.getJointStates(self.robot, self.joint_ids, physicsClientId=self.client)])
+
+    def vacuum_level(self) -> float:
+        """Vacuum level reading (kPa gauge, negative below atmosphere)."""
+        sigma = self.cfg.reality_gap.vacuum_noise
+        return self.suction.state.level + (float(self.rng.normal(0.0, sigma)) if sigma > 0 else 0.0)
+
+    def object_position(self) -> np.ndarray:
+        return np.array(pb.getBasePositionAndOrientation(self.object, physicsClientId=self.client)[0])
+
+    def tcp_pose_pybullet(self) -> tuple[np.ndarray, np.ndarray]:
+        """TCP position and quaternion (x, y, z, w) as PyBullet computes them (for cross-checks)."""
+        pos, orn = pb.getLinkState(self.robot, self.tcp_link, computeForwardKinematics=True, physicsClientId=self.client)[4:6]
+        return np.array(pos), np.array(orn)
+
+    def camera(self) -> Camera:
+        return Camera.from_config(self.client, self.cfg.camera)
+
+    # -- save / restore --------------------------------------------------------------------------
+    def snapshot(self) -> SceneSnapshot:
+        """Capture the whole scene; release it with `discard` when no longer needed."""
+        return SceneSnapshot(
+            pb.saveState(physicsClientId=self.client), self.suction.snapshot(), self._applied.copy(),
+            [p.copy() for p in self._pending], (self._last_servo[0].copy(), np.asarray(self._last_servo[1]).copy()),
+            self.rng.bit_generator.state,
+        )
+
+    def restore(self, snap: SceneSnapshot) -> None:
+        self.suction.set_vacuum(False)
+        pb.restoreState(snap.pb_state, physicsClientId=self.client)
+        self.suction.restore(snap.suction)
+        self._applied = snap.applied.copy()
+        self._pending = collections.deque(p.copy() for p in snap.pending)
+        self._servo(snap.servo[0].copy(), snap.servo[1].copy())
+        self.rng.bit_generator.state = snap.rng_state
+
+    def discard(self, snap: SceneSnapshot) -> None:
+        pb.removeState(snap.pb_state, physicsClientId=self.client)
+
+    def close(self) -> None:
+        if pb.isConnected(self.client):
+            pb.disconnect(self.client)
