@@ -1,0 +1,93 @@
+"""Twin benchmark: env decisions/s, sim-to-wall factor, oracle success, IK and Ruckig timing.
+
+Run: python benchmarks/twin.py [--episodes N]. Prints a table; the last line is one JSON object.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import time
+
+import numpy as np
+
+from mrguide.deploy.kinematics import Kinematics
+from mrguide.deploy.trajectory import JointStreamer
+from mrguide.robot import load_robot
+from mrguide.twin.env import PickPlaceEnv
+from mrguide.twin.rollout import run_episodes
+
+
+def bench_env(episodes: int) -> dict:
+    env = PickPlaceEnv()
+    try:
+        run_episodes(env, lambda o: env.expert_action(), range(3))  # warm-up
+        s = run_episodes(env, lambda o: env.expert_action(), range(episodes))
+    finally:
+        env.close()
+    rate = s.decisions / s.wall_s
+    return {
+        "decisions_per_s": rate,
+        "sim_to_wall": rate * env.twin_cfg.decision_period,
+        "oracle_success": s.success_rate,
+        "episodes": episodes,
+    }
+
+
+def bench_ik(n: int = 3000) -> dict:
+    spec = load_robot()
+    kin = Kinematics(spec)
+    ws = spec.workspace
+    rng = np.random.default_rng(0)
+    q = spec.q_home.copy()
+    p = kin.tcp_position(q)
+    times = []
+    for _ in range(n):  # warm-started, as in the env and the deploy loop: the next target within 5 cm
+        p = np.clip(p + rng.normal(0, 0.03, 3), ws.lo, ws.hi)
+        t = time.perf_counter()
+        q = kin.ik(p, q)
+        times.append(time.perf_counter() - t)
+    ms = np.array(times) * 1e3
+    return {"ik_median_ms": float(np.median(ms)), "ik_p99_ms": float(np.percentile(ms, 99))}
+
+
+def bench_ruckig(n: int = 20000) -> dict:
+    spec = load_robot()
+    s = JointStreamer(spec, 0.004)
+    rng = np.random.default_rng(1)
+    times = []
+    for k in range(n):
+        if k % 100 == 0:
+            s.set_target(rng.uniform(spec.q_lower + 0.2, spec.q_upper - 0.2))
+        t = time.perf_counter()
+        s.step()
+        times.append(time.perf_counter() - t)
+    us = np.array(times) * 1e6
+    return {"ruckig_cycle_us": float(np.median(us)), "ruckig_cycle_p99_us": float(np.percentile(us, 99))}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--episodes", type=int, default=200)
+    args = ap.parse_args()
+    if hasattr(os, "sched_setaffinity"):
+        os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})  # one core
+    res = {**bench_env(args.episodes), **bench_ik(), **bench_ruckig()}
+    print(f"machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}, pinned to one core")
+    rows = [
+        ("env decisions/s (0.1 s decision, 4 ms control)", f"{res['decisions_per_s']:.0f}", ">= 200"),
+        ("simulated / wall time", f"{res['sim_to_wall']:.1f}x", ""),
+        (f"oracle success ({res['episodes']} seeded episodes)", f"{res['oracle_success']:.1%}", ">= 98 %"),
+        ("IK solve median (warm start)", f"{res['ik_median_ms']:.3f} ms", "<= 0.3 ms"),
+        ("IK solve p99", f"{res['ik_p99_ms']:.3f} ms", ""),
+        ("Ruckig cycle median / p99", f"{res['ruckig_cycle_us']:.1f} / {res['ruckig_cycle_p99_us']:.1f} us", ""),
+    ]
+    for name, val, target in rows:
+        print(f"{name:<50} {val:>16}  {target}")
+    print(json.dumps({k: round(v, 4) if isinstance(v, float) else v for k, v in res.items()}))
+
+
+if __name__ == "__main__":
+    main()
