@@ -169,20 +169,32 @@ OBS_LAYOUT = ("tcp_x", "tcp_y", "tcp_z", "g", "phi", "obj_x", "obj_y", "obj_z", 
 ACT_LAYOUT = ("target_x", "target_y", "target_z", "gripper")
 
 
-def oracle_action(obs: np.ndarray, cfg: TaskConfig, to_normalized) -> np.ndarray:
-    """The scripted expert: the current phase's target and required gripper state (from the task model).
+def oracle_target(obs: np.ndarray, cfg: TaskConfig) -> tuple[np.ndarray, float]:
+    """The scripted expert's annotation: the current phase's target (m) and required gripper state ḡ_κ.
 
-    `to_normalized` maps a base-frame point to the normalized action space (the workspace's
-    `to_normalized`). In the grasp phase the target lies 3 mm into the object top so the cup seals; in
-    the release phase the vacuum stays on until the TCP is at the place pose.
+    In the grasp phase the target lies 3 mm into the object top so the cup seals.
     """
     obs = np.asarray(obs, dtype=float)
-    tcp, phase = obs[0:3], phase_from_progress(obs[4])
-    obj, goal = obs[5:8], obs[8:11]
-    target = phase_target(phase, obj, goal, cfg)
-    grip = float(G_REQUIRED[phase])
+    phase = phase_from_progress(obs[4])
+    target = phase_target(phase, obs[5:8], obs[8:11], cfg)
     if phase == 1:
         target = target - np.array([0.0, 0.0, 0.003])
-    elif phase == 4 and np.linalg.norm(tcp - target) > 0.5 * cfg.epsilon:
+    return target, float(G_REQUIRED[phase])
+
+
+def annotation_action(obs: np.ndarray, target: np.ndarray, grip: float, cfg: TaskConfig, to_normalized) -> np.ndarray:
+    """Turn an annotated waypoint (target in m, gripper state) into a normalized action.
+
+    A release annotation (release phase, gripper open) is executed as "carry there, then open": the
+    vacuum stays on until the TCP is within ε/2 of the marked pose.
+    """
+    obs = np.asarray(obs, dtype=float)
+    if phase_from_progress(obs[4]) == 4 and grip < 0 and np.linalg.norm(obs[0:3] - target) > 0.5 * cfg.epsilon:
         grip = 1.0
     return np.concatenate([np.clip(to_normalized(target), -1.0, 1.0), [grip]]).astype(np.float32)
+
+
+def oracle_action(obs: np.ndarray, cfg: TaskConfig, to_normalized) -> np.ndarray:
+    """The scripted expert as a normalized action; `to_normalized` is the workspace's map from metres."""
+    target, grip = oracle_target(obs, cfg)
+    return annotation_action(obs, target, grip, cfg, to_normalized)

@@ -55,8 +55,18 @@ class Kinematics:
         """Joint configuration placing the TCP at `p_target` with orientation `R_target`.
 
         Damped least squares on the SE(3) log error in the TCP frame, warm-started at `q_seed`, with
-        the joint limits enforced at every iteration. Raises IKError if the pose is not reached.
+        the joint limits enforced at every iteration; if the warm start gets stuck (a posture far from
+        the target's), the solve is repeated from the home configuration. Raises IKError if the pose is
+        not reached from either.
         """
+        try:
+            return self._solve(p_target, q_seed, R_target)
+        except IKError:
+            if np.all(np.isfinite(np.asarray(q_seed, dtype=float))):
+                return self._solve(p_target, self.spec.q_home, R_target)
+            raise
+
+    def _solve(self, p_target: np.ndarray, q_seed: np.ndarray, R_target: np.ndarray) -> np.ndarray:
         p_target = np.asarray(p_target, dtype=float)
         q = np.clip(np.asarray(q_seed, dtype=float), self.spec.q_lower, self.spec.q_upper)
         if p_target.shape != (3,) or not np.all(np.isfinite(p_target)) or not np.all(np.isfinite(q)):

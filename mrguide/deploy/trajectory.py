@@ -47,6 +47,7 @@ class JointStreamer:
         """Restart from state (q, dq, ddq), holding q as target."""
         n = self.spec.dof
         q = np.asarray(q, dtype=float)
+        self._otg.reset()  # forget the cached trajectory: the next update plans from this state
         self._inp.current_position = q.tolist()
         self._inp.current_velocity = (np.zeros(n) if dq is None else np.asarray(dq, float)).tolist()
         self._inp.current_acceleration = (np.zeros(n) if ddq is None else np.asarray(ddq, float)).tolist()

@@ -89,6 +89,7 @@ class PickPlaceEnv(gym.Env):
         self.t = 0
         self.vacuum = False
         self.clamped = 0
+        self.ik_failures = 0
         self._obs = np.zeros(OBS_DIM, np.float32)
         self._camera = None
 
@@ -103,7 +104,7 @@ class PickPlaceEnv(gym.Env):
         self.scene.reseed(int(self.np_random.integers(2**63)))
         self.scene.place(self.robot_spec.q_home, obj, goal)
         self.streamer.reset(self.robot_spec.q_home)
-        self.phase, self.t, self.vacuum, self.clamped = 0, 0, False, 0
+        self.phase, self.t, self.vacuum, self.clamped, self.ik_failures = 0, 0, False, 0, 0
         self._obs = self._observe()
         return self._obs.copy(), {"phase": 0, "object": obj, "goal": goal}
 
@@ -134,7 +135,8 @@ class PickPlaceEnv(gym.Env):
             self.streamer.set_target(q_target)
         except IKError as exc:
             ik_failed = True
-            log.warning("IK failed, holding the previous target: %s", exc)
+            self.ik_failures += 1
+            log.debug("IK failed, holding the previous target: %s", exc)
         self.vacuum = bool(clipped[3] > 0)
         self.scene.set_vacuum(self.vacuum)
         for _ in range(self.twin_cfg.cycles_per_decision):
@@ -162,6 +164,7 @@ class PickPlaceEnv(gym.Env):
             "clamped": was_clamped,
             "clamped_total": self.clamped,
             "ik_failed": ik_failed,
+            "ik_failures_total": self.ik_failures,
         }
         return self._obs.copy(), res.reward, terminated, truncated, info
 

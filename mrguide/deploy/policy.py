@@ -1,0 +1,94 @@
+"""Exported policies: a small npz of actor weights + metadata, run with numpy alone on the robot PC.
+
+The file is written by `mrguide.policies.export` and read here; loading checks the format, the
+observation/action layout, the layer shapes, finiteness, and (when given) that the workspace box and
+task parameters match the robot's configuration, so a wrong file is refused before any drive is enabled.
+"""
+
+from __future__ import annotations
+
+import json
+import zipfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from mrguide.config import to_dict
+from mrguide.robot import Workspace
+from mrguide.task import ACT_DIM, ACT_LAYOUT, OBS_DIM, OBS_LAYOUT, TaskConfig
+
+FORMAT = "mrguide-policy"
+FORMAT_VERSION = 1
+ACTIVATIONS = {"relu": lambda x: np.maximum(x, 0.0), "tanh": np.tanh}
+
+
+class PolicyFileError(ValueError):
+    """A policy file that cannot be used here; the message says why."""
+
+
+@dataclass
+class ExportedPolicy:
+    """An MLP actor: obs (11,) → action (4,) in [-1, 1]."""
+
+    weights: list[np.ndarray]
+    biases: list[np.ndarray]
+    activations: list[str]
+    metadata: dict[str, Any]
+
+    def __call__(self, obs: np.ndarray) -> np.ndarray:
+        x = np.asarray(obs, dtype=np.float64)
+        for W, b, act in zip(self.weights, self.biases, self.activations):
+            x = ACTIVATIONS[act](W @ x + b)
+        return x.astype(np.float32)
+
+    @classmethod
+    def load(cls, path: str | Path, workspace: Workspace | None = None, task: TaskConfig | None = None) -> "ExportedPolicy":
+        """Read and validate a policy file; with `workspace`/`task`, also require them to match."""
+        path = Path(path)
+        if not path.is_file():
+            raise PolicyFileError(f"policy file not found: {path}")
+        try:
+            with np.load(path, allow_pickle=False) as npz:
+                arrays = {k: npz[k] for k in npz.files}
+        except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+            raise PolicyFileError(f"{path}: not a readable policy file ({exc})") from exc
+        if "metadata" not in arrays:
+            raise PolicyFileError(f"{path}: no metadata in the file")
+        try:
+            meta = json.loads(str(arrays["metadata"]))
+        except json.JSONDecodeError as exc:
+            raise PolicyFileError(f"{path}: metadata is not valid JSON ({exc})") from exc
+        if meta.get("format") != FORMAT or meta.get("format_version") != FORMAT_VERSION:
+            raise PolicyFileError(f"{path}: format {meta.get('format')} v{meta.get('format_version')}, expected {FORMAT} v{FORMAT_VERSION}")
+        if list(meta.get("obs_layout", [])) != list(OBS_LAYOUT) or list(meta.get("act_layout", [])) != list(ACT_LAYOUT):
+            raise PolicyFileError(f"{path}: observation/action layout {meta.get('obs_layout')} / {meta.get('act_layout')} differs from this stack's {OBS_LAYOUT} / {ACT_LAYOUT}")
+        acts = list(meta.get("activations", []))
+        n = len(acts)
+        if n == 0 or any(a not in ACTIVATIONS for a in acts):
+            raise PolicyFileError(f"{path}: activations {acts} not understood (known: {sorted(ACTIVATIONS)})")
+        try:
+            weights = [arrays[f"W{i}"].astype(np.float64) for i in range(n)]
+            biases = [arrays[f"b{i}"].astype(np.float64) for i in range(n)]
+        except KeyError as exc:
+            raise PolicyFileError(f"{path}: layer array {exc} missing") from exc
+        width = OBS_DIM
+        for i, (W, b) in enumerate(zip(weights, biases)):
+            if W.ndim != 2 or W.shape[1] != width or b.shape != (W.shape[0],):
+                raise PolicyFileError(f"{path}: layer {i} has weights {W.shape} and bias {b.shape}; expected input width {width}")
+            if not (np.all(np.isfinite(W)) and np.all(np.isfinite(b))):
+                raise PolicyFileError(f"{path}: layer {i} holds NaN or inf")
+            width = W.shape[0]
+        if width != ACT_DIM:
+            raise PolicyFileError(f"{path}: output width {width}, expected {ACT_DIM}")
+        if workspace is not None:
+            ws = meta.get("workspace", {})
+            if not (np.allclose(ws.get("low", []), workspace.low) and np.allclose(ws.get("high", []), workspace.high)):
+                raise PolicyFileError(f"{path}: trained for workspace {ws}, the robot is configured for low={workspace.low} high={workspace.high}")
+        if task is not None:
+            theirs, ours = meta.get("task", {}), to_dict(task)
+            diff = sorted(k for k in set(theirs) | set(ours) if theirs.get(k) != ours.get(k))
+            if diff:
+                raise PolicyFileError(f"{path}: task parameters differ from the configuration: {', '.join(diff)}")
+        return cls(weights, biases, acts, meta)

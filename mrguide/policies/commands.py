@@ -1,0 +1,65 @@
+"""`mrguide train` and `mrguide experiment`: argument parsing and progress display for the policies package."""
+
+from __future__ import annotations
+
+import argparse
+from collections import deque
+from pathlib import Path
+
+from tqdm import tqdm
+
+
+def add_train_command(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("train", help="train DDPG in the twin, with or without MR-style expert guidance")
+    p.add_argument("--config", help="TOML config ([train], [ddpg], [guidance], [robot], [twin], [task])")
+    p.add_argument("--out", default="runs/train", help="run directory: checkpoint, metrics, annotations, policy")
+    p.add_argument("--steps", type=int, help="override train.total_steps")
+    p.add_argument("--seed", type=int, help="override train.seed")
+    p.add_argument("--no-guidance", action="store_true", help="baseline DDPG (guidance.enabled = false)")
+    p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=cmd_train)
+
+
+def cmd_train(args: argparse.Namespace) -> int:
+    from mrguide.policies.export import export_actor
+    from mrguide.policies.train import CheckpointError, Trainer, load_train_config, replace_config
+
+    tc, dc, gc, ec = load_train_config(args.config)
+    if args.steps is not None:
+        tc = replace_config(tc, total_steps=args.steps)
+    if args.seed is not None:
+        tc = replace_config(tc, seed=args.seed)
+    if args.no_guidance:
+        gc = replace_config(gc, enabled=False)
+    out = Path(args.out)
+    if not args.resume and (out / "checkpoint.pt").exists():
+        print(f"mrguide train: {out} already holds a run; use --resume or another --out")
+        return 2
+    tr = Trainer(tc, dc, gc, ec, out)
+    try:
+        if args.resume:
+            try:
+                tr.load_checkpoint()
+            except CheckpointError as exc:
+                print(f"mrguide train: {exc}")
+                return 2
+        recent: deque[int] = deque(maxlen=20)
+        with tqdm(total=tc.total_steps, initial=tr.step, desc="train", unit="step", disable=args.quiet) as bar:
+            def progress(row: dict) -> None:
+                recent.append(row["success"])
+                bar.update(row["step"] - bar.n)
+                bar.set_postfix(ret=f"{row['return']:.1f}", succ20=f"{sum(recent) / len(recent):.0%}",
+                                lam=f"{row['lambda']:.2f}", interv=tr.interventions, asked=row["asked"])
+
+            tr.run(progress)
+        final = tr.evaluate()
+        policy = export_actor(tr.agent.actor, out / "policy.npz", tr.env.workspace, tr.env.task_cfg,
+                              {"trained": {"steps": tr.step, "seed": tc.seed, "guidance": gc.enabled}})
+    finally:
+        tr.close()
+    print(f"trained {tr.step} steps in {tr.wall_s():.0f} s ({tr.step / max(tr.wall_s(), 1e-9):.0f} steps/s); "
+          f"expert interventions {tr.interventions}, annotations asked {tr.cache.asked} / reused {tr.cache.reused}")
+    print(f"deterministic evaluation: {final['success_rate']:.0%} success over {tc.eval_episodes} episodes")
+    print(f"policy: {policy}   metrics: {out / 'metrics.csv'}   checkpoint: {out / 'checkpoint.pt'}")
+    return 0

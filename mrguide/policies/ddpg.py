@@ -1,0 +1,158 @@
+"""DDPG (Lillicrap et al.) on the CPU: actor and critic MLPs, target networks, Gaussian exploration.
+
+Defaults from Table I of the paper where it gives them (lr 5e-4, γ 0.99, batch 256, buffer 1e6);
+hidden sizes, τ and the noise scale are ours.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from torch import nn
+
+from mrguide.policies.replay import Batch
+
+
+@dataclass(frozen=True)
+class DDPGConfig:
+    hidden: tuple[int, ...] = (256, 256)  # ours
+    lr_actor: float = 5e-4  # Table I
+    lr_critic: float = 5e-4  # Table I
+    gamma: float = 0.99  # Table I
+    tau: float = 0.005  # soft target update rate (ours)
+    exploration_noise: float = 0.1  # std of the Gaussian action noise, normalized units (ours)
+    #: Weight of a behaviour-cloning term on the expert (ζ = 1) samples of each batch, with the Q term
+    #: normalized by its mean magnitude as in TD3+BC (Fujimoto & Gu 2021). Not in the paper; 0 gives
+    #: plain DDPG. It acts only on expert samples, so a run without guidance is unaffected, and it fades
+    #: with λ_t as expert samples thin out of the batches.
+    bc_weight: float = 0.0
+
+
+def mlp(sizes: list[int], out_act: type[nn.Module] | None = None) -> nn.Sequential:
+    layers: list[nn.Module] = []
+    for i in range(len(sizes) - 1):
+        layers.append(nn.Linear(sizes[i], sizes[i + 1]))
+        if i < len(sizes) - 2:
+            layers.append(nn.ReLU())
+    if out_act is not None:
+        layers.append(out_act())
+    return nn.Sequential(*layers)
+
+
+class ObsScaler(nn.Module):
+    """Fixed affine input scaling x ↦ (x − offset) · scale, so positions in metres reach the first layer
+    in about [-1, 1] (from the workspace box); not trained, folded into the first layer on export."""
+
+    def __init__(self, offset: np.ndarray, scale: np.ndarray):
+        super().__init__()
+        self.register_buffer("offset", torch.as_tensor(offset, dtype=torch.float32))
+        self.register_buffer("scale", torch.as_tensor(scale, dtype=torch.float32))
+
+    def forward(self, obs: torch.Tensor) -> torch.Tensor:
+        return (obs - self.offset) * self.scale
+
+
+class Actor(nn.Module):
+    """μ_θ(s) ∈ [-1, 1]^act_dim."""
+
+    def __init__(self, scaler: ObsScaler, act_dim: int, hidden: tuple[int, ...]):
+        super().__init__()
+        self.scaler = scaler
+        self.net = mlp([len(scaler.offset), *hidden, act_dim], nn.Tanh)
+
+    def forward(self, obs: torch.Tensor) -> torch.Tensor:
+        return self.net(self.scaler(obs))
+
+
+class Critic(nn.Module):
+    """Q_φ(s, a)."""
+
+    def __init__(self, scaler: ObsScaler, act_dim: int, hidden: tuple[int, ...]):
+        super().__init__()
+        self.scaler = scaler
+        self.net = mlp([len(scaler.offset) + act_dim, *hidden, 1])
+
+    def forward(self, obs: torch.Tensor, act: torch.Tensor) -> torch.Tensor:
+        return self.net(torch.cat([self.scaler(obs), act], dim=-1)).squeeze(-1)
+
+
+class DDPG:
+    """Actor-critic with target networks; `update` takes one minibatch."""
+
+    def __init__(self, obs_offset: np.ndarray, obs_scale: np.ndarray, act_dim: int, cfg: DDPGConfig, seed: int = 0):
+        self.cfg = cfg
+        self.act_dim = act_dim
+        torch.manual_seed(seed)
+
+        def scaler() -> ObsScaler:
+            return ObsScaler(obs_offset, obs_scale)
+
+        self.actor = Actor(scaler(), act_dim, cfg.hidden)
+        self.critic = Critic(scaler(), act_dim, cfg.hidden)
+        self.actor_target = Actor(scaler(), act_dim, cfg.hidden)
+        self.critic_target = Critic(scaler(), act_dim, cfg.hidden)
+        self.actor_target.load_state_dict(self.actor.state_dict())
+        self.critic_target.load_state_dict(self.critic.state_dict())
+        self.actor_opt = torch.optim.Adam(self.actor.parameters(), lr=cfg.lr_actor)
+        self.critic_opt = torch.optim.Adam(self.critic.parameters(), lr=cfg.lr_critic)
+
+    @torch.no_grad()
+    def act(self, obs: np.ndarray, rng: np.random.Generator | None = None) -> np.ndarray:
+        """Deterministic action, plus Gaussian exploration noise when `rng` is given; clipped to [-1, 1]."""
+        a = self.actor(torch.as_tensor(obs, dtype=torch.float32).unsqueeze(0)).squeeze(0).numpy()
+        if rng is not None:
+            a = a + rng.normal(0.0, self.cfg.exploration_noise, a.shape)
+        return np.clip(a, -1.0, 1.0).astype(np.float32)
+
+    def update(self, batch: Batch) -> dict[str, float]:
+        """One gradient step on critic and actor, then soft target updates."""
+        obs = torch.as_tensor(batch.obs)
+        act = torch.as_tensor(batch.act)
+        rew = torch.as_tensor(batch.rew)
+        next_obs = torch.as_tensor(batch.next_obs)
+        done = torch.as_tensor(batch.done)
+        with torch.no_grad():
+            target_q = rew + self.cfg.gamma * (1.0 - done) * self.critic_target(next_obs, self.actor_target(next_obs))
+        critic_loss = nn.functional.mse_loss(self.critic(obs, act), target_q)
+        self.critic_opt.zero_grad()
+        critic_loss.backward()
+        self.critic_opt.step()
+
+        pi = self.actor(obs)
+        q_pi = self.critic(obs, pi)
+        bc_loss = torch.zeros(())
+        if self.cfg.bc_weight > 0 and batch.expert.any():
+            expert = torch.as_tensor(batch.expert)
+            bc_loss = ((pi[expert] - act[expert]) ** 2).sum(-1).mean()
+            actor_loss = -q_pi.mean() / (q_pi.abs().mean().detach() + 1e-6) + self.cfg.bc_weight * bc_loss
+        else:
+            actor_loss = -q_pi.mean()
+        self.actor_opt.zero_grad()
+        actor_loss.backward()
+        self.actor_opt.step()
+
+        with torch.no_grad():
+            for net, tgt in ((self.actor, self.actor_target), (self.critic, self.critic_target)):
+                for p, tp in zip(net.parameters(), tgt.parameters()):
+                    tp.mul_(1.0 - self.cfg.tau).add_(p, alpha=self.cfg.tau)
+        return {"critic_loss": critic_loss.item(), "actor_loss": actor_loss.item(), "bc_loss": bc_loss.item()}
+
+    def state_dict(self) -> dict:
+        return {
+            "actor": self.actor.state_dict(),
+            "critic": self.critic.state_dict(),
+            "actor_target": self.actor_target.state_dict(),
+            "critic_target": self.critic_target.state_dict(),
+            "actor_opt": self.actor_opt.state_dict(),
+            "critic_opt": self.critic_opt.state_dict(),
+        }
+
+    def load_state_dict(self, state: dict) -> None:
+        self.actor.load_state_dict(state["actor"])
+        self.critic.load_state_dict(state["critic"])
+        self.actor_target.load_state_dict(state["actor_target"])
+        self.critic_target.load_state_dict(state["critic_target"])
+        self.actor_opt.load_state_dict(state["actor_opt"])
+        self.critic_opt.load_state_dict(state["critic_opt"])

@@ -1,0 +1,393 @@
+"""Training: DDPG in the twin, with MR-style expert guidance injected into a tagged replay buffer.
+
+Read top to bottom: `TrainConfig` says what can be set; `Trainer.run` is the loop. One agent episode
+runs with exploration noise; if its running reward drops below R_th (Eq. 12) while expert intake is
+open, the episode is cut and the expert demonstrates it — from the episode's start state restored in
+the twin (default) or taking over from the current step — and those transitions are stored with ζ = 1.
+Every env step (agent or expert) counts as a training step and is followed by one update on a
+minibatch mixed by λ_t (Eq. 9, 11).
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import logging
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from mrguide import __version__
+from mrguide.config import ConfigError, load_section, to_dict
+from mrguide.policies.ddpg import DDPG, DDPGConfig
+from mrguide.policies.experts import AnnotatorNoise, ExpertSource, FileExpert, OracleExpert, SimulatedAnnotator
+from mrguide.policies.guidance import (
+    Annotation,
+    AnnotationCache,
+    NominalReference,
+    ReferencePose,
+    RunningMedianReference,
+    ThresholdTrigger,
+    bounded_projection,
+    expert_ratio,
+)
+from mrguide.policies.replay import TaggedReplay
+from mrguide.robot import Workspace
+from mrguide.task import ACT_DIM, OBS_DIM, TaskConfig, annotation_action
+from mrguide.twin.env import EnvConfig, PickPlaceEnv
+
+log = logging.getLogger(__name__)
+
+CHECKPOINT_FORMAT = 1
+
+
+@dataclass(frozen=True)
+class GuidanceConfig:
+    """Expert guidance ([guidance] in a TOML config)."""
+
+    enabled: bool = True
+    r_threshold: float = -5.0  # R_th of Eq. 12 (ours; the paper gives no value)
+    intake_steps: int = 10_000  # expert intake window: the first 10k of 20k steps (paper, Sec. IV-B)
+    lam_max: float = 0.9  # λ_max (Table I)
+    lam_min: float = 0.1  # λ_min (Table I)
+    mode: str = "replay"  # "replay": restore the episode start and demonstrate; "takeover": from now on
+    delta: float = 0.05  # Δ of Eq. 13, m (ours)
+    reference: str = "nominal"  # a^e of Eq. 13: "nominal" (model target) or "running_median"
+    cache_tolerance: float = 0.005  # m; observations this close reuse a cached annotation
+    source: str = "annotator"  # "oracle", "annotator" (oracle + noise) or "file"
+    noise: AnnotatorNoise = field(default_factory=AnnotatorNoise)
+    annotation_file: str = ""  # for source = "file"
+
+    def __post_init__(self) -> None:
+        if self.mode not in ("replay", "takeover"):
+            raise ConfigError(f"guidance.mode must be 'replay' or 'takeover', got {self.mode!r}")
+        if self.reference not in ("nominal", "running_median"):
+            raise ConfigError(f"guidance.reference must be 'nominal' or 'running_median', got {self.reference!r}")
+        if self.source not in ("oracle", "annotator", "file"):
+            raise ConfigError(f"guidance.source must be 'oracle', 'annotator' or 'file', got {self.source!r}")
+        if self.source == "file" and not self.annotation_file:
+            raise ConfigError("guidance.source = 'file' needs guidance.annotation_file")
+        if not 0.0 <= self.lam_min <= self.lam_max <= 1.0:
+            raise ConfigError(f"guidance: need 0 <= lam_min <= lam_max <= 1, got {self.lam_min}, {self.lam_max}")
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """A training run ([train] in a TOML config, with [ddpg] and [guidance] beside it)."""
+
+    total_steps: int = 20_000  # paper: 20k timesteps (Fig. 3)
+    seed: int = 0
+    batch_size: int = 256  # Table I
+    buffer_size: int = 1_000_000  # Table I
+    learning_starts: int = 256  # updates begin once this many transitions are stored (ours)
+    eval_every: int = 2_000  # steps between deterministic evaluations
+    eval_episodes: int = 10
+    checkpoint_every: int = 2_000  # steps; checkpoints are written at the next episode end
+    torch_threads: int = 1
+
+
+def load_train_config(path: str | Path | None) -> tuple[TrainConfig, DDPGConfig, GuidanceConfig, EnvConfig]:
+    return (
+        load_section(TrainConfig, path, "train"),
+        load_section(DDPGConfig, path, "ddpg"),
+        load_section(GuidanceConfig, path, "guidance"),
+        EnvConfig.load(path),
+    )
+
+
+def obs_scaling(ws: Workspace) -> tuple[np.ndarray, np.ndarray]:
+    """(offset, scale) mapping the observation's positions to the workspace's [-1, 1], g as is, φ to [-1, 1]."""
+    centre, half = 0.5 * (ws.lo + ws.hi), 0.5 * (ws.hi - ws.lo)
+    offset = np.concatenate([centre, [0.0, 0.5], centre, centre])
+    scale = np.concatenate([1 / half, [1.0, 2.0], 1 / half, 1 / half])
+    return offset, scale
+
+
+class CheckpointError(RuntimeError):
+    """A checkpoint that is corrupt or belongs to another configuration."""
+
+
+class GuidedExpert:
+    """Expert actions for the learner: cache → source (counted) → bounded projection → normalized action."""
+
+    def __init__(self, source: ExpertSource, reference: ReferencePose, cache: AnnotationCache, delta: float, task: TaskConfig, to_normalized):
+        self.source, self.reference, self.cache = source, reference, cache
+        self.delta = delta
+        self.task = task
+        self.to_normalized = to_normalized
+        self.projected = 0  # annotations moved onto the Δ-sphere
+
+    def action(self, obs: np.ndarray) -> np.ndarray:
+        ann = self.cache.lookup(obs)
+        if ann is None:
+            ann = self.source.annotate(obs)
+            self.cache.asked += 1
+            self.cache.insert(obs, ann)
+            self.reference.observe(obs, ann)
+        else:
+            self.cache.reused += 1
+        ref = self.reference.reference(obs)
+        target = bounded_projection(ann.target, ref, self.delta)
+        self.projected += int(not np.allclose(target, ann.target))
+        return annotation_action(obs, target, ann.grip, self.task, self.to_normalized)
+
+
+def make_expert_source(g: GuidanceConfig, env: PickPlaceEnv, seed: int) -> ExpertSource:
+    if g.source == "oracle":
+        return OracleExpert(env.task_cfg)
+    if g.source == "annotator":
+        return SimulatedAnnotator(env.task_cfg, g.noise, seed=seed + 7919)
+    return FileExpert(g.annotation_file, g.cache_tolerance)
+
+
+METRIC_FIELDS = ("step", "episode", "kind", "return", "success", "outcome", "length", "triggered", "lambda", "expert_ratio", "asked", "reused", "wall_s")
+EVAL_FIELDS = ("step", "success_rate", "mean_return")
+
+
+class Trainer:
+    """One seed's training run, resumable from its checkpoint."""
+
+    def __init__(self, cfg: TrainConfig, ddpg_cfg: DDPGConfig, guidance: GuidanceConfig, env_cfg: EnvConfig, out_dir: str | Path):
+        self.cfg, self.ddpg_cfg, self.guidance, self.env_cfg = cfg, ddpg_cfg, guidance, env_cfg
+        self.out = Path(out_dir)
+        self.out.mkdir(parents=True, exist_ok=True)
+        torch.set_num_threads(cfg.torch_threads)
+        self.env = PickPlaceEnv(env_cfg)
+        self.agent = DDPG(*obs_scaling(self.env.workspace), ACT_DIM, ddpg_cfg, seed=cfg.seed)
+        self.replay = TaggedReplay(cfg.buffer_size, OBS_DIM, ACT_DIM)
+        self.rng = np.random.default_rng(cfg.seed)
+        self.source = make_expert_source(guidance, self.env, cfg.seed)
+        reference: ReferencePose = (
+            NominalReference(self.env.task_cfg) if guidance.reference == "nominal" else RunningMedianReference(self.env.task_cfg)
+        )
+        self.cache = AnnotationCache(guidance.cache_tolerance, self.out / "annotations.jsonl")
+        self.expert = GuidedExpert(self.source, reference, self.cache, guidance.delta, self.env.task_cfg, self.env.workspace.to_normalized)
+        self.trigger = ThresholdTrigger(guidance.r_threshold)
+        self.step = 0
+        self.episode = 0
+        self.interventions = 0
+        self.last_ratio = 0.0
+        self.update_s = 0.0
+        self.updates = 0
+        self._next_checkpoint = cfg.checkpoint_every
+        self._next_eval = cfg.eval_every
+        self._t0 = time.perf_counter()
+        self._wall_before = 0.0
+
+    # -- the loop --------------------------------------------------------------------------------
+    def run(self, progress: Callable[[dict], None] | None = None, stop_at: int | None = None) -> None:
+        """Train until `total_steps`, checkpointing and evaluating on the way.
+
+        With `stop_at`, stop (and checkpoint) at the first episode end at or after that step, as an
+        interrupted run would: resuming from there reproduces the uninterrupted run exactly.
+        """
+        end = self.cfg.total_steps
+        stop = min(end, stop_at or end)
+        while self.step < stop:
+            row = self._agent_episode(end)
+            self._log(row)
+            if progress:
+                progress(row)
+            if self.step >= self._next_eval:
+                self.evaluate()
+                self._next_eval += self.cfg.eval_every
+            if self.step >= self._next_checkpoint or self.step >= stop:
+                self.save_checkpoint()
+                self._next_checkpoint = (self.step // self.cfg.checkpoint_every + 1) * self.cfg.checkpoint_every
+
+    def _intake_open(self) -> bool:
+        return self.guidance.enabled and self.step < self.guidance.intake_steps
+
+    def lam(self) -> float:
+        return expert_ratio(self.step, self.cfg.total_steps, self.guidance.lam_max, self.guidance.lam_min) if self.guidance.enabled else 0.0
+
+    def _env_step(self, action: np.ndarray, zeta: int, obs: np.ndarray):
+        next_obs, r, term, trunc, info = self.env.step(action)
+        self.replay.add(obs, action, r, next_obs, term, zeta)
+        self.step += 1
+        if len(self.replay) >= self.cfg.learning_starts:
+            t = time.perf_counter()
+            batch = self.replay.sample(self.cfg.batch_size, self.lam(), self.rng)
+            self.agent.update(batch)
+            self.update_s += time.perf_counter() - t
+            self.updates += 1
+            self.last_ratio = batch.expert_ratio
+        return next_obs, r, term, trunc, info
+
+    def _agent_episode(self, end: int) -> dict:
+        seed = int(self.rng.integers(2**31))
+        obs, _ = self.env.reset(seed=seed)
+        guided = self._intake_open()
+        start = self.env.snapshot() if guided and self.guidance.mode == "replay" else None
+        self.trigger.reset()
+        ret, length, info, triggered = 0.0, 0, {"outcome": None, "is_success": False}, False
+        try:
+            while self.step < end:
+                action = self.agent.act(obs, self.rng)
+                obs, r, term, trunc, info = self._env_step(action, 0, obs)
+                ret += r
+                length += 1
+                if guided and self.trigger.update(r) and not (term or trunc):
+                    triggered = True
+                    break
+                if term or trunc:
+                    break
+            if triggered:
+                self.interventions += 1
+                if start is not None:
+                    obs = self.env.restore(start)
+                self._expert_episode(obs, end)
+        finally:
+            if start is not None:
+                self.env.discard(start)
+        self.episode += 1
+        success = bool(info["is_success"]) and not triggered
+        return self._row("agent", ret, success, info["outcome"] if not triggered else "guided", length, triggered)
+
+    def _expert_episode(self, obs: np.ndarray, end: int) -> None:
+        ret, length, info = 0.0, 0, {"outcome": None, "is_success": False}
+        while self.step < end:
+            obs, r, term, trunc, info = self._env_step(self.expert.action(obs), 1, obs)
+            ret += r
+            length += 1
+            if term or trunc:
+                break
+        self._log(self._row("expert", ret, bool(info["is_success"]), info["outcome"], length, False))
+
+    # -- bookkeeping -----------------------------------------------------------------------------
+    def wall_s(self) -> float:
+        return self._wall_before + time.perf_counter() - self._t0
+
+    def _row(self, kind: str, ret: float, success: bool, outcome, length: int, triggered: bool) -> dict:
+        return {
+            "step": self.step, "episode": self.episode, "kind": kind, "return": round(ret, 4), "success": int(success),
+            "outcome": outcome, "length": length, "triggered": int(triggered), "lambda": round(self.lam(), 4),
+            "expert_ratio": round(self.last_ratio, 4), "asked": self.cache.asked, "reused": self.cache.reused,
+            "wall_s": round(self.wall_s(), 2),
+        }
+
+    def _log(self, row: dict) -> None:
+        path = self.out / "metrics.csv"
+        new = not path.exists()
+        with path.open("a", newline="") as fh:
+            w = csv.DictWriter(fh, METRIC_FIELDS)
+            if new:
+                w.writeheader()
+            w.writerow(row)
+
+    def evaluate(self) -> dict:
+        """Deterministic policy on fixed evaluation seeds (disjoint from training seeds' stream)."""
+        successes, returns = 0, []
+        for k in range(self.cfg.eval_episodes):
+            obs, _ = self.env.reset(seed=1_000_000 + k)
+            ret = 0.0
+            while True:
+                obs, r, term, trunc, info = self.env.step(self.agent.act(obs))
+                ret += r
+                if term or trunc:
+                    break
+            successes += int(info["is_success"])
+            returns.append(ret)
+        res = {"step": self.step, "success_rate": successes / self.cfg.eval_episodes, "mean_return": float(np.mean(returns))}
+        path = self.out / "eval.csv"
+        new = not path.exists()
+        with path.open("a", newline="") as fh:
+            w = csv.DictWriter(fh, EVAL_FIELDS)
+            if new:
+                w.writeheader()
+            w.writerow(res)
+        log.info("eval at step %d: success %.0f%%", self.step, 100 * res["success_rate"])
+        return res
+
+    # -- checkpoints -----------------------------------------------------------------------------
+    def _fingerprint(self) -> dict:
+        return {
+            "train": {k: v for k, v in to_dict(self.cfg).items() if k not in ("total_steps", "checkpoint_every", "eval_every")},
+            "ddpg": to_dict(self.ddpg_cfg), "guidance": to_dict(self.guidance), "env": to_dict(self.env_cfg),
+        }
+
+    def save_checkpoint(self) -> Path:
+        """Everything to resume: networks, optimizers, both pools, RNG states, counters. Written atomically."""
+        state = {
+            "format": CHECKPOINT_FORMAT, "version": __version__, "config": self._fingerprint(),
+            "agent": self.agent.state_dict(), "agent_pool": self.replay.agent.state(), "expert_pool": self.replay.expert.state(),
+            "rng": self.rng.bit_generator.state, "torch_rng": torch.get_rng_state(),
+            "annotator_rng": getattr(self.source, "rng", None) and self.source.rng.bit_generator.state,
+            "counters": {
+                "step": self.step, "episode": self.episode, "interventions": self.interventions, "asked": self.cache.asked,
+                "reused": self.cache.reused, "projected": self.expert.projected, "last_ratio": self.last_ratio,
+                "next_eval": self._next_eval, "wall_s": self.wall_s(), "update_s": self.update_s, "updates": self.updates,
+            },
+        }
+        path = self.out / "checkpoint.pt"
+        tmp = path.with_suffix(".tmp")
+        torch.save(state, tmp)
+        tmp.replace(path)
+        return path
+
+    def load_checkpoint(self, path: str | Path | None = None) -> None:
+        """Resume from a checkpoint; a corrupt or mismatched file raises CheckpointError."""
+        path = Path(path) if path else self.out / "checkpoint.pt"
+        try:
+            state = torch.load(path, weights_only=False)
+        except FileNotFoundError as exc:
+            raise CheckpointError(f"no checkpoint at {path}") from exc
+        except Exception as exc:  # torch raises many kinds on a damaged file
+            raise CheckpointError(f"{path}: not a readable checkpoint ({type(exc).__name__}: {exc})") from exc
+        if not isinstance(state, dict) or state.get("format") != CHECKPOINT_FORMAT:
+            raise CheckpointError(f"{path}: not an mrguide checkpoint of format {CHECKPOINT_FORMAT}")
+        if state["config"] != self._fingerprint():
+            diff = [k for k in state["config"] if state["config"][k] != self._fingerprint().get(k)]
+            raise CheckpointError(f"{path}: written with a different configuration (sections differ: {', '.join(diff)})")
+        try:
+            self.agent.load_state_dict(state["agent"])
+            self.replay.agent.load(state["agent_pool"])
+            self.replay.expert.load(state["expert_pool"])
+        except (KeyError, RuntimeError, ValueError) as exc:
+            raise CheckpointError(f"{path}: does not fit this model: {exc}") from exc
+        self.rng.bit_generator.state = state["rng"]
+        torch.set_rng_state(state["torch_rng"])
+        if state["annotator_rng"] is not None:
+            self.source.rng.bit_generator.state = state["annotator_rng"]
+        c = state["counters"]
+        self.step, self.episode, self.interventions = c["step"], c["episode"], c["interventions"]
+        self.expert.projected, self.last_ratio, self._next_eval = c["projected"], c["last_ratio"], c["next_eval"]
+        self._wall_before, self.update_s, self.updates = c["wall_s"], c["update_s"], c["updates"]
+        self._t0 = time.perf_counter()
+        self._next_checkpoint = (self.step // self.cfg.checkpoint_every + 1) * self.cfg.checkpoint_every
+        self._reload_annotations()
+        self.cache.asked, self.cache.reused = c["asked"], c["reused"]
+        self._truncate_logs()
+
+    def _reload_annotations(self) -> None:
+        """All annotations on disk, including those after the checkpoint: none is asked twice."""
+        path = self.out / "annotations.jsonl"
+        if path.exists():
+            n = self.cache.load(path)
+            log.info("reloaded %d annotations from %s", n, path)
+
+    def _truncate_logs(self) -> None:
+        """Drop metric rows written after the checkpoint (they will be produced again)."""
+        for name in ("metrics.csv", "eval.csv"):
+            path = self.out / name
+            if not path.exists():
+                continue
+            with path.open() as fh:
+                rows = [r for r in csv.DictReader(fh) if int(r["step"]) <= self.step]
+            fields = METRIC_FIELDS if name == "metrics.csv" else EVAL_FIELDS
+            with path.open("w", newline="") as fh:
+                w = csv.DictWriter(fh, fields)
+                w.writeheader()
+                w.writerows(rows)
+
+    def close(self) -> None:
+        self.env.close()
+
+
+def replace_config(cfg, **changes):
+    """dataclasses.replace for frozen configs (used by the CLI and experiments)."""
+    return dataclasses.replace(cfg, **changes)
