@@ -54,9 +54,10 @@ def build_parser() -> argparse.ArgumentParser:
         sp.add_argument("--seed", type=int, default=0)
         sp.add_argument("--quiet", action="store_true", help="no progress bar")
         sp.set_defaults(func=func)
-    from mrguide.policies.commands import add_train_command
+    from mrguide.policies.commands import add_experiment_command, add_train_command
 
     add_train_command(sub)
+    add_experiment_command(sub)
     return p
 
 

@@ -53,7 +53,7 @@ def cmd_train(args: argparse.Namespace) -> int:
                                 lam=f"{row['lambda']:.2f}", interv=tr.interventions, asked=row["asked"])
 
             tr.run(progress)
-        final = tr.evaluate()
+        final = tr.last_eval or tr.evaluate()
         policy = export_actor(tr.agent.actor, out / "policy.npz", tr.env.workspace, tr.env.task_cfg,
                               {"trained": {"steps": tr.step, "seed": tc.seed, "guidance": gc.enabled}})
     finally:
@@ -62,4 +62,25 @@ def cmd_train(args: argparse.Namespace) -> int:
           f"expert interventions {tr.interventions}, annotations asked {tr.cache.asked} / reused {tr.cache.reused}")
     print(f"deterministic evaluation: {final['success_rate']:.0%} success over {tc.eval_episodes} episodes")
     print(f"policy: {policy}   metrics: {out / 'metrics.csv'}   checkpoint: {out / 'checkpoint.pt'}")
+    return 0
+
+
+def add_experiment_command(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("experiment", help="the paper's experiments")
+    p.add_argument("name", choices=["learning-curves"], help="learning-curves: baseline vs guided DDPG (Fig. 3, 5, 9)")
+    p.add_argument("--config", help="TOML config for every run")
+    p.add_argument("--out", default="runs/learning-curves")
+    p.add_argument("--seeds", type=int, default=10)
+    p.add_argument("--steps", type=int, default=20_000)
+    p.add_argument("--workers", type=int, default=2, help="parallel worker processes")
+    p.add_argument("--quiet", action="store_true")
+    p.set_defaults(func=cmd_experiment)
+
+
+def cmd_experiment(args: argparse.Namespace) -> int:
+    from mrguide.policies.experiments import run_learning_curves
+
+    md = run_learning_curves(Path(args.out), args.seeds, args.steps, args.workers, args.config, not args.quiet)
+    print(md.read_text())
+    print(f"figures and CSVs in {args.out}")
     return 0

@@ -27,7 +27,7 @@ class DDPGConfig:
     #: normalized by its mean magnitude as in TD3+BC (Fujimoto & Gu 2021). Not in the paper; 0 gives
     #: plain DDPG. It acts only on expert samples, so a run without guidance is unaffected, and it fades
     #: with λ_t as expert samples thin out of the batches.
-    bc_weight: float = 0.0
+    bc_weight: float = 20.0
 
 
 def mlp(sizes: list[int], out_act: type[nn.Module] | None = None) -> nn.Sequential:

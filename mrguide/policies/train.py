@@ -84,7 +84,7 @@ class TrainConfig:
     batch_size: int = 256  # Table I
     buffer_size: int = 1_000_000  # Table I
     learning_starts: int = 256  # updates begin once this many transitions are stored (ours)
-    eval_every: int = 2_000  # steps between deterministic evaluations
+    eval_every: int = 1_000  # steps between deterministic evaluations (convergence is judged on them)
     eval_episodes: int = 10
     checkpoint_every: int = 2_000  # steps; checkpoints are written at the next episode end
     torch_threads: int = 1
@@ -171,10 +171,12 @@ class Trainer:
         self.episode = 0
         self.interventions = 0
         self.last_ratio = 0.0
+        self._ratio_sum, self._ratio_n = 0.0, 0
         self.update_s = 0.0
         self.updates = 0
         self._next_checkpoint = cfg.checkpoint_every
         self._next_eval = cfg.eval_every
+        self.last_eval: dict = {}
         self._t0 = time.perf_counter()
         self._wall_before = 0.0
 
@@ -195,6 +197,8 @@ class Trainer:
             if self.step >= self._next_eval:
                 self.evaluate()
                 self._next_eval += self.cfg.eval_every
+            if self.step >= end and self.last_eval.get("step") != self.step:
+                self.evaluate()  # the final policy is always evaluated
             if self.step >= self._next_checkpoint or self.step >= stop:
                 self.save_checkpoint()
                 self._next_checkpoint = (self.step // self.cfg.checkpoint_every + 1) * self.cfg.checkpoint_every
@@ -216,6 +220,8 @@ class Trainer:
             self.update_s += time.perf_counter() - t
             self.updates += 1
             self.last_ratio = batch.expert_ratio
+            self._ratio_sum += batch.expert_ratio
+            self._ratio_n += 1
         return next_obs, r, term, trunc, info
 
     def _agent_episode(self, end: int) -> dict:
@@ -263,10 +269,13 @@ class Trainer:
         return self._wall_before + time.perf_counter() - self._t0
 
     def _row(self, kind: str, ret: float, success: bool, outcome, length: int, triggered: bool) -> dict:
+        """A metrics row; `expert_ratio` is the mean realized ratio of the updates since the last row."""
+        ratio = self._ratio_sum / self._ratio_n if self._ratio_n else self.last_ratio
+        self._ratio_sum, self._ratio_n = 0.0, 0
         return {
             "step": self.step, "episode": self.episode, "kind": kind, "return": round(ret, 4), "success": int(success),
             "outcome": outcome, "length": length, "triggered": int(triggered), "lambda": round(self.lam(), 4),
-            "expert_ratio": round(self.last_ratio, 4), "asked": self.cache.asked, "reused": self.cache.reused,
+            "expert_ratio": round(ratio, 4), "asked": self.cache.asked, "reused": self.cache.reused,
             "wall_s": round(self.wall_s(), 2),
         }
 
@@ -301,6 +310,7 @@ class Trainer:
                 w.writeheader()
             w.writerow(res)
         log.info("eval at step %d: success %.0f%%", self.step, 100 * res["success_rate"])
+        self.last_eval = res
         return res
 
     # -- checkpoints -----------------------------------------------------------------------------
