@@ -132,6 +132,14 @@ class Scene:
         for j, qj in zip(self.joint_ids, q):
             pb.resetJointState(self.robot, j, float(qj), 0.0, physicsClientId=c)
         self._servo(np.asarray(q, float), np.zeros(self.spec.dof))
+        self._applied = np.asarray(q, float).copy()
+        self._pending.clear()
+        self.place_objects(obj, goal)
+
+    def place_objects(self, obj: np.ndarray, goal: np.ndarray) -> None:
+        """Object at rest at `obj` (upright, released), goal marker at `goal`; the arm is left as it is."""
+        c = self.client
+        self.suction.set_vacuum(False)
         # Park the object far away for one collision pass: this empties the contact manifolds that
         # restoreState leaves behind, so a seeded episode does not depend on the previous one.
         pb.resetBasePositionAndOrientation(self.object, (0, 0, -10), (0, 0, 0, 1), physicsClientId=c)
@@ -140,8 +148,6 @@ class Scene:
         pb.resetBaseVelocity(self.object, (0, 0, 0), (0, 0, 0), physicsClientId=c)
         pb.resetBasePositionAndOrientation(self.goal_marker, (goal[0], goal[1], 0.001), (0, 0, 0, 1), physicsClientId=c)
         self.goal = np.asarray(goal, float).copy()
-        self._applied = np.asarray(q, float).copy()
-        self._pending.clear()
 
     def reseed(self, seed: int | None) -> None:
         self.rng = np.random.default_rng(seed)

@@ -38,6 +38,7 @@ class SuctionCup:
         self.cfg = cfg
         self.dt = dt
         self.break_force = math.inf
+        self.leak = 0.0  # fault injection: fraction of the sealed vacuum lost through a leak
         self.state = SuctionState()
         self._cid: int | None = None
 
@@ -63,8 +64,10 @@ class SuctionCup:
                 self._detach()
         target = 0.0
         if s.vacuum_on:
-            target = self.cfg.level_sealed if s.attached else self.cfg.level_open
+            target = (self.cfg.level_sealed * (1.0 - self.leak)) if s.attached else self.cfg.level_open
         s.level += (target - s.level) * (1.0 - math.exp(-self.dt / self.cfg.time_constant))
+        if s.attached and target > self.cfg.part_threshold and s.level > self.cfg.part_threshold:
+            self._detach()  # a leak let the vacuum decay below what holds the part: it falls
 
     def _tcp_in_object(self) -> tuple[np.ndarray, np.ndarray]:
         tcp_pos, tcp_orn = pb.getLinkState(self.robot, self.cup_link, computeForwardKinematics=True, physicsClientId=self.client)[4:6]
