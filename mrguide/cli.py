@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 import logging
 import sys
+import time
+from pathlib import Path
 
 from tqdm import tqdm
 
@@ -34,6 +36,85 @@ def cmd_expert(args: argparse.Namespace) -> int:
     return 0
 
 
+def _bus_config(config_path: str | None, bus_config: str):
+    from mrguide.drivers.config import load_cobot_bus_config
+
+    if not bus_config:
+        return load_cobot_bus_config(None)
+    base = Path(config_path).parent if config_path else Path.cwd()
+    return load_cobot_bus_config(base / bus_config)
+
+
+def cmd_deploy(args: argparse.Namespace) -> int:
+    """Run an exported policy on the cobot (real bus), or dry-run it against the simulated cell."""
+    from mrguide.config import load_section
+    from mrguide.deploy.policy import ExportedPolicy, PolicyFileError
+    from mrguide.deploy.safety import SafetyConfig
+    from mrguide.deploy.session import DeployConfig
+    from mrguide.robot import RobotConfig, load_robot
+    from mrguide.task import TaskConfig
+
+    dcfg = load_section(DeployConfig, args.config, "deploy")
+    safety = load_section(SafetyConfig, args.config, "safety")
+    episodes = args.episodes if args.episodes is not None else dcfg.episodes
+    bus = _bus_config(args.config, dcfg.bus_config)
+    log_path = Path(args.log or Path(dcfg.log_dir) / f"deploy-{time.strftime('%Y%m%d-%H%M%S')}.jsonl")
+    spec = load_robot(load_section(RobotConfig, args.config, "robot"))
+    task = load_section(TaskConfig, args.config, "task")
+    try:  # checked before anything is connected or enabled
+        ExportedPolicy.load(args.policy, spec.workspace, task)
+    except PolicyFileError as exc:
+        print(f"mrguide deploy: {exc}", file=sys.stderr)
+        return 2
+    bar = tqdm(total=episodes, desc="deploy" + (" (dry run)" if args.dry_run else ""), unit="ep", disable=args.quiet)
+
+    def tick(report) -> None:
+        bar.update(1)
+        bar.set_postfix(last=report.outcome, decisions=report.decisions)
+
+    if args.dry_run:
+        from mrguide.twin.dry_run import dry_run
+        from mrguide.twin.env import EnvConfig
+
+        summary = dry_run(args.policy, EnvConfig.load(args.config), bus, episodes, args.seed if args.seed is not None else dcfg.seed,
+                          log_path, safety, after_episode=tick)
+    else:
+        if bus.bus.interface == "virtual":
+            print("mrguide deploy: the bus config names the virtual interface; use --dry-run, or configure the real bus",
+                  file=sys.stderr)
+            return 2
+        if not args.enable_drives:
+            print(f"mrguide deploy: this will enable the drives on {bus.bus.interface}:{bus.bus.channel} and move the arm.\n"
+                  "Clear the cell, keep the E-stop at hand, and re-run with --enable-drives to confirm.", file=sys.stderr)
+            return 2
+        summary = _deploy_real(args.policy, args.config, bus, spec, task, dcfg, safety, episodes, log_path, tick)
+    bar.close()
+    print(summary.text())
+    print(f"run log: {log_path}")
+    return 0 if summary.stopped is None else 1
+
+
+def _deploy_real(policy_path, config_path, bus, spec, task, dcfg, safety, episodes, log_path, tick):
+    from mrguide.deploy.policy import ExportedPolicy
+    from mrguide.deploy.runlog import RunLog
+    from mrguide.deploy.runtime import Runtime, RuntimeConfig
+    from mrguide.deploy.session import FixedObjectPose, run_session
+    from mrguide.drivers.cobot import Cobot
+
+    policy = ExportedPolicy.load(policy_path, spec.workspace, task)
+    rcfg = RuntimeConfig(decision_period=policy.decision_period)
+    goals = [dcfg.goals[i % len(dcfg.goals)] for i in range(episodes)]
+    run_log = RunLog(log_path)
+    try:
+        with Cobot(bus, spec) as cobot:
+            cobot.enable()
+            with Runtime(cobot, policy, FixedObjectPose(dcfg.object_position), spec, task, run_log, rcfg, safety) as rt:
+                return run_session(rt, goals, before_episode=lambda i: input(
+                    f"episode {i}: place the object at {dcfg.object_position} and press Enter "), after_episode=tick)
+    finally:
+        run_log.close()
+
+
 def cmd_main(args: argparse.Namespace) -> int:
     """The Quick-start main job."""
     return cmd_expert(args)
@@ -54,7 +135,21 @@ def build_parser() -> argparse.ArgumentParser:
         sp.add_argument("--seed", type=int, default=0)
         sp.add_argument("--quiet", action="store_true", help="no progress bar")
         sp.set_defaults(func=func)
+    sp = sub.add_parser("deploy", help="run an exported policy on the cobot, or --dry-run it against the simulated bus")
+    sp.add_argument("--policy", required=True, help="exported policy file (.npz) from `mrguide train`")
+    sp.add_argument("--config", help="TOML config ([deploy], [safety], [robot], [task]; [twin] for dry runs)")
+    sp.add_argument("--dry-run", action="store_true", help="virtual CAN bus + simulated drives on a twin with reality gap")
+    sp.add_argument("--enable-drives", action="store_true", help="confirm enabling the real drives (real bus only)")
+    sp.add_argument("--episodes", type=int)
+    sp.add_argument("--seed", type=int, help="dry run: object/goal layouts")
+    sp.add_argument("--log", help="run log path (JSONL); default under [deploy] log_dir")
+    sp.add_argument("--quiet", action="store_true")
+    sp.set_defaults(func=cmd_deploy)
+
+    from mrguide.calibration.commands import add_calibrate_command
     from mrguide.policies.commands import add_experiment_command, add_train_command
+
+    add_calibrate_command(sub)
 
     add_train_command(sub)
     add_experiment_command(sub)

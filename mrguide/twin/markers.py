@@ -129,7 +129,7 @@ def add_marker_plane(client: int, dictionary: str, marker_id: int, size_m: float
     return add_textured_slab(client, image, np.asarray(T_base_marker, dtype=float), corners, thickness_m, name)
 
 
-def add_board(client: int, board: Board, T_base_board: np.ndarray, px_per_m: float = 3000.0) -> int:
+def add_board(client: int, board: Board, T_base_board: np.ndarray, px_per_m: float = 4000.0) -> int:
     """The printed board, its pattern at `T_base_board` (board frame: see `mrguide.calibration.boards`), as a
     slab `board.cfg.thickness_m` thick behind the printed face. For a board on the table use
     `board_pose_on_table((x, y, thickness), yaw)`. Returns the body id."""
