@@ -1,0 +1,272 @@
+"""Bus description of the cobot: CAN interface, control timing, node IDs, EDS files, unit conversions.
+
+Loaded from a TOML file (`configs/cobot_bus.toml`) into frozen dataclasses with defaults. Joint limits
+are not repeated here: they come from `mrguide.robot.load_robot()`; `[limits]` may only tighten them.
+No value in this file comes from the paper (it says nothing about the bus); values marked "assumed"
+are engineering choices, not datasheet figures.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import can.interfaces
+import numpy as np
+
+from mrguide.config import ConfigError, from_dict, load_toml
+from mrguide.robot import RobotSpec
+
+#: Directory of the EDS files shipped with the package (also read by the simulated devices).
+EDS_DIR = Path(__file__).resolve().parent / "eds"
+
+#: Bit rates defined by CiA 301 for classic CAN (bit/s).
+CIA301_BITRATES = (10_000, 20_000, 50_000, 125_000, 250_000, 500_000, 800_000, 1_000_000)
+
+INT32_MAX = 2**31 - 1
+
+
+def eds_path(name: str) -> Path:
+    """Resolve an EDS file name: absolute paths as given, relative ones inside `mrguide/drivers/eds/`."""
+    path = Path(name)
+    return path if path.is_absolute() else EDS_DIR / path
+
+
+def _check_node_id(node_id: int, where: str) -> None:
+    if not 1 <= node_id <= 127:
+        raise ConfigError(f"{where}: CANopen node ID must be 1..127, got {node_id}")
+
+
+def _check_eds(name: str, where: str) -> None:
+    if not eds_path(name).is_file():
+        raise ConfigError(f"{where}: EDS file not found: {eds_path(name)}")
+
+
+@dataclass(frozen=True)
+class BusConfig:
+    """python-can bus: interface, channel and bit rate ([bus])."""
+
+    #: python-can interface name: virtual (in-process, no hardware), socketcan, pcan, kvaser, slcan, ...
+    interface: str = "virtual"
+    #: Interface channel, e.g. "can0" (socketcan), "PCAN_USBBUS1" (pcan); any name for virtual.
+    channel: str = "mrguide"
+    #: Bit rate (bit/s). Assumed 1 Mbit/s, the highest CiA 301 classic-CAN rate.
+    bitrate: int = 1_000_000
+    #: Extra keyword arguments for `can.Bus`, e.g. {tty_baudrate = 115200} for slcan.
+    options: dict[str, str | int | float | bool] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.interface not in can.interfaces.VALID_INTERFACES:
+            known = ", ".join(sorted(can.interfaces.VALID_INTERFACES))
+            raise ConfigError(f"bus.interface: unknown python-can interface {self.interface!r}; known: {known}")
+        if self.bitrate not in CIA301_BITRATES:
+            raise ConfigError(f"bus.bitrate: {self.bitrate} is not a CiA 301 bit rate {CIA301_BITRATES}")
+        reserved = {"interface", "channel", "bitrate"} & set(self.options)
+        if reserved:
+            raise ConfigError(f"bus.options: set {sorted(reserved)} as bus keys, not options")
+
+
+@dataclass(frozen=True)
+class TimingConfig:
+    """Control cycle and supervision times ([timing]); all in seconds."""
+
+    #: SYNC / control period. 4 ms (250 Hz) is the project's requirement for CSP streaming.
+    control_period: float = 0.004
+    #: Producer heartbeat time written to every node's 0x1017 (assumed; must be whole ms).
+    heartbeat_period: float = 0.1
+    #: Heartbeat consumer time = factor x producer time (CiA 301 wants it above the producer time).
+    heartbeat_timeout_factor: float = 2.0
+    #: Time allowed for all nodes to send their boot-up message after NMT reset communication.
+    boot_timeout: float = 3.0
+    #: Time allowed for all drives to reach OPERATION ENABLED (or to leave FAULT on reset).
+    enable_timeout: float = 1.0
+    #: SDO response timeout per request during configuration.
+    sdo_timeout: float = 0.3
+    #: Joint setpoints buffered ahead of the bus (cycles); `Cobot.stream` blocks when full.
+    setpoint_queue_depth: int = 4
+    #: Consecutive SYNC cycles without a node's TPDO before it counts as lost.
+    max_missed_feedback: int = 5
+    #: SCHED_FIFO priority (1..99) of the control and receive threads; 0 = normal scheduling (Linux only).
+    realtime_priority: int = 0
+
+    def __post_init__(self) -> None:
+        if not 0.0005 <= self.control_period <= 0.1:
+            raise ConfigError(f"timing.control_period: {self.control_period} s outside [0.0005, 0.1]")
+        hb_ms = self.heartbeat_period * 1000.0
+        if not (1 <= hb_ms <= 65535 and abs(hb_ms - round(hb_ms)) < 1e-9):
+            raise ConfigError(f"timing.heartbeat_period: {self.heartbeat_period} s must be whole ms in [0.001, 65.535]")
+        if self.heartbeat_period < 2 * self.control_period:
+            raise ConfigError("timing.heartbeat_period must be at least two control periods")
+        if not 1.0 < self.heartbeat_timeout_factor <= 3.0:
+            raise ConfigError(f"timing.heartbeat_timeout_factor: {self.heartbeat_timeout_factor} outside (1, 3]")
+        for key in ("boot_timeout", "enable_timeout", "sdo_timeout"):
+            if getattr(self, key) <= 0:
+                raise ConfigError(f"timing.{key} must be > 0")
+        if self.setpoint_queue_depth < 1:
+            raise ConfigError("timing.setpoint_queue_depth must be >= 1")
+        if self.max_missed_feedback < 1:
+            raise ConfigError("timing.max_missed_feedback must be >= 1")
+        if not 0 <= self.realtime_priority <= 99:
+            raise ConfigError(f"timing.realtime_priority: {self.realtime_priority} outside 0..99")
+
+    @property
+    def heartbeat_ms(self) -> int:
+        return round(self.heartbeat_period * 1000.0)
+
+    @property
+    def heartbeat_timeout(self) -> float:
+        return self.heartbeat_period * self.heartbeat_timeout_factor
+
+
+@dataclass(frozen=True)
+class JointDriveConfig:
+    """One joint's drive ([[joints]], in joint order): node ID and counts <-> radians conversion."""
+
+    node_id: int
+    #: Motor encoder counts per motor revolution (assumed 17-bit single-turn encoder).
+    encoder_resolution: int = 131072
+    #: Motor revolutions per joint revolution (assumed 101:1 strain-wave gear).
+    gear_ratio: float = 101.0
+    #: Joint angle (rad) at position 0 counts.
+    offset: float = 0.0
+    #: +1 if counts grow with the joint angle, -1 if the drive counts the other way.
+    direction: int = 1
+
+    def __post_init__(self) -> None:
+        _check_node_id(self.node_id, "joints.node_id")
+        if self.encoder_resolution <= 0:
+            raise ConfigError(f"joints (node {self.node_id}).encoder_resolution must be > 0")
+        if not (math.isfinite(self.gear_ratio) and self.gear_ratio > 0):
+            raise ConfigError(f"joints (node {self.node_id}).gear_ratio must be a positive number")
+        if not math.isfinite(self.offset):
+            raise ConfigError(f"joints (node {self.node_id}).offset must be finite")
+        if self.direction not in (1, -1):
+            raise ConfigError(f"joints (node {self.node_id}).direction must be 1 or -1, got {self.direction}")
+
+
+def _default_joints() -> tuple[JointDriveConfig, ...]:
+    # Node IDs 3..8 as on a Schunk LWA4P arm (DESIGN.md, "Reference hardware").
+    return tuple(JointDriveConfig(node_id=n) for n in range(3, 9))
+
+
+@dataclass(frozen=True)
+class DriveConfig:
+    """Settings shared by all CiA 402 joint drives ([drives])."""
+
+    eds: str = "cia402_drive.eds"
+    #: Following-error window (rad), written to 0x6065 in counts (assumed).
+    following_error_window: float = 0.05
+    #: Following-error time-out (ms), 0x6066 (assumed).
+    following_error_timeout_ms: int = 20
+    #: Quick-stop option code 0x605A: 2 = stop on the quick-stop ramp, then SWITCH ON DISABLED.
+    quick_stop_option: int = 2
+    #: Quick-stop deceleration (rad/s^2), written to 0x6085 in counts/s^2 (assumed).
+    quick_stop_deceleration: float = 10.0
+    #: Also map velocity actual value (0x606C) into a second TPDO every cycle.
+    velocity_tpdo: bool = True
+
+    def __post_init__(self) -> None:
+        _check_eds(self.eds, "drives.eds")
+        if not self.following_error_window > 0:
+            raise ConfigError("drives.following_error_window must be > 0 rad")
+        if not 0 <= self.following_error_timeout_ms <= 65535:
+            raise ConfigError("drives.following_error_timeout_ms must be 0..65535")
+        if self.quick_stop_option not in (1, 2, 5, 6):
+            raise ConfigError(f"drives.quick_stop_option: {self.quick_stop_option} not supported (1, 2, 5 or 6)")
+        if not self.quick_stop_deceleration > 0:
+            raise ConfigError("drives.quick_stop_deceleration must be > 0 rad/s^2")
+
+
+@dataclass(frozen=True)
+class VacuumConfig:
+    """Vacuum generator node ([vacuum]); levels in kPa below atmosphere."""
+
+    node_id: int = 16
+    eds: str = "vacuum_generator.eds"
+    #: Part-gripped threshold L1 (kPa), as on COVAL LEMCOM units; value assumed.
+    grip_threshold_kpa: float = 35.0
+    #: Hysteresis h1 below L1 (kPa) before "part lost"; value assumed.
+    grip_hysteresis_kpa: float = 5.0
+
+    def __post_init__(self) -> None:
+        _check_node_id(self.node_id, "vacuum.node_id")
+        _check_eds(self.eds, "vacuum.eds")
+        if not 0 < self.grip_threshold_kpa < 101.3:
+            raise ConfigError("vacuum.grip_threshold_kpa must lie in (0, 101.3) kPa")
+        if not 0 <= self.grip_hysteresis_kpa < self.grip_threshold_kpa:
+            raise ConfigError("vacuum.grip_hysteresis_kpa must lie in [0, grip_threshold_kpa)")
+
+
+@dataclass(frozen=True)
+class LimitOverrides:
+    """Optional tighter joint limits ([limits]); empty = the robot spec's limits."""
+
+    q_lower: tuple[float, ...] = ()
+    q_upper: tuple[float, ...] = ()
+    v_max: tuple[float, ...] = ()
+
+
+@dataclass(frozen=True)
+class CobotBusConfig:
+    """The whole bus description of the cobot (one TOML file)."""
+
+    bus: BusConfig = field(default_factory=BusConfig)
+    timing: TimingConfig = field(default_factory=TimingConfig)
+    joints: tuple[JointDriveConfig, ...] = field(default_factory=_default_joints)
+    drives: DriveConfig = field(default_factory=DriveConfig)
+    vacuum: VacuumConfig = field(default_factory=VacuumConfig)
+    limits: LimitOverrides = field(default_factory=LimitOverrides)
+
+    def __post_init__(self) -> None:
+        ids = [j.node_id for j in self.joints] + [self.vacuum.node_id]
+        dupes = sorted({n for n in ids if ids.count(n) > 1})
+        if dupes:
+            raise ConfigError(f"node IDs must be unique, duplicated: {dupes}")
+
+    @property
+    def node_ids(self) -> tuple[int, ...]:
+        return tuple(j.node_id for j in self.joints) + (self.vacuum.node_id,)
+
+
+@dataclass(frozen=True)
+class JointLimits:
+    """Limits the driver enforces on every setpoint (rad, rad/s)."""
+
+    q_lower: np.ndarray
+    q_upper: np.ndarray
+    v_max: np.ndarray
+
+
+def load_cobot_bus_config(path: str | Path | None) -> CobotBusConfig:
+    """Load a bus description from TOML; None gives the defaults (virtual bus)."""
+    if path is None:
+        return CobotBusConfig()
+    return from_dict(CobotBusConfig, load_toml(path), where=str(path))
+
+
+def resolve_limits(config: CobotBusConfig, robot: RobotSpec) -> JointLimits:
+    """Joint limits from the robot spec, tightened by `[limits]`; checks they fit the drives' int32 counts."""
+    if len(config.joints) != robot.dof:
+        raise ConfigError(f"joints: {len(config.joints)} drives configured, robot {robot.name} has {robot.dof} joints")
+    limits = {"q_lower": robot.q_lower.copy(), "q_upper": robot.q_upper.copy(), "v_max": robot.v_max.copy()}
+    for key, base in limits.items():
+        override = getattr(config.limits, key)
+        if not override:
+            continue
+        arr = np.asarray(override, dtype=float)
+        if arr.shape != base.shape or not np.all(np.isfinite(arr)):
+            raise ConfigError(f"limits.{key}: expected {robot.dof} finite values, got {list(override)}")
+        looser = arr < base if key == "q_lower" else arr > base
+        if np.any(looser):
+            names = [robot.joint_names[i] for i in np.flatnonzero(looser)]
+            raise ConfigError(f"limits.{key}: may only tighten the robot limits; looser for {names}")
+        limits[key] = arr
+    if np.any(limits["q_upper"] <= limits["q_lower"]) or np.any(limits["v_max"] <= 0):
+        raise ConfigError("limits: need q_upper > q_lower and v_max > 0 for every joint")
+    for joint, name, lo, hi in zip(config.joints, robot.joint_names, limits["q_lower"], limits["q_upper"]):
+        counts_per_rad = joint.encoder_resolution * joint.gear_ratio / (2 * math.pi)
+        worst = max(abs(lo - joint.offset), abs(hi - joint.offset)) * counts_per_rad
+        if worst > INT32_MAX:
+            raise ConfigError(f"joints (node {joint.node_id}, {name}): limits reach {worst:.3g} counts, beyond int32")
+    return JointLimits(**limits)

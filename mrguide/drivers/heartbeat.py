@@ -1,0 +1,88 @@
+"""Heartbeat consumer with a timeout, and boot-up detection.
+
+canopen's `NmtMaster` records each node's last heartbeat state but never times out. This consumer
+hooks the same heartbeat frames (through `nmt.add_heartbeat_callback`), stamps them with a monotonic
+clock and reports nodes whose heartbeat is older than the consumer time.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable, Iterable
+from functools import partial
+
+from canopen import RemoteNode
+from canopen.nmt import NMT_STATES
+
+#: NMT state reported in a boot-up message.
+BOOTUP = 0
+#: NMT state OPERATIONAL as carried in heartbeats.
+OPERATIONAL = 5
+
+
+def nmt_state_name(state: int | None) -> str:
+    if state is None:
+        return "NO HEARTBEAT"
+    return "BOOT-UP" if state == BOOTUP else NMT_STATES.get(state, f"UNKNOWN ({state})")
+
+
+class HeartbeatConsumer:
+    """Tracks heartbeat age and NMT state per node; supervision starts when `arm()` is called."""
+
+    def __init__(self, timeout: float, clock: Callable[[], float] = time.monotonic) -> None:
+        self.timeout = timeout
+        self._clock = clock
+        self._last: dict[int, float] = {}
+        self._state: dict[int, int | None] = {}
+        self._bootups: dict[int, threading.Event] = {}
+        self._armed = False
+
+    def watch(self, node: RemoteNode) -> None:
+        """Start following the heartbeats of `node`."""
+        self._state[node.id] = None
+        self._bootups[node.id] = threading.Event()
+        node.nmt.add_heartbeat_callback(partial(self._on_heartbeat, node.id))
+
+    def _on_heartbeat(self, node_id: int, state: int) -> None:
+        self._last[node_id] = self._clock()
+        self._state[node_id] = state
+        if state == BOOTUP:
+            self._bootups[node_id].set()
+
+    def expect_bootup(self) -> None:
+        """Forget earlier boot-up messages (call right before sending NMT reset)."""
+        for event in self._bootups.values():
+            event.clear()
+
+    def wait_bootup(self, timeout: float) -> list[int]:
+        """Wait for a boot-up message from every watched node; returns the node IDs that sent none."""
+        end = self._clock() + timeout
+        for event in self._bootups.values():
+            event.wait(max(0.0, end - self._clock()))
+        return [n for n, event in self._bootups.items() if not event.is_set()]
+
+    def arm(self) -> None:
+        """Start supervision: every node gets a full consumer time from now for its next heartbeat."""
+        now = self._clock()
+        for node_id in self._bootups:
+            self._last.setdefault(node_id, now)
+            self._last[node_id] = max(self._last[node_id], now)
+        self._armed = True
+
+    def disarm(self) -> None:
+        self._armed = False
+
+    def expired(self, now: float | None = None) -> list[tuple[int, float]]:
+        """(node ID, seconds since its last heartbeat) of every node past the consumer time."""
+        if not self._armed:
+            return []
+        now = self._clock() if now is None else now
+        return [(n, now - t) for n, t in self._last.items() if now - t > self.timeout]
+
+    def state(self, node_id: int) -> int | None:
+        """Last NMT state the node reported (None before its first heartbeat)."""
+        return self._state[node_id]
+
+    def all_in_state(self, state: int, node_ids: Iterable[int]) -> bool:
+        return all(self._state.get(n) == state for n in node_ids)

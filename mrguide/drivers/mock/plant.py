@@ -1,0 +1,56 @@
+"""The plant interface: the physical arm and vacuum gripper behind the simulated CANopen devices.
+
+The simulated cobot steps its plant exactly once per SYNC, from its CAN receive thread: it reads the
+joint state, passes the drives' position targets and the vacuum command, then calls `step(dt)` with the
+SYNC period. A PyBullet twin implements this with one physics step per SYNC.
+
+Units: joint positions in rad, velocities in rad/s (robot joint order); vacuum level in kPa *below
+atmosphere* (0 = atmospheric pressure, positive = vacuum; e.g. 60 kPa below atmosphere = -60 kPa gauge).
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+
+import numpy as np
+
+
+class Plant(ABC):
+    """One object owning arm + vacuum gripper, advanced one SYNC period at a time."""
+
+    @property
+    @abstractmethod
+    def dof(self) -> int:
+        """Number of joints."""
+
+    @abstractmethod
+    def step(self, dt: float) -> None:
+        """Advance the plant by `dt` seconds (one SYNC period) under the last targets and vacuum command."""
+
+    @abstractmethod
+    def set_joint_targets(self, q: np.ndarray) -> None:
+        """Position targets (rad) the drives' position loops track during the next step."""
+
+    @abstractmethod
+    def joint_positions(self) -> np.ndarray:
+        """Measured joint positions (rad)."""
+
+    @abstractmethod
+    def joint_velocities(self) -> np.ndarray:
+        """Measured joint velocities (rad/s)."""
+
+    @abstractmethod
+    def set_vacuum(self, on: bool, blow_off: bool) -> None:
+        """Vacuum generator valves: suction on, and/or blow-off (release pulse)."""
+
+    @abstractmethod
+    def vacuum_level_kpa(self) -> float:
+        """Vacuum level at the suction cup in kPa below atmosphere (>= 0)."""
+
+    @abstractmethod
+    def part_present(self) -> bool:
+        """Whether a part is at the suction cup (in contact / held)."""
+
+    @abstractmethod
+    def set_vacuum_leak(self, fraction: float) -> None:
+        """Fault injection: a leak in the vacuum line; 0 = tight, 1 = no vacuum can build at the cup."""

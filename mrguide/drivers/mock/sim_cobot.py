@@ -1,0 +1,142 @@
+"""The simulated cobot: six CiA 402 drives and the vacuum generator as CANopen slaves on one bus.
+
+All devices share one python-can bus (normally the in-process `virtual` interface, on the channel of the
+cobot's bus config) wrapped in fault injection, and one plant that is stepped once per SYNC from the
+simulator's receive thread::
+
+    plant = FirstOrderPlant(robot.q_home)
+    with SimulatedCobot(config, plant) as sim:      # devices boot and wait in PRE-OPERATIONAL
+        with Cobot(config) as cobot:                # the master finds them on the same channel
+            ...
+            sim.faults.set_drop_rate(0.05)          # fault injection while running
+            sim.inject_drive_fault(5)
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from dataclasses import dataclass
+
+import canopen
+import numpy as np
+
+from mrguide.drivers.bus import BusReceiver, ReceiverStats, open_bus
+from mrguide.drivers.config import CobotBusConfig, eds_path
+from mrguide.drivers.conversion import JointConversion
+from mrguide.drivers.errors import NotReadyError
+from mrguide.drivers.mock.drive_sim import SimulatedDrive
+from mrguide.drivers.mock.faults import FaultInjector, FaultStats, FaultyBus
+from mrguide.drivers.mock.plant import Plant
+from mrguide.drivers.mock.vacuum_sim import SimulatedVacuumGenerator
+
+logger = logging.getLogger(__name__)
+
+#: EMCY code for an injected drive fault: 0x2310 continuous over-current (CiA 402).
+DEFAULT_FAULT_CODE = 0x2310
+
+
+@dataclass(frozen=True)
+class SimStats:
+    syncs: int
+    receiver: ReceiverStats
+    faults: FaultStats
+
+
+class SimulatedCobot:
+    """CANopen slaves of the cobot on a CAN bus, with one plant behind them."""
+
+    def __init__(self, config: CobotBusConfig, plant: Plant, seed: int = 0) -> None:
+        if plant.dof != len(config.joints):
+            raise ValueError(f"plant has {plant.dof} joints, bus config {len(config.joints)} drives")
+        self.config = config
+        self.plant = plant
+        self.faults = FaultInjector(seed)
+        #: Held while a SYNC is processed (plant stepping); take it to touch the plant from another thread.
+        self.lock = threading.RLock()
+        self.sync_count = 0
+        self._network: canopen.Network | None = None
+        self._receiver: BusReceiver | None = None
+        self.drives: list[SimulatedDrive] = []
+        self.vacuum: SimulatedVacuumGenerator | None = None
+
+    def start(self) -> None:
+        """Join the bus and power the devices on (boot-up messages, PRE-OPERATIONAL)."""
+        if self._network is not None:
+            raise NotReadyError("simulated cobot already started")
+        cfg = self.config
+        network = canopen.Network(FaultyBus(open_bus(cfg.bus), self.faults))
+        receiver = BusReceiver(network, "simulator")
+        receiver.expect(0x000, (2,))
+        receiver.expect(0x080, (0, 1))
+        network.subscribe(0x080, self._on_sync)
+        self.drives = [SimulatedDrive(j.node_id, eds_path(cfg.drives.eds), network, receiver, self.faults,
+                                      JointConversion.from_config(j)) for j in cfg.joints]
+        self.vacuum = SimulatedVacuumGenerator(cfg.vacuum.node_id, eds_path(cfg.vacuum.eds), network, receiver,
+                                               self.faults)
+        self._network, self._receiver = network, receiver
+        receiver.start()
+        for slave in (*self.drives, self.vacuum):
+            slave.power_on()
+        logger.info("simulated cobot on %s:%s: drives %s, vacuum generator %d", cfg.bus.interface, cfg.bus.channel,
+                    [d.node_id for d in self.drives], self.vacuum.node_id)
+
+    def stop(self) -> None:
+        """Leave the bus (heartbeats stop, the bus is shut down)."""
+        network, self._network = self._network, None
+        if network is not None:
+            assert self._receiver is not None
+            self._receiver.stop()
+            network.disconnect()
+
+    def __enter__(self) -> SimulatedCobot:
+        self.start()
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.stop()
+
+    def inject_drive_fault(self, node_id: int, code: int = DEFAULT_FAULT_CODE) -> None:
+        """The drive faults at the next SYNC and sends EMCY `code`; a fault reset clears it."""
+        for drive in self.drives:
+            if drive.node_id == node_id:
+                drive.inject_fault(code)
+                return
+        raise ValueError(f"no simulated drive with node ID {node_id}")
+
+    def set_vacuum_leak(self, fraction: float) -> None:
+        """A leak in the vacuum line (0 = tight, 1 = no vacuum builds)."""
+        with self.lock:
+            self.plant.set_vacuum_leak(fraction)
+
+    def stats(self) -> SimStats:
+        assert self._receiver is not None, "start() first"
+        return SimStats(self.sync_count, self._receiver.stats(), self.faults.stats())
+
+    def _on_sync(self, can_id: int, data: bytearray, timestamp: float) -> None:
+        assert self.vacuum is not None
+        with self.lock:
+            self.sync_count += 1
+            plant = self.plant
+            dt = self.drives[0].interpolation_period
+            q, v = plant.joint_positions(), plant.joint_velocities()
+            targets = np.empty_like(q)
+            for i, drive in enumerate(self.drives):
+                if drive.silent:
+                    targets[i] = drive.hold(q[i])
+                    continue
+                drive.refresh_pdos()
+                drive.apply_rpdos()
+                targets[i] = drive.cycle(q[i], v[i], dt)
+                if drive.operational:
+                    drive.transmit_tpdos(self.sync_count)
+            vacuum = self.vacuum
+            if not vacuum.silent:
+                vacuum.refresh_pdos()
+                vacuum.apply_rpdos()
+                vacuum.cycle(plant.vacuum_level_kpa())
+                if vacuum.operational:
+                    vacuum.transmit_tpdos(self.sync_count)
+            plant.set_joint_targets(targets)
+            plant.set_vacuum(*vacuum.commands())
+            plant.step(dt)

@@ -1,0 +1,122 @@
+"""Bus self-test: boot the cobot, enable it, move each joint a little and back, toggle the vacuum, report.
+
+On the `virtual` interface the simulated devices (first-order plant) are started on the same channel;
+on any other interface the real cobot is used and really moves.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+
+import numpy as np
+from ruckig import InputParameter, Result, Ruckig, Trajectory
+
+from mrguide.drivers.cobot import Cobot
+from mrguide.drivers.config import CobotBusConfig
+from mrguide.drivers.mock.first_order_plant import FirstOrderPlant
+from mrguide.drivers.mock.sim_cobot import SimulatedCobot
+from mrguide.drivers.tracking import TrackingRecorder
+from mrguide.robot import RobotSpec
+
+#: How far each joint moves (rad) and the pass criteria (rad).
+MOVE = 0.05
+MAX_TRACKING_ERROR = 0.01
+MAX_FINAL_ERROR = 1e-3
+#: Settling time after each move before the final error is read (s).
+SETTLE = 0.1
+#: On real hardware without a part, vacuum on must at least raise the level this much (kPa).
+OPEN_CUP_MIN_KPA = 1.0
+
+
+def joint_trajectory(q_from: np.ndarray, q_to: np.ndarray, robot: RobotSpec, period: float) -> list[np.ndarray]:
+    """Jerk-limited point-to-point joint path (Ruckig), sampled every control period; ends at `q_to`."""
+    dof = len(q_from)
+    inp = InputParameter(dof)
+    inp.current_position, inp.target_position = list(q_from), list(q_to)
+    inp.max_velocity, inp.max_acceleration, inp.max_jerk = list(robot.v_max), list(robot.a_max), list(robot.j_max)
+    trajectory = Trajectory(dof)
+    result = Ruckig(dof).calculate(inp, trajectory)
+    if result not in (Result.Working, Result.Finished):
+        raise ValueError(f"Ruckig cannot plan {q_from} -> {q_to}: {result}")
+    steps = int(np.ceil(trajectory.duration / period))
+    return [np.array(trajectory.at_time(min(k * period, trajectory.duration))[0]) for k in range(1, steps + 1)]
+
+
+def run_selftest(config: CobotBusConfig, robot: RobotSpec, write: Callable[[str], None]) -> bool:
+    """Run the self-test, writing a report line by line; True if every check passed."""
+    bus = config.bus
+    simulate = bus.interface == "virtual"
+    write(f"mrguide bus selftest on {bus.interface}:{bus.channel} at {bus.bitrate // 1000} kbit/s, "
+          f"control period {config.timing.control_period * 1000:g} ms")
+    sim, plant = None, None
+    if simulate:
+        plant = FirstOrderPlant(robot.q_home)
+        sim = SimulatedCobot(config, plant)
+        sim.start()
+        write(f"  simulated devices: drives {[j.node_id for j in config.joints]}, vacuum generator "
+              f"{config.vacuum.node_id}, first-order plant")
+    cobot = Cobot(config, robot)
+    passed = True
+    try:
+        t0 = time.monotonic()
+        cobot.connect()
+        write(f"  boot, SDO configuration, NMT start    {time.monotonic() - t0:6.2f} s   OK")
+        t0 = time.monotonic()
+        cobot.enable()
+        write(f"  enable (OPERATION ENABLED, CSP)       {time.monotonic() - t0:6.2f} s   OK")
+        recorder = TrackingRecorder(robot.dof)
+        cobot.add_cycle_observer(recorder)
+        for i, (name, joint) in enumerate(zip(robot.joint_names, config.joints)):
+            passed &= _move_joint(cobot, robot, recorder, i, f"{name} (node {joint.node_id})", write)
+        passed &= _toggle_vacuum(cobot, plant, write)
+        stats = cobot.stats()
+        write(f"  cycles {stats.cycles}, missed {stats.missed_cycles}, SYNC lateness p50/p99/max "
+              f"{stats.lateness_p50 * 1e3:.2f}/{stats.lateness_p99 * 1e3:.2f}/{stats.lateness_max * 1e3:.2f} ms, "
+              f"lost feedback {stats.lost_feedback}, frames tx/rx {stats.frames_tx}/{stats.frames_rx}")
+    finally:
+        cobot.disconnect()
+        if sim is not None:
+            sim.stop()
+    write(f"RESULT: {'PASS' if passed else 'FAIL'}")
+    return passed
+
+
+def _move_joint(cobot: Cobot, robot: RobotSpec, recorder: TrackingRecorder, i: int, label: str,
+                write: Callable[[str], None]) -> bool:
+    start = cobot.setpoint
+    step = MOVE if start[i] + MOVE <= cobot.limits.q_upper[i] else -MOVE
+    goal = start.copy()
+    goal[i] += step
+    recorder.reset()
+    for q_from, q_to in ((start, goal), (goal, start)):
+        for q in joint_trajectory(q_from, q_to, robot, cobot.period):
+            cobot.stream(q)
+        time.sleep(SETTLE)
+    final = float(np.max(np.abs(cobot.joint_state().positions - start)))
+    worst = float(recorder.max_error.max())
+    ok = worst <= MAX_TRACKING_ERROR and final <= MAX_FINAL_ERROR
+    write(f"  {label:32s} {step:+.3f} rad and back: max tracking error {worst:.4f} rad, "
+          f"final error {final:.5f} rad   {'OK' if ok else 'FAIL'}")
+    return ok
+
+
+def _toggle_vacuum(cobot: Cobot, plant: FirstOrderPlant | None, write: Callable[[str], None]) -> bool:
+    if plant is not None:
+        plant.place_part()
+    cobot.set_vacuum(True)
+    time.sleep(0.5)
+    on = cobot.vacuum_state()
+    cobot.set_vacuum(False, blow_off=True)
+    time.sleep(0.3)
+    cobot.set_vacuum(False)
+    off = cobot.vacuum_state()
+    if plant is not None:
+        ok = on.part_gripped and not off.part_gripped and not plant.part_present()
+        detail = f"part gripped: {on.part_gripped}; after blow-off {off.level_kpa:.1f} kPa, part released: " \
+                 f"{not plant.part_present()}"
+    else:
+        ok = on.level_kpa >= OPEN_CUP_MIN_KPA
+        detail = f"part gripped: {on.part_gripped} (no part expected); after blow-off {off.level_kpa:.1f} kPa"
+    write(f"  vacuum on: {on.level_kpa:.1f} kPa, {detail}   {'OK' if ok else 'FAIL'}")
+    return ok

@@ -1,0 +1,58 @@
+"""`mrguide bus selftest` / `mrguide bus monitor` through argparse, as the top-level CLI wires them."""
+
+from __future__ import annotations
+
+import argparse
+
+import pytest
+
+from mrguide.drivers.commands import add_bus_commands
+
+
+def _run(argv):
+    parser = argparse.ArgumentParser(prog="mrguide")
+    add_bus_commands(parser.add_subparsers(dest="command", required=True))
+    args = parser.parse_args(argv)
+    return args.func(args)
+
+
+def _toml(tmp_path, text):
+    path = tmp_path / "bus.toml"
+    path.write_text(text)
+    return str(path)
+
+
+def test_selftest_on_the_virtual_bus_passes(tmp_path, capsys):
+    config = _toml(tmp_path, '[bus]\nchannel = "cli-selftest"\n[timing]\nheartbeat_period = 0.05\n')
+    assert _run(["bus", "selftest", "--config", config]) == 0
+    out = capsys.readouterr().out
+    assert "RESULT: PASS" in out
+    assert out.count("and back: max tracking error") == 6
+    assert "part gripped: True" in out
+
+
+def test_monitor_with_simulated_cobot_decodes_traffic(tmp_path, capsys):
+    config = _toml(tmp_path, '[bus]\nchannel = "cli-monitor"\n')
+    assert _run(["bus", "monitor", "--config", config, "--duration", "0.6", "--simulate"]) == 0
+    out = capsys.readouterr().out
+    for word in ("NMT RESET COMMUNICATION", "BOOT-UP", "SDO request", "SYNC", "TPDO1 node 3", "statusword=",
+                 "frames in 0.6 s"):
+        assert word in out
+
+
+@pytest.mark.parametrize("argv_tail, toml, words", [
+    (["selftest"], "[bus]\nbitrate = 7\n", ["configuration error", "bus.bitrate"]),
+    (["monitor", "--duration", "0.1"], "[timing\n", ["configuration error", "not valid TOML"]),
+    (["selftest"], '[bus]\ninterface = "socketcan"\nchannel = "can9"\n', ["--allow-motion"]),
+    (["monitor", "--simulate"], '[bus]\ninterface = "socketcan"\nchannel = "can9"\n', ["virtual bus"]),
+    (["selftest", "--allow-motion"], '[bus]\ninterface = "socketcan"\nchannel = "mrguide-no-if"\n',
+     ["BusError", "mrguide-no-if"]),
+])
+def test_bad_config_or_bus_gives_one_clear_line_and_nonzero_exit(tmp_path, capsys, argv_tail, toml, words):
+    config = _toml(tmp_path, toml)
+    code = _run(["bus", *argv_tail[:1], "--config", config, *argv_tail[1:]])
+    assert code != 0
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1
+    for word in words:
+        assert word in err

@@ -1,0 +1,86 @@
+"""Bus description: the repo's TOML, defaults, and clear errors for bad values."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mrguide.config import ConfigError
+from mrguide.drivers.config import (BusConfig, CobotBusConfig, JointDriveConfig, LimitOverrides, TimingConfig,
+                                    load_cobot_bus_config, resolve_limits)
+from mrguide.drivers.conversion import JointConversion
+
+REPO_TOML = Path(__file__).resolve().parents[2] / "configs" / "cobot_bus.toml"
+
+
+def test_repo_toml_matches_defaults_and_robot_limits(robot):
+    config = load_cobot_bus_config(REPO_TOML)
+    assert config == CobotBusConfig()
+    assert [j.node_id for j in config.joints] == [3, 4, 5, 6, 7, 8]
+    assert config.vacuum.node_id == 16
+    assert config.timing.control_period == pytest.approx(0.004)
+    limits = resolve_limits(config, robot)
+    np.testing.assert_array_equal(limits.q_lower, robot.q_lower)
+    np.testing.assert_array_equal(limits.v_max, robot.v_max)
+
+
+@pytest.mark.parametrize("toml, words", [
+    ('[bus]\ninterface = "cann"\n', ["bus.interface", "cann"]),
+    ("[bus]\nbitrate = 123456\n", ["bus.bitrate", "123456"]),
+    ("[timing]\ncontrol_period = 0.2\n", ["timing.control_period"]),
+    ("[timing]\nheartbeat_period = 0.0505\n", ["timing.heartbeat_period"]),
+    ("[timing]\ncontrol_perod = 0.004\n", ["control_perod"]),
+    ("[vacuum]\nnode_id = 3\n", ["unique", "3"]),
+    ("[vacuum]\nnode_id = 200\n", ["vacuum.node_id", "200"]),
+    ('[drives]\neds = "nope.eds"\n', ["drives.eds", "nope.eds"]),
+    ("[drives]\nquick_stop_option = 3\n", ["quick_stop_option"]),
+    ("[[joints]]\nnode_id = 3\ndirection = 2\n", ["direction"]),
+    ('[timing]\nboot_timeout = "long"\n', ["'long'"]),  # mrguide.config's float hook does not name the key
+])
+def test_bad_values_name_the_key_and_the_file(tmp_path, toml, words):
+    path = tmp_path / "bus.toml"
+    path.write_text(toml)
+    with pytest.raises(ConfigError) as info:
+        load_cobot_bus_config(path)
+    message = str(info.value)
+    assert str(path) in message
+    for word in words:
+        assert word in message
+
+
+def test_limit_overrides_may_only_tighten(robot):
+    tighter = replace(CobotBusConfig(), limits=LimitOverrides(v_max=tuple(robot.v_max * 0.5)))
+    np.testing.assert_allclose(resolve_limits(tighter, robot).v_max, robot.v_max * 0.5)
+    looser = replace(CobotBusConfig(), limits=LimitOverrides(q_upper=tuple(robot.q_upper + 0.1)))
+    with pytest.raises(ConfigError, match="only tighten"):
+        resolve_limits(looser, robot)
+
+
+def test_joint_count_and_int32_range_are_checked(robot):
+    five = replace(CobotBusConfig(), joints=CobotBusConfig().joints[:5])
+    with pytest.raises(ConfigError, match="5 drives"):
+        resolve_limits(five, robot)
+    huge = tuple(JointDriveConfig(node_id=n, gear_ratio=1e5) for n in range(3, 9))
+    with pytest.raises(ConfigError, match="int32"):
+        resolve_limits(replace(CobotBusConfig(), joints=huge), robot)
+
+
+def test_direct_construction_validates_too():
+    with pytest.raises(ConfigError, match="bus.interface"):
+        BusConfig(interface="nonsense")
+    with pytest.raises(ConfigError, match="realtime_priority"):
+        TimingConfig(realtime_priority=120)
+
+
+@pytest.mark.parametrize("direction, offset", [(1, 0.0), (-1, 0.3)])
+def test_counts_radians_round_trip(direction, offset):
+    conv = JointConversion.from_config(JointDriveConfig(node_id=3, direction=direction, offset=offset))
+    assert conv.counts_per_rad == pytest.approx(131072 * 101 / (2 * np.pi))
+    for q in (-2.5, 0.0, 1.234567):
+        assert conv.to_rad(conv.to_counts(q)) == pytest.approx(q, abs=1.0 / conv.counts_per_rad)
+    assert np.sign(conv.to_counts(offset + 0.1)) == direction
+    assert conv.to_counts(offset) == 0
+    assert conv.velocity_to_rad(conv.velocity_to_counts(1.5)) == pytest.approx(1.5, abs=1e-6)

@@ -1,0 +1,62 @@
+"""Cycle timer: absolute deadlines (no drift), skipped deadlines counted; lateness statistics."""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+
+from mrguide.drivers.cycle import CycleStats, CycleTimer
+
+
+class FakeClock:
+    def __init__(self, overshoot: float) -> None:
+        self.t = 100.0
+        self.overshoot = overshoot
+
+    def __call__(self) -> float:
+        return self.t
+
+    def sleep(self, dt: float) -> None:
+        self.t += dt + self.overshoot
+
+
+def test_deadlines_do_not_drift_with_sleep_overshoot():
+    clock = FakeClock(overshoot=0.0007)
+    timer = CycleTimer(0.004, clock=clock, sleep=clock.sleep)
+    timer.start()
+    ticks = [timer.wait() for _ in range(1000)]
+    assert ticks[-1].deadline == pytest.approx(100.0 + 1000 * 0.004)
+    assert clock.t - ticks[-1].deadline == pytest.approx(0.0007)  # overshoot stays one overshoot
+    assert all(t.skipped == 0 for t in ticks)
+
+
+def test_late_cycle_skips_missed_deadlines():
+    clock = FakeClock(overshoot=0.0)
+    timer = CycleTimer(0.004, clock=clock, sleep=clock.sleep)
+    timer.start()
+    timer.wait()
+    clock.t += 0.0145  # the cycle body stalled for 3.6 periods
+    tick = timer.wait()
+    assert tick.skipped == 2
+    assert tick.index == 4
+    assert tick.deadline == pytest.approx(100.0 + 4 * 0.004)
+
+
+def test_real_clock_keeps_the_average_rate():
+    timer = CycleTimer(0.002)
+    timer.start()
+    start = time.monotonic()
+    for _ in range(100):
+        tick = timer.wait()
+    assert tick.index >= 100
+    assert time.monotonic() - start == pytest.approx(tick.index * 0.002, abs=0.015)
+
+
+def test_cycle_stats_percentiles_and_missed():
+    stats = CycleStats(capacity=8)
+    for i in range(10):
+        stats.record(i * 1e-4, skipped=1 if i == 3 else 0)
+    summary = stats.summary()
+    assert summary.cycles == 10 and summary.missed == 1
+    assert summary.lateness_max == pytest.approx(9e-4)  # ring buffer keeps the last 8

@@ -1,0 +1,89 @@
+"""Heartbeat consumer: loss detected within 3 heartbeat periods, node named, streaming stops, quick stop."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+from mrguide.drivers import DriverError, FeedbackLostError, HeartbeatLostError
+from mrguide.drivers.cia402 import OPERATION_ENABLED
+from mrguide.drivers.heartbeat import HeartbeatConsumer
+
+HB = 0.05  # heartbeat period of the test rigs (s)
+
+
+class _Node:
+    """Minimal stand-in for canopen's RemoteNode: an id and an NMT object taking heartbeat callbacks."""
+
+    def __init__(self, node_id):
+        self.id = node_id
+        self.nmt = self
+        self.callbacks = []
+
+    def add_heartbeat_callback(self, callback):
+        self.callbacks.append(callback)
+
+
+def test_consumer_times_out_only_after_arming():
+    now = [0.0]
+    consumer = HeartbeatConsumer(timeout=0.1, clock=lambda: now[0])
+    node = _Node(7)
+    consumer.watch(node)
+    now[0] = 5.0
+    assert consumer.expired() == []  # not armed: boot and configuration take their time
+    consumer.arm()
+    node.callbacks[0](5)
+    now[0] = 5.09
+    assert consumer.expired() == []
+    now[0] = 5.11
+    assert consumer.expired() == [(7, pytest.approx(0.11))]
+    node.callbacks[0](5)
+    assert consumer.expired() == [] and consumer.state(7) == 5
+
+
+def test_heartbeat_loss_stops_streaming_names_node_and_quick_stops(rig, tap_on):
+    cobot, sim = rig.cobot, rig.sim
+    tap = tap_on(rig.config.bus.channel)
+    q, step = cobot.setpoint, np.full(6, 0.4 * cobot.period)  # 0.4 rad/s on every joint
+    silenced_at = None
+    with pytest.raises(HeartbeatLostError) as info:
+        for k in range(2000):
+            q = q + step
+            cobot.stream(q)
+            if k == 20:
+                sim.faults.silence(5, heartbeat_only=True)  # PDOs still flow: only the heartbeat consumer can tell
+                silenced_at = time.monotonic()
+    error = info.value
+    assert error.node_id == 5 and error.name == "elbow_joint"
+    assert "node 5 (elbow_joint)" in str(error)
+    status = cobot.status()
+    assert status.fault is error and status.heartbeat_lost == (5,)
+    assert status.fault_at - silenced_at <= 3 * HB
+    with pytest.raises(HeartbeatLostError):
+        cobot.stream(q)  # streaming stays stopped
+    assert rig.wait_until(lambda: all(s != OPERATION_ENABLED for s in cobot.status().drive_states.values()))
+    with pytest.raises(DriverError, match="no heartbeat"):
+        cobot.reset_faults(timeout=0.1)  # the node is still silent: no reset
+    sim.faults.unsilence(5)
+    assert rig.wait_until(lambda: cobot.status().heartbeat_lost == ())
+    cobot.reset_faults()
+    cobot.enable()
+    cobot.stream(cobot.setpoint)
+    quick_stops = [m for m in tap.with_id(0x203) if m.timestamp > tap.frames[0].timestamp and m.data[:2] == b"\x02\x00"]
+    assert quick_stops, "drive 3 never got the quick-stop controlword"
+
+
+def test_silent_node_is_detected_by_feedback_and_heartbeat(make_rig):
+    rig = make_rig(max_missed_feedback=5)
+    rig.cobot.enable()
+    silenced_at = time.monotonic()
+    rig.sim.faults.silence(7)
+    assert rig.wait_until(lambda: rig.cobot.status().fault is not None, timeout=3 * HB)
+    fault = rig.cobot.status().fault
+    assert isinstance(fault, FeedbackLostError) and fault.node_id == 7
+    assert rig.wait_until(lambda: rig.cobot.status().heartbeat_lost == (7,), timeout=3 * HB)
+    assert time.monotonic() - silenced_at <= 3 * HB + 0.01
+    alive = [name for name in rig.cobot.joint_names if name != "wrist_2_joint"]
+    assert rig.wait_until(lambda: all(rig.cobot.status().drive_states[n] != OPERATION_ENABLED for n in alive))
