@@ -116,8 +116,26 @@ def _deploy_real(policy_path, config_path, bus, spec, task, dcfg, safety, episod
 
 
 def cmd_main(args: argparse.Namespace) -> int:
-    """The Quick-start main job."""
-    return cmd_expert(args)
+    """The Quick-start main job: train a guided policy briefly (or reuse it) → dry-run deploy → sim-to-real."""
+    t0 = time.perf_counter()
+    out = Path(args.out)
+    policy = out / "train" / "policy.npz"
+    if policy.exists():
+        print(f"[1/3] using the policy trained before: {policy} (delete {out} to train again)")
+    else:
+        print(f"[1/3] training a guided DDPG policy for {args.train_steps} steps in the twin (simulated MR annotator)")
+        rc = main(["train", "--steps", str(args.train_steps), "--seed", str(args.seed), "--out", str(out / "train")]
+                  + (["--quiet"] if args.quiet else []))
+        if rc:
+            return rc
+    print(f"\n[2/3] dry run: deploying it over the virtual CAN bus to simulated drives on a twin with reality gap")
+    rc = main(["deploy", "--policy", str(policy), "--config", args.real_config, "--dry-run", "--episodes", str(args.deploy_episodes),
+               "--log", str(out / "deploy.jsonl")] + (["--quiet"] if args.quiet else []))
+    print(f"\n[3/3] sim-to-real evaluation: {args.seeds} seeds x {args.episodes} episodes per condition")
+    rc2 = main(["sim2real", "--policy", str(policy), "--real-config", args.real_config, "--seeds", str(args.seeds),
+                "--episodes", str(args.episodes), "--out", str(out / "sim2real")] + (["--quiet"] if args.quiet else []))
+    print(f"main job finished in {time.perf_counter() - t0:.0f} s")
+    return rc or rc2
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -125,16 +143,23 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-v", "--verbose", action="store_true", help="debug logging")
     sub = p.add_subparsers(dest="command", required=True)
 
-    for name, func, helptext in (
-        ("main", cmd_main, "the Quick-start main job"),
-        ("expert", cmd_expert, "run the scripted expert in the twin"),
-    ):
-        sp = sub.add_parser(name, help=helptext)
-        sp.add_argument("--config", help="TOML config ([robot], [twin], [task])")
-        sp.add_argument("--episodes", type=int, default=50)
-        sp.add_argument("--seed", type=int, default=0)
-        sp.add_argument("--quiet", action="store_true", help="no progress bar")
-        sp.set_defaults(func=func)
+    sp = sub.add_parser("main", help="the Quick-start main job: train briefly -> dry-run deploy -> sim-to-real")
+    sp.add_argument("--out", default="runs/main")
+    sp.add_argument("--train-steps", type=int, default=3000)
+    sp.add_argument("--deploy-episodes", type=int, default=3)
+    sp.add_argument("--seeds", type=int, default=2, help="sim-to-real seeds")
+    sp.add_argument("--episodes", type=int, default=5, help="sim-to-real episodes per seed and condition")
+    sp.add_argument("--seed", type=int, default=0, help="training seed")
+    sp.add_argument("--real-config", default=str(Path(__file__).resolve().parents[1] / "configs" / "real_cell.toml"))
+    sp.add_argument("--quiet", action="store_true", help="no progress bars")
+    sp.set_defaults(func=cmd_main)
+
+    sp = sub.add_parser("expert", help="run the scripted expert in the twin")
+    sp.add_argument("--config", help="TOML config ([robot], [twin], [task])")
+    sp.add_argument("--episodes", type=int, default=50)
+    sp.add_argument("--seed", type=int, default=0)
+    sp.add_argument("--quiet", action="store_true", help="no progress bar")
+    sp.set_defaults(func=cmd_expert)
     sp = sub.add_parser("deploy", help="run an exported policy on the cobot, or --dry-run it against the simulated bus")
     sp.add_argument("--policy", required=True, help="exported policy file (.npz) from `mrguide train`")
     sp.add_argument("--config", help="TOML config ([deploy], [safety], [robot], [task]; [twin] for dry runs)")
@@ -150,6 +175,12 @@ def build_parser() -> argparse.ArgumentParser:
     from mrguide.policies.commands import add_experiment_command, add_train_command
 
     add_calibrate_command(sub)
+    from mrguide.drivers.commands import add_bus_commands
+
+    add_bus_commands(sub)
+    from mrguide.twin.commands import add_sim2real_command
+
+    add_sim2real_command(sub)
 
     add_train_command(sub)
     add_experiment_command(sub)

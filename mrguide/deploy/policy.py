@@ -37,6 +37,11 @@ class ExportedPolicy:
     activations: list[str]
     metadata: dict[str, Any]
 
+    @property
+    def decision_period(self) -> float:
+        """The decision period (s) the policy was trained with: the runtime must act at the same rate."""
+        return float(self.metadata["decision_period"])
+
     def __call__(self, obs: np.ndarray) -> np.ndarray:
         x = np.asarray(obs, dtype=np.float64)
         for W, b, act in zip(self.weights, self.biases, self.activations):
@@ -64,6 +69,9 @@ class ExportedPolicy:
             raise PolicyFileError(f"{path}: format {meta.get('format')} v{meta.get('format_version')}, expected {FORMAT} v{FORMAT_VERSION}")
         if list(meta.get("obs_layout", [])) != list(OBS_LAYOUT) or list(meta.get("act_layout", [])) != list(ACT_LAYOUT):
             raise PolicyFileError(f"{path}: observation/action layout {meta.get('obs_layout')} / {meta.get('act_layout')} differs from this stack's {OBS_LAYOUT} / {ACT_LAYOUT}")
+        period = meta.get("decision_period")
+        if not isinstance(period, (int, float)) or not period > 0:
+            raise PolicyFileError(f"{path}: metadata lacks a positive decision_period (got {period!r})")
         acts = list(meta.get("activations", []))
         n = len(acts)
         if n == 0 or any(a not in ACTIVATIONS for a in acts):

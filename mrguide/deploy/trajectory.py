@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from ruckig import InputParameter, OutputParameter, Result, Ruckig
+from ruckig import ControlInterface, InputParameter, OutputParameter, Result, Ruckig
 
 from mrguide.robot import RobotSpec
 
@@ -51,6 +51,7 @@ class JointStreamer:
         self._inp.current_position = q.tolist()
         self._inp.current_velocity = (np.zeros(n) if dq is None else np.asarray(dq, float)).tolist()
         self._inp.current_acceleration = (np.zeros(n) if ddq is None else np.asarray(ddq, float)).tolist()
+        self._inp.control_interface = ControlInterface.Position
         self._inp.target_position = q.tolist()
         self._inp.target_velocity = [0.0] * n
         self._inp.target_acceleration = [0.0] * n
@@ -62,7 +63,14 @@ class JointStreamer:
             raise TrajectoryError(f"trajectory target must be {self.spec.dof} finite values, got {q_target}")
         if not self.spec.within_limits(q_target):
             raise TrajectoryError(f"trajectory target {np.round(q_target, 4).tolist()} outside the joint limits")
+        self._inp.control_interface = ControlInterface.Position
         self._inp.target_position = q_target.tolist()
+
+    def brake(self) -> None:
+        """Come to rest as fast as the limits allow (jerk-limited), wherever that is: the 'hold' reaction."""
+        self._inp.control_interface = ControlInterface.Velocity
+        self._inp.target_velocity = [0.0] * self.spec.dof
+        self._inp.target_acceleration = [0.0] * self.spec.dof
 
     def state(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Current commanded (q, dq, ddq)."""
@@ -72,12 +80,15 @@ class JointStreamer:
     def snapshot(self) -> tuple[list[float], ...]:
         """Full streamer state (current and target), for save/restore."""
         i = self._inp
-        return (list(i.current_position), list(i.current_velocity), list(i.current_acceleration), list(i.target_position))
+        return (list(i.current_position), list(i.current_velocity), list(i.current_acceleration), list(i.target_position),
+                [float(i.control_interface == ControlInterface.Velocity)])
 
     def restore(self, snap: tuple[list[float], ...]) -> None:
-        q, dq, ddq, target = snap
+        q, dq, ddq, target, braking = snap
         self.reset(np.array(q), np.array(dq), np.array(ddq))
         self._inp.target_position = list(target)
+        if braking[0]:
+            self.brake()
 
     def step(self) -> JointSetpoint:
         """Advance one control period and return the new setpoint."""

@@ -54,7 +54,7 @@ def cmd_train(args: argparse.Namespace) -> int:
 
             tr.run(progress)
         final = tr.last_eval or tr.evaluate()
-        policy = export_actor(tr.agent.actor, out / "policy.npz", tr.env.workspace, tr.env.task_cfg,
+        policy = export_actor(tr.agent.actor, out / "policy.npz", tr.env.workspace, tr.env.task_cfg, tr.env.twin_cfg.decision_period,
                               {"trained": {"steps": tr.step, "seed": tc.seed, "guidance": gc.enabled}})
     finally:
         tr.close()

@@ -18,7 +18,9 @@ from mrguide.robot import Workspace
 from mrguide.task import ACT_LAYOUT, OBS_LAYOUT, TaskConfig
 
 
-def export_actor(actor: Actor, path: str | Path, workspace: Workspace, task: TaskConfig, extra: dict[str, Any] | None = None) -> Path:
+def export_actor(
+    actor: Actor, path: str | Path, workspace: Workspace, task: TaskConfig, decision_period: float, extra: dict[str, Any] | None = None
+) -> Path:
     """Write the actor's linear layers and metadata to `path` (npz), atomically."""
     linears = [m for m in actor.net if isinstance(m, nn.Linear)]
     acts = ["relu"] * (len(linears) - 1) + ["tanh"]
@@ -30,6 +32,7 @@ def export_actor(actor: Actor, path: str | Path, workspace: Workspace, task: Tas
         "activations": acts,
         "workspace": {"low": list(workspace.low), "high": list(workspace.high)},
         "task": to_dict(task),
+        "decision_period": decision_period,
         "versions": {"mrguide": __version__, "torch": torch.__version__, "numpy": np.__version__},
         **(extra or {}),
     }

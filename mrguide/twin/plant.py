@@ -82,6 +82,11 @@ class TwinPlant(Plant):
         with self.lock:
             return self.scene.object_position()
 
+    def object_pose(self) -> tuple[np.ndarray, np.ndarray]:
+        """True object position and quaternion (x, y, z, w)."""
+        with self.lock:
+            return self.scene.object_pose()
+
 
 class TwinObjectPose(ObjectPoseSource):
     """Exact object position from the environment model (sim-to-real conditions 1 and 2)."""

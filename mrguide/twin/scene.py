@@ -202,6 +202,10 @@ class Scene:
     def object_position(self) -> np.ndarray:
         return np.array(pb.getBasePositionAndOrientation(self.object, physicsClientId=self.client)[0])
 
+    def object_pose(self) -> tuple[np.ndarray, np.ndarray]:
+        pos, orn = pb.getBasePositionAndOrientation(self.object, physicsClientId=self.client)
+        return np.array(pos), np.array(orn)
+
     def tcp_pose_pybullet(self) -> tuple[np.ndarray, np.ndarray]:
         """TCP position and quaternion (x, y, z, w) as PyBullet computes them (for cross-checks)."""
         pos, orn = pb.getLinkState(self.robot, self.tcp_link, computeForwardKinematics=True, physicsClientId=self.client)[4:6]

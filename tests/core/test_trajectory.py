@@ -43,3 +43,23 @@ def test_target_outside_limits_is_refused():
         s.set_target(bad)
     with pytest.raises(TrajectoryError, match="finite"):
         s.set_target(np.full(spec.dof, np.nan))
+
+
+def test_brake_stops_within_limits_without_returning():
+    spec = load_robot()
+    dt = 0.004
+    s = JointStreamer(spec, dt)
+    s.set_target(spec.q_home + 0.8 * np.sign(spec.q_upper - spec.q_home - 0.8))
+    for _ in range(60):
+        sp = s.step()
+    assert np.max(np.abs(sp.dq)) > 0.5  # moving fast
+    s.brake()
+    prev = sp
+    for _ in range(500):
+        sp = s.step()
+        assert np.all(np.abs(sp.ddq) <= spec.a_max * (1 + 1e-6) + 1e-9)
+        assert np.all(np.abs(sp.ddq - prev.ddq) / dt <= spec.j_max * (1 + 1e-3) + 1e-6)
+        # no joint reverses direction while braking
+        assert np.all(sp.dq * prev.dq >= -1e-9)
+        prev = sp
+    assert np.allclose(sp.dq, 0.0, atol=1e-9)

@@ -1,0 +1,80 @@
+"""Deploy benchmark: decision latency, policy inference time and control-cycle jitter during a dry run.
+
+Run: python benchmarks/deploy.py [--episodes N]. The dry run drives the scripted expert through the whole
+stack (IK, Ruckig, CANopen over the virtual bus, simulated drives, twin); inference is timed on an
+exported 256x256 actor. Prints a table; the last line is one JSON object.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from mrguide.deploy.policy import ExportedPolicy
+from mrguide.drivers.config import CobotBusConfig
+from mrguide.robot import load_robot
+from mrguide.task import oracle_action
+from mrguide.twin.dry_run import dry_run
+from mrguide.twin.env import EnvConfig
+
+
+def bench_inference(n: int = 20000) -> float:
+    from mrguide.policies.ddpg import DDPG, DDPGConfig
+    from mrguide.policies.export import export_actor
+    from mrguide.policies.train import obs_scaling
+    from mrguide.task import TaskConfig
+
+    ws = load_robot().workspace
+    with tempfile.TemporaryDirectory() as tmp:
+        path = export_actor(DDPG(*obs_scaling(ws), 4, DDPGConfig()).actor, Path(tmp) / "p.npz", ws, TaskConfig(), 0.1)
+        pol = ExportedPolicy.load(path)
+    obs = np.zeros(11, np.float32)
+    times = []
+    for _ in range(n):
+        t = time.perf_counter()
+        pol(obs)
+        times.append(time.perf_counter() - t)
+    return float(np.median(times) * 1e3)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--episodes", type=int, default=10)
+    args = ap.parse_args()
+    cfg = EnvConfig.load(Path(__file__).parents[1] / "configs" / "real_cell.toml")
+    ws = load_robot().workspace
+    with tempfile.TemporaryDirectory() as tmp:
+        summary = dry_run(None, cfg, CobotBusConfig(), args.episodes, 0, Path(tmp) / "log.jsonl",
+                          policy=lambda obs: oracle_action(obs, cfg.task, ws.to_normalized))
+    lat = summary.latency_ms()
+    res = {
+        "decision_latency_p50_ms": float(np.percentile(lat, 50)),
+        "decision_latency_p99_ms": float(np.percentile(lat, 99)),
+        "policy_inference_ms": bench_inference(),
+        "cycle_jitter_p99_ms": summary.cycle_lateness_p99_ms,
+        "missed_cycles": summary.missed_cycles,
+        "dry_run_success": summary.successes / max(len(summary.episodes), 1),
+        "episodes": len(summary.episodes),
+    }
+    print(f"machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}")
+    for name, key, target in (
+        ("decision latency p50 (state read -> first setpoint)", "decision_latency_p50_ms", ""),
+        ("decision latency p99", "decision_latency_p99_ms", "<= 5 ms"),
+        ("policy inference (256x256 MLP, numpy)", "policy_inference_ms", "<= 0.1 ms"),
+        ("control-cycle lateness p99 (SYNC vs deadline)", "cycle_jitter_p99_ms", ""),
+    ):
+        print(f"{name:<55} {res[key]:8.3f} ms  {target}")
+    print(f"missed cycles {res['missed_cycles']}, dry-run success {res['dry_run_success']:.0%} over {res['episodes']} episodes"
+          + (f", stopped: {summary.stopped}" if summary.stopped else ""))
+    print(json.dumps({k: round(v, 4) if isinstance(v, float) else v for k, v in res.items()}))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,44 @@
+"""Training benchmark: a guided 20k-step run on one core — steps/s, update time, wall time.
+
+Run: python benchmarks/train.py [--steps N]. Prints a table; the last line is one JSON object.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import tempfile
+
+from mrguide.policies.train import Trainer, load_train_config, replace_config
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--steps", type=int, default=20_000)
+    args = ap.parse_args()
+    if hasattr(os, "sched_setaffinity"):
+        os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
+    tc, dc, gc, ec = load_train_config(None)
+    tc = replace_config(tc, total_steps=args.steps, checkpoint_every=args.steps)
+    with tempfile.TemporaryDirectory() as out:
+        tr = Trainer(tc, dc, gc, ec, out)
+        try:
+            tr.run()
+        finally:
+            tr.close()
+    wall = tr.wall_s()
+    res = {"steps": tr.step, "steps_per_s": tr.step / wall, "update_ms": tr.update_s / max(tr.updates, 1) * 1e3,
+           f"wall_s_{args.steps // 1000}k": wall, "wall_s_20k": wall * 20_000 / tr.step,
+           "final_eval_success": tr.last_eval.get("success_rate"), "annotations_asked": tr.cache.asked}
+    print(f"machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}, pinned to one core")
+    print(f"{'guided training steps':<40} {tr.step}")
+    print(f"{'steps/s (env + update)':<40} {res['steps_per_s']:.1f}")
+    print(f"{'update (batch 256, 256x256 MLPs)':<40} {res['update_ms']:.2f} ms")
+    print(f"{'wall time, scaled to 20k steps':<40} {res['wall_s_20k']:.0f} s   (target <= 180 s)")
+    print(json.dumps({k: round(v, 4) if isinstance(v, float) else v for k, v in res.items()}))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,255 @@
+"""The deploy runtime: an exported policy driving the cobot through the CAN driver layer.
+
+Each decision: joint state → FK → TCP; vacuum signal → g; object pose from the pose source; the shared
+task model → phase, φ, reward, outcome; observation; policy (numpy) → action; workspace clamp; IK
+warm-started at the measured joints; a Ruckig stream handed to the driver one control period at a time;
+vacuum command from g'. The safety supervisor (`safety.py`) watches every step. No PyBullet, no torch.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections import Counter, deque
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from mrguide.deploy.kinematics import IKError, Kinematics
+from mrguide.deploy.policy import ExportedPolicy
+from mrguide.deploy.runlog import RunLog
+from mrguide.deploy.safety import Event, Reaction, SafetyConfig, Supervisor, Watchdog
+from mrguide.deploy.trajectory import JointStreamer
+from mrguide.drivers.cobot import Cobot
+from mrguide.drivers.cobot_state import CycleSample
+from mrguide.drivers.errors import DriverError
+from mrguide.pose_source import ObjectPoseSource, PoseUnavailable
+from mrguide.robot import RobotSpec
+from mrguide.task import Outcome, TaskConfig, observation, progress, task_step
+
+log = logging.getLogger(__name__)
+
+
+class RunStopped(RuntimeError):
+    """The run cannot go on (quick stop after a fault, a stall or an interrupt)."""
+
+
+@dataclass(frozen=True)
+class RuntimeConfig:
+    """Timing of the runtime ([deploy] in a TOML config)."""
+
+    decision_period: float = 0.1  # s; must be the period the policy was trained with
+    home_tolerance: float = 0.01  # rad; the arm counts as home within this
+
+
+@dataclass
+class EpisodeReport:
+    index: int
+    outcome: str
+    decisions: int
+    events: dict[str, int]
+    latency_ms: list[float] = field(default_factory=list)
+    inference_ms: list[float] = field(default_factory=list)
+    wall_s: float = 0.0
+
+
+class _FollowingMonitor:
+    """Cycle observer: max joint deviation of the measured position from the recently sent setpoints."""
+
+    def __init__(self, depth: int):
+        self.recent: deque[np.ndarray] = deque(maxlen=depth)
+        self.error = 0.0
+
+    def __call__(self, sample: CycleSample) -> None:
+        if sample.setpoint is not None:
+            self.recent.append(sample.setpoint)
+        if self.recent:
+            self.error = min(float(np.max(np.abs(sample.positions - sp))) for sp in self.recent)
+
+
+class Runtime:
+    """Runs episodes of an exported policy on a connected, enabled `Cobot`."""
+
+    def __init__(
+        self,
+        cobot: Cobot,
+        policy: ExportedPolicy,
+        pose: ObjectPoseSource,
+        spec: RobotSpec,
+        task: TaskConfig,
+        run_log: RunLog,
+        config: RuntimeConfig | None = None,
+        safety: SafetyConfig | None = None,
+    ):
+        self.cobot, self.policy, self.pose, self.spec, self.task, self.log = cobot, policy, pose, spec, task, run_log
+        self.cfg = config or RuntimeConfig()
+        period = cobot.period
+        ratio = self.cfg.decision_period / period
+        if abs(ratio - round(ratio)) > 1e-6 or ratio < 1:
+            raise ValueError(f"decision period {self.cfg.decision_period} s is not a multiple of the control period {period} s")
+        self.cycles = int(round(ratio))
+        self.kin = Kinematics(spec)
+        self.streamer = JointStreamer(spec, period)
+        self.supervisor = Supervisor(spec, safety or SafetyConfig(), self._on_event)
+        self.following = _FollowingMonitor(depth=cobot.config.timing.setpoint_queue_depth + 4)
+        self.watchdog = Watchdog(self.supervisor.cfg.stall_timeout, self._on_stall)
+        self._episode_events: Counter[str] = Counter()
+        self._t = 0
+
+    # -- lifecycle ----------------------------------------------------------------------------------
+    def __enter__(self) -> "Runtime":
+        self.cobot.add_cycle_observer(self.following)
+        self.watchdog.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.watchdog.close()
+        self.cobot.remove_cycle_observer(self.following)
+
+    def _on_event(self, event: Event, reaction: Reaction, detail: str) -> None:
+        self._episode_events[event.value] += 1
+        self.log.write("safety", t=self._t, event=event.value, reaction=reaction.value, detail=detail)
+
+    def _on_stall(self, age: float) -> None:
+        """Watchdog thread: the decision loop stopped feeding setpoints; stop the drives."""
+        self.cobot.stop()
+        self.supervisor.report(Event.STALL, f"no setpoint for {age * 1000:.0f} ms")
+
+    # -- streaming ----------------------------------------------------------------------------------
+    def _stream_cycle(self) -> tuple[np.ndarray, np.ndarray, bool]:
+        """One control period of the current trajectory, checked and handed to the driver."""
+        sp = self.streamer.step()
+        problem = self.supervisor.check_setpoint(sp.q, sp.dq, sp.ddq)
+        if problem:
+            self._quick_stop(Event.JOINT_LIMIT, problem)
+        if self.following.error > self.supervisor.cfg.following_error:
+            self._quick_stop(Event.FOLLOWING_ERROR, f"measured joints {self.following.error:.4f} rad from the setpoints")
+        try:
+            self.cobot.stream(sp.q)
+        except DriverError as exc:
+            if self.watchdog.fired:
+                raise RunStopped("stopped by the watchdog: the decision loop stalled") from exc
+            self._quick_stop(Event.DRIVE_FAULT, str(exc))
+        self.watchdog.feed()
+        return sp.q, sp.dq, sp.finished
+
+    def _quick_stop(self, event: Event, detail: str) -> None:
+        self.cobot.stop()
+        self.supervisor.report(event, detail)
+        raise RunStopped(f"{event.value}: {detail}")
+
+    def _settle(self, max_cycles: int = 2000) -> None:
+        """Stream until the current trajectory (or brake ramp) has come to rest."""
+        for _ in range(max_cycles):
+            _, dq, finished = self._stream_cycle()
+            if finished or np.max(np.abs(dq)) < 1e-6:
+                return
+
+    def home(self) -> None:
+        """Move to the home configuration (jerk-limited) with the vacuum off."""
+        self.cobot.set_vacuum(False)
+        self.streamer.reset(self.cobot.setpoint)
+        self.streamer.set_target(self.spec.q_home)
+        self.watchdog.arm(True)
+        try:
+            self._settle(max_cycles=int(30 / self.cobot.period))
+        finally:
+            self.watchdog.arm(False)
+        q = self.cobot.joint_state().positions
+        if np.max(np.abs(q - self.spec.q_home)) > self.cfg.home_tolerance:
+            raise RunStopped(f"arm did not reach home: {np.round(q - self.spec.q_home, 4).tolist()} rad off")
+
+    # -- one episode --------------------------------------------------------------------------------
+    def run_episode(self, goal: np.ndarray, index: int) -> EpisodeReport:
+        """One episode toward `goal` from the home pose; returns its report (RunStopped ends the run)."""
+        goal = np.asarray(goal, dtype=float)
+        self._episode_events = Counter()
+        report = EpisodeReport(index, "aborted", 0, {})
+        t0 = time.perf_counter()
+        self.log.write("episode_start", episode=index, goal=goal)
+        self.streamer.reset(self.cobot.setpoint)
+        self.watchdog.arm(True)
+        phase, prev_obj, outcome = 0, None, None
+        try:
+            for t in range(self.task.horizon + 1):
+                self._t = t
+                t_read = time.perf_counter()
+                js = self.cobot.joint_state()
+                vac = self.cobot.vacuum_state()
+                tcp = self.kin.tcp_position(js.positions)
+                g = 1 if vac.vacuum_on else -1
+                try:
+                    obj = self.pose.object_position()
+                    prev_obj = obj
+                except PoseUnavailable as exc:
+                    if prev_obj is None:
+                        raise RunStopped(f"no object pose at the start of the episode: {exc}") from exc
+                    self.supervisor.report(Event.POSE_UNAVAILABLE, f"{exc}; using the last pose")
+                    obj = prev_obj
+                reward = None
+                if t > 0:
+                    res = task_step(self.task, phase, tcp, g, vac.part_gripped, obj, goal, t - 1)
+                    phase, reward, outcome = res.phase, res.reward, res.outcome
+                    if outcome is Outcome.DROPPED:
+                        self.supervisor.report(Event.VACUUM_LOST, f"part lost in phase {res.phase} (vacuum {vac.level_kpa:.0f} kPa)")
+                if outcome is not None:
+                    self.log.write("decision", t=t, tcp=tcp, g=g, phase=phase, reward=reward, outcome=outcome.value)
+                    break
+                obs = observation(tcp, g, progress(phase), obj, goal)
+                t_inf = time.perf_counter()
+                action = self.policy(obs)
+                inference_ms = (time.perf_counter() - t_inf) * 1e3
+                record = {"episode": index, "t": t, "obs": obs, "action": action, "phase": phase, "reward": reward,
+                          "q": js.positions, "vacuum_kpa": vac.level_kpa, "part": vac.part_gripped}
+                if not np.all(np.isfinite(action)):
+                    self.supervisor.report(Event.NON_FINITE_ACTION, f"policy output {action.tolist()}")
+                    self.log.write("decision", **record)
+                    break
+                target, clamped = self.spec.workspace.clamp(self.spec.workspace.to_cartesian(np.clip(action[:3], -1.0, 1.0)))
+                if np.any(np.abs(action[:3]) > 1.0):
+                    self.supervisor.report(Event.WORKSPACE, f"action {action[:3].tolist()} outside [-1, 1]")
+                try:
+                    q_target = self.kin.ik(target, js.positions)
+                    self.supervisor.ik_result(True)
+                    self.streamer.set_target(q_target)
+                    record["q_target"] = q_target
+                except IKError as exc:
+                    if self.supervisor.ik_result(False, str(exc)) is Reaction.ABORT:
+                        self.log.write("decision", **record)
+                        break
+                    self.streamer.brake()
+                self.cobot.set_vacuum(bool(action[3] > 0))
+                record["target"] = target
+                setpoints = []
+                for k in range(self.cycles):
+                    if k == 0:
+                        latency_ms = (time.perf_counter() - t_read) * 1e3
+                    setpoints.append(self._stream_cycle()[0])
+                record["latency_ms"], record["inference_ms"] = latency_ms, inference_ms
+                record["setpoints"] = np.round(np.array(setpoints), 7)
+                report.latency_ms.append(latency_ms)
+                report.inference_ms.append(inference_ms)
+                report.decisions = t + 1
+                self.log.write("decision", **record)
+            if outcome is not None:
+                report.outcome = outcome.value
+            self.streamer.brake()
+            self._settle()
+            if outcome is not Outcome.SUCCESS:
+                self.cobot.set_vacuum(False)
+        except KeyboardInterrupt:
+            self.cobot.stop()
+            self.supervisor.report(Event.INTERRUPT, "Ctrl-C")
+            report.outcome = "safety_stop"
+            raise
+        except RunStopped:
+            report.outcome = "safety_stop"
+            raise
+        finally:
+            self.watchdog.arm(False)
+            report.events = dict(self._episode_events)
+            report.wall_s = time.perf_counter() - t0
+            self.log.write("episode_end", episode=index, outcome=report.outcome, decisions=report.decisions,
+                           events=report.events, wall_s=report.wall_s)
+            self.log.sync()
+        return report

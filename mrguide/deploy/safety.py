@@ -1,0 +1,160 @@
+"""Safety supervisor of the deploy runtime: what is watched, how each event is answered, and counts.
+
+Reactions, mildest first:
+- CLAMP: the target is moved into the workspace box; the episode goes on.
+- HOLD: the arm brakes to rest on a jerk-limited ramp (Ruckig) and keeps its position; the episode goes on.
+- ABORT: the arm brakes to rest and the episode ends (the run continues with the next one).
+- QUICK_STOP: the drives execute their CiA 402 quick stop; the episode ends and the run stops.
+"""
+
+from __future__ import annotations
+
+import enum
+import logging
+import threading
+import time
+from collections import Counter
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from mrguide.robot import RobotSpec
+
+log = logging.getLogger(__name__)
+
+
+class Reaction(str, enum.Enum):
+    CLAMP = "clamp"
+    HOLD = "hold"
+    ABORT = "abort"
+    QUICK_STOP = "quick_stop"
+
+
+class Event(str, enum.Enum):
+    """Everything the supervisor reacts to, with its fixed reaction in `REACTIONS`."""
+
+    WORKSPACE = "workspace"  # policy target outside the workspace box
+    NON_FINITE_ACTION = "non_finite_action"  # NaN/inf from the policy
+    IK_FAILURE = "ik_failure"  # target not reachable with the tool down
+    IK_FAILURES_REPEATED = "ik_failures_repeated"  # several in a row
+    POSE_UNAVAILABLE = "pose_unavailable"  # no object pose this decision
+    JOINT_LIMIT = "joint_limit"  # a setpoint outside position/velocity/acceleration limits
+    FOLLOWING_ERROR = "following_error"  # measured joints too far from the commanded ones
+    DRIVE_FAULT = "drive_fault"  # EMCY, heartbeat loss, lost feedback, bus error (latched by the driver)
+    VACUUM_LOST = "vacuum_lost"  # part lost during lift or transport (a drop)
+    STALL = "stall"  # the decision loop stopped feeding setpoints (watchdog)
+    INTERRUPT = "interrupt"  # Ctrl-C
+
+
+REACTIONS: dict[Event, Reaction] = {
+    Event.WORKSPACE: Reaction.CLAMP,
+    Event.NON_FINITE_ACTION: Reaction.ABORT,
+    Event.IK_FAILURE: Reaction.HOLD,
+    Event.IK_FAILURES_REPEATED: Reaction.ABORT,
+    Event.POSE_UNAVAILABLE: Reaction.HOLD,
+    Event.JOINT_LIMIT: Reaction.QUICK_STOP,
+    Event.FOLLOWING_ERROR: Reaction.QUICK_STOP,
+    Event.DRIVE_FAULT: Reaction.QUICK_STOP,
+    Event.VACUUM_LOST: Reaction.ABORT,
+    Event.STALL: Reaction.QUICK_STOP,
+    Event.INTERRUPT: Reaction.QUICK_STOP,
+}
+
+
+@dataclass(frozen=True)
+class SafetyConfig:
+    """Limits of the supervisor ([safety] in a TOML config)."""
+
+    following_error: float = 0.05  # rad; the drives' own window (0x6065) is the same by default
+    max_consecutive_ik_failures: int = 3
+    stall_timeout: float = 0.25  # s without a new setpoint while moving → quick stop
+    limit_tolerance: float = 1e-6  # relative slack on velocity/acceleration checks
+
+
+class Supervisor:
+    """Counts and logs events and says how to react; `check_setpoint` guards every streamed setpoint."""
+
+    def __init__(self, spec: RobotSpec, cfg: SafetyConfig, on_event: Callable[[Event, Reaction, str], None] | None = None):
+        self.spec, self.cfg = spec, cfg
+        self.counts: Counter[str] = Counter()
+        self.on_event = on_event
+        self._ik_failures = 0
+
+    def report(self, event: Event, detail: str) -> Reaction:
+        reaction = REACTIONS[event]
+        self.counts[event.value] += 1
+        (log.info if reaction is Reaction.CLAMP else log.warning)("safety: %s -> %s: %s", event.value, reaction.value, detail)
+        if self.on_event:
+            self.on_event(event, reaction, detail)
+        return reaction
+
+    def ik_result(self, ok: bool, detail: str = "") -> Reaction | None:
+        """Track IK outcomes; a failure holds, several in a row abort."""
+        if ok:
+            self._ik_failures = 0
+            return None
+        self._ik_failures += 1
+        if self._ik_failures >= self.cfg.max_consecutive_ik_failures:
+            return self.report(Event.IK_FAILURES_REPEATED, f"{self._ik_failures} IK failures in a row: {detail}")
+        return self.report(Event.IK_FAILURE, detail)
+
+    def check_setpoint(self, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray) -> str | None:
+        """Why a setpoint violates the position/velocity/acceleration limits, or None."""
+        s, tol = self.spec, 1 + self.cfg.limit_tolerance
+        if not (np.all(np.isfinite(q)) and np.all(np.isfinite(dq)) and np.all(np.isfinite(ddq))):
+            return "non-finite setpoint"
+        if not s.within_limits(q, tol=1e-9):
+            return f"position {np.round(q, 4).tolist()} outside the joint limits"
+        if np.any(np.abs(dq) > s.v_max * tol):
+            return f"velocity {np.round(dq, 3).tolist()} above v_max"
+        if np.any(np.abs(ddq) > s.a_max * tol):
+            return f"acceleration {np.round(ddq, 3).tolist()} above a_max"
+        return None
+
+    def check_following(self, commanded: np.ndarray, measured: np.ndarray) -> str | None:
+        err = np.abs(np.asarray(commanded) - np.asarray(measured))
+        if np.max(err) > self.cfg.following_error:
+            i = int(np.argmax(err))
+            return f"{self.spec.joint_names[i]} is {err[i]:.4f} rad from its setpoint (limit {self.cfg.following_error})"
+        return None
+
+
+class Watchdog:
+    """A thread that calls `on_stall` if `feed()` is not called for `timeout` seconds while armed."""
+
+    def __init__(self, timeout: float, on_stall: Callable[[float], None]):
+        self.timeout = timeout
+        self.on_stall = on_stall
+        self._last = time.monotonic()
+        self._armed = False
+        self._fired = False
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="deploy-watchdog", daemon=True)
+
+    def start(self) -> None:
+        self._thread.start()
+
+    def feed(self) -> None:
+        self._last = time.monotonic()
+
+    def arm(self, armed: bool) -> None:
+        self._last = time.monotonic()
+        self._armed = armed
+        self._fired = False
+
+    @property
+    def fired(self) -> bool:
+        return self._fired
+
+    def _run(self) -> None:
+        while not self._stop.wait(self.timeout / 5):
+            age = time.monotonic() - self._last
+            if self._armed and not self._fired and age > self.timeout:
+                self._fired = True
+                self.on_stall(age)
+
+    def close(self) -> None:
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join()

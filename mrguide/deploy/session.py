@@ -1,0 +1,111 @@
+"""A deploy session: a sequence of episodes on a connected cobot, and its summary."""
+
+from __future__ import annotations
+
+import logging
+from collections import Counter
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from mrguide.deploy.runtime import EpisodeReport, RunStopped, Runtime
+from mrguide.pose_source import ObjectPoseSource
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class DeployConfig:
+    """A deploy session ([deploy] in a TOML config)."""
+
+    bus_config: str = ""  # CAN bus description (TOML), relative to the config file; "" = defaults (virtual bus)
+    episodes: int = 5
+    seed: int = 0  # dry run: object and goal layouts
+    log_dir: str = "runs/deploy"
+    #: Real robot with the exact-pose model: where the object is placed for each episode (base frame, m).
+    object_position: tuple[float, float, float] = (0.50, -0.075, 0.025)
+    #: Goals (object centre, m), used in turn.
+    goals: tuple[tuple[float, float, float], ...] = ((0.50, 0.21, 0.025),)
+
+
+@dataclass
+class DeploySummary:
+    """Outcomes, safety events and timing of a session."""
+
+    episodes: list[EpisodeReport] = field(default_factory=list)
+    stopped: str | None = None  # why the run ended early, if it did
+    cycle_lateness_p99_ms: float = 0.0
+    missed_cycles: int = 0
+
+    @property
+    def successes(self) -> int:
+        return sum(e.outcome == "success" for e in self.episodes)
+
+    def outcomes(self) -> Counter:
+        return Counter(e.outcome for e in self.episodes)
+
+    def events(self) -> Counter:
+        c: Counter = Counter()
+        for e in self.episodes:
+            c.update(e.events)
+        return c
+
+    def latency_ms(self) -> np.ndarray:
+        return np.array([x for e in self.episodes for x in e.latency_ms])
+
+    def inference_ms(self) -> np.ndarray:
+        return np.array([x for e in self.episodes for x in e.inference_ms])
+
+    def text(self) -> str:
+        n = len(self.episodes)
+        lines = [f"episodes: {n}, successes: {self.successes} ({self.successes / max(n, 1):.0%})",
+                 f"outcomes: {dict(self.outcomes())}",
+                 f"safety events: {dict(self.events()) or 'none'}"]
+        lat, inf = self.latency_ms(), self.inference_ms()
+        if len(lat):
+            lines.append(f"decision latency p50/p99: {np.percentile(lat, 50):.2f} / {np.percentile(lat, 99):.2f} ms; "
+                         f"policy inference median {np.median(inf):.3f} ms")
+        lines.append(f"control cycle lateness p99: {self.cycle_lateness_p99_ms:.2f} ms, missed cycles: {self.missed_cycles}")
+        if self.stopped:
+            lines.append(f"run stopped early: {self.stopped}")
+        return "\n".join(lines)
+
+
+def run_session(
+    runtime: Runtime,
+    goals: Sequence[np.ndarray],
+    before_episode: Callable[[int], None] | None = None,
+    after_episode: Callable[[EpisodeReport], None] | None = None,
+) -> DeploySummary:
+    """Home, (set the scene,) run one episode per goal; a RunStopped ends the session with a reason."""
+    summary = DeploySummary()
+    try:
+        for i, goal in enumerate(goals):
+            runtime.home()
+            if before_episode:
+                before_episode(i)
+            report = runtime.run_episode(goal, i)
+            summary.episodes.append(report)
+            if after_episode:
+                after_episode(report)
+    except RunStopped as exc:
+        summary.stopped = str(exc)
+        if runtime.log:
+            runtime.log.write("run_stopped", reason=str(exc))
+        log.error("run stopped: %s", exc)
+    finally:
+        stats = runtime.cobot.stats()
+        summary.cycle_lateness_p99_ms = stats.lateness_p99 * 1e3
+        summary.missed_cycles = stats.missed_cycles
+    return summary
+
+
+class FixedObjectPose(ObjectPoseSource):
+    """The object where the environment model says it is (a fixture or a known placement)."""
+
+    def __init__(self, position: Sequence[float]):
+        self.position = np.asarray(position, dtype=float)
+
+    def object_position(self) -> np.ndarray:
+        return self.position.copy()

@@ -1,0 +1,166 @@
+"""The HMD as a device of its own: a separate process that renders its camera, finds the object's marker
+and reports the object position through its marker calibration, streamed to the deploy runtime.
+
+Like a real HoloLens, it runs beside the robot controller, not inside its control loop: rendering a
+1280x720 frame takes ~0.1 s and would stall the 4 ms CAN cycle if done in-process (PyBullet holds the
+GIL). The HMD process has its own PyBullet world with the table and the marked cube, which mirrors the
+true object pose from the cell; the arm is not drawn there, so occlusion by the arm is not modelled.
+At start-up the HMD is calibrated against the board exactly as `mrguide calibrate --twin` does.
+"""
+
+from __future__ import annotations
+
+import logging
+import multiprocessing as mp
+import threading
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from mrguide.pose_source import ObjectPoseSource, PoseUnavailable
+from mrguide.twin.plant import TwinPlant
+
+log = logging.getLogger(__name__)
+
+#: Where the wearer stands and looks while the robot works (base frame, m): ~0.8 m from the object region.
+WATCH_EYE = (1.0, -0.05, 0.55)
+WATCH_TARGET = (0.50, -0.05, 0.0)
+OBJECT_MARKER_ID = 0
+
+
+def _hmd_worker(conn, calibration_path: str | None, object_size: float, noise_seed: int, hmd_overrides: dict) -> None:
+    """Runs in the HMD process: calibrate, then answer each true object pose with the HMD's estimate."""
+    import pybullet as pb
+
+    from mrguide.calibration.config import load_calibration_config
+    from mrguide.config import load_section
+    from mrguide.twin.camera import look_at
+    from mrguide.twin.markers import (
+        MarkerOnBody,
+        TwinCalibrationConfig,
+        TwinHmd,
+        calibrate_twin_hmd,
+        hmd_marker_pose_source,
+        marker_on_cube_top,
+    )
+    from mrguide.twin.scene import TABLE_CENTER, TABLE_HALF_EXTENTS
+
+    try:
+        cfg = load_calibration_config(calibration_path)
+        cfg = replace(cfg, hmd=replace(cfg.hmd, seed=noise_seed, **hmd_overrides))
+        twin_cfg = load_section(TwinCalibrationConfig, calibration_path, "calibration_twin") if calibration_path else TwinCalibrationConfig()
+        client = pb.connect(pb.DIRECT)
+        vis = pb.createVisualShape(pb.GEOM_BOX, halfExtents=TABLE_HALF_EXTENTS, rgbaColor=(0.75, 0.72, 0.66, 1), physicsClientId=client)
+        pb.createMultiBody(0, -1, vis, TABLE_CENTER, physicsClientId=client)
+        h = object_size / 2
+        cube_vis = pb.createVisualShape(pb.GEOM_BOX, halfExtents=(h, h, h), rgbaColor=(0.85, 0.1, 0.1, 1), physicsClientId=client)
+        cube = pb.createMultiBody(0, -1, cube_vis, (0.5, -0.1, h), physicsClientId=client)
+        T_obj_marker = marker_on_cube_top(object_size)
+        marker = MarkerOnBody(client, cube, T_obj_marker, cfg.detector.dictionary, OBJECT_MARKER_ID,
+                              cfg.detector.marker_size_m, quiet_zone_m=0.005)
+        hmd = TwinHmd(client, twin_cfg.T_base_hmd, look_at(np.array(WATCH_EYE), np.array(WATCH_TARGET), np.array([0.0, 0.0, 1.0])),
+                      twin_cfg.intrinsics, twin_cfg.supersample, attached=[marker])
+        run = calibrate_twin_hmd(hmd, cfg, twin_cfg.views, twin_cfg.look_at, cfg.hmd)
+        hmd.look_from(WATCH_EYE, WATCH_TARGET)
+        source = hmd_marker_pose_source(hmd, run.record.T_base_hmd, cfg.detector, OBJECT_MARKER_ID,
+                                        -T_obj_marker[:3, 3], noise=cfg.hmd)
+        err = float(np.linalg.norm(run.record.T_base_hmd[:3, 3] - twin_cfg.T_base_hmd[:3, 3]))
+        conn.send(("ready", {"rms_residual_m": float(run.record.rms_residual_m), "T_base_hmd_translation_error_m": err}))
+    except Exception as exc:  # report start-up failures to the parent instead of dying silently
+        conn.send(("error", f"{type(exc).__name__}: {exc}"))
+        return
+    while True:
+        msg = conn.recv()
+        if msg is None:
+            break
+        pos, orn = msg
+        pb.resetBasePositionAndOrientation(cube, pos, orn, physicsClientId=client)
+        try:
+            conn.send(("pose", source.object_position()))
+        except PoseUnavailable as exc:
+            conn.send(("none", str(exc)))
+
+
+class HmdPoseStream(ObjectPoseSource):
+    """Latest object position from the HMD process; stale or missing estimates raise PoseUnavailable."""
+
+    def __init__(self, plant: TwinPlant, calibration_path: str | Path | None, object_size: float,
+                 noise_seed: int = 0, hmd_overrides: dict | None = None, max_age: float = 3.0, start_timeout: float = 180.0):
+        self.plant = plant
+        self.max_age = max_age
+        ctx = mp.get_context("spawn")
+        self._conn, child = ctx.Pipe()
+        self._proc = ctx.Process(target=_hmd_worker, args=(child, str(calibration_path) if calibration_path else None, object_size, noise_seed, hmd_overrides or {}),
+                                 name="hmd", daemon=True)
+        self._proc.start()
+        if not self._conn.poll(start_timeout):
+            self._proc.kill()
+            raise RuntimeError(f"HMD process did not start within {start_timeout} s")
+        kind, info = self._conn.recv()
+        if kind != "ready":
+            raise RuntimeError(f"HMD process failed to start: {info}")
+        self.calibration = info
+        self._latest: tuple[np.ndarray, float] | None = None
+        self._generation = 0
+        self.frames = self.misses = 0
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="hmd-stream", daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            gen = self._generation
+            pos, orn = self.plant.object_pose()
+            t = time.monotonic()
+            try:
+                self._conn.send((pos.tolist(), orn.tolist()))
+                kind, value = self._conn.recv()
+            except (EOFError, OSError):
+                log.warning("HMD process went away")
+                return
+            with self._lock:
+                self.frames += 1
+                if kind == "pose" and gen == self._generation:
+                    self._latest = (np.asarray(value, dtype=float), t)
+                elif kind != "pose":
+                    self.misses += 1
+
+    def invalidate(self) -> None:
+        """Forget the current estimate (the object was moved by hand)."""
+        with self._lock:
+            self._generation += 1
+            self._latest = None
+
+    def wait_fresh(self, timeout: float = 10.0) -> None:
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            with self._lock:
+                if self._latest is not None:
+                    return
+            time.sleep(0.02)
+        raise PoseUnavailable(f"no HMD estimate of the object within {timeout} s")
+
+    def object_position(self) -> np.ndarray:
+        with self._lock:
+            latest = self._latest
+        if latest is None:
+            raise PoseUnavailable("the HMD has not seen the object marker yet")
+        pos, t = latest
+        age = time.monotonic() - t
+        if age > self.max_age:
+            raise PoseUnavailable(f"the last HMD estimate is {age:.2f} s old")
+        return pos.copy()
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=10)
+        try:
+            self._conn.send(None)
+        except (BrokenPipeError, OSError):
+            pass
+        self._proc.join(timeout=5)
+        if self._proc.is_alive():
+            self._proc.kill()

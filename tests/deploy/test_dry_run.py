@@ -1,0 +1,42 @@
+"""The scripted expert through the whole stack: IK, Ruckig, CANopen, simulated drives, twin with gap."""
+
+import numpy as np
+import pytest
+
+from mrguide.deploy.runlog import read_log
+from mrguide.robot import load_robot
+from mrguide.twin.env import EnvConfig
+
+
+def _check_logged_trajectory(log):
+    spec = load_robot()
+    records = [r for r in read_log(log) if r["kind"] == "decision" and "setpoints" in r]
+    assert records, "no setpoints logged"
+    for episode in {r["episode"] for r in records}:  # between episodes the arm goes home (not logged)
+        q = np.concatenate([np.array(r["setpoints"]) for r in records if r["episode"] == episode])
+        assert np.all(q >= spec.q_lower - 1e-6) and np.all(q <= spec.q_upper + 1e-6)  # log rounds to 1e-7
+        dq = np.abs(np.diff(q, axis=0)) / 0.004
+        assert np.all(dq <= spec.v_max * (1 + 1e-4) + 1e-4)
+
+
+def test_expert_succeeds_through_the_full_stack(run_dry):
+    summary, log, _ = run_dry(episodes=6, seed=1)
+    assert summary.stopped is None
+    assert summary.successes >= 6 * 0.95, summary.text()
+    _check_logged_trajectory(log)
+    kinds = {r["kind"] for r in read_log(log)}
+    assert {"episode_start", "decision", "episode_end"} <= kinds
+
+
+@pytest.mark.slow
+def test_expert_success_rate_over_40_episodes(run_dry):
+    summary, log, _ = run_dry(episodes=40, seed=2)
+    assert summary.successes >= 38, summary.text()
+    _check_logged_trajectory(log)
+
+
+def test_real_cell_gap_config_loads():
+    from pathlib import Path
+
+    cfg = EnvConfig.load(Path(__file__).parents[2] / "configs" / "real_cell.toml")
+    assert cfg.twin.reality_gap.actuator_latency == 2
