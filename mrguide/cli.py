@@ -123,8 +123,9 @@ def cmd_main(args: argparse.Namespace) -> int:
     if policy.exists():
         print(f"[1/3] using the policy trained before: {policy} (delete {out} to train again)")
     else:
-        print(f"[1/3] training a guided DDPG policy for {args.train_steps} steps in the twin (simulated MR annotator)")
-        rc = main(["train", "--steps", str(args.train_steps), "--seed", str(args.seed), "--out", str(out / "train")]
+        print(f"[1/3] training a guided DDPG policy in the twin (simulated MR annotator): the first {args.train_steps} "
+              "steps of the 20k-step schedule")
+        rc = main(["train", "--stop-after", str(args.train_steps), "--seed", str(args.seed), "--out", str(out / "train")]
                   + (["--quiet"] if args.quiet else []))
         if rc:
             return rc

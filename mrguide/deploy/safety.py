@@ -2,6 +2,7 @@
 
 Reactions, mildest first:
 - CLAMP: the target is moved into the workspace box; the episode goes on.
+- LAST_KNOWN: the decision uses the last valid value (the object pose) and the episode goes on.
 - HOLD: the arm brakes to rest on a jerk-limited ramp (Ruckig) and keeps its position; the episode goes on.
 - ABORT: the arm brakes to rest and the episode ends (the run continues with the next one).
 - QUICK_STOP: the drives execute their CiA 402 quick stop; the episode ends and the run stops.
@@ -26,6 +27,7 @@ log = logging.getLogger(__name__)
 
 class Reaction(str, enum.Enum):
     CLAMP = "clamp"
+    LAST_KNOWN = "last_known"
     HOLD = "hold"
     ABORT = "abort"
     QUICK_STOP = "quick_stop"
@@ -52,7 +54,7 @@ REACTIONS: dict[Event, Reaction] = {
     Event.NON_FINITE_ACTION: Reaction.ABORT,
     Event.IK_FAILURE: Reaction.HOLD,
     Event.IK_FAILURES_REPEATED: Reaction.ABORT,
-    Event.POSE_UNAVAILABLE: Reaction.HOLD,
+    Event.POSE_UNAVAILABLE: Reaction.LAST_KNOWN,
     Event.JOINT_LIMIT: Reaction.QUICK_STOP,
     Event.FOLLOWING_ERROR: Reaction.QUICK_STOP,
     Event.DRIVE_FAULT: Reaction.QUICK_STOP,
@@ -84,7 +86,7 @@ class Supervisor:
     def report(self, event: Event, detail: str) -> Reaction:
         reaction = REACTIONS[event]
         self.counts[event.value] += 1
-        (log.info if reaction is Reaction.CLAMP else log.warning)("safety: %s -> %s: %s", event.value, reaction.value, detail)
+        (log.info if reaction in (Reaction.CLAMP, Reaction.LAST_KNOWN) else log.warning)("safety: %s -> %s: %s", event.value, reaction.value, detail)
         if self.on_event:
             self.on_event(event, reaction, detail)
         return reaction

@@ -15,6 +15,8 @@ def add_train_command(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", default="runs/train", help="run directory: checkpoint, metrics, annotations, policy")
     p.add_argument("--steps", type=int, help="override train.total_steps")
     p.add_argument("--seed", type=int, help="override train.seed")
+    p.add_argument("--stop-after", type=int, metavar="N",
+                   help="stop (checkpoint, export) after N steps, keeping the schedule of total_steps; --resume continues")
     p.add_argument("--no-guidance", action="store_true", help="baseline DDPG (guidance.enabled = false)")
     p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -45,14 +47,14 @@ def cmd_train(args: argparse.Namespace) -> int:
                 print(f"mrguide train: {exc}")
                 return 2
         recent: deque[int] = deque(maxlen=20)
-        with tqdm(total=tc.total_steps, initial=tr.step, desc="train", unit="step", disable=args.quiet) as bar:
+        with tqdm(total=min(tc.total_steps, args.stop_after or tc.total_steps), initial=tr.step, desc="train", unit="step", disable=args.quiet) as bar:
             def progress(row: dict) -> None:
                 recent.append(row["success"])
                 bar.update(row["step"] - bar.n)
                 bar.set_postfix(ret=f"{row['return']:.1f}", succ20=f"{sum(recent) / len(recent):.0%}",
                                 lam=f"{row['lambda']:.2f}", interv=tr.interventions, asked=row["asked"])
 
-            tr.run(progress)
+            tr.run(progress, stop_at=args.stop_after)
         final = tr.last_eval or tr.evaluate()
         policy = export_actor(tr.agent.actor, out / "policy.npz", tr.env.workspace, tr.env.task_cfg, tr.env.twin_cfg.decision_period,
                               {"trained": {"steps": tr.step, "seed": tc.seed, "guidance": gc.enabled}})

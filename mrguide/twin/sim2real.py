@@ -46,13 +46,24 @@ class ConditionResult:
         return np.array([np.mean([o == "success" for o in v]) for v in self.outcomes.values()])
 
     def summary(self) -> dict:
-        rates = self.rates()
-        n = len(rates)
-        half = float(stats.t.ppf(0.975, n - 1) * rates.std(ddof=1) / np.sqrt(n)) if n > 1 else float("nan")
+        """Pooled success rate with its 95 % Wilson interval, the spread over seeds, failures by cause."""
         pooled = Counter(o for v in self.outcomes.values() for o in v)
         total = sum(pooled.values())
-        return {"condition": self.condition, "seeds": n, "episodes": total, "success_rate": float(rates.mean()),
-                "ci95": half, **{c: pooled.get(c, 0) for c in CAUSES}}
+        lo, hi = wilson_interval(pooled.get("success", 0), total)
+        rates = self.rates()
+        return {"condition": self.condition, "seeds": len(rates), "episodes": total,
+                "success_rate": pooled.get("success", 0) / max(total, 1), "ci95_low": lo, "ci95_high": hi,
+                "seed_std": float(rates.std(ddof=1)) if len(rates) > 1 else 0.0, **{c: pooled.get(c, 0) for c in CAUSES}}
+
+
+def wilson_interval(successes: int, n: int, z: float = float(stats.norm.ppf(0.975))) -> tuple[float, float]:
+    """95 % Wilson score interval of a success proportion."""
+    if n == 0:
+        return 0.0, 1.0
+    p = successes / n
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z * np.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    return float(max(0.0, centre - half)), float(min(1.0, centre + half))
 
 
 def _cause(outcome: str) -> str:
@@ -78,10 +89,11 @@ def run_sim(policy: ExportedPolicy, env_cfg: EnvConfig, seed: int, episodes: int
 
 def run_real(policy_path: Path, real_cfg: EnvConfig, bus_cfg: CobotBusConfig, seed: int, episodes: int, log_path: Path,
              hmd_config: Path | None, safety: SafetyConfig | None, on_episode: Callable[[str], None] | None = None,
-             use_hmd: bool = False, hmd_overrides: dict | None = None) -> list[str]:
+             use_hmd: bool = False, hmd_overrides: dict | None = None, policy=None) -> list[str]:
     """Conditions 2 and 3 (`use_hmd`): a dry run whose outcomes are re-judged on the twin's ground truth.
 
-    `hmd_config` is the TOML with `[calibration]` (and its `[calibration.hmd]` noise) for the HMD."""
+    `hmd_config` is the TOML with `[calibration]` (and its `[calibration.hmd]` noise) for the HMD; `policy`
+    (any obs → action callable) replaces the policy file, as in `dry_run`."""
     cells: list[SimulatedCell] = []
     streams: list[HmdPoseStream] = []
     outcomes: list[str] = []
@@ -114,7 +126,7 @@ def run_real(policy_path: Path, real_cfg: EnvConfig, bus_cfg: CobotBusConfig, se
 
     try:
         summary = dry_run(policy_path, real_cfg, bus_cfg, episodes, seed, log_path, safety,
-                          pose_factory=pose_factory, after_episode=judge, on_placed=refresh)
+                          pose_factory=pose_factory, after_episode=judge, on_placed=refresh, policy=policy)
     finally:
         for s in streams:
             s.close()
@@ -138,20 +150,21 @@ def write_report(results: list[ConditionResult], out: Path, gap_text: str) -> Pa
         w.writerows(rows)
     fig, ax = plt.subplots(figsize=(6, 4))
     x = np.arange(len(rows))
-    ax.bar(x, [100 * r["success_rate"] for r in rows], yerr=[100 * np.nan_to_num(r["ci95"]) for r in rows],
+    err = np.array([[r["success_rate"] - r["ci95_low"], r["ci95_high"] - r["success_rate"]] for r in rows]).T * 100
+    ax.bar(x, [100 * r["success_rate"] for r in rows], yerr=err,
            color=["tab:blue", "tab:green", "tab:orange"][: len(rows)], capsize=6)
     ax.set_xticks(x, [LABELS[r["condition"]] for r in rows])
-    ax.set(ylabel="success rate (%)", ylim=(0, 105), title="Sim-to-real (mean over seeds, 95 % CI)")
+    ax.set(ylabel="success rate (%)", ylim=(0, 105), title="Sim-to-real (pooled episodes, 95 % Wilson CI)")
     for i, r in enumerate(rows):
         ax.text(i, 2, f"{100 * r['success_rate']:.0f}%", ha="center", color="white", fontweight="bold")
     fig.tight_layout()
     fig.savefig(out / "fig8_sim2real.png", dpi=120)
     plt.close(fig)
-    lines = ["| condition | seeds × episodes | success (mean ± 95 % CI over seeds) | " + " | ".join(CAUSES) + " |",
-             "| --- | --- | --- | " + " | ".join("---" for _ in CAUSES) + " |"]
+    lines = ["| condition | seeds × episodes | success | 95 % CI (Wilson) | std over seeds | " + " | ".join(CAUSES) + " |",
+             "| --- | --- | --- | --- | --- | " + " | ".join("---" for _ in CAUSES) + " |"]
     for r in rows:
-        ci = "" if np.isnan(r["ci95"]) else f" ± {100 * r['ci95']:.0f} %"
-        lines.append(f"| {r['condition']} | {r['seeds']} × {r['episodes'] // max(r['seeds'], 1)} | {100 * r['success_rate']:.0f} %{ci} | "
+        lines.append(f"| {r['condition']} | {r['seeds']} × {r['episodes'] // max(r['seeds'], 1)} | {100 * r['success_rate']:.0f} % | "
+                     f"{100 * r['ci95_low']:.0f}–{100 * r['ci95_high']:.0f} % | {100 * r['seed_std']:.0f} % | "
                      + " | ".join(str(r[c]) for c in CAUSES) + " |")
     lines += ["", gap_text]
     md = out / "sim2real.md"

@@ -18,7 +18,7 @@ from mrguide.task import TaskConfig
 def exported(tmp_path):
     ws = Workspace()
     agent = DDPG(*obs_scaling(ws), 4, DDPGConfig(), seed=3)
-    path = export_actor(agent.actor, tmp_path / "policy.npz", ws, TaskConfig(), {"trained": {"steps": 0}})
+    path = export_actor(agent.actor, tmp_path / "policy.npz", ws, TaskConfig(), 0.1, {"trained": {"steps": 0}})
     return agent, path, ws
 
 
