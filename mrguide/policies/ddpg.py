@@ -22,7 +22,10 @@ class DDPGConfig:
     lr_critic: float = 5e-4  # Table I
     gamma: float = 0.99  # Table I
     tau: float = 0.005  # soft target update rate (ours)
-    exploration_noise: float = 0.1  # std of the Gaussian action noise, normalized units (ours)
+    exploration_noise: float = 0.1  # std of the Gaussian action noise at the start, normalized units (ours)
+    exploration_noise_final: float = 0.1  # ... decayed linearly to this by the end of training (ours)
+    #: Clipped double-Q target (Fujimoto et al. 2018): min of two critics. Not in the paper; off = DDPG.
+    clipped_double_q: bool = False
     #: Weight of a behaviour-cloning term on the expert (ζ = 1) samples of each batch, with the Q term
     #: normalized by its mean magnitude as in TD3+BC (Fujimoto & Gu 2021). Not in the paper; 0 gives
     #: plain DDPG. It acts only on expert samples, so a run without guidance is unaffected, and it fades
@@ -95,15 +98,22 @@ class DDPG:
         self.critic_target = Critic(scaler(), act_dim, cfg.hidden)
         self.actor_target.load_state_dict(self.actor.state_dict())
         self.critic_target.load_state_dict(self.critic.state_dict())
+        self.critics = [self.critic]
+        self.critic_targets = [self.critic_target]
+        if cfg.clipped_double_q:
+            self.critics.append(Critic(scaler(), act_dim, cfg.hidden))
+            self.critic_targets.append(Critic(scaler(), act_dim, cfg.hidden))
+            self.critic_targets[1].load_state_dict(self.critics[1].state_dict())
         self.actor_opt = torch.optim.Adam(self.actor.parameters(), lr=cfg.lr_actor)
-        self.critic_opt = torch.optim.Adam(self.critic.parameters(), lr=cfg.lr_critic)
+        self.critic_opt = torch.optim.Adam([p for c in self.critics for p in c.parameters()], lr=cfg.lr_critic)
 
     @torch.no_grad()
-    def act(self, obs: np.ndarray, rng: np.random.Generator | None = None) -> np.ndarray:
-        """Deterministic action, plus Gaussian exploration noise when `rng` is given; clipped to [-1, 1]."""
+    def act(self, obs: np.ndarray, rng: np.random.Generator | None = None, sigma: float | None = None) -> np.ndarray:
+        """Deterministic action, plus Gaussian noise of std `sigma` (default: the initial exploration noise)
+        when `rng` is given; clipped to [-1, 1]."""
         a = self.actor(torch.as_tensor(obs, dtype=torch.float32).unsqueeze(0)).squeeze(0).numpy()
         if rng is not None:
-            a = a + rng.normal(0.0, self.cfg.exploration_noise, a.shape)
+            a = a + rng.normal(0.0, self.cfg.exploration_noise if sigma is None else sigma, a.shape)
         return np.clip(a, -1.0, 1.0).astype(np.float32)
 
     def update(self, batch: Batch) -> dict[str, float]:
@@ -114,8 +124,10 @@ class DDPG:
         next_obs = torch.as_tensor(batch.next_obs)
         done = torch.as_tensor(batch.done)
         with torch.no_grad():
-            target_q = rew + self.cfg.gamma * (1.0 - done) * self.critic_target(next_obs, self.actor_target(next_obs))
-        critic_loss = nn.functional.mse_loss(self.critic(obs, act), target_q)
+            next_act = self.actor_target(next_obs)
+            next_q = torch.stack([c(next_obs, next_act) for c in self.critic_targets]).min(0).values
+            target_q = rew + self.cfg.gamma * (1.0 - done) * next_q
+        critic_loss = sum(nn.functional.mse_loss(c(obs, act), target_q) for c in self.critics)
         self.critic_opt.zero_grad()
         critic_loss.backward()
         self.critic_opt.step()
@@ -134,7 +146,7 @@ class DDPG:
         self.actor_opt.step()
 
         with torch.no_grad():
-            for net, tgt in ((self.actor, self.actor_target), (self.critic, self.critic_target)):
+            for net, tgt in ((self.actor, self.actor_target), *zip(self.critics, self.critic_targets)):
                 for p, tp in zip(net.parameters(), tgt.parameters()):
                     tp.mul_(1.0 - self.cfg.tau).add_(p, alpha=self.cfg.tau)
         return {"critic_loss": critic_loss.item(), "actor_loss": actor_loss.item(), "bc_loss": bc_loss.item()}
@@ -142,17 +154,20 @@ class DDPG:
     def state_dict(self) -> dict:
         return {
             "actor": self.actor.state_dict(),
-            "critic": self.critic.state_dict(),
+            "critics": [c.state_dict() for c in self.critics],
             "actor_target": self.actor_target.state_dict(),
-            "critic_target": self.critic_target.state_dict(),
+            "critic_targets": [c.state_dict() for c in self.critic_targets],
             "actor_opt": self.actor_opt.state_dict(),
             "critic_opt": self.critic_opt.state_dict(),
         }
 
     def load_state_dict(self, state: dict) -> None:
         self.actor.load_state_dict(state["actor"])
-        self.critic.load_state_dict(state["critic"])
         self.actor_target.load_state_dict(state["actor_target"])
-        self.critic_target.load_state_dict(state["critic_target"])
+        for nets, key in ((self.critics, "critics"), (self.critic_targets, "critic_targets")):
+            if len(state[key]) != len(nets):
+                raise RuntimeError(f"checkpoint has {len(state[key])} critics, this agent {len(nets)}")
+            for net, sd in zip(nets, state[key]):
+                net.load_state_dict(sd)
         self.actor_opt.load_state_dict(state["actor_opt"])
         self.critic_opt.load_state_dict(state["critic_opt"])

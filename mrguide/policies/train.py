@@ -148,6 +148,16 @@ METRIC_FIELDS = ("step", "episode", "kind", "return", "success", "outcome", "len
 EVAL_FIELDS = ("step", "success_rate", "mean_return")
 
 
+def _append_csv(path: Path, fields: tuple[str, ...], row: dict) -> None:
+    """Append one row (with a header when the file is new); each row is on disk when this returns."""
+    new = not path.exists()
+    with path.open("a", newline="") as fh:
+        w = csv.DictWriter(fh, fields)
+        if new:
+            w.writeheader()
+        w.writerow(row)
+
+
 class Trainer:
     """One seed's training run, resumable from its checkpoint."""
 
@@ -206,6 +216,11 @@ class Trainer:
     def _intake_open(self) -> bool:
         return self.guidance.enabled and self.step < self.guidance.intake_steps
 
+    def exploration_sigma(self) -> float:
+        """Exploration noise, decayed linearly from its initial to its final value over training."""
+        d = self.ddpg_cfg
+        return d.exploration_noise + (d.exploration_noise_final - d.exploration_noise) * min(1.0, self.step / self.cfg.total_steps)
+
     def lam(self) -> float:
         return expert_ratio(self.step, self.cfg.total_steps, self.guidance.lam_max, self.guidance.lam_min) if self.guidance.enabled else 0.0
 
@@ -233,7 +248,7 @@ class Trainer:
         ret, length, info, triggered = 0.0, 0, {"outcome": None, "is_success": False}, False
         try:
             while self.step < end:
-                action = self.agent.act(obs, self.rng)
+                action = self.agent.act(obs, self.rng, self.exploration_sigma())
                 obs, r, term, trunc, info = self._env_step(action, 0, obs)
                 ret += r
                 length += 1
@@ -280,13 +295,7 @@ class Trainer:
         }
 
     def _log(self, row: dict) -> None:
-        path = self.out / "metrics.csv"
-        new = not path.exists()
-        with path.open("a", newline="") as fh:
-            w = csv.DictWriter(fh, METRIC_FIELDS)
-            if new:
-                w.writeheader()
-            w.writerow(row)
+        _append_csv(self.out / "metrics.csv", METRIC_FIELDS, row)
 
     def evaluate(self) -> dict:
         """Deterministic policy on fixed evaluation seeds (disjoint from training seeds' stream)."""
@@ -302,13 +311,7 @@ class Trainer:
             successes += int(info["is_success"])
             returns.append(ret)
         res = {"step": self.step, "success_rate": successes / self.cfg.eval_episodes, "mean_return": float(np.mean(returns))}
-        path = self.out / "eval.csv"
-        new = not path.exists()
-        with path.open("a", newline="") as fh:
-            w = csv.DictWriter(fh, EVAL_FIELDS)
-            if new:
-                w.writeheader()
-            w.writerow(res)
+        _append_csv(self.out / "eval.csv", EVAL_FIELDS, res)
         log.info("eval at step %d: success %.0f%%", self.step, 100 * res["success_rate"])
         self.last_eval = res
         return res
