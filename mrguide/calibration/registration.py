@@ -21,11 +21,9 @@ from mrguide.calibration.se3 import apply, make_T, rotation_angle_deg
 log = logging.getLogger(__name__)
 
 
-@dataclass(frozen=True)
-class RigidFit:
-    """T_dst_src with the distance of every transformed source point from its destination point (m)."""
+class _Residuals:
+    """RMS and maximum of a `residuals_m` array (m)."""
 
-    T_dst_src: np.ndarray
     residuals_m: np.ndarray
 
     @property
@@ -35,6 +33,14 @@ class RigidFit:
     @property
     def max_m(self) -> float:
         return float(np.max(self.residuals_m))
+
+
+@dataclass(frozen=True)
+class RigidFit(_Residuals):
+    """T_dst_src with the distance of every transformed source point from its destination point (m)."""
+
+    T_dst_src: np.ndarray
+    residuals_m: np.ndarray
 
 
 def fit_rigid(src: np.ndarray, dst: np.ndarray, where: str = "rigid fit") -> RigidFit:
@@ -66,21 +72,13 @@ class Correspondences:
 
 
 @dataclass(frozen=True)
-class Registration:
+class Registration(_Residuals):
     """T_base_hmd from the frames that agreed, with residuals and what was left out and why."""
 
     T_base_hmd: np.ndarray
     residuals_m: np.ndarray  # per point, over all frames used
     frames_used: tuple[str, ...]
     frames_rejected: dict[str, str] = field(default_factory=dict)  # label -> reason
-
-    @property
-    def rms_m(self) -> float:
-        return float(np.sqrt(np.mean(self.residuals_m**2)))
-
-    @property
-    def max_m(self) -> float:
-        return float(np.max(self.residuals_m))
 
 
 def register(frames: Sequence[Correspondences], cfg: RegistrationConfig = RegistrationConfig()) -> Registration:

@@ -105,7 +105,7 @@ def _ci95(x: np.ndarray) -> np.ndarray:
     return stats.t.ppf(0.975, n - 1) * x.std(axis=0, ddof=1) / np.sqrt(n) if n > 1 else np.zeros(x.shape[1])
 
 
-def summarize(out: Path, seeds: int, steps: int, eval_episodes: int, grid_step: int = 250) -> Path:
+def summarize(out: Path, seeds: int, steps: int, eval_episodes: int, grid_step: int = 1000) -> Path:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -118,22 +118,18 @@ def summarize(out: Path, seeds: int, steps: int, eval_episodes: int, grid_step: 
         for s in range(seeds):
             run = out / v / f"seed{s}"
             rows = _read(run / "metrics.csv")
-            agent = [r for r in rows if r["kind"] == "agent"]
-            st = np.array([int(r["step"]) for r in agent])
-            ret = np.array([float(r["return"]) for r in agent])
-            # mean return of the agent episodes ending in each window of the grid (carried forward when none)
-            series, last = [], ret[0] if len(ret) else 0.0
-            for g in grid:
-                sel = (st > g - grid_step) & (st <= g)
-                last = float(ret[sel].mean()) if sel.any() else last
-                series.append(last)
+            ev = _read(run / "eval.csv")
+            # Fig. 3 uses the deterministic evaluation returns: training episodes of the guided runs are cut
+            # short when the expert takes over, so their returns are not comparable with the baseline's
+            ev_st = np.array([int(r["step"]) for r in ev])
+            ev_ret = np.array([float(r["mean_return"]) for r in ev])
+            series = [float(ev_ret[ev_st <= g + grid_step // 2][-1]) if (ev_st <= g + grid_step // 2).any() else np.nan for g in grid]
             returns.append(series)
             all_st = np.array([int(r["step"]) for r in rows])
             asked = np.array([int(r["asked"]) for r in rows])
             ratio = np.array([float(r["expert_ratio"]) for r in rows])
             asked_c.append([asked[all_st <= g].max() if (all_st <= g).any() else 0 for g in grid])
             ratio_c.append([ratio[(all_st > g - grid_step) & (all_st <= g)].mean() if ((all_st > g - grid_step) & (all_st <= g)).any() else np.nan for g in grid])
-            ev = _read(run / "eval.csv")
             c = convergence_step(ev, eval_episodes)
             conv_steps.append(c)
             asked_at_conv.append(int(asked[all_st <= c].max()) if c is not None and (all_st <= c).any() else None)
@@ -157,10 +153,10 @@ def summarize(out: Path, seeds: int, steps: int, eval_episodes: int, grid_step: 
     # Fig. 3: mean episode return with 95 % CI
     fig, ax = plt.subplots(figsize=(7, 4))
     for v, color in zip(VARIANTS, ("tab:blue", "tab:red")):
-        m, h = curves[v].mean(0), _ci95(curves[v])
+        m, h = np.nanmean(curves[v], 0), _ci95(curves[v])
         ax.plot(grid, m, color=color, label=f"{v} DDPG")
         ax.fill_between(grid, m - h, m + h, color=color, alpha=0.2)
-    ax.set(xlabel="training step", ylabel="mean episode return", title=f"Learning curves, {seeds} seeds, 95 % CI")
+    ax.set(xlabel="training step", ylabel="mean return, deterministic evaluation", title=f"Learning curves, {seeds} seeds, 95 % CI")
     ax.legend()
     fig.tight_layout()
     fig.savefig(out / "fig3_learning_curves.png", dpi=120)
