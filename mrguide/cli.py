@@ -11,6 +11,7 @@ from pathlib import Path
 from tqdm import tqdm
 
 from mrguide.config import ConfigError
+from mrguide.drivers.errors import DriverError
 
 
 def cmd_expert(args: argparse.Namespace) -> int:
@@ -196,6 +197,9 @@ def main(argv: list[str] | None = None) -> int:
     except ConfigError as exc:
         print(f"mrguide: config error: {exc}", file=sys.stderr)
         return 2
+    except DriverError as exc:
+        print(f"mrguide: CAN driver error: {exc}", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         print("mrguide: interrupted", file=sys.stderr)
         return 130

@@ -40,6 +40,9 @@ class RuntimeConfig:
 
     decision_period: float = 0.1  # s; must be the period the policy was trained with
     home_tolerance: float = 0.01  # rad; the arm counts as home within this
+    #: While the vacuum generator reports a part after the grasp, the object hangs under the cup: take its
+    #: position from the TCP (forward kinematics) instead of the pose source, which may lag (an HMD does).
+    track_carried_object: bool = True
 
 
 @dataclass
@@ -186,6 +189,8 @@ class Runtime:
                         raise RunStopped(f"no object pose at the start of the episode: {exc}") from exc
                     self.supervisor.report(Event.POSE_UNAVAILABLE, f"{exc}; using the last pose")
                     obj = prev_obj
+                if self.cfg.track_carried_object and phase >= 2 and vac.part_gripped:
+                    obj = tcp - np.array([0.0, 0.0, 0.5 * self.task.object_height])
                 reward = None
                 if t > 0:
                     res = task_step(self.task, phase, tcp, g, vac.part_gripped, obj, goal, t - 1)

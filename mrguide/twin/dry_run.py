@@ -54,16 +54,16 @@ def simulated_cell(env_cfg: EnvConfig, bus_cfg: CobotBusConfig, seed: int = 0) -
         heartbeat_timeout_factor=3.0, heartbeat_period=max(t.heartbeat_period, 0.15)))
     twin_cfg = replace(env_cfg.twin, control_period=bus_cfg.timing.control_period, gui=False)
     spec = load_robot(env_cfg.robot)
+    # A full garbage collection over everything loaded so far (torch, pinocchio, ...) holds the GIL long
+    # enough to starve the 4 ms loop: collect once now, before any bus thread runs, and exempt the rest.
+    gc.collect()
+    gc.freeze()
     scene = Scene(spec, twin_cfg, env_cfg.task.object_height, seed=seed)
     plant = TwinPlant(scene)
     sim = SimulatedCobot(bus_cfg, plant, seed=seed)
     sim.start()
     try:
         with Cobot(bus_cfg, spec) as cobot:
-            # A full garbage collection over everything loaded so far (torch, canopen dictionaries, ...)
-            # holds the GIL for long enough to starve the 4 ms loop: exempt those objects from it.
-            gc.collect()
-            gc.freeze()
             cobot.enable()
             yield SimulatedCell(scene, plant, sim, cobot)
     finally:

@@ -150,7 +150,7 @@ def write_report(results: list[ConditionResult], out: Path, gap_text: str) -> Pa
         w.writerows(rows)
     fig, ax = plt.subplots(figsize=(6, 4))
     x = np.arange(len(rows))
-    err = np.array([[r["success_rate"] - r["ci95_low"], r["ci95_high"] - r["success_rate"]] for r in rows]).T * 100
+    err = np.clip(np.array([[r["success_rate"] - r["ci95_low"], r["ci95_high"] - r["success_rate"]] for r in rows]).T * 100, 0, None)
     ax.bar(x, [100 * r["success_rate"] for r in rows], yerr=err,
            color=["tab:blue", "tab:green", "tab:orange"][: len(rows)], capsize=6)
     ax.set_xticks(x, [LABELS[r["condition"]] for r in rows])

@@ -50,7 +50,7 @@ def test_real_hmd_condition_uses_marker_pipeline_poses(tmp_path, monkeypatch):
     monkeypatch.setattr(HmdPoseStream, "object_position", spy)
     out = s2r.run_real(None, cfg, bus, seed=0, episodes=2, log_path=tmp_path / "log.jsonl", hmd_config=REAL,
                        safety=None, policy=expert(cfg), use_hmd=True)
-    assert len(out) == 2 and all(o in ("success", *s2r.CAUSES) for o in out)
+    assert len(out) == 2 and "success" in out, out
     errors = np.array([np.linalg.norm(e - t) for e, t, _ in seen])
     assert len(seen) > 10 and max(f for *_, f in seen) > 2
     # poses really came out of the marker pipeline with its noise: never the ground truth, never far off
