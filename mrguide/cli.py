@@ -48,7 +48,7 @@ def _bus_config(config_path: str | None, bus_config: str):
 
 def cmd_deploy(args: argparse.Namespace) -> int:
     """Run an exported policy on the cobot (real bus), or dry-run it against the simulated cell."""
-    from mrguide.config import load_section
+    from mrguide.config import load_optional_section, load_section
     from mrguide.deploy.policy import ExportedPolicy, PolicyFileError
     from mrguide.deploy.safety import SafetyConfig
     from mrguide.deploy.session import DeployConfig
@@ -56,7 +56,7 @@ def cmd_deploy(args: argparse.Namespace) -> int:
     from mrguide.task import TaskConfig
 
     dcfg = load_section(DeployConfig, args.config, "deploy")
-    safety = load_section(SafetyConfig, args.config, "safety")
+    safety = load_optional_section(SafetyConfig, args.config, "safety")
     episodes = args.episodes if args.episodes is not None else dcfg.episodes
     bus = _bus_config(args.config, dcfg.bus_config)
     log_path = Path(args.log or Path(dcfg.log_dir) / f"deploy-{time.strftime('%Y%m%d-%H%M%S')}.jsonl")

@@ -54,6 +54,13 @@ def load_section(cls: type[T], path: str | Path | None, section: str) -> T:
     return from_dict(cls, data, where=f"{path} [{section}]")
 
 
+def load_optional_section(cls: type[T], path: str | Path | None, section: str) -> T | None:
+    """Like `load_section`, but None when the file or the section is absent (the caller picks defaults)."""
+    if path is None or section not in load_toml(path):
+        return None
+    return load_section(cls, path, section)
+
+
 def to_dict(obj: Any) -> dict[str, Any]:
     """A dataclass as a plain dict (tuples become lists), for metadata and logs."""
     return dataclasses.asdict(obj)

@@ -57,17 +57,23 @@ class EpisodeReport:
 
 
 class _FollowingMonitor:
-    """Cycle observer: max joint deviation of the measured position from the recently sent setpoints."""
+    """Cycle observer: how far the measured joints are from every setpoint sent in the last `depth` cycles
+    (the smallest of those distances), so servo lag, bus latency and late feedback are not counted as
+    following error, while an arm that stopped following its commands is."""
 
     def __init__(self, depth: int):
-        self.recent: deque[np.ndarray] = deque(maxlen=depth)
+        self.recent: np.ndarray | None = None  # ring of the last `depth` setpoints
+        self.depth, self.count = depth, 0
         self.error = 0.0
 
     def __call__(self, sample: CycleSample) -> None:
         if sample.setpoint is not None:
-            self.recent.append(sample.setpoint)
-        if self.recent:
-            self.error = min(float(np.max(np.abs(sample.positions - sp))) for sp in self.recent)
+            if self.recent is None:
+                self.recent = np.tile(sample.setpoint, (self.depth, 1))
+            self.recent[self.count % self.depth] = sample.setpoint
+            self.count += 1
+        if self.recent is not None:
+            self.error = float(np.abs(self.recent - sample.positions).max(axis=1).min())
 
 
 class Runtime:
@@ -94,7 +100,7 @@ class Runtime:
         self.kin = Kinematics(spec)
         self.streamer = JointStreamer(spec, period)
         self.supervisor = Supervisor(spec, safety or SafetyConfig(), self._on_event)
-        self.following = _FollowingMonitor(depth=cobot.config.timing.setpoint_queue_depth + 4)
+        self.following = _FollowingMonitor(depth=max(25, 2 * cobot.config.timing.setpoint_queue_depth))  # 100 ms at 4 ms
         self.watchdog = Watchdog(self.supervisor.cfg.stall_timeout, self._on_stall)
         self._episode_events: Counter[str] = Counter()
         self._t = 0

@@ -30,7 +30,7 @@ def add_sim2real_command(sub: argparse._SubParsersAction) -> None:
 
 
 def cmd_sim2real(args: argparse.Namespace) -> int:
-    from mrguide.config import ConfigError, load_section
+    from mrguide.config import ConfigError, load_optional_section, load_section
     from mrguide.deploy.policy import ExportedPolicy, PolicyFileError
     from mrguide.deploy.safety import SafetyConfig
     from mrguide.deploy.session import DeployConfig
@@ -46,7 +46,7 @@ def cmd_sim2real(args: argparse.Namespace) -> int:
     real_cfg = EnvConfig.load(real_path)
     dcfg = load_section(DeployConfig, real_path, "deploy")
     bus = load_cobot_bus_config(real_path.parent / dcfg.bus_config if dcfg.bus_config else None)
-    safety = load_section(SafetyConfig, real_path, "safety")
+    safety = load_optional_section(SafetyConfig, real_path, "safety")
     try:
         policy = ExportedPolicy.load(args.policy, load_robot(train_cfg.robot).workspace, train_cfg.task)
     except PolicyFileError as exc:

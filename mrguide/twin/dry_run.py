@@ -112,8 +112,11 @@ def dry_run(
     try:
         with simulated_cell(env_cfg, bus_cfg, seed) as cell:
             pose = pose_factory(cell) if pose_factory else TwinObjectPose(cell.plant)
+            # Without a [safety] config the simulated cell allows 0.1 rad of following error (robot: 0.05):
+            # on a loaded PC the simulated arm can fall behind for lack of CPU, not of torque.
             runtime = Runtime(cell.cobot, loaded, pose, spec, env_cfg.task, run_log,
-                              RuntimeConfig(decision_period=env_cfg.twin.decision_period), safety)
+                              RuntimeConfig(decision_period=env_cfg.twin.decision_period),
+                              safety or SafetyConfig(following_error=0.1))
             def place(i: int) -> None:
                 cell.plant.place_objects(*layouts[i])
                 if on_placed:

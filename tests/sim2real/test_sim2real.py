@@ -51,11 +51,13 @@ def test_real_hmd_condition_uses_marker_pipeline_poses(tmp_path, monkeypatch):
     out = s2r.run_real(None, cfg, bus, seed=0, episodes=2, log_path=tmp_path / "log.jsonl", hmd_config=REAL,
                        safety=None, policy=expert(cfg), use_hmd=True)
     assert len(out) == 2 and "success" in out, out
-    errors = np.array([np.linalg.norm(e - t) for e, t, _ in seen])
     assert len(seen) > 10 and max(f for *_, f in seen) > 2
-    # poses really came out of the marker pipeline with its noise: never the ground truth, never far off
+    # poses really came out of the marker pipeline with its noise: never the ground truth, and close to
+    # it while the object rests on the table (while carried, the HMD estimate lags the moving object)
+    errors = np.array([np.linalg.norm(e - t) for e, t, _ in seen])
+    resting = np.array([t[2] < 0.03 for _, t, _ in seen])
     assert np.all(errors > 1e-5)
-    assert np.median(errors) < 0.02
+    assert resting.sum() > 5 and np.median(errors[resting]) < 0.02
 
 
 def test_report_files(tmp_path):
