@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from mrguide.deploy.runtime import EpisodeReport, RunStopped, Runtime
+from mrguide.drivers.errors import DriverError
 from mrguide.pose_source import ObjectPoseSource
 
 log = logging.getLogger(__name__)
@@ -89,7 +90,7 @@ def run_session(
             summary.episodes.append(report)
             if after_episode:
                 after_episode(report)
-    except RunStopped as exc:
+    except (RunStopped, DriverError) as exc:  # a fault latched between episodes ends the run the same way
         summary.stopped = str(exc)
         if runtime.log:
             runtime.log.write("run_stopped", reason=str(exc))
