@@ -178,7 +178,7 @@ class Runtime:
         self.log.write("episode_start", episode=index, goal=goal)
         self.streamer.reset(self.cobot.setpoint)
         self.watchdog.arm(True)
-        phase, prev_obj, outcome = 0, None, None
+        phase, prev_obj, outcome, carried = 0, None, None, None
         try:
             for t in range(self.task.horizon + 1):
                 self._t = t
@@ -195,8 +195,12 @@ class Runtime:
                         raise RunStopped(f"no object pose at the start of the episode: {exc}") from exc
                     self.supervisor.report(Event.POSE_UNAVAILABLE, f"{exc}; using the last pose")
                     obj = prev_obj
-                if self.cfg.track_carried_object and phase >= 2 and vac.part_gripped:
-                    obj = tcp - np.array([0.0, 0.0, 0.5 * self.task.object_height])
+                if self.cfg.track_carried_object and phase >= 2:
+                    if vac.part_gripped:
+                        obj = carried = tcp - np.array([0.0, 0.0, 0.5 * self.task.object_height])
+                    elif carried is not None and phase == 4:
+                        obj = carried  # just released: it lies where the cup let it go
+
                 reward = None
                 if t > 0:
                     res = task_step(self.task, phase, tcp, g, vac.part_gripped, obj, goal, t - 1)

@@ -118,8 +118,8 @@ def run_real(policy_path: Path, real_cfg: EnvConfig, bus_cfg: CobotBusConfig, se
         obj = cells[0].plant.object_position()
         goal = goals[report.index]
         placed = np.linalg.norm(obj[:2] - goal[:2]) < task.place_tolerance and abs(obj[2] - goal[2]) < 0.01
-        if outcome == "success" and not placed:
-            outcome = "misplaced"  # the runtime believed its (HMD) pose; the ground truth disagrees
+        if outcome in ("success", "misplaced"):  # released at the goal pose: the ground truth decides
+            outcome = "success" if placed else "misplaced"
         outcomes.append(outcome)
         if on_episode:
             on_episode(outcome)
