@@ -5,13 +5,15 @@ Run: python benchmarks/train.py [--steps N]. Prints a table; the last line is on
 
 from __future__ import annotations
 
+import dataclasses
+
 import argparse
 import json
 import os
 import platform
 import tempfile
 
-from mrguide.policies.train import Trainer, load_train_config, replace_config
+from mrguide.policies.train import Trainer, load_train_config
 
 
 def main() -> None:
@@ -21,7 +23,7 @@ def main() -> None:
     if hasattr(os, "sched_setaffinity"):
         os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
     tc, dc, gc, ec = load_train_config(None)
-    tc = replace_config(tc, total_steps=args.steps, checkpoint_every=args.steps)
+    tc = dataclasses.replace(tc, total_steps=args.steps, checkpoint_every=args.steps)
     with tempfile.TemporaryDirectory() as out:
         tr = Trainer(tc, dc, gc, ec, out)
         try:

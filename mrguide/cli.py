@@ -130,7 +130,7 @@ def cmd_main(args: argparse.Namespace) -> int:
                   + (["--quiet"] if args.quiet else []))
         if rc:
             return rc
-    print(f"\n[2/3] dry run: deploying it over the virtual CAN bus to simulated drives on a twin with reality gap")
+    print("\n[2/3] dry run: deploying it over the virtual CAN bus to simulated drives on a twin with reality gap")
     rc = main(["deploy", "--policy", str(policy), "--config", args.real_config, "--dry-run", "--episodes", str(args.deploy_episodes),
                "--log", str(out / "deploy.jsonl")] + (["--quiet"] if args.quiet else []))
     print(f"\n[3/3] sim-to-real evaluation: {args.seeds} seeds x {args.episodes} episodes per condition")

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import argparse
 from collections import deque
 from pathlib import Path
@@ -25,15 +27,15 @@ def add_train_command(sub: argparse._SubParsersAction) -> None:
 
 def cmd_train(args: argparse.Namespace) -> int:
     from mrguide.policies.export import export_actor
-    from mrguide.policies.train import CheckpointError, Trainer, load_train_config, replace_config
+    from mrguide.policies.train import CheckpointError, Trainer, load_train_config
 
     tc, dc, gc, ec = load_train_config(args.config)
     if args.steps is not None:
-        tc = replace_config(tc, total_steps=args.steps)
+        tc = dataclasses.replace(tc, total_steps=args.steps)
     if args.seed is not None:
-        tc = replace_config(tc, seed=args.seed)
+        tc = dataclasses.replace(tc, seed=args.seed)
     if args.no_guidance:
-        gc = replace_config(gc, enabled=False)
+        gc = dataclasses.replace(gc, enabled=False)
     out = Path(args.out)
     if not args.resume and (out / "checkpoint.pt").exists():
         print(f"mrguide train: {out} already holds a run; use --resume or another --out")

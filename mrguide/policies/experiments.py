@@ -6,6 +6,8 @@ experiment can be re-run and only missing runs are trained again. Aggregation re
 
 from __future__ import annotations
 
+import dataclasses
+
 import csv
 import multiprocessing as mp
 import time
@@ -33,14 +35,14 @@ class RunSpec:
 
 def _train_one(spec: RunSpec, queue) -> str:
     """Worker: one seed of one variant, resumed if a checkpoint exists, finished if done already."""
-    from mrguide.policies.train import Trainer, load_train_config, replace_config
+    from mrguide.policies.train import Trainer, load_train_config
 
     out = Path(spec.out)
     if (out / "done").exists():
         return spec.out
     tc, dc, gc, ec = load_train_config(spec.config)
-    tc = replace_config(tc, total_steps=spec.steps, seed=spec.seed)
-    gc = replace_config(gc, enabled=spec.variant == "guided")
+    tc = dataclasses.replace(tc, total_steps=spec.steps, seed=spec.seed)
+    gc = dataclasses.replace(gc, enabled=spec.variant == "guided")
     tr = Trainer(tc, dc, gc, ec, out)
     try:
         if (out / "checkpoint.pt").exists():

@@ -11,7 +11,6 @@ minibatch mixed by λ_t (Eq. 9, 11).
 from __future__ import annotations
 
 import csv
-import dataclasses
 import logging
 import time
 from collections.abc import Callable
@@ -26,7 +25,6 @@ from mrguide.config import ConfigError, load_section, to_dict
 from mrguide.policies.ddpg import DDPG, DDPGConfig
 from mrguide.policies.experts import AnnotatorNoise, ExpertSource, FileExpert, OracleExpert, SimulatedAnnotator
 from mrguide.policies.guidance import (
-    Annotation,
     AnnotationCache,
     NominalReference,
     ReferencePose,
@@ -399,8 +397,3 @@ class Trainer:
 
     def close(self) -> None:
         self.env.close()
-
-
-def replace_config(cfg, **changes):
-    """dataclasses.replace for frozen configs (used by the CLI and experiments)."""
-    return dataclasses.replace(cfg, **changes)

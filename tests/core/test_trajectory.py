@@ -12,7 +12,7 @@ def test_stream_respects_limits_and_reaches_targets():
     dt = 0.004
     s = JointStreamer(spec, dt)
     rng = np.random.default_rng(0)
-    prev_q, prev_dq, prev_ddq = s.state()
+    prev_q, _, prev_ddq = s.state()
     for k in range(8):
         target = rng.uniform(spec.q_lower + 0.1, spec.q_upper - 0.1)
         s.set_target(target)
@@ -27,7 +27,7 @@ def test_stream_respects_limits_and_reaches_targets():
             assert np.all(np.abs(jerk) <= spec.j_max * (1 + 1e-3) + 1e-6)
             # position is consistent with the velocity it reports
             assert np.all(np.abs(sp.q - prev_q) <= spec.v_max * dt * (1 + 1e-6) + 1e-9)
-            prev_q, prev_dq, prev_ddq = sp.q, sp.dq, sp.ddq
+            prev_q, prev_ddq = sp.q, sp.ddq
             if sp.finished:
                 break
         if k % 2 == 0:

@@ -1,18 +1,19 @@
 """Training loop: guidance fires, checkpoints resume exactly, bad checkpoints are refused."""
 
+import dataclasses
 import csv
 
 import numpy as np
 import pytest
 
-from mrguide.policies.train import CheckpointError, Trainer, load_train_config, replace_config
+from mrguide.policies.train import CheckpointError, Trainer, load_train_config
 
 
 def make(tmp_path, name, **train):
     tc, dc, gc, ec = load_train_config(None)
-    tc = replace_config(tc, total_steps=600, learning_starts=64, batch_size=32, eval_every=10_000, checkpoint_every=10_000, **train)
-    dc = replace_config(dc, hidden=(32, 32))
-    gc = replace_config(gc, intake_steps=400)
+    tc = dataclasses.replace(tc, total_steps=600, learning_starts=64, batch_size=32, eval_every=10_000, checkpoint_every=10_000, **train)
+    dc = dataclasses.replace(dc, hidden=(32, 32))
+    gc = dataclasses.replace(gc, intake_steps=400)
     return Trainer(tc, dc, gc, ec, tmp_path / name)
 
 
