@@ -1,13 +1,12 @@
 """Training benchmark: a guided 20k-step run on one core — steps/s, update time, wall time.
 
-Run: python benchmarks/train.py [--steps N]. Prints a table; the last line is one JSON object.
+Run: python benchmarks/train.py [--steps N] [--config FILE]. Prints a table; the last line is one JSON object.
 """
 
 from __future__ import annotations
 
-import dataclasses
-
 import argparse
+import dataclasses
 import json
 import os
 import platform
@@ -19,10 +18,11 @@ from mrguide.policies.train import Trainer, load_train_config
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--steps", type=int, default=20_000)
+    ap.add_argument("--config", help="training config (TOML); default: the built-in defaults")
     args = ap.parse_args()
     if hasattr(os, "sched_setaffinity"):
         os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
-    tc, dc, gc, ec = load_train_config(None)
+    tc, dc, gc, ec = load_train_config(args.config)
     tc = dataclasses.replace(tc, total_steps=args.steps, checkpoint_every=args.steps)
     with tempfile.TemporaryDirectory() as out:
         tr = Trainer(tc, dc, gc, ec, out)
@@ -37,7 +37,8 @@ def main() -> None:
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}, pinned to one core")
     print(f"{'guided training steps':<40} {tr.step}")
     print(f"{'steps/s (env + update)':<40} {res['steps_per_s']:.1f}")
-    print(f"{'update (batch 256, 256x256 MLPs)':<40} {res['update_ms']:.2f} ms")
+    hidden = "x".join(map(str, dc.hidden))
+    print(f"{f'update (batch {tc.batch_size}, {hidden} MLPs)':<40} {res['update_ms']:.2f} ms")
     print(f"{'wall time, scaled to 20k steps':<40} {res['wall_s_20k']:.0f} s   (target <= 180 s)")
     print(json.dumps({k: round(v, 4) if isinstance(v, float) else v for k, v in res.items()}))
 

@@ -1,7 +1,8 @@
 """DDPG (Lillicrap et al.) on the CPU: actor and critic MLPs, target networks, Gaussian exploration.
 
 Defaults from Table I of the paper where it gives them (lr 5e-4, γ 0.99, batch 256, buffer 1e6);
-hidden sizes, τ and the noise scale are ours.
+hidden sizes, τ and the noise scale are ours. Two departures from plain DDPG, both switchable: a
+clipped double-Q target and a behaviour-cloning term on expert samples (see `DDPGConfig`).
 """
 
 from __future__ import annotations
@@ -17,15 +18,16 @@ from mrguide.policies.replay import Batch
 
 @dataclass(frozen=True)
 class DDPGConfig:
-    hidden: tuple[int, ...] = (256, 256)  # ours
+    hidden: tuple[int, ...] = (128, 128)  # ours; 256x256 doubled the update time
     lr_actor: float = 5e-4  # Table I
     lr_critic: float = 5e-4  # Table I
     gamma: float = 0.99  # Table I
     tau: float = 0.005  # soft target update rate (ours)
     exploration_noise: float = 0.1  # std of the Gaussian action noise at the start, normalized units (ours)
     exploration_noise_final: float = 0.1  # ... decayed linearly to this by the end of training (ours)
-    #: Clipped double-Q target (Fujimoto et al. 2018): min of two critics. Not in the paper; off = DDPG.
-    clipped_double_q: bool = False
+    #: Clipped double-Q target (Fujimoto et al. 2018): min of two critics. Not in the paper (off = plain
+    #: DDPG); on by default because without it guided runs collapsed after the expert intake closed.
+    clipped_double_q: bool = True
     #: Weight of a behaviour-cloning term on the expert (ζ = 1) samples of each batch, with the Q term
     #: normalized by its mean magnitude as in TD3+BC (Fujimoto & Gu 2021). Not in the paper; 0 gives
     #: plain DDPG. It acts only on expert samples, so a run without guidance is unaffected, and it fades
@@ -69,16 +71,32 @@ class Actor(nn.Module):
         return self.net(self.scaler(obs))
 
 
-class Critic(nn.Module):
-    """Q_φ(s, a)."""
+class CriticEnsemble(nn.Module):
+    """n critics Q_φ1..Q_φn(s, a) with the same layout, evaluated together: each layer is one batched
+    matrix product over the stacked weights (n = 1 is the DDPG critic, n = 2 the clipped double-Q pair).
+    Weights and biases are initialized as `nn.Linear` does."""
 
-    def __init__(self, scaler: ObsScaler, act_dim: int, hidden: tuple[int, ...]):
+    def __init__(self, scaler: ObsScaler, act_dim: int, hidden: tuple[int, ...], n: int):
         super().__init__()
         self.scaler = scaler
-        self.net = mlp([len(scaler.offset) + act_dim, *hidden, 1])
+        sizes = [len(scaler.offset) + act_dim, *hidden, 1]
+        self.weights = nn.ParameterList()
+        self.biases = nn.ParameterList()
+        for fan_in, fan_out in zip(sizes[:-1], sizes[1:]):
+            bound = 1.0 / fan_in**0.5
+            self.weights.append(nn.Parameter(torch.empty(n, fan_in, fan_out).uniform_(-bound, bound)))
+            self.biases.append(nn.Parameter(torch.empty(n, 1, fan_out).uniform_(-bound, bound)))
 
-    def forward(self, obs: torch.Tensor, act: torch.Tensor) -> torch.Tensor:
-        return self.net(torch.cat([self.scaler(obs), act], dim=-1)).squeeze(-1)
+    def forward(self, obs: torch.Tensor, act: torch.Tensor, members: slice = slice(None)) -> torch.Tensor:
+        """Q values of the selected members, shape (members, batch)."""
+        x = torch.cat([self.scaler(obs), act], dim=-1)
+        ws, bs = [w[members] for w in self.weights], [b[members] for b in self.biases]
+        h = x.expand(ws[0].shape[0], *x.shape)
+        for i, (w, b) in enumerate(zip(ws, bs)):
+            h = torch.baddbmm(b, h, w)
+            if i < len(ws) - 1:
+                h = torch.relu(h)
+        return h.squeeze(-1)
 
 
 class DDPG:
@@ -92,20 +110,21 @@ class DDPG:
         def scaler() -> ObsScaler:
             return ObsScaler(obs_offset, obs_scale)
 
+        n_critics = 2 if cfg.clipped_double_q else 1
         self.actor = Actor(scaler(), act_dim, cfg.hidden)
-        self.critic = Critic(scaler(), act_dim, cfg.hidden)
+        self.critic = CriticEnsemble(scaler(), act_dim, cfg.hidden, n_critics)
         self.actor_target = Actor(scaler(), act_dim, cfg.hidden)
-        self.critic_target = Critic(scaler(), act_dim, cfg.hidden)
+        self.critic_target = CriticEnsemble(scaler(), act_dim, cfg.hidden, n_critics)
         self.actor_target.load_state_dict(self.actor.state_dict())
         self.critic_target.load_state_dict(self.critic.state_dict())
-        self.critics = [self.critic]
-        self.critic_targets = [self.critic_target]
-        if cfg.clipped_double_q:
-            self.critics.append(Critic(scaler(), act_dim, cfg.hidden))
-            self.critic_targets.append(Critic(scaler(), act_dim, cfg.hidden))
-            self.critic_targets[1].load_state_dict(self.critics[1].state_dict())
-        self.actor_opt = torch.optim.Adam(self.actor.parameters(), lr=cfg.lr_actor)
-        self.critic_opt = torch.optim.Adam([p for c in self.critics for p in c.parameters()], lr=cfg.lr_critic)
+        # fused: one kernel per step for all parameters (same arithmetic as the loop version)
+        self.actor_params = list(self.actor.parameters())
+        self.actor_opt = torch.optim.Adam(self.actor_params, lr=cfg.lr_actor, fused=True)
+        self.critic_opt = torch.optim.Adam(self.critic.parameters(), lr=cfg.lr_critic, fused=True)
+        self._soft_pairs = [
+            (list(net.parameters()), list(tgt.parameters()))
+            for net, tgt in ((self.actor, self.actor_target), (self.critic, self.critic_target))
+        ]
 
     @torch.no_grad()
     def act(self, obs: np.ndarray, rng: np.random.Generator | None = None, sigma: float | None = None) -> np.ndarray:
@@ -125,15 +144,16 @@ class DDPG:
         done = torch.as_tensor(batch.done)
         with torch.no_grad():
             next_act = self.actor_target(next_obs)
-            next_q = torch.stack([c(next_obs, next_act) for c in self.critic_targets]).min(0).values
+            next_q = self.critic_target(next_obs, next_act).min(0).values  # min over the pair: clipped double-Q
             target_q = rew + self.cfg.gamma * (1.0 - done) * next_q
-        critic_loss = sum(nn.functional.mse_loss(c(obs, act), target_q) for c in self.critics)
+        q = self.critic(obs, act)
+        critic_loss = nn.functional.mse_loss(q, target_q.expand_as(q)) * q.shape[0]  # sum of the members' losses
         self.critic_opt.zero_grad()
         critic_loss.backward()
         self.critic_opt.step()
 
         pi = self.actor(obs)
-        q_pi = self.critic(obs, pi)
+        q_pi = self.critic(obs, pi, slice(0, 1)).squeeze(0)  # the actor follows the first critic (as TD3)
         bc_loss = torch.zeros(())
         if self.cfg.bc_weight > 0 and batch.expert.any():
             expert = torch.as_tensor(batch.expert)
@@ -141,22 +161,22 @@ class DDPG:
             actor_loss = -q_pi.mean() / (q_pi.abs().mean().detach() + 1e-6) + self.cfg.bc_weight * bc_loss
         else:
             actor_loss = -q_pi.mean()
-        self.actor_opt.zero_grad()
-        actor_loss.backward()
+        # gradients w.r.t. the actor only: the critic's weight gradients are never computed
+        for p, g in zip(self.actor_params, torch.autograd.grad(actor_loss, self.actor_params)):
+            p.grad = g
         self.actor_opt.step()
 
         with torch.no_grad():
-            for net, tgt in ((self.actor, self.actor_target), *zip(self.critics, self.critic_targets)):
-                for p, tp in zip(net.parameters(), tgt.parameters()):
-                    tp.mul_(1.0 - self.cfg.tau).add_(p, alpha=self.cfg.tau)
+            for params, targets in self._soft_pairs:
+                torch._foreach_lerp_(targets, params, self.cfg.tau)
         return {"critic_loss": critic_loss.item(), "actor_loss": actor_loss.item(), "bc_loss": bc_loss.item()}
 
     def state_dict(self) -> dict:
         return {
             "actor": self.actor.state_dict(),
-            "critics": [c.state_dict() for c in self.critics],
+            "critic": self.critic.state_dict(),
             "actor_target": self.actor_target.state_dict(),
-            "critic_targets": [c.state_dict() for c in self.critic_targets],
+            "critic_target": self.critic_target.state_dict(),
             "actor_opt": self.actor_opt.state_dict(),
             "critic_opt": self.critic_opt.state_dict(),
         }
@@ -164,10 +184,7 @@ class DDPG:
     def load_state_dict(self, state: dict) -> None:
         self.actor.load_state_dict(state["actor"])
         self.actor_target.load_state_dict(state["actor_target"])
-        for nets, key in ((self.critics, "critics"), (self.critic_targets, "critic_targets")):
-            if len(state[key]) != len(nets):
-                raise RuntimeError(f"checkpoint has {len(state[key])} critics, this agent {len(nets)}")
-            for net, sd in zip(nets, state[key]):
-                net.load_state_dict(sd)
+        self.critic.load_state_dict(state["critic"])
+        self.critic_target.load_state_dict(state["critic_target"])
         self.actor_opt.load_state_dict(state["actor_opt"])
         self.critic_opt.load_state_dict(state["critic_opt"])

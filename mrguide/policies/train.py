@@ -40,7 +40,7 @@ from mrguide.twin.env import EnvConfig, PickPlaceEnv
 
 log = logging.getLogger(__name__)
 
-CHECKPOINT_FORMAT = 1
+CHECKPOINT_FORMAT = 2  # 2: critics stored as one ensemble
 
 
 @dataclass(frozen=True)
