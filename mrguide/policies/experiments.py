@@ -114,7 +114,7 @@ def summarize(out: Path, seeds: int, steps: int, eval_episodes: int, grid_step: 
     import matplotlib.pyplot as plt
 
     grid = np.arange(grid_step, steps + 1, grid_step)
-    curves, conv, asked_curves, ratio_curves, table = {}, {}, {}, {}, []
+    curves, conv, asked_curves, ratio_curves, table, per_run = {}, {}, {}, {}, [], []
     for v in VARIANTS:
         returns, conv_steps, asked_at_conv, asked_c, ratio_c, finals, walls = [], [], [], [], [], [], []
         for s in range(seeds):
@@ -138,6 +138,8 @@ def summarize(out: Path, seeds: int, steps: int, eval_episodes: int, grid_step: 
             finals.append(float(ev[-1]["success_rate"]))
             done = (run / "done").read_text().split()
             walls.append(float(done[0]))
+            per_run.append({"variant": v, "seed": s, "convergence_step": c, "annotations_until_convergence": asked_at_conv[-1],
+                            "annotations_total": int(asked.max(initial=0)), "final_eval_success": finals[-1], "wall_s": walls[-1]})
         curves[v], conv[v] = np.array(returns), conv_steps
         asked_curves[v], ratio_curves[v] = np.array(asked_c, float), np.array(ratio_c, float)
         ok = [c for c in conv_steps if c is not None]
@@ -205,6 +207,10 @@ def summarize(out: Path, seeds: int, steps: int, eval_episodes: int, grid_step: 
         w = csv.DictWriter(fh, list(table[0]))
         w.writeheader()
         w.writerows(table)
+    with (out / "runs.csv").open("w", newline="") as fh:
+        w = csv.DictWriter(fh, list(per_run[0]))
+        w.writeheader()
+        w.writerows(per_run)
     md = out / "summary.md"
     lines = [
         f"Learning curves: {seeds} seeds × {steps} steps per variant. Convergence = evaluation success over the "

@@ -74,3 +74,18 @@ def test_corrupt_and_mismatched_checkpoints_refused(tmp_path):
     with pytest.raises(CheckpointError, match="no checkpoint"):
         same.load_checkpoint(tmp_path / "nothing.pt")
     same.close()
+
+
+@pytest.mark.slow
+def test_guided_training_reaches_80_percent_eval_success_within_5000_steps(tmp_path):
+    """The issue's convergence check for one seed, with the default configuration and 20k-step schedule."""
+    tc, dc, gc, ec = load_train_config(None)
+    tr = Trainer(tc, dc, gc, ec, tmp_path / "slow")
+    try:
+        tr.run(stop_at=5_000)
+        with (tmp_path / "slow" / "eval.csv").open() as fh:
+            evals = [float(r["success_rate"]) for r in csv.DictReader(fh) if int(r["step"]) <= 5_000]
+        assert len(evals) >= 4
+        assert max(evals) >= 0.8, evals
+    finally:
+        tr.close()
