@@ -1,8 +1,9 @@
 """DDPG (Lillicrap et al.) on the CPU: actor and critic MLPs, target networks, Gaussian exploration.
 
 Defaults from Table I of the paper where it gives them (lr 5e-4, γ 0.99, batch 256, buffer 1e6);
-hidden sizes, τ and the noise scale are ours. Two departures from plain DDPG, both switchable: a
-clipped double-Q target and a behaviour-cloning term on expert samples (see `DDPGConfig`).
+hidden sizes, τ and the noise scale are ours. Departures from plain DDPG, each switchable in
+`DDPGConfig`: TD3's three changes (clipped double-Q target, target policy smoothing, delayed actor
+updates) and a behaviour-cloning term on expert samples.
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from mrguide.config import ConfigError
 from mrguide.policies.replay import Batch
 
 
@@ -33,6 +35,17 @@ class DDPGConfig:
     #: plain DDPG. It acts only on expert samples, so a run without guidance is unaffected, and it fades
     #: with λ_t as expert samples thin out of the batches.
     bc_weight: float = 20.0
+    #: Target policy smoothing (TD3): clipped Gaussian noise of this std on the target action; 0 = DDPG.
+    target_noise: float = 0.2
+    target_noise_clip: float = 0.5
+    #: Actor and target networks are updated every `policy_delay` critic updates (TD3); 1 = DDPG.
+    policy_delay: int = 2
+
+    def __post_init__(self) -> None:
+        if self.policy_delay < 1:
+            raise ConfigError(f"ddpg.policy_delay must be >= 1, got {self.policy_delay}")
+        if self.target_noise < 0 or self.target_noise_clip < 0:
+            raise ConfigError("ddpg.target_noise and ddpg.target_noise_clip must be >= 0")
 
 
 def mlp(sizes: list[int], out_act: type[nn.Module] | None = None) -> nn.Sequential:
@@ -121,6 +134,7 @@ class DDPG:
         self.actor_params = list(self.actor.parameters())
         self.actor_opt = torch.optim.Adam(self.actor_params, lr=cfg.lr_actor, fused=True)
         self.critic_opt = torch.optim.Adam(self.critic.parameters(), lr=cfg.lr_critic, fused=True)
+        self.updates = 0  # critic steps so far (the actor steps on every policy_delay-th)
         self._soft_pairs = [
             (list(net.parameters()), list(tgt.parameters()))
             for net, tgt in ((self.actor, self.actor_target), (self.critic, self.critic_target))
@@ -136,7 +150,7 @@ class DDPG:
         return np.clip(a, -1.0, 1.0).astype(np.float32)
 
     def update(self, batch: Batch) -> dict[str, float]:
-        """One gradient step on critic and actor, then soft target updates."""
+        """One critic step; every `policy_delay`-th call also an actor step and the soft target updates."""
         obs = torch.as_tensor(batch.obs)
         act = torch.as_tensor(batch.act)
         rew = torch.as_tensor(batch.rew)
@@ -144,6 +158,9 @@ class DDPG:
         done = torch.as_tensor(batch.done)
         with torch.no_grad():
             next_act = self.actor_target(next_obs)
+            if self.cfg.target_noise > 0:
+                eps = (torch.randn_like(next_act) * self.cfg.target_noise).clamp(-self.cfg.target_noise_clip, self.cfg.target_noise_clip)
+                next_act = (next_act + eps).clamp(-1.0, 1.0)
             next_q = self.critic_target(next_obs, next_act).min(0).values  # min over the pair: clipped double-Q
             target_q = rew + self.cfg.gamma * (1.0 - done) * next_q
         q = self.critic(obs, act)
@@ -152,11 +169,22 @@ class DDPG:
         critic_loss.backward()
         self.critic_opt.step()
 
+        self.updates += 1
+        losses = {"critic_loss": critic_loss.item()}
+        if self.updates % self.cfg.policy_delay == 0:
+            losses |= self._actor_step(obs, act, batch.expert)
+            with torch.no_grad():
+                for params, targets in self._soft_pairs:
+                    torch._foreach_lerp_(targets, params, self.cfg.tau)
+        return losses
+
+    def _actor_step(self, obs: torch.Tensor, act: torch.Tensor, expert_mask: np.ndarray) -> dict[str, float]:
+        """Deterministic policy gradient on the first critic, plus behaviour cloning on expert samples."""
         pi = self.actor(obs)
         q_pi = self.critic(obs, pi, slice(0, 1)).squeeze(0)  # the actor follows the first critic (as TD3)
         bc_loss = torch.zeros(())
-        if self.cfg.bc_weight > 0 and batch.expert.any():
-            expert = torch.as_tensor(batch.expert)
+        if self.cfg.bc_weight > 0 and expert_mask.any():
+            expert = torch.as_tensor(expert_mask)
             bc_loss = ((pi[expert] - act[expert]) ** 2).sum(-1).mean()
             actor_loss = -q_pi.mean() / (q_pi.abs().mean().detach() + 1e-6) + self.cfg.bc_weight * bc_loss
         else:
@@ -165,11 +193,7 @@ class DDPG:
         for p, g in zip(self.actor_params, torch.autograd.grad(actor_loss, self.actor_params)):
             p.grad = g
         self.actor_opt.step()
-
-        with torch.no_grad():
-            for params, targets in self._soft_pairs:
-                torch._foreach_lerp_(targets, params, self.cfg.tau)
-        return {"critic_loss": critic_loss.item(), "actor_loss": actor_loss.item(), "bc_loss": bc_loss.item()}
+        return {"actor_loss": actor_loss.item(), "bc_loss": bc_loss.item()}
 
     def state_dict(self) -> dict:
         return {
@@ -179,6 +203,7 @@ class DDPG:
             "critic_target": self.critic_target.state_dict(),
             "actor_opt": self.actor_opt.state_dict(),
             "critic_opt": self.critic_opt.state_dict(),
+            "updates": self.updates,
         }
 
     def load_state_dict(self, state: dict) -> None:
@@ -188,3 +213,4 @@ class DDPG:
         self.critic_target.load_state_dict(state["critic_target"])
         self.actor_opt.load_state_dict(state["actor_opt"])
         self.critic_opt.load_state_dict(state["critic_opt"])
+        self.updates = state["updates"]

@@ -40,7 +40,7 @@ from mrguide.twin.env import EnvConfig, PickPlaceEnv
 
 log = logging.getLogger(__name__)
 
-CHECKPOINT_FORMAT = 2  # 2: critics stored as one ensemble
+CHECKPOINT_FORMAT = 3  # 2: critics stored as one ensemble; 3: agent update counter
 
 
 @dataclass(frozen=True)

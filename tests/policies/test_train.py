@@ -5,6 +5,7 @@ import csv
 
 import numpy as np
 import pytest
+import torch
 
 from mrguide.policies.train import CheckpointError, Trainer, load_train_config
 
@@ -35,24 +36,57 @@ def test_guidance_fires_and_expert_pool_fills(tmp_path):
         tr.close()
 
 
-def test_checkpoint_resume_equals_uninterrupted_run(tmp_path):
+def flat_state(sd, prefix=""):
+    """A nested state dict as {path: tensor or value}."""
+    out = {}
+    for k, v in (sd.items() if isinstance(sd, dict) else enumerate(sd)):
+        out |= flat_state(v, f"{prefix}{k}.") if isinstance(v, (dict, list)) else {f"{prefix}{k}": v}
+    return out
+
+
+def test_checkpoint_restores_the_exact_training_state(tmp_path):
+    first = make(tmp_path, "run")
+    first.run(stop_at=250)
+    resumed = make(tmp_path, "run")
+    resumed.load_checkpoint()
+    try:
+        a, b = flat_state(first.agent.state_dict()), flat_state(resumed.agent.state_dict())
+        assert a.keys() == b.keys()
+        for k in a:  # networks, targets, both optimizers (moments, step counts), update counter
+            assert (torch.equal(a[k], b[k]) if torch.is_tensor(a[k]) else a[k] == b[k]), k
+        for pool in ("agent", "expert"):
+            sa, sb = getattr(first.replay, pool).state(), getattr(resumed.replay, pool).state()
+            assert all(np.array_equal(sa[k], sb[k]) for k in sa), pool
+        assert first.rng.bit_generator.state == resumed.rng.bit_generator.state
+        assert first.source.rng.bit_generator.state == resumed.source.rng.bit_generator.state
+        assert counters(first) == counters(resumed)
+    finally:
+        first.close()
+        resumed.close()
+
+
+def test_checkpoint_resume_continues_as_the_uninterrupted_run(tmp_path):
     straight = make(tmp_path, "straight")
-    straight.run(stop_at=500)
+    straight.run(stop_at=350)
     first = make(tmp_path, "split")
     first.run(stop_at=250)
     first.close()
     resumed = make(tmp_path, "split")
     resumed.load_checkpoint()
-    resumed.run(stop_at=500)
+    resumed.run(stop_at=350)
     try:
         assert counters(resumed) == counters(straight)
-        # Same transitions; PyBullet's solver keeps internal caches across episodes that a fresh process
-        # lacks, which shows as float noise (measured: <= 1.4e-6 m) in some later observations.
+        # Same transitions up to float noise. A resumed process starts with fresh PyBullet solver caches:
+        # the first step after the resume differs by ~4e-8 m, and a contact event (a grasp) can grow that
+        # to a few mm within the episode; the next reset starts exact again. So: episode starts and
+        # counts exact, states within 1 cm (a wrong RNG or pool would put objects and goals 10 cm apart).
         for pool in ("agent", "expert"):
             a = getattr(straight.replay, pool).state()
             b = getattr(resumed.replay, pool).state()
             for k in a:
-                assert a[k].shape == b[k].shape and np.allclose(a[k], b[k], atol=1e-5), (pool, k)
+                assert a[k].shape == b[k].shape and np.allclose(a[k], b[k], atol=1e-2), (pool, k)
+            goals = slice(8, 11)  # the goal never moves within an episode: exact everywhere
+            assert np.array_equal(a["obs"][:, goals], b["obs"][:, goals]), pool
     finally:
         straight.close()
         resumed.close()
