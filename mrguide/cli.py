@@ -147,7 +147,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     sp = sub.add_parser("main", help="the Quick-start main job: train briefly -> dry-run deploy -> sim-to-real")
     sp.add_argument("--out", default="runs/main")
-    sp.add_argument("--train-steps", type=int, default=3000)
+    sp.add_argument("--train-steps", type=int, default=5000)
     sp.add_argument("--deploy-episodes", type=int, default=3)
     sp.add_argument("--seeds", type=int, default=2, help="sim-to-real seeds")
     sp.add_argument("--episodes", type=int, default=5, help="sim-to-real episodes per seed and condition")

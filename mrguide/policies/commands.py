@@ -2,9 +2,8 @@
 
 from __future__ import annotations
 
-import dataclasses
-
 import argparse
+import dataclasses
 from collections import deque
 from pathlib import Path
 

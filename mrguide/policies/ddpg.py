@@ -1,9 +1,9 @@
 """DDPG (Lillicrap et al.) on the CPU: actor and critic MLPs, target networks, Gaussian exploration.
 
 Defaults from Table I of the paper where it gives them (lr 5e-4, γ 0.99, batch 256, buffer 1e6);
-hidden sizes, τ and the noise scale are ours. Departures from plain DDPG, each switchable in
-`DDPGConfig`: TD3's three changes (clipped double-Q target, target policy smoothing, delayed actor
-updates) and a behaviour-cloning term on expert samples.
+hidden sizes, τ and the noise scale are ours. Two departures from plain DDPG are on by default: a
+clipped double-Q target and a behaviour-cloning term on expert samples; TD3's other two changes
+(target policy smoothing, delayed actor updates) are available and off. All switchable in `DDPGConfig`.
 """
 
 from __future__ import annotations
@@ -36,10 +36,11 @@ class DDPGConfig:
     #: with λ_t as expert samples thin out of the batches.
     bc_weight: float = 20.0
     #: Target policy smoothing (TD3): clipped Gaussian noise of this std on the target action; 0 = DDPG.
-    target_noise: float = 0.2
+    #: Off by default: with it and policy_delay = 2 fewer guided seeds converged by 5k (learning curves v4).
+    target_noise: float = 0.0
     target_noise_clip: float = 0.5
     #: Actor and target networks are updated every `policy_delay` critic updates (TD3); 1 = DDPG.
-    policy_delay: int = 2
+    policy_delay: int = 1
 
     def __post_init__(self) -> None:
         if self.policy_delay < 1:

@@ -6,9 +6,8 @@ experiment can be re-run and only missing runs are trained again. Aggregation re
 
 from __future__ import annotations
 
-import dataclasses
-
 import csv
+import dataclasses
 import multiprocessing as mp
 import time
 from dataclasses import dataclass
@@ -190,7 +189,8 @@ def summarize(out: Path, seeds: int, steps: int, eval_episodes: int, grid_step: 
     ax2.plot(grid, np.nanmean(r, 0), color="tab:green", label="realized expert ratio per batch")
     ax2.fill_between(grid, np.nanmin(r, 0), np.nanmax(r, 0), color="tab:green", alpha=0.2)
     ax2.set(ylabel="expert ratio per batch", ylim=(0, 1))
-    fig.legend(loc="upper right")
+    handles = ax.get_legend_handles_labels()[0] + ax2.get_legend_handles_labels()[0]
+    ax.legend(handles, [h.get_label() for h in handles], loc="center right")
     fig.tight_layout()
     fig.savefig(out / "fig9_expert_effort.png", dpi=120)
     plt.close(fig)
