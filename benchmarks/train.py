@@ -31,7 +31,7 @@ def main() -> None:
         finally:
             tr.close()
     wall = tr.wall_s()
-    res = {"steps": tr.step, "steps_per_s": tr.step / wall, "update_ms": tr.update_s / max(tr.updates, 1) * 1e3,
+    res = {"steps": tr.step, "steps_per_s": tr.step / wall, "update_ms": tr.update_ms(),
            f"wall_s_{args.steps // 1000}k": wall, "wall_s_20k": wall * 20_000 / tr.step,
            "final_eval_success": tr.last_eval.get("success_rate"), "annotations_asked": tr.cache.asked}
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}, pinned to one core")

@@ -53,7 +53,7 @@ def _train_one(spec: RunSpec, queue) -> str:
             last[0] = row["step"]
 
         tr.run(progress)
-        (out / "done").write_text(f"{tr.wall_s():.1f}\n{tr.update_s / max(tr.updates, 1) * 1e3:.3f}\n")
+        (out / "done").write_text(f"{tr.wall_s():.1f}\n{tr.update_ms():.3f}\n")
     finally:
         tr.close()
     return spec.out

@@ -181,7 +181,6 @@ class Trainer:
         self.last_ratio = 0.0
         self._ratio_sum, self._ratio_n = 0.0, 0
         self.update_s = 0.0
-        self.updates = 0
         self._next_checkpoint = cfg.checkpoint_every
         self._next_eval = cfg.eval_every
         self.last_eval: dict = {}
@@ -231,7 +230,6 @@ class Trainer:
             batch = self.replay.sample(self.cfg.batch_size, self.lam(), self.rng)
             self.agent.update(batch)
             self.update_s += time.perf_counter() - t
-            self.updates += 1
             self.last_ratio = batch.expert_ratio
             self._ratio_sum += batch.expert_ratio
             self._ratio_n += 1
@@ -278,6 +276,10 @@ class Trainer:
         self._log(self._row("expert", ret, bool(info["is_success"]), info["outcome"], length, False))
 
     # -- bookkeeping -----------------------------------------------------------------------------
+    def update_ms(self) -> float:
+        """Mean wall time of one update (minibatch sampling included), ms."""
+        return self.update_s / max(self.agent.updates, 1) * 1e3
+
     def wall_s(self) -> float:
         return self._wall_before + time.perf_counter() - self._t0
 
@@ -331,7 +333,7 @@ class Trainer:
             "counters": {
                 "step": self.step, "episode": self.episode, "interventions": self.interventions, "asked": self.cache.asked,
                 "reused": self.cache.reused, "projected": self.expert.projected, "last_ratio": self.last_ratio,
-                "next_eval": self._next_eval, "wall_s": self.wall_s(), "update_s": self.update_s, "updates": self.updates,
+                "next_eval": self._next_eval, "wall_s": self.wall_s(), "update_s": self.update_s,
             },
         }
         path = self.out / "checkpoint.pt"
@@ -367,7 +369,7 @@ class Trainer:
         c = state["counters"]
         self.step, self.episode, self.interventions = c["step"], c["episode"], c["interventions"]
         self.expert.projected, self.last_ratio, self._next_eval = c["projected"], c["last_ratio"], c["next_eval"]
-        self._wall_before, self.update_s, self.updates = c["wall_s"], c["update_s"], c["updates"]
+        self._wall_before, self.update_s = c["wall_s"], c["update_s"]
         self._t0 = time.perf_counter()
         self._next_checkpoint = (self.step // self.cfg.checkpoint_every + 1) * self.cfg.checkpoint_every
         self._reload_annotations()
