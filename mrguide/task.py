@@ -10,6 +10,8 @@ Interpretation notes (the paper leaves these open):
 - The grasp phase completes only when the vacuum generator reports a part (the real cell's signal),
   and losing the part during lift or transport ends the episode as a drop.
 - Success also requires the released object to lie within `place_tolerance` of the goal (xy).
+- An object that is not held and whose centre is below the table surface was pushed off the table:
+  the episode ends as a failure (`knocked_off`); the paper's task model does not cover it.
 """
 
 from __future__ import annotations
@@ -34,6 +36,7 @@ class Outcome(str, enum.Enum):
     NO_GRASP = "no_grasp"  # horizon reached before the object was grasped
     DROPPED = "dropped"  # part lost during lift or transport (or before release)
     MISPLACED = "misplaced"  # released outside the tolerance region
+    KNOCKED_OFF = "knocked_off"  # the object, not held, fell below the table surface (pushed off the table)
     TIMEOUT = "timeout"  # horizon reached after the grasp
 
 
@@ -52,6 +55,7 @@ class TaskConfig:
     lift_height: float = 0.15  # TCP height of the lift and transport targets (m)
     place_tolerance: float = 0.03  # success radius of the placed object around the goal, xy (m)
     horizon: int = 60  # T, decisions per episode
+    table_height: float = 0.0  # z of the surface the object rests on (m); a free object below it fell off
 
     def __post_init__(self) -> None:
         for name in ("alpha", "eta", "step_penalty", "epsilon", "object_height", "place_tolerance"):
@@ -140,6 +144,8 @@ def task_step(
     holding_needed = phase in (2, 3) or (phase == 4 and g == 1)
     if holding_needed and not part_present:
         outcome = Outcome.DROPPED
+    elif not part_present and np.asarray(obj)[2] < cfg.table_height:
+        outcome = Outcome.KNOCKED_OFF  # no phase target can be reached any more: end it, don't track a falling object
     elif phase == 4 and g == -1:
         placed = float(np.linalg.norm(np.asarray(obj)[:2] - np.asarray(goal)[:2])) < cfg.place_tolerance
         if reached and placed:

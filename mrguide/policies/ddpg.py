@@ -104,7 +104,10 @@ class CriticEnsemble(nn.Module):
     def forward(self, obs: torch.Tensor, act: torch.Tensor, members: slice = slice(None)) -> torch.Tensor:
         """Q values of the selected members, shape (members, batch)."""
         x = torch.cat([self.scaler(obs), act], dim=-1)
-        ws, bs = [w[members] for w in self.weights], [b[members] for b in self.biases]
+        if members == slice(None):  # no slicing: its backward would copy every weight gradient once more
+            ws, bs = list(self.weights), list(self.biases)
+        else:
+            ws, bs = [w[members] for w in self.weights], [b[members] for b in self.biases]
         h = x.expand(ws[0].shape[0], *x.shape)
         for i, (w, b) in enumerate(zip(ws, bs)):
             h = torch.baddbmm(b, h, w)

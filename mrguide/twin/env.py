@@ -152,7 +152,7 @@ class PickPlaceEnv(gym.Env):
         self.phase = res.phase
         success = res.outcome is Outcome.SUCCESS
         self._obs = observation(tcp, g, progress(self.phase, success), obj, self.scene.goal)
-        terminated = res.outcome in (Outcome.SUCCESS, Outcome.DROPPED, Outcome.MISPLACED)
+        terminated = res.outcome in (Outcome.SUCCESS, Outcome.DROPPED, Outcome.MISPLACED, Outcome.KNOCKED_OFF)
         truncated = res.outcome in (Outcome.NO_GRASP, Outcome.TIMEOUT)
         info = {
             "phase": self.phase,

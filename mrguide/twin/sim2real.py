@@ -34,7 +34,7 @@ log = logging.getLogger(__name__)
 CONDITIONS = ("sim", "real_exact", "real_hmd")
 LABELS = {"sim": "simulation,\nexact poses", "real_exact": "'real' robot,\nexact poses", "real_hmd": "'real' robot,\nHMD poses"}
 #: Failure causes as reported (safety stops and aborted episodes count as "safety_stop").
-CAUSES = ("no_grasp", "dropped", "misplaced", "timeout", "safety_stop")
+CAUSES = ("no_grasp", "dropped", "misplaced", "knocked_off", "timeout", "safety_stop")
 
 
 @dataclass
@@ -67,7 +67,7 @@ def wilson_interval(successes: int, n: int, z: float = float(stats.norm.ppf(0.97
 
 
 def _cause(outcome: str) -> str:
-    return outcome if outcome in ("success", *CAUSES[:4]) else "safety_stop"
+    return outcome if outcome in ("success", *CAUSES[:-1]) else "safety_stop"
 
 
 def run_sim(policy: ExportedPolicy, env_cfg: EnvConfig, seed: int, episodes: int) -> list[str]:

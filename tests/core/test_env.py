@@ -97,6 +97,20 @@ def test_out_of_box_target_is_clamped_and_counted(env):
     assert obs[0] == pytest.approx(env.workspace.hi[0], abs=2e-3)
 
 
+def test_object_off_the_table_ends_the_episode(env):
+    """An object that falls off the table ends the episode (it used to fall forever, the tracking term
+    following it to -48 m and the critic to Q = -9000)."""
+    hold = np.array([0.0, 0.0, 0.0, -1.0])  # TCP to the workspace centre, vacuum off
+    env.reset(seed=0, options={"object": [1.05, 0.1]})  # just past the table's far edge (x = 1.0)
+    _, r, terminated, truncated, info = env.step(hold)
+    assert terminated and not truncated and info["outcome"] == "knocked_off"
+    assert r == pytest.approx(sum(info["reward_terms"].values())) and info["reward_terms"]["terminal"] == -10.0
+    # on the table nothing happens
+    env.reset(seed=0, options={"object": [0.95, 0.1]})
+    _, _, terminated, truncated, info = env.step(hold)
+    assert not terminated and not truncated and info["outcome"] is None
+
+
 def test_unknown_robot_is_one_clear_message():
     with pytest.raises(RobotSpecError, match="unknown robot 'kuka'.*known robots: ur5"):
         load_robot(RobotConfig(name="kuka"))

@@ -79,6 +79,14 @@ def test_failures():
     assert task_step(CFG, 1, lifted, 1, False, OBJ, GOAL, t=49).outcome is Outcome.NO_GRASP
     assert task_step(CFG, 3, lifted, 1, True, OBJ, GOAL, t=49).outcome is Outcome.TIMEOUT
     assert task_step(CFG, 3, lifted, 1, True, OBJ, GOAL, t=48).outcome is None
+    # a free object below the table surface was pushed off: the episode ends, whatever the phase
+    fallen = OBJ - [0.0, 0.0, 0.03]
+    for phase in (0, 1):
+        knocked = task_step(CFG, phase, lifted, -1, False, fallen, GOAL, t=3)
+        assert knocked.outcome is Outcome.KNOCKED_OFF and knocked.terms["terminal"] == -10.0
+    assert task_step(CFG, 0, lifted, -1, False, OBJ, GOAL, t=3).outcome is None
+    # held in the cup it is not knocked off (the carried object's estimate may dip with the TCP)
+    assert task_step(CFG, 1, lifted, 1, True, fallen, GOAL, t=3).outcome is not Outcome.KNOCKED_OFF
 
 
 def test_progress_indicator():
