@@ -100,7 +100,10 @@ class Scene:
         self.cup_link = links["suction_cup"]
         for link in (-1, 0, 1):  # the arm is bolted to the table: no contacts between its base and the top
             pb.setCollisionFilterPair(self.table, self.robot, -1, link, 0, physicsClientId=c)
-        self.efforts = np.array([pb.getJointInfo(self.robot, j, physicsClientId=c)[10] for j in self.joint_ids])
+        efforts = [pb.getJointInfo(self.robot, j, physicsClientId=c)[10] for j in self.joint_ids]
+        self._motor_args = {  # the servo call's constant arguments, built once (it runs every 4 ms period)
+            "forces": efforts, "positionGains": [0.6] * spec.dof, "velocityGains": [1.0] * spec.dof,
+        }
         h = object_size / 2
         obj_col = pb.createCollisionShape(pb.GEOM_BOX, halfExtents=(h, h, h), physicsClientId=c)
         obj_vis = pb.createVisualShape(pb.GEOM_BOX, halfExtents=(h, h, h), rgbaColor=(0.85, 0.1, 0.1, 1), physicsClientId=c)
@@ -170,10 +173,8 @@ class Scene:
     def _servo(self, q: np.ndarray, dq: np.ndarray) -> None:
         self._last_servo = (q, dq)
         pb.setJointMotorControlArray(
-            self.robot, self.joint_ids, pb.POSITION_CONTROL,
-            targetPositions=q.tolist(), targetVelocities=np.asarray(dq).tolist(),
-            forces=self.efforts.tolist(), positionGains=[0.6] * len(q), velocityGains=[1.0] * len(q),
-            physicsClientId=self.client,
+            self.robot, self.joint_ids, pb.POSITION_CONTROL, targetPositions=q.tolist(), targetVelocities=np.asarray(dq).tolist(),
+            physicsClientId=self.client, **self._motor_args,
         )
 
     def set_vacuum(self, on: bool) -> None:

@@ -11,7 +11,6 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import numpy as np
 import pybullet as pb
 
 from mrguide.twin.config import VacuumConfig
@@ -37,6 +36,7 @@ class SuctionCup:
         self.half = 0.5 * obj_size
         self.cfg = cfg
         self.dt = dt
+        self._level_gain = 1.0 - math.exp(-dt / cfg.time_constant)  # first-order lag over one period
         self.break_force = math.inf
         self.leak = 0.0  # fault injection: fraction of the sealed vacuum lost through a leak
         self.state = SuctionState()
@@ -58,40 +58,40 @@ class SuctionCup:
         if s.vacuum_on and not s.attached and self._sealed():
             self._attach()
         elif s.attached and self._cid is not None:
-            force = pb.getConstraintState(self._cid, physicsClientId=self.client)
-            if np.linalg.norm(force[:3]) > self.break_force:
+            fx, fy, fz = pb.getConstraintState(self._cid, physicsClientId=self.client)[:3]
+            if math.hypot(fx, fy, fz) > self.break_force:
                 s.breaks += 1
                 self._detach()
         target = 0.0
         if s.vacuum_on:
             target = (self.cfg.level_sealed * (1.0 - self.leak)) if s.attached else self.cfg.level_open
-        s.level += (target - s.level) * (1.0 - math.exp(-self.dt / self.cfg.time_constant))
+        s.level += (target - s.level) * self._level_gain
         if s.attached and target > self.cfg.part_threshold and s.level > self.cfg.part_threshold:
             self._detach()  # a leak let the vacuum decay below what holds the part: it falls
 
-    def _tcp_in_object(self) -> tuple[np.ndarray, np.ndarray]:
+    def _tcp_in_object(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
+        """Cup pose in the object frame (position, quaternion x y z w); called every period while the vacuum is on."""
         tcp_pos, tcp_orn = pb.getLinkState(self.robot, self.cup_link, computeForwardKinematics=True, physicsClientId=self.client)[4:6]
         obj_pos, obj_orn = pb.getBasePositionAndOrientation(self.obj, physicsClientId=self.client)
         inv_pos, inv_orn = pb.invertTransform(obj_pos, obj_orn)
-        rel_pos, rel_orn = pb.multiplyTransforms(inv_pos, inv_orn, tcp_pos, tcp_orn)
-        return np.array(rel_pos), np.array(rel_orn)
+        return pb.multiplyTransforms(inv_pos, inv_orn, tcp_pos, tcp_orn)
 
     def _sealed(self) -> bool:
         """The cup lip rests on the object's top face, centred enough to seal, and roughly square to it."""
         rel_pos, rel_orn = self._tcp_in_object()
-        cup_axis = np.array(pb.getMatrixFromQuaternion(rel_orn)).reshape(3, 3)[:, 2]
+        cup_axis_z = pb.getMatrixFromQuaternion(rel_orn)[8]  # z component of the cup axis (row-major R[2][2])
         margin = self.half - 0.012
-        return bool(
+        return (
             abs(rel_pos[0]) < margin
             and abs(rel_pos[1]) < margin
             and -self.cfg.seal_distance < rel_pos[2] - self.half < self.cfg.seal_distance
-            and cup_axis[2] < -0.95
+            and cup_axis_z < -0.95
         )
 
     def _attach(self) -> None:
         # Constraint frame = the TCP frame; the object keeps its pose relative to it at the moment of sealing.
         rel_pos, rel_orn = self._tcp_in_object()
-        inv_pos, inv_orn = pb.invertTransform(rel_pos.tolist(), rel_orn.tolist())
+        inv_pos, inv_orn = pb.invertTransform(rel_pos, rel_orn)
         self._create(inv_pos, inv_orn)
 
     def _create(self, obj_in_tcp_pos, obj_in_tcp_orn) -> None:
