@@ -20,7 +20,7 @@ from mrguide.drivers.cobot import Cobot
 from mrguide.drivers.config import CobotBusConfig, load_cobot_bus_config
 from mrguide.drivers.errors import DriverError
 from mrguide.drivers.mock.first_order_plant import FirstOrderPlant
-from mrguide.drivers.mock.sim_cobot import SimulatedCobot
+from mrguide.drivers.mock.sim_cobot import SimulatedCobot, shared_pc_config
 from mrguide.drivers.monitor import monitor
 from mrguide.drivers.selftest import run_selftest
 from mrguide.robot import RobotSpecError, load_robot
@@ -112,7 +112,7 @@ class _SimulatedDemo:
     """Simulated cobot plus a master that boots it and streams a slow sine on every joint."""
 
     def __init__(self, config: CobotBusConfig) -> None:
-        self._config = config
+        self._config = config = shared_pc_config(config)
         self._robot = load_robot()
         self._sim = SimulatedCobot(config, FirstOrderPlant(self._robot.q_home))
         self._stop = threading.Event()

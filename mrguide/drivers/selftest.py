@@ -15,7 +15,7 @@ from ruckig import InputParameter, Result, Ruckig, Trajectory
 from mrguide.drivers.cobot import Cobot
 from mrguide.drivers.config import CobotBusConfig
 from mrguide.drivers.mock.first_order_plant import FirstOrderPlant
-from mrguide.drivers.mock.sim_cobot import SimulatedCobot
+from mrguide.drivers.mock.sim_cobot import SimulatedCobot, shared_pc_config
 from mrguide.drivers.tracking import TrackingRecorder
 from mrguide.robot import RobotSpec
 
@@ -47,6 +47,8 @@ def run_selftest(config: CobotBusConfig, robot: RobotSpec, write: Callable[[str]
     """Run the self-test, writing a report line by line; True if every check passed."""
     bus = config.bus
     simulate = bus.interface == "virtual"
+    if simulate:
+        config = shared_pc_config(config)
     write(f"mrguide bus selftest on {bus.interface}:{bus.channel} at {bus.bitrate // 1000} kbit/s, "
           f"control period {config.timing.control_period * 1000:g} ms")
     sim, plant = None, None

@@ -21,7 +21,7 @@ from mrguide.deploy.safety import SafetyConfig
 from mrguide.deploy.session import DeploySummary, run_session
 from mrguide.drivers.cobot import Cobot
 from mrguide.drivers.config import CobotBusConfig
-from mrguide.drivers.mock.sim_cobot import SimulatedCobot
+from mrguide.drivers.mock.sim_cobot import SimulatedCobot, shared_pc_config
 from mrguide.pose_source import ObjectPoseSource
 from mrguide.robot import load_robot
 from mrguide.twin.env import EnvConfig
@@ -44,14 +44,7 @@ def simulated_cell(env_cfg: EnvConfig, bus_cfg: CobotBusConfig, seed: int = 0) -
     """Start the twin + simulated devices, connect and enable the cobot; tear everything down on exit."""
     if bus_cfg.bus.interface != "virtual":
         raise ValueError(f"a dry run needs the virtual CAN interface, the bus config says {bus_cfg.bus.interface!r}")
-    # The simulated devices share this PC (and Python's GIL) with the master, on an OS without real-time
-    # guarantees: give the control and receive threads SCHED_FIFO where allowed, and let the supervision
-    # tolerate 100 ms without feedback (real bus: 5 cycles) and 0.45 s without heartbeat (real bus: 0.2 s),
-    # so that a busy machine is not mistaken for a dead drive. Faults injected in tests still trip them.
-    t = bus_cfg.timing
-    bus_cfg = replace(bus_cfg, timing=replace(
-        t, realtime_priority=t.realtime_priority or 50, max_missed_feedback=max(t.max_missed_feedback, 25),
-        heartbeat_timeout_factor=3.0, heartbeat_period=max(t.heartbeat_period, 0.15)))
+    bus_cfg = shared_pc_config(bus_cfg)
     twin_cfg = replace(env_cfg.twin, control_period=bus_cfg.timing.control_period, gui=False)
     spec = load_robot(env_cfg.robot)
     # A full garbage collection over everything loaded so far (torch, pinocchio, ...) holds the GIL long

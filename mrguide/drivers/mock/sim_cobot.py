@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import logging
 import threading
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import canopen
 import numpy as np
@@ -34,6 +34,20 @@ logger = logging.getLogger(__name__)
 
 #: EMCY code for an injected drive fault: 0x2310 continuous over-current (CiA 402).
 DEFAULT_FAULT_CODE = 0x2310
+
+
+def shared_pc_config(config: CobotBusConfig) -> CobotBusConfig:
+    """The master's bus config when the simulated devices run on the same PC.
+
+    They share the CPU (and Python's GIL) with the master on an OS without real-time guarantees: the
+    control and receive threads get SCHED_FIFO where allowed, and the supervision tolerates 100 ms
+    without feedback (real bus: 5 cycles) and 0.45 s without heartbeat (real bus: 0.2 s), so that a
+    busy machine is not mistaken for a dead drive. Injected faults still trip them.
+    """
+    t = config.timing
+    return replace(config, timing=replace(
+        t, realtime_priority=t.realtime_priority or 50, max_missed_feedback=max(t.max_missed_feedback, 25),
+        heartbeat_timeout_factor=3.0, heartbeat_period=max(t.heartbeat_period, 0.15)))
 
 
 @dataclass(frozen=True)
