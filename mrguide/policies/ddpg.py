@@ -20,7 +20,7 @@ from mrguide.policies.replay import Batch
 
 @dataclass(frozen=True)
 class DDPGConfig:
-    hidden: tuple[int, ...] = (128, 128)  # ours; 256x256 doubled the update time
+    hidden: tuple[int, ...] = (96, 96)  # ours: 9/10 seeds within 5k at 177 s per 20k-step run (128: 9/10, 205 s; 64: 7/10, 153 s)
     lr_actor: float = 5e-4  # Table I
     lr_critic: float = 5e-4  # Table I
     gamma: float = 0.99  # Table I
