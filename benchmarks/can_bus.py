@@ -26,7 +26,7 @@ import numpy as np
 from mrguide.drivers import Cobot, CobotBusConfig, CycleSample, DriverError
 from mrguide.drivers.config import BusConfig, TimingConfig
 from mrguide.drivers.mock import FirstOrderPlant, SimulatedCobot
-from mrguide.drivers.realtime import make_current_thread_realtime
+from mrguide.drivers.realtime import freeze_heap, make_current_thread_realtime
 from mrguide.drivers.tracking import TrackingRecorder
 from mrguide.robot import load_robot
 
@@ -49,12 +49,9 @@ def run_rate(rate: int, seconds: float, priority: int) -> dict[str, float]:
         lateness.append(sample.lateness)
         tracking(sample)
 
+    freeze_heap()
     with SimulatedCobot(config, FirstOrderPlant(robot.q_home)) as sim, Cobot(config, robot) as cobot:
         cobot.enable()
-        # Long-lived objects (imports, dictionaries, the nodes) leave the garbage collector's scans, so a
-        # full collection does not stall the control thread for tens of milliseconds.
-        gc.collect()
-        gc.freeze()
         q0 = cobot.setpoint
         before = cobot.stats()
         cobot.add_cycle_observer(observe)

@@ -101,11 +101,13 @@ def _deploy_real(policy_path, config_path, bus, spec, task, dcfg, safety, episod
     from mrguide.deploy.runtime import Runtime, RuntimeConfig
     from mrguide.deploy.session import FixedObjectPose, run_session
     from mrguide.drivers.cobot import Cobot
+    from mrguide.drivers.realtime import freeze_heap
 
     policy = ExportedPolicy.load(policy_path, spec.workspace, task)
     rcfg = RuntimeConfig(decision_period=policy.decision_period)
     goals = [dcfg.goals[i % len(dcfg.goals)] for i in range(episodes)]
     run_log = RunLog(log_path)
+    freeze_heap()
     try:
         with Cobot(bus, spec) as cobot:
             cobot.enable()

@@ -2,9 +2,10 @@
 
 One control thread runs the SYNC cycle on absolute monotonic deadlines: at each deadline it sends SYNC,
 then one RPDO per drive (controlword + target position) and one to the vacuum generator; the devices
-apply them at the next SYNC. The same thread supervises heartbeats, PDO feedback, EMCY/statusword
-faults and the bus, and latches the first fault: all drives get quick stop, streaming stops, and the
-next facade call raises that fault. Setpoints are validated before they enter the queue, so a refused
+apply them at the next SYNC. The same thread sends the master's heartbeat, which every device consumes
+(0x1016), so a hung control thread or a dead PC disables the drives without the master's help. It also
+supervises heartbeats, PDO feedback, EMCY/statusword faults and the bus, and latches the first fault:
+all drives get quick stop, streaming stops, and the next facade call raises that fault. Setpoints are validated before they enter the queue, so a refused
 setpoint never reaches the bus.
 """
 
@@ -35,7 +36,8 @@ from mrguide.drivers.cycle import CycleStats, CycleTimer, Tick
 from mrguide.drivers.errors import (BootError, BusError, BusOffError, DeviceFaultError, DriverError,
                                     FeedbackLostError, HeartbeatLostError, NodeLostError, NotReadyError,
                                     SetpointError)
-from mrguide.drivers.heartbeat import OPERATIONAL, HeartbeatConsumer, nmt_state_name
+from mrguide.drivers.heartbeat import (CONSUMER_HEARTBEAT, OPERATIONAL, HeartbeatConsumer, consumer_heartbeat_entry,
+                                       nmt_state_name)
 from mrguide.drivers.realtime import make_current_thread_realtime
 from mrguide.drivers.vacuum import BLOW_OFF_BIT, VACUUM_ON_BIT, VacuumGenerator
 from mrguide.robot import RobotSpec, load_robot
@@ -80,6 +82,7 @@ class Cobot:
         self.joint_names = self.robot.joint_names
         self.period = self.config.timing.control_period
         self._max_step = self.limits.v_max * self.period
+        self._heartbeat_cycles = max(1, round(self.config.timing.heartbeat_period / self.period))
         self._lock = threading.RLock()
         self._space = threading.Condition(self._lock)
         self._queue: deque[np.ndarray] = deque()
@@ -102,6 +105,7 @@ class Cobot:
         self._fault_at: float | None = None
         self._sync_index = 0
         self._sync_sent = False
+        self._heartbeat_due = 1
         self._last_rx: dict[int, int] = {}
         self._misses: dict[int, int] = {}
         self._lost_logged: set[int] = set()
@@ -172,6 +176,12 @@ class Cobot:
         for dev in devices:
             for cob_id, length in dev.configure(timing).items():
                 self._receiver.expect(cob_id, (length,))
+            if self.config.master.heartbeat:
+                try:
+                    self._set_master_consumer(dev, timing.heartbeat_timeout_ms)
+                except SdoError as exc:
+                    raise BootError(f"{dev.label}: cannot make it consume the master's heartbeat (0x1016:01): {exc}; "
+                                    "set [master] heartbeat = false for devices without 0x1016") from exc
         self._vacuum.vacuum_on, self._vacuum.blow_off = self._vacuum_command_on_device()
         self._hb.arm()
         for dev in devices:
@@ -211,9 +221,29 @@ class Cobot:
                     self._command = PowerCommand.DISABLE
                 self._wait_for(lambda: all(self._state(d) in (SWITCH_ON_DISABLED, *FAULT_STATES) for d in alive),
                                self.config.timing.enable_timeout)
+                if self.config.master.heartbeat:
+                    self._sign_off()
         finally:
             self._teardown()
         logger.info("cobot disconnected")
+
+    def _set_master_consumer(self, dev: Cia402Drive | VacuumGenerator, time_ms: int) -> None:
+        """Make a device consume the master's heartbeat with consumer time `time_ms` (0 switches it off)."""
+        dev.node.sdo[CONSUMER_HEARTBEAT][1].raw = consumer_heartbeat_entry(self.config.master.node_id, time_ms)
+
+    def _sign_off(self) -> None:
+        """Switch off the supervision of the master in every device that still sends its heartbeat: a
+        planned disconnect is no master loss (devices left OPERATIONAL by a fault still answer SDO)."""
+        assert self._hb is not None and self._vacuum is not None
+        silent = {node_id for node_id, _ in self._hb.expired()}
+        for dev in (*self._drives, self._vacuum):
+            if dev.node.id in silent or self._hb.state(dev.node.id) is None:
+                continue
+            try:
+                self._set_master_consumer(dev, 0)
+            except (SdoError, can.CanError) as exc:
+                logger.warning("%s: could not switch off its supervision of the master's heartbeat: %s",
+                               dev.label, exc)
 
     def _teardown(self) -> None:
         self._stop_thread.set()
@@ -496,6 +526,9 @@ class Cobot:
         self._cycle_stats.record(lateness, tick.skipped)
         self._sync_index = tick.index
         self._sync_sent = True
+        if self.config.master.heartbeat and tick.index >= self._heartbeat_due:
+            self._heartbeat_due = tick.index + self._heartbeat_cycles
+            self._send_frame(self._send_heartbeat)
         self._supervise()
         setpoint = self._send_commands()
         if self._observers:
@@ -505,6 +538,11 @@ class Cobot:
         assert self._network is not None
         self._network.sync.transmit()
         return 0
+
+    def _send_heartbeat(self) -> int:
+        assert self._network is not None
+        self._network.send_message(0x700 + self.config.master.node_id, bytes([OPERATIONAL]))
+        return 1
 
     def _send_frame(self, send: Callable[[], int]) -> bool:
         try:

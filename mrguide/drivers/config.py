@@ -100,6 +100,9 @@ class TimingConfig:
             raise ConfigError("timing.heartbeat_period must be at least two control periods")
         if not 1.0 < self.heartbeat_timeout_factor <= 3.0:
             raise ConfigError(f"timing.heartbeat_timeout_factor: {self.heartbeat_timeout_factor} outside (1, 3]")
+        if self.heartbeat_timeout_ms > 0xFFFF:
+            raise ConfigError("timing: heartbeat_period x heartbeat_timeout_factor must fit 65.535 s (the devices "
+                              "consume the master's heartbeat with this time)")
         for key in ("boot_timeout", "enable_timeout", "sdo_timeout"):
             if getattr(self, key) <= 0:
                 raise ConfigError(f"timing.{key} must be > 0")
@@ -117,6 +120,11 @@ class TimingConfig:
     @property
     def heartbeat_timeout(self) -> float:
         return self.heartbeat_period * self.heartbeat_timeout_factor
+
+    @property
+    def heartbeat_timeout_ms(self) -> int:
+        """Consumer time in whole ms, rounded up (written to the devices' 0x1016 for the master)."""
+        return math.ceil(round(self.heartbeat_timeout * 1000.0, 6))
 
 
 @dataclass(frozen=True)
@@ -199,6 +207,20 @@ class VacuumConfig:
 
 
 @dataclass(frozen=True)
+class MasterConfig:
+    """The master (this PC) as a CANopen node ([master])."""
+
+    #: Node ID of the master's heartbeat (0x700 + ID); must differ from every device's.
+    node_id: int = 127
+    #: Send a heartbeat from the control thread and make every device consume it (0x1016): if the
+    #: control thread stops, the devices leave OPERATIONAL and the drives disable by themselves.
+    heartbeat: bool = True
+
+    def __post_init__(self) -> None:
+        _check_node_id(self.node_id, "master.node_id")
+
+
+@dataclass(frozen=True)
 class LimitOverrides:
     """Optional tighter joint limits ([limits]); empty = the robot spec's limits."""
 
@@ -217,12 +239,13 @@ class CobotBusConfig:
     drives: DriveConfig = field(default_factory=DriveConfig)
     vacuum: VacuumConfig = field(default_factory=VacuumConfig)
     limits: LimitOverrides = field(default_factory=LimitOverrides)
+    master: MasterConfig = field(default_factory=MasterConfig)
 
     def __post_init__(self) -> None:
-        ids = [j.node_id for j in self.joints] + [self.vacuum.node_id]
+        ids = [j.node_id for j in self.joints] + [self.vacuum.node_id, self.master.node_id]
         dupes = sorted({n for n in ids if ids.count(n) > 1})
         if dupes:
-            raise ConfigError(f"node IDs must be unique, duplicated: {dupes}")
+            raise ConfigError(f"node IDs must be unique (devices and master.node_id), duplicated: {dupes}")
 
     @property
     def node_ids(self) -> tuple[int, ...]:

@@ -1,8 +1,11 @@
-"""Heartbeat consumer with a timeout, and boot-up detection.
+"""Heartbeat consumer with a timeout, boot-up detection, and the devices' view of the master's heartbeat.
 
 canopen's `NmtMaster` records each node's last heartbeat state but never times out. This consumer
 hooks the same heartbeat frames (through `nmt.add_heartbeat_callback`), stamps them with a monotonic
 clock and reports nodes whose heartbeat is older than the consumer time.
+
+The other direction: the master produces a heartbeat too, and every device consumes it through its
+object 0x1016 (CiA 301), so a device notices a dead or hung master by itself.
 """
 
 from __future__ import annotations
@@ -19,6 +22,25 @@ from canopen.nmt import NMT_STATES
 BOOTUP = 0
 #: NMT state OPERATIONAL as carried in heartbeats.
 OPERATIONAL = 5
+#: Consumer heartbeat time object (CiA 301); sub-index 1 holds the entry for the master.
+CONSUMER_HEARTBEAT = 0x1016
+#: EMCY error code of a heartbeat consumer time-out (CiA 301: life guard or heartbeat error).
+HEARTBEAT_ERROR = 0x8130
+
+
+def consumer_heartbeat_entry(producer_id: int, time_ms: int) -> int:
+    """A 0x1016 entry (CiA 301): producer node ID in bits 16-23, consumer time in ms in bits 0-15; 0 = off."""
+    if not 1 <= producer_id <= 127 or not 0 <= time_ms <= 0xFFFF:
+        raise ValueError(f"consumer heartbeat entry: node ID {producer_id} or time {time_ms} ms out of range")
+    return producer_id << 16 | time_ms if time_ms else 0
+
+
+def parse_consumer_heartbeat_entry(entry: int) -> tuple[int, float] | None:
+    """(producer node ID, consumer time in s) of a 0x1016 entry, or None if the entry is switched off."""
+    producer_id, time_ms = entry >> 16 & 0xFF, entry & 0xFFFF
+    if not 1 <= producer_id <= 127 or time_ms == 0:
+        return None
+    return producer_id, time_ms / 1000.0
 
 
 def nmt_state_name(state: int | None) -> str:

@@ -66,6 +66,7 @@ class FrameDecoder:
     def __init__(self, config: CobotBusConfig, joint_names: Sequence[str]) -> None:
         self._names = {j.node_id: name for j, name in zip(config.joints, joint_names)}
         self._names[config.vacuum.node_id] = "vacuum"
+        self._names[config.master.node_id] = "master"
         self._pdos: dict[int, tuple[str, list[_PdoField]]] = {}
         self._ods: dict[int, canopen.ObjectDictionary] = {}
         for joint in config.joints:

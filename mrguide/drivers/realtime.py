@@ -1,7 +1,8 @@
-"""Real-time scheduling for the control and receive threads (Linux SCHED_FIFO), when permitted."""
+"""Real-time hygiene for the control and receive threads: SCHED_FIFO when permitted, a settled heap."""
 
 from __future__ import annotations
 
+import gc
 import logging
 import os
 
@@ -25,3 +26,14 @@ def make_current_thread_realtime(priority: int) -> bool:
         logger.warning("cannot get SCHED_FIFO priority %d (%s): keeping normal scheduling", priority, exc)
         return False
     return True
+
+
+def freeze_heap() -> None:
+    """Collect garbage now and exempt every object alive from later collections (call before the bus starts).
+
+    A full collection scans everything the process has loaded (torch, pinocchio, EDS dictionaries) with the
+    GIL held, and runs the finalizers of whatever garbage it finds, in the thread that triggered it, which
+    may be the control thread: tens of ms measured here, against a 4 ms cycle and a 100 ms heartbeat.
+    """
+    gc.collect()
+    gc.freeze()

@@ -7,7 +7,6 @@ setpoints and vacuum commands over CANopen, and answers with encoder positions a
 from __future__ import annotations
 
 import contextlib
-import gc
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -22,6 +21,7 @@ from mrguide.deploy.session import DeploySummary, run_session
 from mrguide.drivers.cobot import Cobot
 from mrguide.drivers.config import CobotBusConfig
 from mrguide.drivers.mock.sim_cobot import SimulatedCobot, shared_pc_config
+from mrguide.drivers.realtime import freeze_heap
 from mrguide.pose_source import ObjectPoseSource
 from mrguide.robot import load_robot
 from mrguide.twin.env import EnvConfig
@@ -47,10 +47,7 @@ def simulated_cell(env_cfg: EnvConfig, bus_cfg: CobotBusConfig, seed: int = 0) -
     bus_cfg = shared_pc_config(bus_cfg)
     twin_cfg = replace(env_cfg.twin, control_period=bus_cfg.timing.control_period, gui=False)
     spec = load_robot(env_cfg.robot)
-    # A full garbage collection over everything loaded so far (torch, pinocchio, ...) holds the GIL long
-    # enough to starve the 4 ms loop: collect once now, before any bus thread runs, and exempt the rest.
-    gc.collect()
-    gc.freeze()
+    freeze_heap()
     scene = Scene(spec, twin_cfg, env_cfg.task.object_height, seed=seed)
     plant = TwinPlant(scene)
     sim = SimulatedCobot(bus_cfg, plant, seed=seed)

@@ -7,6 +7,7 @@ tests that exercise a watchdog set their own values.
 
 from __future__ import annotations
 
+import gc
 import threading
 import time
 import uuid
@@ -19,6 +20,7 @@ import pytest
 from mrguide.drivers import Cobot, CobotBusConfig
 from mrguide.drivers.config import BusConfig, TimingConfig
 from mrguide.drivers.mock import FirstOrderParams, FirstOrderPlant, SimulatedCobot
+from mrguide.drivers.realtime import freeze_heap
 from mrguide.robot import RobotSpec, load_robot
 
 TEST_TIMING = TimingConfig(heartbeat_period=0.05, boot_timeout=2.0, enable_timeout=1.0, max_missed_feedback=50,
@@ -49,12 +51,22 @@ class Rig:
     cobot: Cobot
 
     def wait_until(self, predicate: Callable[[], bool], timeout: float = 1.0) -> bool:
-        end = time.monotonic() + timeout
-        while not predicate():
-            if time.monotonic() > end:
-                return False
-            time.sleep(0.002)
-        return True
+        return _wait_until(predicate, timeout)
+
+
+def _wait_until(predicate: Callable[[], bool], timeout: float = 1.0) -> bool:
+    """Poll `predicate` every 2 ms; False if it is still false after `timeout` seconds."""
+    end = time.monotonic() + timeout
+    while not predicate():
+        if time.monotonic() > end:
+            return False
+        time.sleep(0.002)
+    return True
+
+
+@pytest.fixture
+def wait_until() -> Callable[..., bool]:
+    return _wait_until
 
 
 @pytest.fixture
@@ -63,6 +75,7 @@ def make_rig(robot: RobotSpec) -> Iterator[Callable[..., Rig]]:
     started: list[Rig] = []
 
     def factory(plant_params: FirstOrderParams | None = None, **timing: float | int) -> Rig:
+        freeze_heap()  # as the deploy does: no collection (and no finalizer of an old rig) in the bus threads
         config = _make_config(**timing)
         plant = FirstOrderPlant(robot.q_home, plant_params)
         sim = SimulatedCobot(config, plant)
@@ -77,6 +90,8 @@ def make_rig(robot: RobotSpec) -> Iterator[Callable[..., Rig]]:
     for rig in started:
         rig.cobot.disconnect()
         rig.sim.stop()
+    started.clear()
+    gc.collect()  # this rig's garbage is finalized here, not in the next rig's threads
 
 
 @pytest.fixture

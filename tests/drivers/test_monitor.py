@@ -23,6 +23,8 @@ def decoder(robot):
     (0x080, b"", "sync", ["SYNC"]),
     (0x705, b"\x05", "heartbeat", ["node 5 (elbow_joint)", "OPERATIONAL"]),
     (0x703, b"\x00", "heartbeat", ["BOOT-UP"]),
+    (0x77F, b"\x05", "heartbeat", ["node 127 (master)", "OPERATIONAL"]),
+    (0x083, struct.pack("<HB5s", 0x8130, 0x11, b""), "emcy", ["node 3 (shoulder_pan_joint)", "0x8130"]),
     (0x084, struct.pack("<HB5s", 0x2310, 0x03, b""), "emcy", ["node 4 (shoulder_lift_joint)", "0x2310", "Current"]),
     (0x203, struct.pack("<Hi", 0x0F, 0), "pdo", ["RPDO1", "controlword=0x000F", "target=0 (+0.0000 rad)"]),
     (0x183, struct.pack("<Hi", 0x1237, 131072 * 101 // 4), "pdo", ["TPDO1", "OPERATION ENABLED", "+1.5708 rad"]),

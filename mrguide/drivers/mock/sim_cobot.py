@@ -2,7 +2,8 @@
 
 All devices share one python-can bus (normally the in-process `virtual` interface, on the channel of the
 cobot's bus config) wrapped in fault injection, and one plant that is stepped once per SYNC from the
-simulator's receive thread::
+simulator's receive thread (the world's time advances with SYNC). A device clock thread checks the
+devices' heartbeat consumers, which must also fire when no SYNC comes::
 
     plant = FirstOrderPlant(robot.q_home)
     with SimulatedCobot(config, plant) as sim:      # devices boot and wait in PRE-OPERATIONAL
@@ -16,6 +17,7 @@ from __future__ import annotations
 
 import logging
 import threading
+import time
 from dataclasses import dataclass, replace
 
 import canopen
@@ -34,6 +36,8 @@ logger = logging.getLogger(__name__)
 
 #: EMCY code for an injected drive fault: 0x2310 continuous over-current (CiA 402).
 DEFAULT_FAULT_CODE = 0x2310
+#: Period of the devices' own clock that checks their heartbeat consumers (s).
+DEVICE_CLOCK_PERIOD = 0.01
 
 
 def shared_pc_config(config: CobotBusConfig) -> CobotBusConfig:
@@ -73,6 +77,8 @@ class SimulatedCobot:
         self._receiver: BusReceiver | None = None
         self.drives: list[SimulatedDrive] = []
         self.vacuum: SimulatedVacuumGenerator | None = None
+        self._clock_thread: threading.Thread | None = None
+        self._stop_clock = threading.Event()
 
     def start(self) -> None:
         """Join the bus and power the devices on (boot-up messages, PRE-OPERATIONAL)."""
@@ -92,11 +98,18 @@ class SimulatedCobot:
         receiver.start()
         for slave in (*self.drives, self.vacuum):
             slave.power_on()
+        self._stop_clock.clear()
+        self._clock_thread = threading.Thread(target=self._device_clock, name="sim-device-clock", daemon=True)
+        self._clock_thread.start()
         logger.info("simulated cobot on %s:%s: drives %s, vacuum generator %d", cfg.bus.interface, cfg.bus.channel,
                     [d.node_id for d in self.drives], self.vacuum.node_id)
 
     def stop(self) -> None:
         """Leave the bus (heartbeats stop, the bus is shut down)."""
+        self._stop_clock.set()
+        if self._clock_thread is not None:
+            self._clock_thread.join()
+            self._clock_thread = None
         network, self._network = self._network, None
         if network is not None:
             assert self._receiver is not None
@@ -126,6 +139,16 @@ class SimulatedCobot:
     def stats(self) -> SimStats:
         assert self._receiver is not None, "start() first"
         return SimStats(self.sync_count, self._receiver.stats(), self.faults.stats())
+
+    def _device_clock(self) -> None:
+        assert self.vacuum is not None
+        slaves = (*self.drives, self.vacuum)
+        while not self._stop_clock.wait(DEVICE_CLOCK_PERIOD):
+            now = time.monotonic()
+            with self.lock:
+                for slave in slaves:
+                    if not slave.silent:
+                        slave.check_heartbeats(now)
 
     def _on_sync(self, can_id: int, data: bytearray, timestamp: float) -> None:
         assert self.vacuum is not None

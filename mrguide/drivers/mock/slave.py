@@ -1,15 +1,20 @@
 """A simulated CANopen slave: canopen's LocalNode plus what it lacks for a cyclic device.
 
 LocalNode gives the SDO server, the NMT slave with heartbeat producer and the EMCY producer. It does
-not apply received RPDOs, send TPDOs on SYNC or reboot on NMT reset; this class does, as a real device
-would: RPDOs received between two SYNCs are applied at the next SYNC, synchronous TPDOs are sent on it.
-Process data lives in `image` (keyed by (index, subindex)) and is served to SDO reads and writes too.
+not apply received RPDOs, send TPDOs on SYNC, reboot on NMT reset or consume heartbeats; this class
+does, as a real device would: RPDOs received between two SYNCs are applied at the next SYNC, synchronous
+TPDOs are sent on it. A producer configured in 0x1016 is supervised from its first heartbeat on; when it
+falls silent for the consumer time the device sends EMCY 0x8130 and, if OPERATIONAL, enters
+PRE-OPERATIONAL (the CiA 301 default error behaviour). Process data lives in `image` (keyed by
+(index, subindex)) and is served to SDO reads and writes too.
 """
 
 from __future__ import annotations
 
 import logging
+import time
 from abc import ABC, abstractmethod
+from dataclasses import dataclass
 from pathlib import Path
 
 import canopen
@@ -17,6 +22,7 @@ from canopen import LocalNode
 from canopen.objectdictionary import ODVariable
 
 from mrguide.drivers.bus import BusReceiver
+from mrguide.drivers.heartbeat import CONSUMER_HEARTBEAT, HEARTBEAT_ERROR, parse_consumer_heartbeat_entry
 from mrguide.drivers.mock.faults import FaultInjector
 from mrguide.drivers.mock.pdo_image import (RPDO_COMM, RPDO_MAP, SYNC_TYPES, TPDO_COMM, TPDO_MAP, Key, PdoLayout,
                                             read_layouts)
@@ -28,6 +34,17 @@ NMT_RESET_COMMUNICATION = 0x82
 NMT_ENTER_PRE_OPERATIONAL = 0x80
 #: Indices written back to their EDS values by NMT reset communication (CiA 301 communication area).
 COMMUNICATION_AREA = range(0x1000, 0x2000)
+#: Error register of a communication error: generic + communication bits (CiA 301 0x1001).
+COMMUNICATION_ERROR_REGISTER = 0x11
+
+
+@dataclass
+class _ConsumedHeartbeat:
+    """One producer the device supervises (an entry of 0x1016)."""
+
+    timeout: float
+    last: float | None = None  # monotonic time of the latest heartbeat; None = not yet started
+    lost: bool = False
 
 
 class SimulatedSlave(ABC):
@@ -45,6 +62,7 @@ class SimulatedSlave(ABC):
         self._tpdos: list[PdoLayout] = []
         self._received: dict[int, bytes] = {}
         self._pdo_dirty = True
+        self._consumed: dict[int, _ConsumedHeartbeat] = {}
         self.node.add_read_callback(self._on_read)
         self.node.add_write_callback(self._on_write)
         network.subscribe(0x000, self._on_nmt)
@@ -92,6 +110,7 @@ class SimulatedSlave(ABC):
                 del self.node.data_store[index]
         self._pdo_dirty = True
         self._received.clear()
+        self._reload_consumers()
         self.node.nmt.send_command(command)  # boot-up message
         self.node.nmt.send_command(NMT_ENTER_PRE_OPERATIONAL)  # starts the heartbeat per 0x1017
         logger.debug("node %d booted (%s)", self.node.id, "reset node" if command == NMT_RESET_NODE else "reset comm")
@@ -130,7 +149,41 @@ class SimulatedSlave(ABC):
             self.validate_write(key, value)
             self.image[key] = value
         self.node.data_store.setdefault(index, {})[subindex] = bytes(data)
+        if index == CONSUMER_HEARTBEAT:
+            self._reload_consumers()
         self.after_write(index, subindex)
+
+    # ---------------------------------------------------------------- heartbeat consumer
+
+    def _reload_consumers(self) -> None:
+        """Follow the producers configured in 0x1016 (only sub-index 1 exists in the shipped EDS files)."""
+        for producer_id in self._consumed:
+            self.network.unsubscribe(0x700 + producer_id, self._on_consumed_heartbeat)
+        self._consumed = {}
+        parsed = parse_consumer_heartbeat_entry(self.value((CONSUMER_HEARTBEAT, 1)))
+        if parsed is not None:
+            producer_id, timeout = parsed
+            self._consumed[producer_id] = _ConsumedHeartbeat(timeout)
+            self.network.subscribe(0x700 + producer_id, self._on_consumed_heartbeat)
+            self.receiver.expect(0x700 + producer_id, (1,))
+
+    def _on_consumed_heartbeat(self, can_id: int, data: bytearray, timestamp: float) -> None:
+        entry = self._consumed.get(can_id - 0x700)
+        if entry is not None and not self.silent:
+            entry.last, entry.lost = time.monotonic(), False
+
+    def check_heartbeats(self, now: float) -> None:
+        """Heartbeat consumer time-out: EMCY 0x8130 once per loss, and OPERATIONAL -> PRE-OPERATIONAL."""
+        for producer_id, entry in self._consumed.items():
+            if entry.lost or entry.last is None or now - entry.last <= entry.timeout:
+                continue
+            entry.lost = True
+            logger.warning("node %d: heartbeat of node %d lost (consumer time %.0f ms)", self.node.id, producer_id,
+                           entry.timeout * 1000)
+            self.node.emcy.send(HEARTBEAT_ERROR, COMMUNICATION_ERROR_REGISTER)
+            if self.operational:
+                self.node.nmt.send_command(NMT_ENTER_PRE_OPERATIONAL)
+                self.on_nmt_state()
 
     # ---------------------------------------------------------------- PDOs
 
