@@ -31,7 +31,11 @@ log = logging.getLogger(__name__)
 
 
 class RunStopped(RuntimeError):
-    """The run cannot go on (quick stop after a fault, a stall or an interrupt)."""
+    """The run cannot go on (quick stop after a fault, a stall or an interrupt).
+
+    `report` is the report of the episode it stopped, if it stopped one (outcome "safety_stop")."""
+
+    report: EpisodeReport | None = None
 
 
 @dataclass(frozen=True)
@@ -168,6 +172,15 @@ class Runtime:
         if np.max(np.abs(q - self.spec.q_home)) > self.cfg.home_tolerance:
             raise RunStopped(f"arm did not reach home: {np.round(q - self.spec.q_home, 4).tolist()} rad off")
 
+    def recover(self) -> None:
+        """Acknowledge a safety stop: fault reset and re-enable where the arm stands (`home()` comes next).
+
+        For evaluations in the simulated cell, where the operator's acknowledgement is implied. Raises
+        DriverError if the cause persists (a silent node, a drive that stays in FAULT)."""
+        self.cobot.reset_faults()
+        self.cobot.enable()
+        self.log.write("recovered", t=self._t)
+
     # -- one episode --------------------------------------------------------------------------------
     def run_episode(self, goal: np.ndarray, index: int) -> EpisodeReport:
         """One episode toward `goal` from the home pose; returns its report (RunStopped ends the run)."""
@@ -257,8 +270,9 @@ class Runtime:
             self.supervisor.report(Event.INTERRUPT, "Ctrl-C")
             report.outcome = "safety_stop"
             raise
-        except RunStopped:
+        except RunStopped as exc:
             report.outcome = "safety_stop"
+            exc.report = report
             raise
         finally:
             self.watchdog.arm(False)

@@ -36,6 +36,7 @@ class DeploySummary:
 
     episodes: list[EpisodeReport] = field(default_factory=list)
     stopped: str | None = None  # why the run ended early, if it did
+    recoveries: int = 0  # safety stops after which the run went on (fault reset, next episode)
     cycle_lateness_p99_ms: float = 0.0
     missed_cycles: int = 0
 
@@ -68,6 +69,8 @@ class DeploySummary:
             lines.append(f"decision latency p50/p99: {np.percentile(lat, 50):.2f} / {np.percentile(lat, 99):.2f} ms; "
                          f"policy inference median {np.median(inf):.3f} ms")
         lines.append(f"control cycle lateness p99: {self.cycle_lateness_p99_ms:.2f} ms, missed cycles: {self.missed_cycles}")
+        if self.recoveries:
+            lines.append(f"safety stops recovered from (fault reset, next episode): {self.recoveries}")
         if self.stopped:
             lines.append(f"run stopped early: {self.stopped}")
         return "\n".join(lines)
@@ -78,19 +81,37 @@ def run_session(
     goals: Sequence[np.ndarray],
     before_episode: Callable[[int], None] | None = None,
     after_episode: Callable[[EpisodeReport], None] | None = None,
+    max_recoveries: int = 0,
 ) -> DeploySummary:
-    """Home, (set the scene,) run one episode per goal; a RunStopped ends the session with a reason."""
+    """Home, (set the scene,) run one episode per goal.
+
+    A safety stop (RunStopped, or a driver fault latched between episodes) fails its episode as
+    "safety_stop" and ends the session with a reason, unless `max_recoveries` allows a fault reset and
+    the next episode (evaluations in the simulated cell; the real robot wants its operator)."""
     summary = DeploySummary()
+
+    def record(report: EpisodeReport) -> None:
+        summary.episodes.append(report)
+        if after_episode:
+            after_episode(report)
+
     try:
         for i, goal in enumerate(goals):
-            runtime.home()
-            if before_episode:
-                before_episode(i)
-            report = runtime.run_episode(goal, i)
-            summary.episodes.append(report)
-            if after_episode:
-                after_episode(report)
-    except (RunStopped, DriverError) as exc:  # a fault latched between episodes ends the run the same way
+            try:
+                runtime.home()
+                if before_episode:
+                    before_episode(i)
+                report = runtime.run_episode(goal, i)
+            except (RunStopped, DriverError) as exc:
+                stopped = exc.report if isinstance(exc, RunStopped) else None
+                record(stopped or EpisodeReport(i, "safety_stop", 0, {}))
+                if summary.recoveries >= max_recoveries or i == len(goals) - 1:
+                    raise
+                _recover(runtime, exc)
+                summary.recoveries += 1
+                continue
+            record(report)
+    except (RunStopped, DriverError) as exc:
         summary.stopped = str(exc)
         if runtime.log:
             runtime.log.write("run_stopped", reason=str(exc))
@@ -100,6 +121,14 @@ def run_session(
         summary.cycle_lateness_p99_ms = stats.lateness_p99 * 1e3
         summary.missed_cycles = stats.missed_cycles
     return summary
+
+
+def _recover(runtime: Runtime, stop: Exception) -> None:
+    log.warning("safety stop: %s; fault reset, going on with the next episode", stop)
+    try:
+        runtime.recover()
+    except DriverError as exc:
+        raise RunStopped(f"{stop}; recovery failed: {exc}") from exc
 
 
 class FixedObjectPose(ObjectPoseSource):

@@ -24,6 +24,9 @@ def add_sim2real_command(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--sweep", action="append", default=[], metavar="PARAM=v1,v2,...",
                    help=f"instead of the three conditions, success vs one parameter; reality gap ({', '.join(GAP_PARAMS)}) "
                         f"runs condition 2, HMD ({', '.join(HMD_PARAMS)}) condition 3; repeatable")
+    p.add_argument("--no-recovery", action="store_true",
+                   help="a safety stop ends the seed's run (its remaining episodes fail); default: fault reset, "
+                        "the stopped episode fails, the next one runs")
     p.add_argument("--out", default="runs/sim2real")
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(func=cmd_sim2real)
@@ -75,7 +78,7 @@ def cmd_sim2real(args: argparse.Namespace) -> int:
                     Path(args.policy), cfg, bus, seed, args.episodes,
                     out / f"log-{cond}-{name or 'default'}-{value}-seed{seed}-{time.strftime('%H%M%S')}.jsonl",
                     real_path, safety, on_episode=lambda o: bar.update(1), use_hmd=cond == "real_hmd",
-                    hmd_overrides={name: value} if name in HMD_PARAMS else None)
+                    hmd_overrides={name: value} if name in HMD_PARAMS else None, recover=not args.no_recovery)
             results.append(res)
     md = s2r.write_report(results, out, s2r.gap_description(real_cfg, real_path))
     print(md.read_text())

@@ -85,12 +85,14 @@ def dry_run(
     after_episode: Callable[[EpisodeReport], None] | None = None,
     policy=None,
     on_placed: Callable[[], None] | None = None,
+    max_recoveries: int = 0,
 ) -> DeploySummary:
     """Run `episodes` seeded episodes of a policy through the whole stack against the simulated cell.
 
     The policy file is loaded and checked before any drive is enabled. `policy` may replace the loaded
     policy by any callable obs → action (the scripted expert in tests). `on_placed` runs after the object
-    was put in place for an episode (e.g. to wait for a fresh HMD estimate).
+    was put in place for an episode (e.g. to wait for a fresh HMD estimate). `max_recoveries` safety
+    stops may be followed by a fault reset and the next episode (see `run_session`).
     """
     spec = load_robot(env_cfg.robot)
     loaded = ExportedPolicy.load(policy_path, spec.workspace, env_cfg.task) if policy is None else policy
@@ -113,6 +115,7 @@ def dry_run(
                     on_placed()
 
             with runtime:
-                return run_session(runtime, [g for _, g in layouts], before_episode=place, after_episode=after_episode)
+                return run_session(runtime, [g for _, g in layouts], before_episode=place, after_episode=after_episode,
+                                   max_recoveries=max_recoveries)
     finally:
         run_log.close()

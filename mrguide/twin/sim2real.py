@@ -89,11 +89,13 @@ def run_sim(policy: ExportedPolicy, env_cfg: EnvConfig, seed: int, episodes: int
 
 def run_real(policy_path: Path, real_cfg: EnvConfig, bus_cfg: CobotBusConfig, seed: int, episodes: int, log_path: Path,
              hmd_config: Path | None, safety: SafetyConfig | None, on_episode: Callable[[str], None] | None = None,
-             use_hmd: bool = False, hmd_overrides: dict | None = None, policy=None) -> list[str]:
+             use_hmd: bool = False, hmd_overrides: dict | None = None, policy=None, recover: bool = True) -> list[str]:
     """Conditions 2 and 3 (`use_hmd`): a dry run whose outcomes are re-judged on the twin's ground truth.
 
     `hmd_config` is the TOML with `[calibration]` (and its `[calibration.hmd]` noise) for the HMD; `policy`
-    (any obs → action callable) replaces the policy file, as in `dry_run`."""
+    (any obs → action callable) replaces the policy file, as in `dry_run`. A safety stop fails its
+    episode; with `recover` the drives are fault-reset and the next episode runs (as an operator would
+    after acknowledging), otherwise the remaining episodes of the seed count as safety stops too."""
     cells: list[SimulatedCell] = []
     streams: list[HmdPoseStream] = []
     outcomes: list[str] = []
@@ -126,14 +128,17 @@ def run_real(policy_path: Path, real_cfg: EnvConfig, bus_cfg: CobotBusConfig, se
 
     try:
         summary = dry_run(policy_path, real_cfg, bus_cfg, episodes, seed, log_path, safety,
-                          pose_factory=pose_factory, after_episode=judge, on_placed=refresh, policy=policy)
+                          pose_factory=pose_factory, after_episode=judge, on_placed=refresh, policy=policy,
+                          max_recoveries=episodes if recover else 0)
     finally:
         for s in streams:
             s.close()
     # a run stopped early leaves its remaining episodes unplayed: they count as safety stops
     outcomes += ["safety_stop"] * (episodes - len(outcomes))
+    if summary.recoveries:
+        log.warning("seed %d: %d safety stop(s) recovered from", seed, summary.recoveries)
     if summary.stopped:
-        log.warning("seed %d stopped early: %s", seed, summary.stopped)
+        log.warning("seed %d stopped: %s", seed, summary.stopped)
     return outcomes
 
 

@@ -37,7 +37,7 @@ class Expert:
 def run_dry(tmp_path):
     """dry_run with the expert; returns (summary, run log path, the cell the run used)."""
 
-    def run(episodes=1, seed=0, hook=None, env_cfg=None, safety=None, on_cell=None):
+    def run(episodes=1, seed=0, hook=None, env_cfg=None, safety=None, on_cell=None, max_recoveries=0):
         cfg = env_cfg or EnvConfig()
         cells = []
 
@@ -51,7 +51,8 @@ def run_dry(tmp_path):
 
         log = tmp_path / f"run-{seed}.jsonl"
         summary = dry_run(None, cfg, bus_config(), episodes, seed, log, safety, pose_factory=pose_factory,
-                          policy=Expert(cfg, (lambda o, p, a: hook(o, p, a, cells[0])) if hook else None))
+                          policy=Expert(cfg, (lambda o, p, a: hook(o, p, a, cells[0])) if hook else None),
+                          max_recoveries=max_recoveries)
         return summary, log, cells[0]
 
     return run

@@ -68,3 +68,30 @@ def test_stalled_decision_loop_triggers_the_watchdog(run_dry):
     summary, log, cell = run_dry(hook=stall)
     assert ("stall", "quick_stop") in events(log)
     assert summary.stopped is not None and "stall" in summary.stopped
+
+
+def test_safety_stop_fails_its_episode_and_recovery_runs_the_next(run_dry):
+    stalled = []
+
+    def stall_once(obs, phase, a, cell):
+        if phase == 1 and not stalled:
+            stalled.append(True)
+            time.sleep(0.6)
+        return a
+
+    summary, log, cell = run_dry(episodes=2, hook=stall_once, max_recoveries=1)
+    assert [e.outcome for e in summary.episodes] == ["safety_stop", "success"]
+    assert summary.recoveries == 1 and summary.stopped is None
+    kinds = [r["kind"] for r in read_log(log)]
+    assert kinds.index("recovered") < len(kinds) - 1 - kinds[::-1].index("episode_end")
+
+
+def test_recovery_fails_while_the_cause_persists(run_dry):
+    def silence_in_transport(obs, phase, a, cell):
+        if phase == 3:
+            cell.sim.faults.silence(5)
+        return a
+
+    summary, log, _ = run_dry(episodes=3, hook=silence_in_transport, max_recoveries=3)
+    assert [e.outcome for e in summary.episodes] == ["safety_stop"]
+    assert summary.recoveries == 0 and "recovery failed" in summary.stopped and "node 5" in summary.stopped
