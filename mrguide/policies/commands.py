@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import sys
 from collections import deque
 from pathlib import Path
 
@@ -76,14 +77,20 @@ def add_experiment_command(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seeds", type=int, default=10)
     p.add_argument("--steps", type=int, default=20_000)
     p.add_argument("--workers", type=int, default=2, help="parallel worker processes")
+    p.add_argument("--variants", default="baseline,guided", help="comma-separated subset of baseline,guided")
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(func=cmd_experiment)
 
 
 def cmd_experiment(args: argparse.Namespace) -> int:
-    from mrguide.policies.experiments import run_learning_curves
+    from mrguide.policies.experiments import VARIANTS, run_learning_curves
 
-    md = run_learning_curves(Path(args.out), args.seeds, args.steps, args.workers, args.config, not args.quiet)
+    variants = tuple(v for v in VARIANTS if v in args.variants.split(","))
+    unknown = set(args.variants.split(",")) - set(VARIANTS)
+    if unknown or not variants:
+        print(f"mrguide experiment: --variants must name some of {', '.join(VARIANTS)}, got {args.variants!r}", file=sys.stderr)
+        return 2
+    md = run_learning_curves(Path(args.out), args.seeds, args.steps, args.workers, args.config, not args.quiet, variants)
     print(md.read_text())
     print(f"figures and CSVs in {args.out}")
     return 0

@@ -59,11 +59,12 @@ def _train_one(spec: RunSpec, queue) -> str:
     return spec.out
 
 
-def run_learning_curves(out: Path, seeds: int, steps: int, workers: int, config: str | None, show_progress: bool = True) -> Path:
+def run_learning_curves(out: Path, seeds: int, steps: int, workers: int, config: str | None, show_progress: bool = True,
+                        variants: tuple[str, ...] = VARIANTS) -> Path:
     """Train every (variant, seed) in parallel, then write PNGs, CSVs and a markdown table into `out`."""
     from tqdm import tqdm
 
-    specs = [RunSpec(v, s, steps, config, str(out / v / f"seed{s}")) for v in VARIANTS for s in range(seeds)]
+    specs = [RunSpec(v, s, steps, config, str(out / v / f"seed{s}")) for v in variants for s in range(seeds)]
     ctx = mp.get_context("spawn")
     with ctx.Manager() as manager:
         queue = manager.Queue()
@@ -79,7 +80,7 @@ def run_learning_curves(out: Path, seeds: int, steps: int, workers: int, config:
                 time.sleep(0.2)
     from mrguide.policies.train import load_train_config
 
-    return summarize(out, seeds, steps, load_train_config(config)[0].eval_episodes)
+    return summarize(out, seeds, steps, load_train_config(config)[0].eval_episodes, variants=variants)
 
 
 # -- aggregation ---------------------------------------------------------------------------------
@@ -106,15 +107,17 @@ def _ci95(x: np.ndarray) -> np.ndarray:
     return stats.t.ppf(0.975, n - 1) * x.std(axis=0, ddof=1) / np.sqrt(n) if n > 1 else np.zeros(x.shape[1])
 
 
-def summarize(out: Path, seeds: int, steps: int, eval_episodes: int, grid_step: int = 1000) -> Path:
+def summarize(out: Path, seeds: int, steps: int, eval_episodes: int, grid_step: int = 1000,
+              variants: tuple[str, ...] = VARIANTS) -> Path:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    grid_step = min(grid_step, steps)
     grid = np.arange(grid_step, steps + 1, grid_step)
     curves, conv, asked_curves, ratio_curves, table, per_run = {}, {}, {}, {}, [], []
-    for v in VARIANTS:
+    for v in variants:
         returns, conv_steps, asked_at_conv, asked_c, ratio_c, finals, walls = [], [], [], [], [], [], []
         for s in range(seeds):
             run = out / v / f"seed{s}"
@@ -155,7 +158,9 @@ def summarize(out: Path, seeds: int, steps: int, eval_episodes: int, grid_step: 
 
     # Fig. 3: mean episode return with 95 % CI
     fig, ax = plt.subplots(figsize=(7, 4))
-    for v, color in zip(VARIANTS, ("tab:blue", "tab:red")):
+    colors = {"baseline": "tab:blue", "guided": "tab:red"}
+    for v in variants:
+        color = colors[v]
         m, h = np.nanmean(curves[v], 0), _ci95(curves[v])
         ax.plot(grid, m, color=color, label=f"{v} DDPG")
         ax.fill_between(grid, m - h, m + h, color=color, alpha=0.2)
@@ -168,7 +173,8 @@ def summarize(out: Path, seeds: int, steps: int, eval_episodes: int, grid_step: 
     # Fig. 5: convergence probability over normalized progress
     fig, ax = plt.subplots(figsize=(7, 4))
     x = np.linspace(0, 1, 101)
-    for v, color in zip(VARIANTS, ("tab:blue", "tab:red")):
+    for v in variants:
+        color = colors[v]
         cs = [c / steps if c is not None else np.inf for c in conv[v]]
         ax.step(x, [np.mean([c <= xi for c in cs]) for xi in x], color=color, where="post", label=f"{v} DDPG")
     ax.set(xlabel="normalized training progress", ylabel="convergence probability", ylim=(-0.02, 1.02),
@@ -178,14 +184,21 @@ def summarize(out: Path, seeds: int, steps: int, eval_episodes: int, grid_step: 
     fig.savefig(out / "fig5_convergence.png", dpi=120)
     plt.close(fig)
 
-    # Fig. 9: expert effort and realized expert ratio (guided runs)
+    if "guided" in variants:
+        _plot_expert_effort(out, grid, asked_curves["guided"], ratio_curves["guided"])
+    _write_tables(out, seeds, steps, variants, grid, curves, asked_curves, ratio_curves, table, per_run)
+    return out / "summary.md"
+
+
+def _plot_expert_effort(out: Path, grid: np.ndarray, a: np.ndarray, r: np.ndarray) -> None:
+    """Fig. 9: expert effort and realized expert ratio of the guided runs."""
+    import matplotlib.pyplot as plt
+
     fig, ax = plt.subplots(figsize=(7, 4))
-    a = asked_curves["guided"]
     ax.plot(grid, a.mean(0), color="tab:red", label="cumulative annotations asked")
     ax.fill_between(grid, a.min(0), a.max(0), color="tab:red", alpha=0.2)
     ax.set(xlabel="training step", ylabel="annotations asked (cumulative)")
     ax2 = ax.twinx()
-    r = ratio_curves["guided"]
     ax2.plot(grid, np.nanmean(r, 0), color="tab:green", label="realized expert ratio per batch")
     ax2.fill_between(grid, np.nanmin(r, 0), np.nanmax(r, 0), color="tab:green", alpha=0.2)
     ax2.set(ylabel="expert ratio per batch", ylim=(0, 1))
@@ -195,14 +208,21 @@ def summarize(out: Path, seeds: int, steps: int, eval_episodes: int, grid_step: 
     fig.savefig(out / "fig9_expert_effort.png", dpi=120)
     plt.close(fig)
 
+
+def _write_tables(out: Path, seeds: int, steps: int, variants: tuple[str, ...], grid: np.ndarray, curves: dict,
+                  asked_curves: dict, ratio_curves: dict, table: list[dict], per_run: list[dict]) -> None:
+    """curves.csv, summary.csv, runs.csv and summary.md."""
+    guided = "guided" in variants
     with (out / "curves.csv").open("w", newline="") as fh:
         w = csv.writer(fh)
-        w.writerow(["step"] + [f"{v}_return_mean" for v in VARIANTS] + [f"{v}_return_ci95" for v in VARIANTS]
-                   + ["guided_asked_mean", "guided_expert_ratio_mean"])
-        cis = {v: _ci95(curves[v]) for v in VARIANTS}
+        w.writerow(["step"] + [f"{v}_return_mean" for v in variants] + [f"{v}_return_ci95" for v in variants]
+                   + (["guided_asked_mean", "guided_expert_ratio_mean"] if guided else []))
+        cis = {v: _ci95(curves[v]) for v in variants}
         for i, g in enumerate(grid):
-            w.writerow([g] + [round(curves[v][:, i].mean(), 3) for v in VARIANTS] + [round(cis[v][i], 3) for v in VARIANTS]
-                       + [round(a[:, i].mean(), 1), round(float(np.nanmean(r[:, i])), 3)])
+            extra = ([round(asked_curves["guided"][:, i].mean(), 1), round(float(np.nanmean(ratio_curves["guided"][:, i])), 3)]
+                     if guided else [])
+            w.writerow([g] + [round(curves[v][:, i].mean(), 3) for v in variants] + [round(cis[v][i], 3) for v in variants]
+                       + extra)
     with (out / "summary.csv").open("w", newline="") as fh:
         w = csv.DictWriter(fh, list(table[0]))
         w.writeheader()
@@ -226,4 +246,3 @@ def summarize(out: Path, seeds: int, steps: int, eval_episodes: int, grid_step: 
             f"{t['annotations_total_mean']:.0f} | {t['wall_s_per_run_median']:.0f} s |"
         )
     md.write_text("\n".join(lines) + "\n")
-    return md

@@ -40,7 +40,7 @@ from mrguide.twin.env import EnvConfig, PickPlaceEnv
 
 log = logging.getLogger(__name__)
 
-CHECKPOINT_FORMAT = 3  # 2: critics stored as one ensemble; 3: agent update counter
+CHECKPOINT_FORMAT = 4  # 2: critics stored as one ensemble; 3: agent update counter; 4: evaluation counter
 
 
 @dataclass(frozen=True)
@@ -83,7 +83,7 @@ class TrainConfig:
     buffer_size: int = 1_000_000  # Table I
     learning_starts: int = 256  # updates begin once this many transitions are stored (ours)
     eval_every: int = 1_000  # steps between deterministic evaluations (convergence is judged on them)
-    eval_episodes: int = 10
+    eval_episodes: int = 10  # per evaluation; each evaluation draws new start states (see Trainer.evaluate)
     checkpoint_every: int = 2_000  # steps; checkpoints are written at the next episode end
     torch_threads: int = 1
 
@@ -142,6 +142,7 @@ def make_expert_source(g: GuidanceConfig, env: PickPlaceEnv, seed: int) -> Exper
     return FileExpert(g.annotation_file, g.cache_tolerance)
 
 
+EVAL_SEED_BASE = 1_000_000  # evaluation env seeds start here (training seeds come from the run's RNG)
 METRIC_FIELDS = ("step", "episode", "kind", "return", "success", "outcome", "length", "triggered", "lambda", "expert_ratio", "asked", "reused", "wall_s")
 EVAL_FIELDS = ("step", "success_rate", "mean_return")
 
@@ -184,6 +185,7 @@ class Trainer:
         self._next_checkpoint = cfg.checkpoint_every
         self._next_eval = cfg.eval_every
         self.last_eval: dict = {}
+        self.evaluations = 0
         self._t0 = time.perf_counter()
         self._wall_before = 0.0
 
@@ -298,10 +300,16 @@ class Trainer:
         _append_csv(self.out / "metrics.csv", METRIC_FIELDS, row)
 
     def evaluate(self) -> dict:
-        """Deterministic policy on fixed evaluation seeds (disjoint from training seeds' stream)."""
+        """Deterministic policy from start states that differ from one evaluation to the next.
+
+        Evaluation i uses env seeds 1e6 + i·n … 1e6 + i·n + n − 1 (n = eval_episodes), disjoint from the
+        training stream, so a window of two evaluations covers 2n distinct start states and the same
+        seed's evaluations are comparable across variants and runs.
+        """
         successes, returns = 0, []
-        for k in range(self.cfg.eval_episodes):
-            obs, _ = self.env.reset(seed=1_000_000 + k)
+        n = self.cfg.eval_episodes
+        for k in range(n):
+            obs, _ = self.env.reset(seed=EVAL_SEED_BASE + self.evaluations * n + k)
             ret = 0.0
             while True:
                 obs, r, term, trunc, info = self.env.step(self.agent.act(obs))
@@ -310,7 +318,8 @@ class Trainer:
                     break
             successes += int(info["is_success"])
             returns.append(ret)
-        res = {"step": self.step, "success_rate": successes / self.cfg.eval_episodes, "mean_return": float(np.mean(returns))}
+        self.evaluations += 1
+        res = {"step": self.step, "success_rate": successes / n, "mean_return": float(np.mean(returns))}
         _append_csv(self.out / "eval.csv", EVAL_FIELDS, res)
         log.info("eval at step %d: success %.0f%%", self.step, 100 * res["success_rate"])
         self.last_eval = res
@@ -333,7 +342,7 @@ class Trainer:
             "counters": {
                 "step": self.step, "episode": self.episode, "interventions": self.interventions, "asked": self.cache.asked,
                 "reused": self.cache.reused, "projected": self.expert.projected, "last_ratio": self.last_ratio,
-                "next_eval": self._next_eval, "wall_s": self.wall_s(), "update_s": self.update_s,
+                "next_eval": self._next_eval, "evaluations": self.evaluations, "wall_s": self.wall_s(), "update_s": self.update_s,
             },
         }
         path = self.out / "checkpoint.pt"
@@ -369,6 +378,7 @@ class Trainer:
         c = state["counters"]
         self.step, self.episode, self.interventions = c["step"], c["episode"], c["interventions"]
         self.expert.projected, self.last_ratio, self._next_eval = c["projected"], c["last_ratio"], c["next_eval"]
+        self.evaluations = c["evaluations"]
         self._wall_before, self.update_s = c["wall_s"], c["update_s"]
         self._t0 = time.perf_counter()
         self._next_checkpoint = (self.step // self.cfg.checkpoint_every + 1) * self.cfg.checkpoint_every
