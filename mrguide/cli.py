@@ -186,7 +186,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_sim2real_command(sub)
 
-    add_train_command(sub)
+    from mrguide.annotation.commands import LiveTrainPlugin, add_annotate_command
+
+    add_train_command(sub, LiveTrainPlugin())
+    add_annotate_command(sub)
     add_experiment_command(sub)
     return p
 

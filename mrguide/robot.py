@@ -8,6 +8,7 @@ the tool centre point (TCP) is the cup's lip, and the policy always commands it 
 from __future__ import annotations
 
 import importlib.metadata
+import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -172,3 +173,34 @@ def load_robot(config: RobotConfig | None = None) -> RobotSpec:
         workspace=cfg.workspace,
         **arrays,
     )
+
+
+def urdf_with_tool(spec: RobotSpec, mesh_root: str, cup_radius: float) -> str:
+    """The arm's URDF text with `package://` URIs rooted at `mesh_root` and the suction cup added.
+
+    The cup is a cylinder link `suction_cup` on the flange, as long as the flange-to-TCP offset, and a
+    massless `tcp` link sits at its lip. Used by the twin (file paths) and the annotation page (URLs).
+    """
+    root = ET.fromstring(spec.urdf_path.read_text().replace("package://", mesh_root))
+    length = float(spec.T_flange_tcp[2, 3])
+    cyl = f'<cylinder radius="{cup_radius}" length="{length}"/>'
+    origin = f'<origin xyz="0 0 {length / 2}" rpy="0 0 0"/>'
+    root.append(ET.fromstring(
+        f'<link name="suction_cup"><inertial><mass value="0.1"/>{origin}'
+        f'<inertia ixx="1e-4" ixy="0" ixz="0" iyy="1e-4" iyz="0" izz="1e-4"/></inertial>'
+        f'<visual>{origin}<geometry>{cyl}</geometry><material name="cup"><color rgba="0.15 0.15 0.15 1"/></material></visual>'
+        f'<collision>{origin}<geometry>{cyl}</geometry></collision></link>'
+    ))
+    root.append(ET.fromstring(
+        f'<joint name="flange_cup_joint" type="fixed"><parent link="{spec.flange_frame}"/><child link="suction_cup"/>'
+        f'<origin xyz="0 0 0" rpy="0 0 0"/></joint>'
+    ))
+    root.append(ET.fromstring(
+        '<link name="tcp"><inertial><mass value="0"/><origin xyz="0 0 0" rpy="0 0 0"/>'
+        '<inertia ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"/></inertial></link>'
+    ))
+    root.append(ET.fromstring(
+        f'<joint name="cup_tcp_joint" type="fixed"><parent link="suction_cup"/><child link="tcp"/>'
+        f'<origin xyz="0 0 {length}" rpy="0 0 0"/></joint>'
+    ))
+    return ET.tostring(root, encoding="unicode")

@@ -4,29 +4,74 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import signal
 import sys
 from collections import deque
+from collections.abc import Callable
+from contextlib import contextmanager
+from functools import partial
 from pathlib import Path
+from typing import Any, Protocol
 
 from tqdm import tqdm
 
+from mrguide.cli_args import nonnegative_int, positive_int
 
-def add_train_command(sub: argparse._SubParsersAction) -> None:
+
+class LiveSessionLike(Protocol):
+    """What `mrguide train --expert live` needs from a live annotation session (mrguide.annotation.live)."""
+
+    url: str
+
+    def source_factory(self, env: Any) -> Any: ...
+
+    def publish(self, **status: Any) -> None: ...
+
+    def interrupt(self) -> None: ...
+
+    def close(self) -> None: ...
+
+    def summary(self) -> str: ...
+
+
+class LivePlugin(Protocol):
+    """Adds the live-session options to `train` and opens the session (provided by the annotation package)."""
+
+    def add_arguments(self, parser: argparse.ArgumentParser) -> None: ...
+
+    def open_session(self, args: argparse.Namespace, on_waiting: Callable[[bool], None]) -> LiveSessionLike: ...
+
+
+EXPERTS = ("oracle", "annotator", "file", "live")
+
+
+def add_train_command(sub: argparse._SubParsersAction, live: LivePlugin | None = None) -> None:
+    """`mrguide train`; with `live`, also `--expert live` and its server options."""
     p = sub.add_parser("train", help="train DDPG in the twin, with or without MR-style expert guidance")
     p.add_argument("--config", help="TOML config ([train], [ddpg], [guidance], [robot], [twin], [task])")
     p.add_argument("--out", default="runs/train", help="run directory: checkpoint, metrics, annotations, policy")
-    p.add_argument("--steps", type=int, help="override train.total_steps")
-    p.add_argument("--seed", type=int, help="override train.seed")
-    p.add_argument("--stop-after", type=int, metavar="N",
+    p.add_argument("--steps", type=positive_int, help="override train.total_steps")
+    p.add_argument("--seed", type=nonnegative_int, help="override train.seed")
+    p.add_argument("--stop-after", type=positive_int, metavar="N",
                    help="stop (checkpoint, export) after N steps, keeping the schedule of total_steps; --resume continues")
     p.add_argument("--no-guidance", action="store_true", help="baseline DDPG (guidance.enabled = false)")
+    p.add_argument("--expert", choices=EXPERTS if live else EXPERTS[:-1],
+                   help="override guidance.source: the scripted oracle, the simulated MR annotator, a recorded "
+                        "annotation file (guidance.annotation_file), or a person through the live annotation page")
     p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
-    p.set_defaults(func=cmd_train)
+    if live is not None:
+        live.add_arguments(p)
+    p.set_defaults(func=partial(cmd_train, live=live))
 
 
-def cmd_train(args: argparse.Namespace) -> int:
-    from mrguide.policies.export import export_actor
+def _refuse(message: str) -> int:
+    print(f"mrguide train: {message}", file=sys.stderr)
+    return 2
+
+
+def cmd_train(args: argparse.Namespace, live: LivePlugin | None = None) -> int:
+    """Train (or resume), show progress, export the policy; Ctrl-C checkpoints and exits 130."""
     from mrguide.policies.train import CheckpointError, Trainer, load_train_config
 
     tc, dc, gc, ec = load_train_config(args.config)
@@ -36,37 +81,105 @@ def cmd_train(args: argparse.Namespace) -> int:
         tc = dataclasses.replace(tc, seed=args.seed)
     if args.no_guidance:
         gc = dataclasses.replace(gc, enabled=False)
+    if args.expert:
+        gc = dataclasses.replace(gc, source=args.expert)
     out = Path(args.out)
     if not args.resume and (out / "checkpoint.pt").exists():
-        print(f"mrguide train: {out} already holds a run; use --resume or another --out")
-        return 2
-    tr = Trainer(tc, dc, gc, ec, out)
+        return _refuse(f"{out} already holds a run; use --resume or another --out")
+    bar = tqdm(total=min(tc.total_steps, args.stop_after or tc.total_steps), desc="train", unit="step", disable=args.quiet)
+    session = None
+    if gc.enabled and gc.source == "live":
+        assert live is not None
+        session = live.open_session(args, lambda waiting: bar.set_description_str(
+            "train | waiting for an annotation" if waiting else "train"))
+    try:
+        tr = Trainer(tc, dc, gc, ec, out, session.source_factory if session else None)
+    except BaseException:
+        if session:
+            session.close()
+        bar.close()
+        raise
+    if session:
+        bar.write(f"annotation page: {session.url}")
     try:
         if args.resume:
             try:
                 tr.load_checkpoint()
             except CheckpointError as exc:
-                print(f"mrguide train: {exc}")
-                return 2
-        recent: deque[int] = deque(maxlen=20)
-        with tqdm(total=min(tc.total_steps, args.stop_after or tc.total_steps), initial=tr.step, desc="train", unit="step", disable=args.quiet) as bar:
-            def progress(row: dict) -> None:
-                recent.append(row["success"])
-                bar.update(row["step"] - bar.n)
-                bar.set_postfix(ret=f"{row['return']:.1f}", succ20=f"{sum(recent) / len(recent):.0%}",
-                                lam=f"{row['lambda']:.2f}", interv=tr.interventions, asked=row["asked"])
-
-            tr.run(progress, stop_at=args.stop_after)
-        final = tr.last_eval or tr.evaluate()
-        policy = export_actor(tr.agent.actor, out / "policy.npz", tr.env.workspace, tr.env.task_cfg, tr.env.twin_cfg.decision_period,
-                              {"trained": {"steps": tr.step, "seed": tc.seed, "guidance": gc.enabled}})
+                return _refuse(str(exc))
+        bar.n = tr.step
+        bar.refresh()
+        with _stop_on_sigint(tr, session, bar):
+            _run(tr, args.stop_after, bar, session)
+        if tr.stop_requested.is_set():
+            tr.save_checkpoint()
+            bar.close()
+            print(f"interrupted at step {tr.step}: checkpoint {out / 'checkpoint.pt'} written; "
+                  f"`mrguide train --out {out} --resume` continues", file=sys.stderr)
+            return 130
+        bar.close()
+        _finish(tr, tc, gc, out)
+        if session:
+            print(session.summary())
     finally:
+        bar.close()
         tr.close()
+        if session:
+            session.close()
+    return 0
+
+
+def _run(tr, stop_after: int | None, bar: tqdm, session: LiveSessionLike | None) -> None:
+    recent: deque[int] = deque(maxlen=20)
+
+    def status() -> dict:
+        return {"step": tr.step, "total_steps": tr.cfg.total_steps, "episode": tr.episode, "lambda": round(tr.lam(), 4),
+                "success_rate": sum(recent) / len(recent) if recent else None, "asked": tr.cache.asked,
+                "reused": tr.cache.reused, "remarks": tr.expert.remarks, "skipped": tr.skipped, "interventions": tr.interventions}
+
+    def progress(row: dict) -> None:
+        recent.append(row["success"])
+        bar.update(row["step"] - bar.n)
+        bar.set_postfix(ret=f"{row['return']:.1f}", succ20=f"{sum(recent) / len(recent):.0%}",
+                        lam=f"{row['lambda']:.2f}", interv=tr.interventions, asked=row["asked"])
+        if session:
+            session.publish(**status())
+
+    if session:
+        session.publish(**status())
+    tr.run(progress, stop_at=stop_after)
+
+
+def _finish(tr, tc, gc, out: Path) -> None:
+    from mrguide.policies.export import export_actor
+
+    final = tr.last_eval or tr.evaluate()
+    policy = export_actor(tr.agent.actor, out / "policy.npz", tr.env.workspace, tr.env.task_cfg, tr.env.twin_cfg.decision_period,
+                          {"trained": {"steps": tr.step, "seed": tc.seed, "guidance": gc.enabled}})
     print(f"trained {tr.step} steps in {tr.wall_s():.0f} s ({tr.step / max(tr.wall_s(), 1e-9):.0f} steps/s); "
-          f"expert interventions {tr.interventions}, annotations asked {tr.cache.asked} / reused {tr.cache.reused}")
+          f"expert interventions {tr.interventions}, annotations asked {tr.cache.asked} / reused {tr.cache.reused}"
+          f" / re-marked {tr.expert.remarks}, demonstrations skipped {tr.skipped}")
     print(f"deterministic evaluation: {final['success_rate']:.0%} success over {tc.eval_episodes} episodes")
     print(f"policy: {policy}   metrics: {out / 'metrics.csv'}   checkpoint: {out / 'checkpoint.pt'}")
-    return 0
+
+
+@contextmanager
+def _stop_on_sigint(tr, session: LiveSessionLike | None, bar: tqdm):
+    """First Ctrl-C: stop at the next step (and end a pending annotation request); a second one aborts."""
+
+    def handler(signum, frame) -> None:
+        if tr.stop_requested.is_set():
+            raise KeyboardInterrupt
+        tr.stop_requested.set()
+        if session:
+            session.interrupt()
+        bar.write("stopping at the next step to write a checkpoint (Ctrl-C again to abort without one)")
+
+    previous = signal.signal(signal.SIGINT, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def add_experiment_command(sub: argparse._SubParsersAction) -> None:

@@ -2,21 +2,28 @@
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Protocol
 
 import numpy as np
 
-from mrguide.policies.guidance import Annotation, AnnotationCache, AnnotationError
+from mrguide.policies.annotations import Annotation, AnnotationCache, AnnotationError
+from mrguide.robot import Workspace
 from mrguide.task import TaskConfig, oracle_target
+
+#: The simulated annotator of training seed s draws its noise from RNG seed s + this.
+ANNOTATOR_SEED_OFFSET = 7919
 
 
 class ExpertSource(Protocol):
-    """Gives an annotation (TCP target in the robot frame + gripper command) for an observation."""
+    """Gives an annotation (TCP target in the robot frame + gripper command) for an observation.
 
-    def annotate(self, obs: np.ndarray) -> Annotation: ...
+    `previous` is the annotation of this waypoint that the arm did not reach (a request to re-mark it).
+    None means nobody annotated: the demonstration is dropped.
+    """
+
+    def annotate(self, obs: np.ndarray, previous: Annotation | None = None) -> Annotation | None: ...
 
 
 class OracleExpert:
@@ -25,9 +32,9 @@ class OracleExpert:
     def __init__(self, task: TaskConfig):
         self.task = task
 
-    def annotate(self, obs: np.ndarray) -> Annotation:
+    def annotate(self, obs: np.ndarray, previous: Annotation | None = None) -> Annotation:
         target, grip = oracle_target(obs, self.task)
-        return Annotation(target, grip)
+        return Annotation(target, grip, "oracle")
 
 
 @dataclass(frozen=True)
@@ -45,39 +52,41 @@ class AnnotatorNoise:
 
 
 class SimulatedAnnotator:
-    """Oracle + noise: what a person marking targets through an HMD would give."""
+    """Oracle + noise: what a person marking targets through an HMD would give.
 
-    def __init__(self, task: TaskConfig, noise: AnnotatorNoise, seed: int | None = None):
+    The marked point is confined to the workspace box, as the annotation page's gizmo is (a person
+    cannot mark outside it), so the simulated annotator and `mrguide annotate bot` answer alike.
+    """
+
+    def __init__(self, task: TaskConfig, noise: AnnotatorNoise, workspace: Workspace, seed: int | None = None):
         self.oracle = OracleExpert(task)
         self.noise = noise
+        self.workspace = workspace
         self.rng = np.random.default_rng(seed)
 
-    def annotate(self, obs: np.ndarray) -> Annotation:
+    def annotate(self, obs: np.ndarray, previous: Annotation | None = None) -> Annotation:
         exact = self.oracle.annotate(obs)
         n = self.noise
         err = self.rng.normal(0.0, n.sigma, 3) + np.asarray(n.bias)
         if n.outlier_rate > 0 and self.rng.random() < n.outlier_rate:
             err = err + self.rng.normal(0.0, n.outlier_scale, 3)
-        return Annotation(exact.target + err, exact.grip)
+        return Annotation(self.workspace.clamp(exact.target + err)[0], exact.grip, "simulated")
 
 
 class FileExpert:
-    """Annotations replayed from a JSONL file of {"obs", "target", "grip"} records (e.g. a live MR session)."""
+    """Annotations replayed from an `annotations.jsonl` (e.g. of a live MR session); re-marks replay as their newest."""
 
     def __init__(self, path: str | Path, tolerance: float = 0.005):
         self.path = Path(path)
         if not self.path.is_file():
             raise AnnotationError(f"annotation file not found: {self.path}")
         self._cache = AnnotationCache(tolerance)
-        try:
-            n = self._cache.load(self.path)
-        except (json.JSONDecodeError, AnnotationError) as exc:
-            raise AnnotationError(f"{self.path}: {exc}") from exc
-        if n == 0:
+        if self._cache.load(self.path) == 0:
             raise AnnotationError(f"{self.path}: no annotations in the file")
 
-    def annotate(self, obs: np.ndarray) -> Annotation:
-        ann = self._cache.lookup(obs)
-        if ann is None:
+    def annotate(self, obs: np.ndarray, previous: Annotation | None = None) -> Annotation:
+        hit = self._cache.lookup(obs)
+        if hit is None:
             raise AnnotationError(f"{self.path}: no recorded annotation within {self._cache.tolerance} m of this observation")
-        return ann
+        ann = hit.annotation
+        return Annotation(ann.target, ann.grip, "file", {"replayed_from": ann.source})

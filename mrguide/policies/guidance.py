@@ -1,24 +1,18 @@
 """Expert guidance: the λ schedule (Eq. 11), threshold activation (Eq. 12), bounded projection of
-annotations (Eq. 13) and the annotation cache (Sec. V-G: identical inputs are never asked twice)."""
+annotations (Eq. 13) and the references it bounds around. The annotation cache is in `annotations`."""
 
 from __future__ import annotations
 
-import json
 import logging
 from collections import deque
-from dataclasses import dataclass
-from pathlib import Path
 from typing import Protocol
 
 import numpy as np
 
+from mrguide.policies.annotations import Annotation, AnnotationError
 from mrguide.task import TaskConfig, phase_from_progress, phase_target
 
 log = logging.getLogger(__name__)
-
-
-class AnnotationError(ValueError):
-    """An annotation that cannot be used (NaN/inf, wrong shape)."""
 
 
 def expert_ratio(t: int, horizon: int, lam_max: float = 0.9, lam_min: float = 0.1) -> float:
@@ -56,19 +50,6 @@ def bounded_projection(mr: np.ndarray, reference: np.ndarray, delta: float) -> n
         raise ValueError(f"Δ must be > 0, got {delta}")
     diff = mr - reference
     return reference + delta / max(float(np.linalg.norm(diff)), delta) * diff
-
-
-@dataclass(frozen=True)
-class Annotation:
-    """An expert action in the robot base frame: TCP target (m) and gripper command (+1 / -1)."""
-
-    target: np.ndarray
-    grip: float
-
-    def __post_init__(self) -> None:
-        t = np.asarray(self.target, dtype=float)
-        if t.shape != (3,) or not np.all(np.isfinite(t)) or not np.isfinite(self.grip):
-            raise AnnotationError(f"annotation must be a finite 3-vector target and gripper value, got {self.target}, {self.grip}")
 
 
 class ReferencePose(Protocol):
@@ -113,67 +94,3 @@ class RunningMedianReference:
     def observe(self, obs: np.ndarray, annotation: Annotation) -> None:
         phase = phase_from_progress(obs[4])
         self.offsets[phase].append(np.asarray(annotation.target) - phase_target(phase, obs[5:8], obs[8:11], self.task))
-
-
-class AnnotationCache:
-    """Annotations kept and reused for matching observations; appended to a JSONL file as they arrive.
-
-    An annotation marks the waypoint of the current phase, which depends on the phase and on where the
-    object or goal is, not on where the arm happens to be. Two observations therefore match when they
-    are in the same phase and the phase's anchor differs by at most `tolerance` metres per coordinate:
-    the object position for approach and grasp, its xy for lift (the object rises with the cup), the
-    goal for transport and release.
-    """
-
-    def __init__(self, tolerance: float = 0.005, path: str | Path | None = None):
-        self.tolerance = tolerance
-        self.path = Path(path) if path else None
-        self._keys: list[np.ndarray] = []
-        self._values: list[Annotation] = []
-        self._matrix: np.ndarray | None = None
-        self.asked = 0
-        self.reused = 0
-
-    def __len__(self) -> int:
-        return len(self._values)
-
-    @staticmethod
-    def _key(obs: np.ndarray) -> np.ndarray:
-        obs = np.asarray(obs, dtype=float)
-        phase = phase_from_progress(obs[4])
-        anchor = obs[5:8].copy() if phase <= 2 else obs[8:11].copy()
-        if phase == 2:
-            anchor[2] = 0.0
-        return np.concatenate([anchor, [phase * 1e3]])  # phase scaled so that any difference exceeds any tolerance
-
-    def lookup(self, obs: np.ndarray) -> Annotation | None:
-        if not self._values:
-            return None
-        if self._matrix is None or len(self._matrix) != len(self._keys):
-            self._matrix = np.array(self._keys)
-        diff = np.abs(self._matrix - self._key(obs)).max(axis=1)
-        i = int(np.argmin(diff))
-        return self._values[i] if diff[i] <= self.tolerance else None
-
-    def insert(self, obs: np.ndarray, annotation: Annotation, persist: bool = True) -> None:
-        self._keys.append(self._key(obs))
-        self._values.append(annotation)
-        if persist and self.path is not None:
-            with self.path.open("a") as fh:
-                fh.write(json.dumps({"obs": np.asarray(obs, float).tolist(), "target": np.asarray(annotation.target).tolist(), "grip": float(annotation.grip)}) + "\n")
-
-    def load(self, path: str | Path) -> int:
-        """Read annotations written by `insert`; a torn last line (crash mid-write) is skipped. Returns the count."""
-        n = 0
-        lines = Path(path).read_text().splitlines()
-        for k, line in enumerate(lines):
-            try:
-                rec = json.loads(line)
-                self.insert(np.array(rec["obs"]), Annotation(np.array(rec["target"]), float(rec["grip"])), persist=False)
-                n += 1
-            except (json.JSONDecodeError, KeyError, AnnotationError) as exc:
-                if k == len(lines) - 1:
-                    log.warning("%s: skipping a torn last line (%s)", path, exc)
-                else:
-                    raise AnnotationError(f"{path}:{k + 1}: bad annotation record: {exc}") from exc
-        return n

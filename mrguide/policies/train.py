@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import csv
 import logging
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -23,9 +24,10 @@ import torch
 from mrguide import __version__
 from mrguide.config import ConfigError, load_section, to_dict
 from mrguide.policies.ddpg import DDPG, DDPGConfig
-from mrguide.policies.experts import AnnotatorNoise, ExpertSource, FileExpert, OracleExpert, SimulatedAnnotator
+from mrguide.policies.annotations import Annotation, AnnotationCache
+from mrguide.policies.experts import (ANNOTATOR_SEED_OFFSET, AnnotatorNoise, ExpertSource, FileExpert, OracleExpert,
+                                      SimulatedAnnotator)
 from mrguide.policies.guidance import (
-    AnnotationCache,
     NominalReference,
     ReferencePose,
     RunningMedianReference,
@@ -56,7 +58,8 @@ class GuidanceConfig:
     delta: float = 0.05  # Δ of Eq. 13, m (ours)
     reference: str = "nominal"  # a^e of Eq. 13: "nominal" (model target) or "running_median"
     cache_tolerance: float = 0.005  # m; observations this close reuse a cached annotation
-    source: str = "annotator"  # "oracle", "annotator" (oracle + noise) or "file"
+    reask_after: int = 15  # expert steps on one waypoint without reaching it before it is asked again (0: never; ours)
+    source: str = "annotator"  # "oracle", "annotator" (oracle + noise), "file", or "live" (a person: `--expert live`)
     noise: AnnotatorNoise = field(default_factory=AnnotatorNoise)
     annotation_file: str = ""  # for source = "file"
 
@@ -65,8 +68,10 @@ class GuidanceConfig:
             raise ConfigError(f"guidance.mode must be 'replay' or 'takeover', got {self.mode!r}")
         if self.reference not in ("nominal", "running_median"):
             raise ConfigError(f"guidance.reference must be 'nominal' or 'running_median', got {self.reference!r}")
-        if self.source not in ("oracle", "annotator", "file"):
-            raise ConfigError(f"guidance.source must be 'oracle', 'annotator' or 'file', got {self.source!r}")
+        if self.source not in ("oracle", "annotator", "file", "live"):
+            raise ConfigError(f"guidance.source must be 'oracle', 'annotator', 'file' or 'live', got {self.source!r}")
+        if self.reask_after < 0:
+            raise ConfigError(f"guidance.reask_after must be >= 0, got {self.reask_after}")
         if self.source == "file" and not self.annotation_file:
             raise ConfigError("guidance.source = 'file' needs guidance.annotation_file")
         if not 0.0 <= self.lam_min <= self.lam_max <= 1.0:
@@ -110,40 +115,71 @@ class CheckpointError(RuntimeError):
 
 
 class GuidedExpert:
-    """Expert actions for the learner: cache → source (counted) → bounded projection → normalized action."""
+    """Expert actions for the learner: cache → source (counted) → bounded projection → normalized action.
 
-    def __init__(self, source: ExpertSource, reference: ReferencePose, cache: AnnotationCache, delta: float, task: TaskConfig, to_normalized):
+    A waypoint the arm has followed for `reask_after` consecutive expert steps without the phase
+    advancing was not reachable as marked (noise, a slip of the hand): it is asked again, as a person
+    watching the arm would re-mark it, and the new mark supersedes the old one in the cache.
+    """
+
+    def __init__(self, source: ExpertSource, reference: ReferencePose, cache: AnnotationCache, delta: float, task: TaskConfig,
+                 to_normalized, reask_after: int = 0):
         self.source, self.reference, self.cache = source, reference, cache
         self.delta = delta
         self.task = task
         self.to_normalized = to_normalized
+        self.reask_after = reask_after
         self.projected = 0  # annotations moved onto the Δ-sphere
+        self.remarks = 0  # waypoints asked again because the arm did not reach them
+        self._streak = (-1, 0)  # (cache index in use, consecutive expert steps on it)
 
-    def action(self, obs: np.ndarray) -> np.ndarray:
-        ann = self.cache.lookup(obs)
-        if ann is None:
-            ann = self.source.annotate(obs)
-            self.cache.asked += 1
-            self.cache.insert(obs, ann)
-            self.reference.observe(obs, ann)
+    def begin_demonstration(self) -> None:
+        self._streak = (-1, 0)
+
+    def action(self, obs: np.ndarray) -> np.ndarray | None:
+        """The expert's normalized action for `obs`, or None when nobody annotated (drop the demonstration)."""
+        hit = self.cache.lookup(obs)
+        if hit is None:
+            ann = self._ask(obs, None)
+        elif self.reask_after and self._streak == (hit.index, self.reask_after):
+            self.remarks += 1
+            ann = self._ask(obs, hit)
         else:
             self.cache.reused += 1
+            ann = hit.annotation
+            self._streak = (hit.index, self._streak[1] + 1 if self._streak[0] == hit.index else 1)
+        if ann is None:
+            return None
         ref = self.reference.reference(obs)
         target = bounded_projection(ann.target, ref, self.delta)
         self.projected += int(not np.allclose(target, ann.target))
         return annotation_action(obs, target, ann.grip, self.task, self.to_normalized)
 
+    def _ask(self, obs: np.ndarray, previous) -> Annotation | None:
+        ann = self.source.annotate(obs, previous.annotation if previous else None)
+        self.cache.asked += 1
+        if ann is None:
+            return None
+        index = self.cache.insert(obs, ann, supersedes=previous.index if previous else None)
+        self.reference.observe(obs, ann)
+        self._streak = (index, 1)
+        return ann
+
 
 def make_expert_source(g: GuidanceConfig, env: PickPlaceEnv, seed: int) -> ExpertSource:
+    """The configured in-process expert source (a live person is attached by `mrguide train --expert live`)."""
     if g.source == "oracle":
         return OracleExpert(env.task_cfg)
     if g.source == "annotator":
-        return SimulatedAnnotator(env.task_cfg, g.noise, seed=seed + 7919)
-    return FileExpert(g.annotation_file, g.cache_tolerance)
+        return SimulatedAnnotator(env.task_cfg, g.noise, env.workspace, seed=seed + ANNOTATOR_SEED_OFFSET)
+    if g.source == "file":
+        return FileExpert(g.annotation_file, g.cache_tolerance)
+    raise ConfigError("guidance.source = 'live' needs a person: run `mrguide train --expert live`")
 
 
 EVAL_SEED_BASE = 1_000_000  # evaluation env seeds start here (training seeds come from the run's RNG)
-METRIC_FIELDS = ("step", "episode", "kind", "return", "success", "outcome", "length", "triggered", "lambda", "expert_ratio", "asked", "reused", "wall_s")
+METRIC_FIELDS = ("step", "episode", "kind", "return", "success", "outcome", "length", "triggered", "lambda", "expert_ratio",
+                 "asked", "reused", "remarks", "skipped", "wall_s")
 EVAL_FIELDS = ("step", "success_rate", "mean_return")
 
 
@@ -160,7 +196,9 @@ def _append_csv(path: Path, fields: tuple[str, ...], row: dict) -> None:
 class Trainer:
     """One seed's training run, resumable from its checkpoint."""
 
-    def __init__(self, cfg: TrainConfig, ddpg_cfg: DDPGConfig, guidance: GuidanceConfig, env_cfg: EnvConfig, out_dir: str | Path):
+    def __init__(self, cfg: TrainConfig, ddpg_cfg: DDPGConfig, guidance: GuidanceConfig, env_cfg: EnvConfig, out_dir: str | Path,
+                 source_factory: Callable[[PickPlaceEnv], ExpertSource] | None = None):
+        """`source_factory` builds the expert source from the env (a live annotation session); default: the config's."""
         self.cfg, self.ddpg_cfg, self.guidance, self.env_cfg = cfg, ddpg_cfg, guidance, env_cfg
         self.out = Path(out_dir)
         self.out.mkdir(parents=True, exist_ok=True)
@@ -169,16 +207,19 @@ class Trainer:
         self.agent = DDPG(*obs_scaling(self.env.workspace), ACT_DIM, ddpg_cfg, seed=cfg.seed)
         self.replay = TaggedReplay(cfg.buffer_size, OBS_DIM, ACT_DIM)
         self.rng = np.random.default_rng(cfg.seed)
-        self.source = make_expert_source(guidance, self.env, cfg.seed)
+        self.source = source_factory(self.env) if source_factory else make_expert_source(guidance, self.env, cfg.seed)
         reference: ReferencePose = (
             NominalReference(self.env.task_cfg) if guidance.reference == "nominal" else RunningMedianReference(self.env.task_cfg)
         )
         self.cache = AnnotationCache(guidance.cache_tolerance, self.out / "annotations.jsonl")
-        self.expert = GuidedExpert(self.source, reference, self.cache, guidance.delta, self.env.task_cfg, self.env.workspace.to_normalized)
+        self.expert = GuidedExpert(self.source, reference, self.cache, guidance.delta, self.env.task_cfg, self.env.workspace.to_normalized,
+                                   guidance.reask_after)
         self.trigger = ThresholdTrigger(guidance.r_threshold)
         self.step = 0
         self.episode = 0
         self.interventions = 0
+        self.skipped = 0  # demonstrations dropped because nobody annotated
+        self.stop_requested = threading.Event()  # set (e.g. on Ctrl-C) to stop at the next step
         self.last_ratio = 0.0
         self._ratio_sum, self._ratio_n = 0.0, 0
         self.update_s = 0.0
@@ -198,11 +239,13 @@ class Trainer:
         """
         end = self.cfg.total_steps
         stop = min(end, stop_at or end)
-        while self.step < stop:
+        while self.step < stop and not self.stop_requested.is_set():
             row = self._agent_episode(end)
             self._log(row)
             if progress:
                 progress(row)
+            if self.stop_requested.is_set():
+                break  # the caller checkpoints the state as it is
             if self.step >= self._next_eval:
                 self.evaluate()
                 self._next_eval += self.cfg.eval_every
@@ -245,7 +288,7 @@ class Trainer:
         self.trigger.reset()
         ret, length, info, triggered = 0.0, 0, {"outcome": None, "is_success": False}, False
         try:
-            while self.step < end:
+            while self.step < end and not self.stop_requested.is_set():
                 action = self.agent.act(obs, self.rng, self.exploration_sigma())
                 obs, r, term, trunc, info = self._env_step(action, 0, obs)
                 ret += r
@@ -268,9 +311,16 @@ class Trainer:
         return self._row("agent", ret, success, info["outcome"] if not triggered else "guided", length, triggered)
 
     def _expert_episode(self, obs: np.ndarray, end: int) -> None:
+        """The expert demonstrates from `obs` (ζ = 1); a waypoint nobody annotates ends the demonstration there."""
         ret, length, info = 0.0, 0, {"outcome": None, "is_success": False}
-        while self.step < end:
-            obs, r, term, trunc, info = self._env_step(self.expert.action(obs), 1, obs)
+        self.expert.begin_demonstration()
+        while self.step < end and not self.stop_requested.is_set():
+            action = self.expert.action(obs)
+            if action is None:
+                self.skipped += int(not self.stop_requested.is_set())
+                info = {"outcome": "skipped", "is_success": False}
+                break
+            obs, r, term, trunc, info = self._env_step(action, 1, obs)
             ret += r
             length += 1
             if term or trunc:
@@ -293,7 +343,7 @@ class Trainer:
             "step": self.step, "episode": self.episode, "kind": kind, "return": round(ret, 4), "success": int(success),
             "outcome": outcome, "length": length, "triggered": int(triggered), "lambda": round(self.lam(), 4),
             "expert_ratio": round(ratio, 4), "asked": self.cache.asked, "reused": self.cache.reused,
-            "wall_s": round(self.wall_s(), 2),
+            "remarks": self.expert.remarks, "skipped": self.skipped, "wall_s": round(self.wall_s(), 2),
         }
 
     def _log(self, row: dict) -> None:
@@ -341,7 +391,8 @@ class Trainer:
             "annotator_rng": getattr(self.source, "rng", None) and self.source.rng.bit_generator.state,
             "counters": {
                 "step": self.step, "episode": self.episode, "interventions": self.interventions, "asked": self.cache.asked,
-                "reused": self.cache.reused, "projected": self.expert.projected, "last_ratio": self.last_ratio,
+                "reused": self.cache.reused, "projected": self.expert.projected, "remarks": self.expert.remarks,
+                "skipped": self.skipped, "last_ratio": self.last_ratio,
                 "next_eval": self._next_eval, "evaluations": self.evaluations, "wall_s": self.wall_s(), "update_s": self.update_s,
             },
         }
@@ -378,7 +429,7 @@ class Trainer:
         c = state["counters"]
         self.step, self.episode, self.interventions = c["step"], c["episode"], c["interventions"]
         self.expert.projected, self.last_ratio, self._next_eval = c["projected"], c["last_ratio"], c["next_eval"]
-        self.evaluations = c["evaluations"]
+        self.evaluations, self.expert.remarks, self.skipped = c["evaluations"], c["remarks"], c["skipped"]
         self._wall_before, self.update_s = c["wall_s"], c["update_s"]
         self._t0 = time.perf_counter()
         self._next_checkpoint = (self.step // self.cfg.checkpoint_every + 1) * self.cfg.checkpoint_every
@@ -390,7 +441,7 @@ class Trainer:
         """All annotations on disk, including those after the checkpoint: none is asked twice."""
         path = self.out / "annotations.jsonl"
         if path.exists():
-            n = self.cache.load(path)
+            n = self.cache.load(path, repair=True)
             log.info("reloaded %d annotations from %s", n, path)
 
     def _truncate_logs(self) -> None:

@@ -13,14 +13,13 @@ import hashlib
 import logging
 import os
 import tempfile
-import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pybullet as pb
 
-from mrguide.robot import RobotSpec
+from mrguide.robot import RobotSpec, urdf_with_tool
 from mrguide.twin.camera import Camera
 from mrguide.twin.config import TwinConfig
 from mrguide.twin.suction import SuctionCup, SuctionState
@@ -34,29 +33,7 @@ TABLE_HALF_EXTENTS = (0.55, 0.60, 0.02)  # top face at z = 0
 
 def urdf_with_cup(spec: RobotSpec) -> Path:
     """Path of a (content-addressed) URDF = the package's URDF + `suction_cup` and `tcp` links on the flange."""
-    root = ET.fromstring(spec.urdf_path.read_text().replace("package://", f"{spec.package_dir.as_posix()}/"))
-    length = float(spec.T_flange_tcp[2, 3])
-    cyl = f'<cylinder radius="{CUP_RADIUS}" length="{length}"/>'
-    origin = f'<origin xyz="0 0 {length / 2}" rpy="0 0 0"/>'
-    root.append(ET.fromstring(
-        f'<link name="suction_cup"><inertial><mass value="0.1"/>{origin}'
-        f'<inertia ixx="1e-4" ixy="0" ixz="0" iyy="1e-4" iyz="0" izz="1e-4"/></inertial>'
-        f'<visual>{origin}<geometry>{cyl}</geometry><material name="cup"><color rgba="0.15 0.15 0.15 1"/></material></visual>'
-        f'<collision>{origin}<geometry>{cyl}</geometry></collision></link>'
-    ))
-    root.append(ET.fromstring(
-        f'<joint name="flange_cup_joint" type="fixed"><parent link="{spec.flange_frame}"/><child link="suction_cup"/>'
-        f'<origin xyz="0 0 0" rpy="0 0 0"/></joint>'
-    ))
-    root.append(ET.fromstring(
-        '<link name="tcp"><inertial><mass value="0"/><origin xyz="0 0 0" rpy="0 0 0"/>'
-        '<inertia ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"/></inertial></link>'
-    ))
-    root.append(ET.fromstring(
-        f'<joint name="cup_tcp_joint" type="fixed"><parent link="suction_cup"/><child link="tcp"/>'
-        f'<origin xyz="0 0 {length}" rpy="0 0 0"/></joint>'
-    ))
-    text = ET.tostring(root, encoding="unicode")
+    text = urdf_with_tool(spec, f"{spec.package_dir.as_posix()}/", CUP_RADIUS)
     out = Path(tempfile.gettempdir()) / "mrguide-urdf" / f"{spec.name}-cup-{hashlib.sha1(text.encode()).hexdigest()[:12]}.urdf"
     if not out.exists():
         out.parent.mkdir(parents=True, exist_ok=True)

@@ -3,17 +3,18 @@
 import numpy as np
 import pytest
 
+from mrguide.policies.annotations import Annotation, AnnotationCache, AnnotationError
 from mrguide.policies.experts import AnnotatorNoise, FileExpert, OracleExpert, SimulatedAnnotator
 from mrguide.policies.guidance import (
-    Annotation,
-    AnnotationCache,
-    AnnotationError,
     RunningMedianReference,
     ThresholdTrigger,
     bounded_projection,
     expert_ratio,
 )
+from mrguide.robot import Workspace
 from mrguide.task import TaskConfig, observation, phase_target
+
+WIDE = Workspace((-5.0, -5.0, -5.0), (5.0, 5.0, 5.0))  # no clamping: noise statistics as drawn
 
 
 def test_expert_ratio_schedule():
@@ -59,7 +60,7 @@ def test_cache_reuses_matching_observations_and_persists(tmp_path):
     cache.insert(_obs(0), ann)
     # the arm elsewhere, object within tolerance: same waypoint
     hit = cache.lookup(_obs(0, obj=(0.503, -0.1, 0.025), tcp=(0.4, 0.0, 0.2)))
-    assert hit is ann
+    assert hit.annotation is ann and hit.index == 0
     assert cache.lookup(_obs(0, obj=(0.51, -0.1, 0.025))) is None  # object moved 1 cm
     assert cache.lookup(_obs(1)) is None  # other phase
     # transport and release depend on the goal only
@@ -67,7 +68,53 @@ def test_cache_reuses_matching_observations_and_persists(tmp_path):
     assert cache.lookup(_obs(3, obj=(0.4, 0.0, 0.1))) is not None
     fresh = AnnotationCache(0.005)
     assert fresh.load(path) == 2
-    assert np.allclose(fresh.lookup(_obs(0)).target, ann.target)
+    assert np.allclose(fresh.lookup(_obs(0)).annotation.target, ann.target)
+
+
+def test_cache_remark_supersedes_and_survives_reload(tmp_path):
+    path = tmp_path / "ann.jsonl"
+    cache = AnnotationCache(0.005, path)
+    first = cache.insert(_obs(1), Annotation(np.array([0.5, -0.1, 0.08]), 1.0, "live", {"client": "bot"}))
+    cache.insert(_obs(3), Annotation(np.array([0.5, 0.2, 0.15]), 1.0))
+    again = cache.insert(_obs(1), Annotation(np.array([0.5, -0.1, 0.047]), 1.0, "live"), supersedes=first)
+    assert cache.lookup(_obs(1)).index == again and len(cache) == 2
+    fresh = AnnotationCache(0.005, path)
+    assert fresh.load(path) == 2
+    hit = fresh.lookup(_obs(1))
+    assert hit.index == again and np.allclose(hit.annotation.target, [0.5, -0.1, 0.047])
+    lines = path.read_text().splitlines()
+    assert '"client": "bot"' in lines[0] and '"supersedes": 0' in lines[2]
+
+
+@pytest.mark.parametrize("record, reason", [
+    ("[1, 2]", "JSON object"),
+    ('{"obs": [0.1], "target": [0.5, 0, 0.1], "grip": 1}', "11 finite numbers"),
+    ('{"obs": OBS, "target": [NaN, 0, 0.1], "grip": 1}', "3 finite numbers"),
+    ('{"obs": OBS, "target": [0.5, 0, 0.1], "grip": null}', "gripper command"),
+    ('{"obs": OBS, "target": [0.5, 0, 0.1]}', "no 'grip'"),
+    ('{"obs": OBS, "target": "here", "grip": 1}', "target"),
+    ('{"obs": OBS, "target": [0.5, 0, 0.1], "grip": 1, "supersedes": 7}', "earlier record"),
+])
+def test_cache_refuses_bad_records_naming_the_line(tmp_path, record, reason):
+    path = tmp_path / "ann.jsonl"
+    good = '{"obs": OBS, "target": [0.5, 0, 0.1], "grip": 1}'
+    obs = str(_obs(0).tolist())
+    path.write_text(good.replace("OBS", obs) + "\n" + record.replace("OBS", obs) + "\n")
+    with pytest.raises(AnnotationError, match=reason) as err:
+        AnnotationCache().load(path)
+    assert f"{path}:2:" in str(err.value)
+
+
+def test_cache_repair_cuts_a_torn_tail_so_the_next_record_is_whole(tmp_path):
+    path = tmp_path / "ann.jsonl"
+    cache = AnnotationCache(0.005, path)
+    cache.insert(_obs(0), Annotation(np.array([0.5, -0.1, 0.13]), -1.0))
+    with path.open("a") as fh:
+        fh.write('{"obs": [0.1, 0.2')  # crash mid-write
+    resumed = AnnotationCache(0.005, path)
+    assert resumed.load(path, repair=True) == 1
+    resumed.insert(_obs(3), Annotation(np.array([0.5, 0.2, 0.15]), 1.0))
+    assert AnnotationCache().load(path) == 2  # no record glued onto the torn line
 
 
 def test_cache_load_skips_torn_last_line_but_refuses_corruption(tmp_path):
@@ -78,21 +125,29 @@ def test_cache_load_skips_torn_last_line_but_refuses_corruption(tmp_path):
         fh.write('{"obs": [0.1, 0.2')  # crash mid-write
     assert AnnotationCache().load(path) == 1
     path.write_text('garbage\n' + path.read_text())
-    with pytest.raises(AnnotationError, match=":1: bad annotation record"):
+    with pytest.raises(AnnotationError, match=":1: not JSON"):
         AnnotationCache().load(path)
 
 
 def test_simulated_annotator_noise_and_outliers():
     task = TaskConfig()
     exact = OracleExpert(task).annotate(_obs(0)).target
-    noisy = SimulatedAnnotator(task, AnnotatorNoise(sigma=0.02), seed=1)
+    noisy = SimulatedAnnotator(task, AnnotatorNoise(sigma=0.02), WIDE, seed=1)
     errs = np.array([noisy.annotate(_obs(0)).target - exact for _ in range(2000)])
     assert errs.std(axis=0) == pytest.approx([0.02] * 3, rel=0.1)
-    biased = SimulatedAnnotator(task, AnnotatorNoise(bias=(0.01, 0.0, -0.02)), seed=1)
+    biased = SimulatedAnnotator(task, AnnotatorNoise(bias=(0.01, 0.0, -0.02)), WIDE, seed=1)
     assert np.allclose(biased.annotate(_obs(0)).target - exact, [0.01, 0.0, -0.02])
-    outl = SimulatedAnnotator(task, AnnotatorNoise(outlier_rate=0.1, outlier_scale=0.2), seed=2)
+    outl = SimulatedAnnotator(task, AnnotatorNoise(outlier_rate=0.1, outlier_scale=0.2), WIDE, seed=2)
     big = np.mean([np.linalg.norm(outl.annotate(_obs(0)).target - exact) > 0.05 for _ in range(2000)])
     assert 0.07 < big < 0.13
+
+
+def test_simulated_annotator_marks_inside_the_workspace_box_only():
+    ws = Workspace()
+    marks = SimulatedAnnotator(TaskConfig(), AnnotatorNoise(sigma=0.1), ws, seed=3)
+    targets = np.array([marks.annotate(_obs(1)).target for _ in range(500)])
+    assert np.all(targets >= ws.lo) and np.all(targets <= ws.hi)
+    assert np.mean(targets[:, 2] == ws.lo[2]) > 0.2  # grasp marks below the box floor land on it
 
 
 def test_running_median_reference_follows_bias_not_outliers():
@@ -113,8 +168,67 @@ def test_file_expert(tmp_path):
     path = tmp_path / "rec.jsonl"
     AnnotationCache(0.005, path).insert(_obs(2), Annotation(np.array([0.5, -0.1, 0.15]), 1.0))
     fe = FileExpert(path)
-    assert np.allclose(fe.annotate(_obs(2)).target, [0.5, -0.1, 0.15])
+    replayed = fe.annotate(_obs(2))
+    assert np.allclose(replayed.target, [0.5, -0.1, 0.15]) and replayed.source == "file"
     with pytest.raises(AnnotationError, match="no recorded annotation"):
         fe.annotate(_obs(4))
     with pytest.raises(AnnotationError, match="not found"):
         FileExpert(tmp_path / "missing.jsonl")
+
+
+class _Recorder:
+    """An expert source that marks a fixed (unreachable) point and records what it was asked."""
+
+    def __init__(self, answers):
+        self.answers = list(answers)
+        self.previous = []
+
+    def annotate(self, obs, previous=None):
+        self.previous.append(previous)
+        target = self.answers.pop(0)
+        return None if target is None else Annotation(np.array(target), 1.0, "live")
+
+
+def _guided(source, tmp_path, reask_after):
+    from mrguide.policies.guidance import NominalReference
+    from mrguide.policies.train import GuidedExpert
+
+    task = TaskConfig()
+    cache = AnnotationCache(0.005, tmp_path / "ann.jsonl")
+    return GuidedExpert(source, NominalReference(task), cache, 0.05, task, Workspace().to_normalized, reask_after), cache
+
+
+def test_a_waypoint_not_reached_is_asked_again_and_supersedes_the_first(tmp_path):
+    src = _Recorder([[0.5, -0.1, 0.06], [0.5, -0.1, 0.047]])
+    expert, cache = _guided(src, tmp_path, reask_after=15)
+    expert.begin_demonstration()
+    obs = _obs(1)  # grasp phase; the arm never gets there, so the phase does not advance
+    actions = [expert.action(obs) for _ in range(15)]  # the mark is followed for 15 steps
+    assert src.previous == [None] and cache.asked == 1 and cache.reused == 14 and expert.remarks == 0
+    assert np.allclose(actions[0], actions[14])
+    again = expert.action(obs)  # 16th step on the same waypoint: asked again, with the old mark
+    assert expert.remarks == 1 and cache.asked == 2 and np.allclose(src.previous[1].target, [0.5, -0.1, 0.06])
+    assert not np.allclose(again, actions[0]) and cache.lookup(obs).index == 1 and len(cache) == 1
+    fresh = AnnotationCache(0.005)
+    fresh.load(tmp_path / "ann.jsonl")
+    assert np.allclose(fresh.lookup(obs).annotation.target, [0.5, -0.1, 0.047])
+
+
+def test_reask_disabled_and_a_new_demonstration_restarts_the_count(tmp_path):
+    src = _Recorder([[0.5, -0.1, 0.06]])
+    expert, cache = _guided(src, tmp_path, reask_after=0)
+    for _ in range(40):
+        expert.action(_obs(1))
+    assert cache.asked == 1 and expert.remarks == 0
+    src = _Recorder([[0.5, -0.1, 0.06]])
+    expert, cache = _guided(src, tmp_path / "..", reask_after=15)
+    for _ in range(3):
+        expert.begin_demonstration()
+        for _ in range(10):  # 10 steps per demonstration: never 15 in a row
+            expert.action(_obs(1))
+    assert cache.asked == 1 and expert.remarks == 0
+
+
+def test_nobody_answering_gives_no_action(tmp_path):
+    expert, cache = _guided(_Recorder([None]), tmp_path, reask_after=15)
+    assert expert.action(_obs(0)) is None and len(cache) == 0 and cache.asked == 1

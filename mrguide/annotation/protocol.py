@@ -1,0 +1,130 @@
+"""Live annotation protocol v1 (docs/annotation-protocol.md): message parsing and validation, requests.
+
+Pure functions and data: no threads, no web code. Every refusal is a `ProtocolError` whose message is
+the reason sent back to the client.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from mrguide.robot import Workspace
+from mrguide.task import G_REQUIRED, PHASES
+
+PROTOCOL_VERSION = 1
+MAX_MESSAGE_BYTES = 64 * 1024
+CLIENT_TYPES = ("hello", "claim", "answer", "skip", "ping")
+
+#: What is asked in each phase, in words a person at the page or in the headset understands.
+PROMPTS: tuple[str, ...] = (
+    "Mark the pre-grasp point: where the cup should hover above the object before it goes down. Vacuum off.",
+    "Mark where the cup should touch the object: the centre of its top face. Vacuum on.",
+    "Mark where the cup should lift the object to. Vacuum on.",
+    "Mark where to carry the object: the point above the goal. Vacuum on.",
+    "Mark where the object should be set down on the goal; the vacuum releases there. Vacuum off.",
+)
+REMARK_PROMPT = "The arm did not reach your last mark for this step. Mark it again. "
+
+
+class ProtocolError(ValueError):
+    """A client message that is refused; the message is the reason sent back in the `ack`."""
+
+
+@dataclass(frozen=True)
+class AnnotationRequest:
+    """What the trainer asks a person: the robot and scene state in one phase of the task."""
+
+    phase: int
+    joints: np.ndarray  # rad, robot joint order
+    tcp: np.ndarray  # m, robot base frame
+    vacuum_on: bool
+    object_position: np.ndarray
+    object_orientation: np.ndarray  # quaternion x, y, z, w
+    goal: np.ndarray
+    obs: np.ndarray  # the policy observation the answer is recorded with
+    remark: bool = False
+    previous_target: np.ndarray | None = None
+
+    def to_message(self, request_id: str, timeout_s: float | None, claimed_by: str | None) -> dict[str, Any]:
+        """The `request` message (JSON-ready)."""
+        return {
+            "type": "request", "id": request_id, "phase": PHASES[self.phase], "phase_index": self.phase,
+            "ask": ["target", "vacuum"],
+            "prompt": (REMARK_PROMPT if self.remark else "") + PROMPTS[self.phase],
+            "suggested_vacuum": G_REQUIRED[self.phase] > 0, "remark": self.remark,
+            "previous_target": _floats(self.previous_target) if self.previous_target is not None else None,
+            "state": {
+                "joints": _floats(self.joints), "tcp": _floats(self.tcp), "vacuum_on": bool(self.vacuum_on),
+                "object": {"position": _floats(self.object_position), "orientation": _floats(self.object_orientation)},
+                "goal": _floats(self.goal),
+            },
+            "timeout_s": timeout_s, "claimed_by": claimed_by,
+        }
+
+
+def _floats(x: np.ndarray) -> list[float]:
+    return [float(v) for v in np.asarray(x).ravel()]
+
+
+def _refuse_constant(name: str) -> float:
+    raise ProtocolError(f"not finite: {name} is not allowed in JSON")
+
+
+def parse_message(text: str | bytes) -> dict[str, Any]:
+    """Decode one client message: a JSON object of known `type` within the size limit."""
+    if isinstance(text, (bytes, bytearray)):
+        raise ProtocolError("binary frames are not part of the protocol; send JSON text")
+    if len(text.encode("utf-8", "surrogatepass")) > MAX_MESSAGE_BYTES:
+        raise ProtocolError(f"message larger than {MAX_MESSAGE_BYTES} bytes")
+    try:
+        msg = json.loads(text, parse_constant=_refuse_constant)
+    except json.JSONDecodeError as exc:
+        raise ProtocolError(f"malformed JSON: {exc.msg} at line {exc.lineno} column {exc.colno}") from exc
+    if not isinstance(msg, dict):
+        raise ProtocolError(f"a message must be a JSON object, got {type(msg).__name__}")
+    kind = msg.get("type")
+    if not isinstance(kind, str):
+        raise ProtocolError("message has no string field 'type'")
+    if kind not in CLIENT_TYPES:
+        raise ProtocolError(f"unknown message type {kind[:40]!r}")
+    if kind in ("claim", "answer", "skip") and not isinstance(msg.get("id"), str):
+        raise ProtocolError(f"'{kind}' needs a string field 'id'")
+    return msg
+
+
+def parse_hello(msg: dict[str, Any]) -> tuple[str, str]:
+    """(client kind, display name) of a client `hello`; another protocol version is refused."""
+    if msg.get("protocol") != PROTOCOL_VERSION:
+        raise ProtocolError(f"protocol {msg.get('protocol')!r} not supported: this server speaks {PROTOCOL_VERSION}")
+    kind = msg.get("client", "unknown")
+    name = msg.get("name", kind)
+    if not isinstance(kind, str) or not isinstance(name, str):
+        raise ProtocolError("'client' and 'name' must be strings")
+    return kind[:40], name[:80]
+
+
+def parse_answer(msg: dict[str, Any], workspace: Workspace) -> tuple[np.ndarray, bool]:
+    """(target in m, vacuum on) of an `answer`: three finite numbers inside the workspace box, a bool."""
+    target = msg.get("target")
+    if not isinstance(target, list) or len(target) != 3:
+        raise ProtocolError("'target' must be a list of 3 numbers [x, y, z] in metres")
+    for i, v in enumerate(target):
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            raise ProtocolError(f"target[{i}] is not a number: {v!r}"[:120])
+        if not math.isfinite(v):
+            raise ProtocolError(f"not finite: target[{i}]")
+    vacuum = msg.get("vacuum")
+    if not isinstance(vacuum, bool):
+        raise ProtocolError("'vacuum' must be true or false")
+    p = np.array(target, dtype=float)
+    for i, axis in enumerate("xyz"):
+        if p[i] < workspace.lo[i]:
+            raise ProtocolError(f"target outside the workspace box: {axis} = {p[i]:.4f} < {workspace.lo[i]:.4f}")
+        if p[i] > workspace.hi[i]:
+            raise ProtocolError(f"target outside the workspace box: {axis} = {p[i]:.4f} > {workspace.hi[i]:.4f}")
+    return p, vacuum

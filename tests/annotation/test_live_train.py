@@ -1,0 +1,153 @@
+"""Training with a live expert: a bot over the wire equals the in-process annotator; timeouts; Ctrl-C."""
+
+from __future__ import annotations
+
+import asyncio
+import csv
+import dataclasses
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+import aiohttp
+import numpy as np
+import pytest
+
+from mrguide.annotation.bot import AnnotationBot, BotOptions
+from mrguide.annotation.live import LiveOptions, LiveSession
+from mrguide.policies.annotations import anchor_key
+from mrguide.policies.experts import AnnotatorNoise
+from mrguide.policies.train import Trainer, load_train_config
+from tests.annotation.conftest import Client
+
+SIGMA = 0.02
+
+
+def trainer(out: Path, source: str = "annotator", factory=None) -> Trainer:
+    tc, dc, gc, ec = load_train_config(None)
+    tc = dataclasses.replace(tc, total_steps=600, learning_starts=64, batch_size=32, eval_every=10_000, checkpoint_every=10_000)
+    dc = dataclasses.replace(dc, hidden=(32, 32))
+    gc = dataclasses.replace(gc, intake_steps=400, source=source, noise=AnnotatorNoise(sigma=SIGMA))
+    return Trainer(tc, dc, gc, ec, out, factory)
+
+
+def rows(path: Path) -> list[dict]:
+    with path.open() as fh:
+        return [{k: v for k, v in r.items() if k != "wall_s"} for r in csv.DictReader(fh)]
+
+
+def records(path: Path) -> list[dict]:
+    return [json.loads(line) for line in path.read_text().splitlines()]
+
+
+def test_bot_over_the_wire_trains_exactly_like_the_in_process_annotator(tmp_path):
+    local = trainer(tmp_path / "local")
+    try:
+        local.run(stop_at=350)
+    finally:
+        local.close()
+    session = LiveSession(LiveOptions(port=0))
+    live = trainer(tmp_path / "live", "live", session.source_factory)
+    bot = AnnotationBot(BotOptions(session.url, AnnotatorNoise(sigma=SIGMA), seed=0))
+    thread = threading.Thread(target=bot.run, daemon=True)
+    thread.start()
+    try:
+        live.run(stop_at=350)
+    finally:
+        live.close()
+        session.close()
+    thread.join(10)
+    a, b = records(tmp_path / "local" / "annotations.jsonl"), records(tmp_path / "live" / "annotations.jsonl")
+    assert len(a) == len(b) > 5
+    assert [r["target"] for r in a] == [r["target"] for r in b]  # bit for bit, through JSON
+    assert {r["source"] for r in a} == {"simulated"} and {(r["source"], r["client"]) for r in b} == {("live", "bot")}
+    assert all(r["latency_s"] >= 0 for r in b)
+    assert rows(tmp_path / "local" / "metrics.csv") == rows(tmp_path / "live" / "metrics.csv")
+    assert bot.report.answers == len(b) and bot.report.refused == 0
+
+
+@pytest.mark.parametrize("policy", ["skip", "oracle"])
+def test_nobody_answers_skip_drops_demonstrations_oracle_answers_tagged(tmp_path, policy):
+    session = LiveSession(LiveOptions(port=0, on_timeout=policy, timeout_s=0.05))
+    tr = trainer(tmp_path / policy, "live", session.source_factory)
+    try:
+        tr.run(stop_at=150)
+    finally:
+        tr.close()
+        session.close()
+    assert tr.interventions > 0 and session.expert.counts.answers == 0
+    ann = tmp_path / policy / "annotations.jsonl"
+    if policy == "skip":
+        assert tr.skipped == tr.interventions and tr.replay.expert.size == 0  # no ζ = 1 transition without a person
+        assert not ann.exists()
+    else:
+        assert tr.skipped == 0 and tr.replay.expert.size > 0
+        recs = records(ann)
+        assert recs and {r["source"] for r in recs} == {"oracle"} and all(r["fallback"] == "timeout" for r in recs)
+        assert session.expert.counts.fallbacks == len(recs)
+
+
+async def _answer_requests(url: str, n: int, seen: list[dict]) -> None:
+    """Answer `n` requests with the object/goal-based waypoint, then watch the next one without answering."""
+    ws_url = url.replace("http", "ws", 1).replace("/?token=", "/ws?token=")
+    async with aiohttp.ClientSession() as http:
+        ws = await http.ws_connect(ws_url)
+        c = Client(ws)
+        await c.send({"type": "hello", "protocol": 1, "client": "test"})
+        for _ in range(n + 1):
+            req = await c.recv("request", timeout=60)
+            seen.append(req)
+            if len(seen) > n:
+                return
+            s = req["state"]
+            anchor = s["object"]["position"] if req["phase_index"] <= 2 else s["goal"]
+            z = {0: 0.13, 1: 0.047, 2: 0.15, 3: 0.15, 4: 0.05}[req["phase_index"]]
+            await c.send({"type": "answer", "id": req["id"], "target": [anchor[0], anchor[1], z], "vacuum": req["suggested_vacuum"]})
+
+
+def _start_train(out: Path, *extra: str) -> subprocess.Popen:
+    cmd = [sys.executable, "-m", "mrguide.cli", "train", "--expert", "live", "--port", "0", "--steps", "3000", "--quiet",
+           "--out", str(out), *extra]
+    return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env={**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[2])})
+
+
+def _page_url(proc: subprocess.Popen) -> str:
+    for line in proc.stdout:
+        if line.startswith("annotation page: "):
+            return line.split(": ", 1)[1].strip()
+    raise AssertionError(f"no URL printed; stderr: {proc.stderr.read()}")
+
+
+def test_ctrl_c_while_waiting_checkpoints_and_resume_asks_nothing_twice(tmp_path):
+    out = tmp_path / "run"
+    proc = _start_train(out)
+    try:
+        seen: list[dict] = []
+        asyncio.run(_answer_requests(_page_url(proc), 6, seen))  # 6 answered, the 7th left waiting
+        proc.send_signal(signal.SIGINT)
+        stdout, stderr = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    assert proc.returncode == 130, stderr
+    assert "checkpoint" in stderr and (out / "checkpoint.pt").exists()
+    first = records(out / "annotations.jsonl")
+    assert [r["request"] for r in first] == [r["id"] for r in seen[:6]]  # every answer on disk, nothing else
+    proc = _start_train(out, "--resume", "--stop-after", "600")
+    try:
+        url = _page_url(proc)
+        bot = subprocess.run([sys.executable, "-m", "mrguide.cli", "annotate", "bot", "--url", url], capture_output=True,
+                             text=True, timeout=240, env={**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[2])})
+        proc.wait(timeout=240)
+    finally:
+        proc.kill()
+    assert proc.returncode == 0 and bot.returncode == 0, (proc.stderr.read(), bot.stderr)
+    after = records(out / "annotations.jsonl")
+    assert after[:6] == first and len(after) > 6
+    keys = [anchor_key(np.array(r["obs"])) for r in after if r["supersedes"] is None]
+    for i, k in enumerate(keys):  # no waypoint asked twice (re-marks aside)
+        assert all(np.abs(k - other).max() > 0.005 for other in keys[:i])
