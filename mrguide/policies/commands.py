@@ -86,6 +86,10 @@ def cmd_train(args: argparse.Namespace, live: LivePlugin | None = None) -> int:
     out = Path(args.out)
     if not args.resume and (out / "checkpoint.pt").exists():
         return _refuse(f"{out} already holds a run; use --resume or another --out")
+    leftovers = [n for n in ("metrics.csv", "eval.csv", "annotations.jsonl") if not args.resume and (out / n).exists()]
+    if leftovers:
+        return _refuse(f"{out} holds {', '.join(leftovers)} of a run that never checkpointed: use another --out, or move "
+                       "them away (a recorded annotations.jsonl replays with guidance.source = 'file')")
     bar = tqdm(total=min(tc.total_steps, args.stop_after or tc.total_steps), desc="train", unit="step", disable=args.quiet)
     session = None
     if gc.enabled and gc.source == "live":

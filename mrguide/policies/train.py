@@ -25,6 +25,7 @@ from mrguide import __version__
 from mrguide.config import ConfigError, load_section, to_dict
 from mrguide.policies.ddpg import DDPG, DDPGConfig
 from mrguide.policies.annotations import Annotation, AnnotationCache
+from mrguide.policies.checkpoint import CheckpointError, read_checkpoint, write_checkpoint
 from mrguide.policies.experts import (ANNOTATOR_SEED_OFFSET, AnnotatorNoise, ExpertSource, FileExpert, OracleExpert,
                                       SimulatedAnnotator)
 from mrguide.policies.guidance import (
@@ -42,7 +43,6 @@ from mrguide.twin.env import EnvConfig, PickPlaceEnv
 
 log = logging.getLogger(__name__)
 
-CHECKPOINT_FORMAT = 4  # 2: critics stored as one ensemble; 3: agent update counter; 4: evaluation counter
 
 
 @dataclass(frozen=True)
@@ -108,10 +108,6 @@ def obs_scaling(ws: Workspace) -> tuple[np.ndarray, np.ndarray]:
     offset = np.concatenate([centre, [0.0, 0.5], centre, centre])
     scale = np.concatenate([1 / half, [1.0, 2.0], 1 / half, 1 / half])
     return offset, scale
-
-
-class CheckpointError(RuntimeError):
-    """A checkpoint that is corrupt or belongs to another configuration."""
 
 
 class GuidedExpert:
@@ -385,7 +381,7 @@ class Trainer:
     def save_checkpoint(self) -> Path:
         """Everything to resume: networks, optimizers, both pools, RNG states, counters. Written atomically."""
         state = {
-            "format": CHECKPOINT_FORMAT, "version": __version__, "config": self._fingerprint(),
+            "version": __version__, "config": self._fingerprint(),
             "agent": self.agent.state_dict(), "agent_pool": self.replay.agent.state(), "expert_pool": self.replay.expert.state(),
             "rng": self.rng.bit_generator.state, "torch_rng": torch.get_rng_state(),
             "annotator_rng": getattr(self.source, "rng", None) and self.source.rng.bit_generator.state,
@@ -396,23 +392,12 @@ class Trainer:
                 "next_eval": self._next_eval, "evaluations": self.evaluations, "wall_s": self.wall_s(), "update_s": self.update_s,
             },
         }
-        path = self.out / "checkpoint.pt"
-        tmp = path.with_suffix(".tmp")
-        torch.save(state, tmp)
-        tmp.replace(path)
-        return path
+        return write_checkpoint(self.out / "checkpoint.pt", state)
 
     def load_checkpoint(self, path: str | Path | None = None) -> None:
         """Resume from a checkpoint; a corrupt or mismatched file raises CheckpointError."""
         path = Path(path) if path else self.out / "checkpoint.pt"
-        try:
-            state = torch.load(path, weights_only=False)
-        except FileNotFoundError as exc:
-            raise CheckpointError(f"no checkpoint at {path}") from exc
-        except Exception as exc:  # torch raises many kinds on a damaged file
-            raise CheckpointError(f"{path}: not a readable checkpoint ({type(exc).__name__}: {exc})") from exc
-        if not isinstance(state, dict) or state.get("format") != CHECKPOINT_FORMAT:
-            raise CheckpointError(f"{path}: not an mrguide checkpoint of format {CHECKPOINT_FORMAT}")
+        state = read_checkpoint(path)
         if state["config"] != self._fingerprint():
             diff = [k for k in state["config"] if state["config"][k] != self._fingerprint().get(k)]
             raise CheckpointError(f"{path}: written with a different configuration (sections differ: {', '.join(diff)})")
@@ -420,21 +405,22 @@ class Trainer:
             self.agent.load_state_dict(state["agent"])
             self.replay.agent.load(state["agent_pool"])
             self.replay.expert.load(state["expert_pool"])
-        except (KeyError, RuntimeError, ValueError) as exc:
-            raise CheckpointError(f"{path}: does not fit this model: {exc}") from exc
-        self.rng.bit_generator.state = state["rng"]
-        torch.set_rng_state(state["torch_rng"])
-        if state["annotator_rng"] is not None:
-            self.source.rng.bit_generator.state = state["annotator_rng"]
-        c = state["counters"]
-        self.step, self.episode, self.interventions = c["step"], c["episode"], c["interventions"]
-        self.expert.projected, self.last_ratio, self._next_eval = c["projected"], c["last_ratio"], c["next_eval"]
-        self.evaluations, self.expert.remarks, self.skipped = c["evaluations"], c["remarks"], c["skipped"]
-        self._wall_before, self.update_s = c["wall_s"], c["update_s"]
+            self.rng.bit_generator.state = state["rng"]
+            torch.set_rng_state(state["torch_rng"])
+            if state["annotator_rng"] is not None:
+                self.source.rng.bit_generator.state = state["annotator_rng"]
+            c = state["counters"]
+            self.step, self.episode, self.interventions = c["step"], c["episode"], c["interventions"]
+            self.expert.projected, self.last_ratio, self._next_eval = c["projected"], c["last_ratio"], c["next_eval"]
+            self.evaluations, self.expert.remarks, self.skipped = c["evaluations"], c["remarks"], c["skipped"]
+            self._wall_before, self.update_s = c["wall_s"], c["update_s"]
+            asked, reused = c["asked"], c["reused"]
+        except (KeyError, TypeError, RuntimeError, ValueError, AttributeError) as exc:
+            raise CheckpointError(f"{path}: does not fit this trainer: {type(exc).__name__}: {exc}") from exc
         self._t0 = time.perf_counter()
         self._next_checkpoint = (self.step // self.cfg.checkpoint_every + 1) * self.cfg.checkpoint_every
         self._reload_annotations()
-        self.cache.asked, self.cache.reused = c["asked"], c["reused"]
+        self.cache.asked, self.cache.reused = asked, reused
         self._truncate_logs()
 
     def _reload_annotations(self) -> None:

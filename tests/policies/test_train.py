@@ -101,13 +101,27 @@ def test_corrupt_and_mismatched_checkpoints_refused(tmp_path):
         other.load_checkpoint()
     other.close()
     path = tmp_path / "c" / "checkpoint.pt"
-    path.write_bytes(path.read_bytes()[:1000])
+    good = path.read_bytes()
     same = make(tmp_path, "c")
-    with pytest.raises(CheckpointError, match="not a readable checkpoint"):
-        same.load_checkpoint()
-    with pytest.raises(CheckpointError, match="no checkpoint"):
-        same.load_checkpoint(tmp_path / "nothing.pt")
-    same.close()
+    try:
+        same.load_checkpoint()  # the intact file loads
+        rng = np.random.default_rng(0)
+        header_end = good.index(b"\n") + 1
+        flipped = bytearray(good)
+        for i in rng.choice(np.arange(header_end, len(good)), 64, replace=False):
+            flipped[i] ^= 0xFF
+        for damaged, reason in ((bytes(flipped), "digest"), (good[:1000], "digest"), (b"garbage", "not an mrguide checkpoint"),
+                                (good.replace(b"MRGUIDE-CHECKPOINT 5", b"MRGUIDE-CHECKPOINT 3", 1), "format 3")):
+            path.write_bytes(damaged)
+            with pytest.raises(CheckpointError, match=reason):
+                same.load_checkpoint()
+        torch.save({"format": 3}, path)  # an old-style file without a header
+        with pytest.raises(CheckpointError, match="not an mrguide checkpoint"):
+            same.load_checkpoint()
+        with pytest.raises(CheckpointError, match="no checkpoint"):
+            same.load_checkpoint(tmp_path / "nothing.pt")
+    finally:
+        same.close()
 
 
 @pytest.mark.slow
