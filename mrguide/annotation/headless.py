@@ -198,7 +198,7 @@ class AnnotationPage:
             raise HeadlessError(f"the gizmo's {axis} arrow is not under any pixel (hidden or edge-on?)")
         return handle
 
-    def drag_gizmo(self, axis: str, dx: float, dy: float, steps: int = 12) -> list[float]:
+    def drag_gizmo(self, axis: str, dx: float, dy: float, steps: int = 6) -> list[float]:
         """Drag the gizmo's `axis` arrow by (dx, dy) screen pixels with the mouse; returns the new target."""
         h = self.gizmo_handle(axis)
         mouse = self.page.mouse

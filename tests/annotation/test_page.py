@@ -120,22 +120,20 @@ def test_page_shows_request_drag_keys_and_submit(browser, served, spec, tmp_path
         assert page.page.is_disabled("#xr-button")
         assert "headset" in page.text("xr-message").lower() or "webxr" in page.text("xr-message").lower()
 
-        # Drag the gizmo's X arrow with the mouse, along its on-screen direction.
-        a, b = page.page.evaluate("(p) => [window.mrguide.screenOf(p), window.mrguide.screenOf([p[0] + 0.1, p[1], p[2]])]",
-                                  list(start))
-        d = np.array([b["x"] - a["x"], b["y"] - a["y"]])
-        d = 70 * d / np.linalg.norm(d)
-        after_x = np.array(page.drag_gizmo("X", d[0], d[1]))
-        assert after_x[0] > start[0] + 0.01, (start, after_x)  # moved along +x by a visible amount
-        np.testing.assert_allclose(after_x[1:], start[1:], atol=2e-4)  # and only along x
-        # Then down along z (toward the object), dragging the Z arrow.
-        a, b = page.page.evaluate("(p) => [window.mrguide.screenOf(p), window.mrguide.screenOf([p[0], p[1], p[2] - 0.1])]",
-                                  list(after_x))
-        d = np.array([b["x"] - a["x"], b["y"] - a["y"]])
-        d = 90 * d / np.linalg.norm(d)
-        after_z = np.array(page.drag_gizmo("Z", d[0], d[1]))
-        assert after_z[2] < after_x[2] - 0.02, (after_x, after_z)
-        np.testing.assert_allclose(after_z[:2], after_x[:2], atol=2e-4)
+        # Drag the gizmo's Y arrow with the mouse toward the object (-y), as far on screen as 17 cm there.
+        def screen_delta(p, dp):
+            a, b = page.page.evaluate("([p, q]) => [window.mrguide.screenOf(p), window.mrguide.screenOf(q)]",
+                                      [list(p), list(np.add(p, dp))])
+            return b["x"] - a["x"], b["y"] - a["y"]
+
+        after_y = np.array(page.drag_gizmo("Y", *screen_delta(start, [0, -0.17, 0])))
+        assert after_y[1] < start[1] - 0.08, (start, after_y)  # moved along -y by a visible amount
+        np.testing.assert_allclose(after_y[[0, 2]], start[[0, 2]], atol=2e-4)  # and only along y
+        # Then down along z toward the object's top, dragging the Z arrow.
+        after_z = np.array(page.drag_gizmo("Z", *screen_delta(after_y, [0, 0, -0.25])))
+        assert after_z[2] < after_y[2] - 0.1, (after_y, after_z)
+        np.testing.assert_allclose(after_z[:2], after_y[:2], atol=2e-4)
+        assert spec.workspace.contains(after_z)
         assert s["claimedBy"] is None and page.state()["claimedBy"] == page.state()["clientId"]  # editing claims
 
         # Keyboard: PageDown 5 mm down, Shift+PageUp 1 mm up, an arrow 5 mm along one table axis, V toggles.

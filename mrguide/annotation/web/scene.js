@@ -261,8 +261,7 @@ export class TwinView extends EventTarget {
   /** The arm model's TCP link (forward kinematics of urdf-loader) in the robot frame, or null. */
   modelTcp() {
     if (!this.robot || !this.robot.links || !this.robot.links.tcp) return null;
-    this.scene.updateMatrixWorld(true);
-    const p = this.robot.links.tcp.getWorldPosition(new THREE.Vector3());
+    const p = this.robot.links.tcp.getWorldPosition(new THREE.Vector3()); // updates its parent chain
     this.root.worldToLocal(p);
     return [p.x, p.y, p.z];
   }
@@ -287,7 +286,7 @@ export class TwinView extends EventTarget {
     }
     this.target.visible = true;
     this.gizmo.enabled = true;
-    this.gizmo.getHelper().visible = true;
+    this.gizmo.getHelper().visible = !this.renderer.xr.isPresenting;
     this._updateCues();
     this.requestRender();
   }
@@ -351,9 +350,9 @@ export class TwinView extends EventTarget {
   resetCamera() {
     const { lo, hi } = this.workspace;
     const mid = [(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, (lo[2] + hi[2]) / 3];
-    const eye = [mid[0] + 0.95, mid[1] - 0.55, 0.78];
+    const eye = [mid[0] + 1.1, mid[1] - 0.62, 0.92];
     this.camera.position.copy(this.toWorld(eye));
-    this.orbit.target.copy(this.toWorld([mid[0] - 0.08, mid[1] - 0.04, mid[2]]));
+    this.orbit.target.copy(this.toWorld([mid[0] - 0.12, mid[1] - 0.05, mid[2] + 0.06]));
     this.orbit.update();
     this.requestRender();
   }

@@ -34,7 +34,7 @@ export class XRView {
       available: false, arSupported: false, vrSupported: false, message: 'checking for WebXR...',
       mode: null, blendMode: null, presenting: false, transparent: false, referenceSpace: null,
       placed: false, placementSource: null, hitTest: false, reticleVisible: false,
-      selects: 0, lastSelect: null, error: null,
+      selects: 0, lastSelect: null, error: null, frames: 0,
     };
     this._buildProps();
   }
@@ -67,7 +67,8 @@ export class XRView {
     this.panelTexture = new THREE.CanvasTexture(canvas);
     this.panelTexture.colorSpace = THREE.SRGBColorSpace;
     this.panel = new THREE.Mesh(new THREE.PlaneGeometry(0.48, 0.18),
-      new THREE.MeshBasicMaterial({ map: this.panelTexture, transparent: true, depthWrite: false }));
+      new THREE.MeshBasicMaterial({ map: this.panelTexture, transparent: true, depthWrite: false, depthTest: false }));
+    this.panel.renderOrder = 10; // always readable
     this.panel.visible = false;
     scene.add(this.panel);
   }
@@ -111,6 +112,8 @@ export class XRView {
     Object.assign(this.info, { mode, blendMode: blend, presenting: true, referenceSpace: refType, placed: false,
       placementSource: null, hitTest: false, reticleVisible: false, error: null });
     this._setTransparent(blend !== 'opaque');
+    this.view.root.visible = false; // until placed: no twin under the person's feet
+    this.view.gizmo.getHelper().visible = false; // the mouse gizmo is for the desktop camera; here a select marks
     this.pens.forEach((p) => { p.visible = true; });
     this.panel.visible = true;
 
@@ -158,6 +161,7 @@ export class XRView {
     root.matrix.copy(matrix);
     root.matrixWorldNeedsUpdate = true;
     root.updateMatrixWorld(true);
+    root.visible = true;
     Object.assign(this.info, { placed: true, placementSource: source });
     this.reticle.visible = false;
     this.info.reticleVisible = false;
@@ -166,8 +170,8 @@ export class XRView {
 
   /** Base at `point` (world, on a surface), robot +x pointing at the person: the workspace lies between. */
   _placeFacingViewer(point, source) {
-    const head = this.view.renderer.xr.getCamera().getWorldPosition(new THREE.Vector3());
-    const d = head.clone().sub(point);
+    const head = this.head ? this.head.clone() : this.view.renderer.xr.getCamera().getWorldPosition(new THREE.Vector3());
+    const d = head.sub(point);
     d.y = 0;
     if (d.lengthSq() < 1e-6) d.set(0, 0, 1);
     d.normalize();
@@ -179,8 +183,14 @@ export class XRView {
 
   _frame(frame) {
     const r = this.view.renderer;
+    this.info.frames += 1;
+    const ref = r.xr.getReferenceSpace();
+    const viewerPose = frame && ref ? frame.getViewerPose(ref) : null;
+    if (viewerPose) { // the head (between the eyes), for turning the robot and the panel to the person
+      const p = viewerPose.transform.position;
+      this.head = new THREE.Vector3(p.x, p.y, p.z);
+    }
     if (frame && !this.info.placed) {
-      const ref = r.xr.getReferenceSpace();
       if (this.hitSource) {
         const hits = frame.getHitTestResults(this.hitSource);
         const pose = hits.length ? hits[0].getPose(ref) : null;
@@ -188,7 +198,7 @@ export class XRView {
         if (pose) this.reticle.matrix.fromArray(pose.transform.matrix);
         this.info.reticleVisible = !!pose;
       } else if (!this.info.hitTest) {
-        const viewer = frame.getViewerPose(ref);
+        const viewer = viewerPose;
         if (viewer) {
           const p = viewer.transform.position;
           const o = viewer.transform.orientation;
@@ -227,10 +237,10 @@ export class XRView {
       c.fillText(lines[2] || '', 36, 350);
       this.panelTexture.needsUpdate = true;
     }
-    // Above the far edge of the workspace, turned to the person.
+    // Beside the workspace (robot -y side), turned to the person: it never hides the arm or the target.
     const { lo, hi } = this.view.workspace;
-    this.panel.position.copy(this.view.toWorld([hi[0] * 0.5 + lo[0] * 0.5, (lo[1] + hi[1]) / 2, hi[2] + 0.16]));
-    const cam = this.view.renderer.xr.getCamera().getWorldPosition(new THREE.Vector3());
+    this.panel.position.copy(this.view.toWorld([(lo[0] + hi[0]) / 2, lo[1] - 0.3, hi[2]]));
+    const cam = this.head || this.view.renderer.xr.getCamera().getWorldPosition(new THREE.Vector3());
     this.panel.lookAt(cam.x, this.panel.position.y, cam.z);
   }
 
@@ -257,11 +267,14 @@ export class XRView {
     v.renderer.setAnimationLoop(null);
     this.session = null;
     this.hitSource = null;
+    this.head = null;
     this.reticle.visible = false;
     this.panel.visible = false;
     this.pens.forEach((p) => { p.visible = false; });
     v.root.matrix.copy(DESKTOP_ROOT);
     v.root.matrixWorldNeedsUpdate = true;
+    v.root.visible = true;
+    v.gizmo.getHelper().visible = v.gizmo.enabled;
     this._setTransparent(false);
     Object.assign(this.info, { presenting: false, mode: null, blendMode: null, placed: false, placementSource: null,
       reticleVisible: false });

@@ -1,0 +1,232 @@
+"""WebXR of the annotation page, with Meta's IWER emulating the headset in headless Chromium.
+
+The page imports IWER when its URL carries `?xr=PROFILE` (web/emulation.js) and installs the emulated
+runtime over navigator.xr before it sets up XR; the test then drives the emulated device through
+`window.mrguide.xrDevice` (IWER's XRDevice: head pose, controllers, hands) and checks what reaches
+the trainer.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from concurrent.futures import Future
+from dataclasses import asdict
+
+import numpy as np
+import pytest
+
+from mrguide.annotation.broker import AnnotationBroker, LiveAnswer
+from mrguide.annotation.headless import HeadlessBrowser, chromium_path
+from mrguide.annotation.protocol import AnnotationRequest
+from mrguide.annotation.server import WEB_DIR, AnnotationServer
+from mrguide.deploy.kinematics import Kinematics
+from mrguide.robot import load_robot
+from mrguide.task import TaskConfig, observation, progress
+
+OBJ = np.array([0.52, -0.06, 0.025])
+GOAL = np.array([0.46, 0.22, 0.025])
+TABLE_HEIGHT = 0.75  # web/emulation.js: the emulated table surface (local-floor, y up)
+HEAD = np.array([0.0, 1.6, 0.0])  # IWER's default head position
+
+
+def hello_for(spec, registration=None) -> dict:
+    """The hello fields the live session sends (mrguide.annotation.live)."""
+    return {
+        "robot": {"name": spec.name, "frame": spec.base_frame, "tcp_frame": "tcp", "units": "m", "angles": "rad",
+                  "quaternion": "xyzw", "up": "z", "urdf_url": "/robot/robot.urdf", "joint_names": list(spec.joint_names),
+                  "workspace": {"lo": spec.workspace.lo.tolist(), "hi": spec.workspace.hi.tolist()}},
+        "task": asdict(TaskConfig()), "registration": registration, "on_timeout": "wait",
+    }
+
+
+def make_request(spec, phase: int) -> AnnotationRequest:
+    tcp = Kinematics(spec).tcp_position(spec.q_home)
+    obs = observation(tcp, -1, progress(phase), OBJ, GOAL)
+    return AnnotationRequest(phase, spec.q_home.copy(), tcp, False, OBJ, np.array([0, 0, 0, 1.0]), GOAL, obs)
+
+
+def ask(broker: AnnotationBroker, req: AnnotationRequest) -> Future:
+    fut: Future = Future()
+
+    def run() -> None:
+        try:
+            fut.set_result(broker.request(req, None))
+        except BaseException as exc:  # handed to the test
+            fut.set_exception(exc)
+
+    threading.Thread(target=run, daemon=True).start()
+    return fut
+
+
+def placement(state) -> np.ndarray:
+    """The page's robot-frame -> XR reference space matrix (three.js stores it column-major)."""
+    return np.array(state["xr"]["placement"]).reshape(4, 4).T
+
+
+def transform(T: np.ndarray, p) -> np.ndarray:
+    return (T @ np.append(np.asarray(p, dtype=float), 1.0))[:3]
+
+
+@pytest.fixture(scope="module")
+def browser():
+    chromium_path()  # missing pieces are errors, not skips: .ci/run installs chromium, ./run.sh runs npm ci
+    assert (WEB_DIR / "node_modules" / "iwer").is_dir(), "run `npm ci` in mrguide/annotation/web (./run.sh does)"
+    with HeadlessBrowser(viewport=(960, 600)) as b:  # XR draws every frame: a smaller canvas is faster on SwiftShader
+        yield b
+
+
+@pytest.fixture
+def spec():
+    return load_robot()
+
+
+def serve(spec, registration=None):
+    broker = AnnotationBroker(spec.workspace, hello_for(spec, registration))
+    server = AnnotationServer(broker, spec, port=0)
+    server.start()
+    return broker, server
+
+
+RIGHT_TRIGGER = "(v) => window.mrguide.xrDevice.controllers.right.updateButtonValue('trigger', v)"
+LEFT_TRIGGER = "(v) => window.mrguide.xrDevice.controllers.left.updateButtonValue('trigger', v)"
+RIGHT_PINCH = "(v) => window.mrguide.xrDevice.hands.right.updatePinchValue(v)"
+
+
+def press(page, button: str) -> None:
+    """A full select with an IWER input (`button`: JS taking the value): press, which fires `select`, release."""
+    n = page.state()["xr"]["selects"]
+    page.page.evaluate(button, 1)
+    page.wait_state(f"s.xr.selects > {n}")
+    f = page.state()["xr"]["frames"]
+    page.page.evaluate(button, 0)
+    page.wait_state(f"s.xr.frames > {f + 2}")
+
+
+def test_quest3_immersive_ar_hit_test_and_controller_select(browser, spec, tmp_path):
+    broker, server = serve(spec)
+    fut = ask(broker, make_request(spec, phase=1))
+    page = browser.open(server.url + "&xr=quest3")
+    try:
+        s = page.wait_request()
+        page.wait_robot()
+        assert s["xr"]["arSupported"] and page.text("xr-button") == "Enter AR"
+        assert "Meta Quest 3" in page.text("emulated")
+        xr = page.enter_xr()
+        assert xr["mode"] == "immersive-ar" and xr["blendMode"] == "alpha-blend"
+        assert xr["transparent"] and xr["hitTest"] and not xr["placed"]
+
+        # Look down at the table: the hit-test reticle appears where the gaze meets it.
+        pitch = math.radians(-50)
+        page.page.evaluate(f"""() => {{ const d = window.mrguide.xrDevice;
+            d.position.set(0, 1.6, 0); d.quaternion.set({math.sin(pitch / 2)}, 0, 0, {math.cos(pitch / 2)}); }}""")
+        page.wait_state("s.xr.reticleVisible")
+        gaze = np.array([0.0, math.sin(pitch), -math.cos(pitch)])
+        hit = HEAD + (TABLE_HEIGHT - HEAD[1]) / gaze[1] * gaze
+
+        # The first select places the robot base there, its +x (toward the workspace) facing the person.
+        press(page, RIGHT_TRIGGER)
+        s = page.wait_state("s.xr.placed")
+        assert s["xr"]["placementSource"] == "hit-test"
+        M = placement(s)
+        np.testing.assert_allclose(M[:3, 3], hit, atol=1e-3)
+        np.testing.assert_allclose(M[:3, 0], [0, 0, 1], atol=1e-6)  # robot x -> toward the person (+z here)
+        np.testing.assert_allclose(M[:3, 2], [0, 1, 0], atol=1e-6)  # robot z -> up
+        assert s["requestId"] and not fut.done()  # placing is not answering
+
+        # Hold the controller at a point of the workspace and select: that point is the waypoint.
+        p_robot = np.array([0.50, 0.05, 0.12])
+        w = transform(M, p_robot)
+        page.page.evaluate(f"() => window.mrguide.xrDevice.controllers.right.position.set({w[0]}, {w[1]}, {w[2]})")
+        page.wait_state(f"s.xr.frames > {s['xr']['frames'] + 2}")
+        page.screenshot(tmp_path / "annotation-quest3-ar.png")
+        press(page, RIGHT_TRIGGER)
+        answer = fut.result(timeout=15)
+        assert isinstance(answer, LiveAnswer)
+        np.testing.assert_allclose(answer.target, p_robot, atol=1.5e-4)  # 0.1 mm rounding + float32 poses
+        assert answer.vacuum is True  # grasp: the suggested vacuum, not toggled
+        assert answer.client == "headset"
+        s = page.wait_state("s.closed && s.closed.mine")
+        np.testing.assert_allclose(s["xr"]["lastSelect"]["robot"], p_robot, atol=1e-4)
+    finally:
+        page.close()
+        broker.close()
+        server.stop()
+
+
+def test_hololens2_profile_falls_back_to_additive_vr_placed_by_registration(browser, spec):
+    # The HMD's tracking frame (y up) in the robot base frame (z up), as `mrguide calibrate` writes it.
+    yaw = math.radians(30)
+    Rz = np.array([[math.cos(yaw), -math.sin(yaw), 0], [math.sin(yaw), math.cos(yaw), 0], [0, 0, 1]])
+    Rx = np.array([[1, 0, 0], [0, 0, -1], [0, 1, 0]])  # hmd y -> base z
+    T_base_hmd = np.eye(4)
+    T_base_hmd[:3, :3] = Rz @ Rx
+    T_base_hmd[:3, 3] = [0.9, -0.3, -0.74]
+    broker, server = serve(spec, {"T_base_hmd": T_base_hmd.tolist(), "method": "test", "rms_residual_m": 0.001})
+    fut = ask(broker, make_request(spec, phase=4))
+    page = browser.open(server.url + "&xr=hololens2")
+    try:
+        s = page.wait_request()
+        page.wait_robot()
+        assert not s["xr"]["arSupported"] and s["xr"]["vrSupported"]
+        assert page.text("xr-button") == "Enter VR (no AR here)"
+        xr = page.enter_xr()
+        assert xr["mode"] == "immersive-vr" and xr["blendMode"] == "additive"
+        assert xr["transparent"]  # additive display: black background, nothing drawn over the real cell
+        assert xr["placed"] and xr["placementSource"] == "registration" and not xr["hitTest"]
+        s = page.state()
+        np.testing.assert_allclose(placement(s), np.linalg.inv(T_base_hmd), atol=1e-6)
+
+        # A hand pinch (HoloLens has no controllers) near a point of the workspace marks it.
+        p_robot = np.array([0.47, 0.10, 0.20])
+        w = transform(np.linalg.inv(T_base_hmd), p_robot)
+        page.page.evaluate(f"() => window.mrguide.xrDevice.hands.right.position.set({w[0]}, {w[1]}, {w[2]})")
+        page.wait_state(f"s.xr.frames > {s['xr']['frames'] + 2}")
+        press(page, RIGHT_PINCH)
+        answer = fut.result(timeout=15)
+        assert isinstance(answer, LiveAnswer) and answer.client == "headset"
+        assert answer.vacuum is False  # release: vacuum off
+        s = page.state()
+        sel = s["xr"]["lastSelect"]
+        assert sel["hand"] is True
+        # The pinch point (between thumb and index tips) is near the tracked hand, and what was sent is
+        # that point in the robot frame, clamped into the box, at 0.1 mm.
+        assert np.linalg.norm(np.array(sel["robot"]) - p_robot) < 0.2
+        np.testing.assert_allclose(sel["robot"], transform(T_base_hmd, sel["world"]), atol=1e-5)
+        expected = np.clip(sel["robot"], spec.workspace.lo, spec.workspace.hi)
+        np.testing.assert_allclose(answer.target, expected, atol=6e-5)
+        assert spec.workspace.contains(answer.target)
+    finally:
+        page.close()
+        broker.close()
+        server.stop()
+
+
+def test_quest3_without_ar_falls_back_to_vr_and_places_in_front(browser, spec):
+    broker, server = serve(spec)
+    fut = ask(broker, make_request(spec, phase=0))
+    page = browser.open(server.url + "&xr=quest3-vr")
+    try:
+        page.wait_request()
+        xr = page.enter_xr()
+        assert xr["mode"] == "immersive-vr" and xr["blendMode"] == "opaque" and not xr["transparent"]
+        s = page.wait_state("s.xr.placed")
+        assert s["xr"]["placementSource"] == "default"  # neither registration nor hit-test
+        M = placement(s)
+        assert M[1, 3] == pytest.approx(HEAD[1] - 0.7, abs=1e-6) and M[2, 3] == pytest.approx(-0.8, abs=1e-6)
+        p_robot = np.array([0.40, -0.10, 0.25])
+        w = transform(M, p_robot)
+        page.page.evaluate(f"() => window.mrguide.xrDevice.controllers.left.position.set({w[0]}, {w[1]}, {w[2]})")
+        page.wait_state(f"s.xr.frames > {s['xr']['frames'] + 2}")
+        press(page, LEFT_TRIGGER)
+        answer = fut.result(timeout=15)
+        assert isinstance(answer, LiveAnswer)
+        np.testing.assert_allclose(answer.target, p_robot, atol=1.5e-4)
+        assert answer.vacuum is False
+        page.page.evaluate("() => window.mrguide.exitXR()")
+        s = page.wait_state("!s.xr.presenting")
+        np.testing.assert_allclose(placement(s), [[1, 0, 0, 0], [0, 0, 1, 0], [0, -1, 0, 0], [0, 0, 0, 1]], atol=1e-9)
+    finally:
+        page.close()
+        broker.close()
+        server.stop()
