@@ -7,6 +7,9 @@ cd "$(dirname "$0")"
 PY=${PYTHON:-python3}
 VENV=.venv
 STAMP="$VENV/.installed-$(sha1sum pyproject.toml | cut -c1-12)"
+WEB=mrguide/annotation/web
+# The annotation page's JavaScript (three.js, urdf-loader, iwer) from npm, exactly as the lockfile says.
+WEB_STAMP="$WEB/node_modules/.installed-$(sha1sum "$WEB/package-lock.json" | cut -c1-12)"
 
 if [ ! -f "$STAMP" ]; then
   echo "[run.sh] setting up $VENV (first run takes a few minutes)..." >&2
@@ -17,6 +20,12 @@ if [ ! -f "$STAMP" ]; then
   "$VENV/bin/python" -m pip install --quiet -e ".[dev]"
   rm -f "$VENV"/.installed-*
   touch "$STAMP"
+fi
+
+if [ ! -f "$WEB_STAMP" ]; then
+  echo "[run.sh] installing the annotation page's npm packages (npm ci)..." >&2
+  (cd "$WEB" && npm ci --no-audit --no-fund --loglevel=error)
+  touch "$WEB_STAMP"
 fi
 
 cmd=${1:-main}
