@@ -180,6 +180,10 @@ class AnnotationPage:
         """Submit through the test hook (no rendering or clicking in the way: for timing)."""
         return self.page.evaluate("() => window.mrguide.submit()")
 
+    def auto_submit(self, on: bool = True) -> None:
+        """Make the page answer each new request the moment it shows it (start target, suggested vacuum)."""
+        self.page.evaluate("(on) => window.mrguide.autoSubmit(on)", bool(on))
+
     def skip(self) -> bool:
         return self.page.evaluate("() => window.mrguide.skip()")
 

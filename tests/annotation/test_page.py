@@ -15,6 +15,7 @@ from dataclasses import asdict
 from pathlib import Path
 
 import asyncio
+import json
 
 import aiohttp
 import numpy as np
@@ -61,6 +62,13 @@ def ask(broker: AnnotationBroker, req: AnnotationRequest, timeout: float | None 
 
     threading.Thread(target=run, daemon=True).start()
     return fut
+
+
+def screen_delta(page, p, dp) -> tuple[float, float]:
+    """Screen pixels (dx, dy) between robot-frame points p and p + dp, as the page's camera shows them."""
+    a, b = page.page.evaluate("([p, q]) => [window.mrguide.screenOf(p), window.mrguide.screenOf(q)]",
+                              [list(map(float, p)), list(map(float, np.add(p, dp)))])
+    return b["x"] - a["x"], b["y"] - a["y"]
 
 
 @pytest.fixture(scope="module")
@@ -121,16 +129,11 @@ def test_page_shows_request_drag_keys_and_submit(browser, served, spec, tmp_path
         assert "headset" in page.text("xr-message").lower() or "webxr" in page.text("xr-message").lower()
 
         # Drag the gizmo's Y arrow with the mouse toward the object (-y), as far on screen as 17 cm there.
-        def screen_delta(p, dp):
-            a, b = page.page.evaluate("([p, q]) => [window.mrguide.screenOf(p), window.mrguide.screenOf(q)]",
-                                      [list(p), list(np.add(p, dp))])
-            return b["x"] - a["x"], b["y"] - a["y"]
-
-        after_y = np.array(page.drag_gizmo("Y", *screen_delta(start, [0, -0.17, 0])))
+        after_y = np.array(page.drag_gizmo("Y", *screen_delta(page, start, [0, -0.17, 0])))
         assert after_y[1] < start[1] - 0.08, (start, after_y)  # moved along -y by a visible amount
         np.testing.assert_allclose(after_y[[0, 2]], start[[0, 2]], atol=2e-4)  # and only along y
         # Then down along z toward the object's top, dragging the Z arrow.
-        after_z = np.array(page.drag_gizmo("Z", *screen_delta(after_y, [0, 0, -0.25])))
+        after_z = np.array(page.drag_gizmo("Z", *screen_delta(page, after_y, [0, 0, -0.25])))
         assert after_z[2] < after_y[2] - 0.1, (after_y, after_z)
         np.testing.assert_allclose(after_z[:2], after_y[:2], atol=2e-4)
         assert spec.workspace.contains(after_z)
@@ -183,8 +186,12 @@ def test_target_is_confined_to_the_workspace(browser, served, spec):
     fut = ask(broker, make_request(spec, phase=0))
     page = browser.open(server.url)
     try:
-        page.wait_request()
+        s = page.wait_request()
         lo, hi = spec.workspace.lo, spec.workspace.hi
+        # Dragging the gizmo far below the table stops at the floor of the box.
+        after = page.drag_gizmo("Z", *screen_delta(page, s["target"], [0, 0, -0.6]))
+        assert after[2] == pytest.approx(lo[2], abs=1e-12)
+        np.testing.assert_allclose(after[:2], s["target"][:2], atol=2e-4)
         assert page.set_target([2.0, -3.0, -1.0]) == pytest.approx([hi[0], lo[1], lo[2]])
         for _ in range(3):  # nudging past the floor of the box stays on it
             page.press("PageDown")
@@ -271,7 +278,7 @@ def test_refusal_reason_is_shown(browser, served, spec):
             server_side = ws.connect_to_server()
 
             def from_server(message) -> None:
-                if isinstance(message, str) and '"type": "cancel"' in message:
+                if isinstance(message, str) and json.loads(message).get("type") == "cancel":
                     dropped.append(message)
                     return
                 ws.send(message)

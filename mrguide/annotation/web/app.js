@@ -18,6 +18,8 @@
 //   window.mrguide.enterXR() / exitXR()  as the headset button
 //   window.mrguide.dropConnection()      close the socket as a network failure would (reconnects)
 //   window.mrguide.redraw()              draw the view again (it draws on demand)
+//   window.mrguide.autoSubmit(on)        answer every new request as soon as it is shown, with the start
+//                                        target and the suggested vacuum (benchmarks: no polling delay)
 //   window.mrguide.xrDevice              IWER's XRDevice when ?xr= is given (tests drive it)
 
 import { TwinView, roundTarget } from './scene.js';
@@ -55,6 +57,7 @@ const S = {
   closed: null, // {id, reason} of the last request that closed
   status: {},
   answers: 0,
+  autoSubmit: false,
 };
 
 async function main() {
@@ -131,6 +134,7 @@ async function main() {
       view.showRequest(req);
       S.start = view.setTarget(start);
       S.target = S.start;
+      if (S.autoSubmit) submit();
     } else {
       // Reconnected mid-request: keep what the person has marked so far.
       view.showRequest(req);
@@ -397,6 +401,7 @@ async function main() {
     exitXR: async () => { await xr.exit(); },
     dropConnection: () => conn.drop(),
     redraw: () => view.requestRender(),
+    autoSubmit: (on) => { S.autoSubmit = !!on; if (on && S.request) submit(); return S.autoSubmit; },
   };
 
   await xr.detect();
