@@ -40,11 +40,11 @@ const quest3VrOnly = {
 
 export const PROFILES = { quest3: metaQuest3, 'quest3-vr': quest3VrOnly, hololens2 };
 
-/** IWER's SEM interface with one infinite horizontal surface at `height` (y up). */
+/** IWER's SEM interface with one infinite horizontal surface at TABLE_HEIGHT (y up). */
 class TableEnvironment {
-  constructor(height) {
+  constructor() { // IWER passes the XRDevice; a table does not need it
     this.version = 'mrguide-table-1';
-    this.height = height;
+    this.height = TABLE_HEIGHT;
     this.trackedPlanes = new Set();
     this.trackedMeshes = new Set();
     this.planesVisible = false;
@@ -104,7 +104,7 @@ export function installEmulatedXR(profileName) {
   if (!config) throw new Error(`unknown XR emulation profile '${profileName}': use ${Object.keys(PROFILES).join(', ')}`);
   const device = new XRDevice(config, { stereoEnabled: false });
   if (config.supportedFeatures.includes('hit-test')) {
-    device.installSEM(class { constructor() { return new TableEnvironment(TABLE_HEIGHT); } });
+    device.installSEM(TableEnvironment);
   }
   if (!config.controllerConfig) device.primaryInputMode = 'hand';
   device.installRuntime({ forceInstall: true });
