@@ -162,6 +162,11 @@ class AnnotationBroker:
                 self._lock.release()
 
     @property
+    def client_count(self) -> int:
+        with self._lock:
+            return len(self._clients)
+
+    @property
     def waiting(self) -> bool:
         with self._lock:
             return self._pending is not None
@@ -176,6 +181,8 @@ class AnnotationBroker:
             hello = {"type": "hello", "protocol": 1, "client_id": client.client_id, **self._hello,
                      "status": self._status_message(), "request": self._outstanding()}
             self._deliver([(client, hello)])
+            status = self._status_message()
+            self._deliver([(c, status) for c in self._clients.values() if c is not client])
         log.info("annotation client %s connected", client.client_id)
         return client.client_id
 
@@ -184,6 +191,8 @@ class AnnotationBroker:
         with self._lock:
             self._clients.pop(client_id, None)
             self._status["clients"] = len(self._clients)
+            status = self._status_message()
+            self._deliver([(c, status) for c in self._clients.values()])
             p = self._pending
             if p is not None and p.claimed_by == client_id:
                 p.claimed_by = None
@@ -246,8 +255,12 @@ class AnnotationBroker:
 
     # -- helpers -----------------------------------------------------------------------------------
     def _outstanding(self) -> dict[str, Any] | None:
+        """The open request as a (re)connecting client should see it: with the seconds left to answer."""
         p = self._pending
-        return dict(p.message) if p is not None and p.result is None else None
+        if p is None or p.result is not None:
+            return None
+        remaining = None if p.deadline is None else round(max(0.0, p.deadline - time.monotonic()), 3)
+        return {**p.message, "remaining_s": remaining}
 
     def _status_message(self) -> dict[str, Any]:
         return {**self._status, "type": "status", "refused": dict(self.stats.refused)}

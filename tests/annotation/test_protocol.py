@@ -178,9 +178,13 @@ def test_status_reaches_every_client(served):
     async def scenario():
         async with aiohttp.ClientSession() as http:
             a, b = await connect(http, server), await connect(http, server)
+            joined = await a.recv("status")  # b connected
+            assert joined["clients"] == 2
             broker.publish_status(step=1234, success_rate=0.5, asked=17)
             sa, sb = await a.recv("status"), await b.recv("status")
             assert sa["step"] == sb["step"] == 1234 and sa["asked"] == 17 and sa["clients"] == 2
+            await b.ws.close()
+            assert (await a.recv("status"))["clients"] == 1
 
     run(scenario())
 

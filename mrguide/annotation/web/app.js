@@ -361,8 +361,9 @@ async function main() {
   // Countdown of requests with a deadline, and the reconnect timer.
   setInterval(() => {
     const req = S.request;
-    $('countdown').textContent = req && req.timeout_s
-      ? `closes in ${Math.max(0, Math.ceil(req.timeout_s - (performance.now() - S.receivedAt) / 1000))} s` : '';
+    const left = req ? (req.remaining_s ?? req.timeout_s) : null; // remaining_s: sent with hello on (re)connect
+    $('countdown').textContent = left
+      ? `closes in ${Math.max(0, Math.ceil(left - (performance.now() - S.receivedAt) / 1000))} s` : '';
     if (!conn.connected) render();
   }, 500);
 
