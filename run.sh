@@ -32,6 +32,17 @@ cmd=${1:-main}
 shift || true
 case "$cmd" in
   main) exec "$VENV/bin/mrguide" main "$@" ;;
-  test) exec "$VENV/bin/python" -m pytest -q "$@" ;;
+  test)
+    # The annotation page's browser tests drive Debian's chromium (never a browser a test tool downloads).
+    if [ ! -x /usr/bin/chromium ] && [ -z "${MRGUIDE_CHROMIUM:-}" ]; then
+      if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
+        echo "[run.sh] installing Debian's chromium for the browser tests..." >&2
+        DEBIAN_FRONTEND=noninteractive apt-get update -qq
+        DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends chromium >/dev/null
+      else
+        echo "[run.sh] the browser tests need Chromium: 'sudo apt-get install chromium' (or set MRGUIDE_CHROMIUM)" >&2
+      fi
+    fi
+    exec "$VENV/bin/python" -m pytest -q "$@" ;;
   *) echo "usage: ./run.sh {main|test} [args]" >&2; exit 2 ;;
 esac
