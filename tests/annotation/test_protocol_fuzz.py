@@ -1,0 +1,48 @@
+"""Property-based fuzz of the protocol parser and the broker: no client input raises, or answers a request."""
+
+from __future__ import annotations
+
+import json
+
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from mrguide.annotation.broker import AnnotationBroker
+from mrguide.annotation.protocol import ProtocolError, parse_answer, parse_message
+from mrguide.robot import Workspace
+
+JSON = st.recursive(
+    st.none() | st.booleans() | st.integers() | st.floats(allow_nan=True, allow_infinity=True) | st.text(max_size=20),
+    lambda inner: st.lists(inner, max_size=5) | st.dictionaries(st.text(max_size=10), inner, max_size=5),
+    max_leaves=20,
+)
+MESSAGES = st.fixed_dictionaries(
+    {"type": st.sampled_from(["hello", "claim", "answer", "skip", "ping", "bogus", 3, None])},
+    optional={"id": JSON, "target": JSON | st.lists(st.floats(), min_size=3, max_size=3), "vacuum": JSON, "protocol": JSON},
+)
+
+
+@settings(max_examples=400, deadline=None)
+@given(st.one_of(st.text(max_size=200), JSON.map(json.dumps), MESSAGES.map(json.dumps), st.binary(max_size=50)))
+def test_parser_refuses_with_protocol_error_only(text):
+    try:
+        msg = parse_message(text)
+        if msg["type"] == "answer":
+            target, vacuum = parse_answer(msg, Workspace())
+            assert all(lo <= v <= hi for v, lo, hi in zip(target, Workspace().lo, Workspace().hi))
+            assert isinstance(vacuum, bool)
+    except ProtocolError as exc:
+        assert str(exc)
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(st.one_of(MESSAGES.map(json.dumps), st.text(max_size=50)), max_size=10))
+def test_broker_never_raises_and_nothing_is_answered_without_a_request(messages):
+    broker = AnnotationBroker(Workspace())
+    sent: list[dict] = []
+    client = broker.attach(sent.append)
+    for text in messages:
+        broker.receive(client, text)
+    assert broker.stats.answered == 0 and broker.stats.skipped == 0
+    assert not any(m["type"] == "ack" and m["for"] in ("answer", "claim", "skip") and m["accepted"] for m in sent)
+    assert sum(m["type"] == "ack" for m in sent) == len(messages)  # every message got its one reply
