@@ -5,8 +5,9 @@ then one RPDO per drive (controlword + target position) and one to the vacuum ge
 apply them at the next SYNC. The same thread sends the master's heartbeat, which every device consumes
 (0x1016), so a hung control thread or a dead PC disables the drives without the master's help. It also
 supervises heartbeats, PDO feedback, EMCY/statusword faults and the bus, and latches the first fault:
-all drives get quick stop, streaming stops, and the next facade call raises that fault. Setpoints are validated before they enter the queue, so a refused
-setpoint never reaches the bus.
+all drives get quick stop, streaming stops, and the next facade call raises that fault. Setpoints are
+validated before they enter the queue, and every RPDO's target once more right before it is sent
+(`setpoint_guard`), so no non-finite or out-of-limit target reaches the bus by any path.
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ from canopen.sdo.exceptions import SdoError
 from mrguide.config import ConfigError
 from mrguide.drivers.bus import BusReceiver, frame_bits, open_bus
 from mrguide.drivers.cia402 import (FAULT_STATES, OPERATION_ENABLED, QUICK_STOP_ACTIVE, SWITCH_ON_DISABLED,
-                                    Cia402Drive, PowerCommand, controlword_for)
+                                    Cia402Drive, PowerCommand)
 from mrguide.drivers.cobot_state import CobotStatus, CycleSample, DriverStats, JointState, VacuumState
 from mrguide.drivers.config import CobotBusConfig, eds_path, resolve_limits
 from mrguide.drivers.conversion import JointConversion
@@ -39,6 +40,7 @@ from mrguide.drivers.errors import (BootError, BusError, BusOffError, DeviceFaul
 from mrguide.drivers.heartbeat import (CONSUMER_HEARTBEAT, OPERATIONAL, HeartbeatConsumer, consumer_heartbeat_entry,
                                        nmt_state_name)
 from mrguide.drivers.realtime import make_current_thread_realtime
+from mrguide.drivers.setpoint_guard import plan_rpdos, setpoint_problem
 from mrguide.drivers.vacuum import BLOW_OFF_BIT, VACUUM_ON_BIT, VacuumGenerator
 from mrguide.robot import RobotSpec, load_robot
 
@@ -47,8 +49,6 @@ logger = logging.getLogger(__name__)
 NMT_START = 0x01
 NMT_PRE_OPERATIONAL = 0x80
 NMT_RESET_COMMUNICATION = 0x82
-#: Relative slack on the per-cycle step limit (floating-point round-off of trajectory generators).
-STEP_SLACK = 1e-6
 #: A setpoint step above this fraction of v_max * period means the arm is moving (for underrun counting).
 MOVING_FRACTION = 0.01
 
@@ -334,31 +334,10 @@ class Cobot:
             self._queue.append(q)
 
     def _validate(self, q: np.ndarray, reference: np.ndarray) -> None:
-        problem = self._setpoint_problem(q, reference)
+        problem = setpoint_problem(q, reference, self.limits, self.period, self.joint_names)
         if problem:
             self._refused += 1
             raise SetpointError(f"setpoint refused: {problem}")
-
-    def _setpoint_problem(self, q: np.ndarray, reference: np.ndarray) -> str | None:
-        if q.shape != (len(self.joint_names),):
-            return f"shape {q.shape}, expected ({len(self.joint_names)},) joint positions in rad"
-        bad = ~np.isfinite(q)
-        if bad.any():
-            return "non-finite value for " + ", ".join(f"{self.joint_names[i]} ({q[i]})" for i in np.flatnonzero(bad))
-        lim = self.limits
-        out = (q < lim.q_lower) | (q > lim.q_upper)
-        if out.any():
-            return "outside joint limits: " + "; ".join(
-                f"{self.joint_names[i]} = {q[i]:.4f} rad not in [{lim.q_lower[i]:.3f}, {lim.q_upper[i]:.3f}]"
-                for i in np.flatnonzero(out))
-        step = np.abs(q - reference)
-        too_far = step > self._max_step * (1 + STEP_SLACK) + 1e-12
-        if too_far.any():
-            return "step per cycle exceeds v_max * period: " + "; ".join(
-                f"{self.joint_names[i]} moves {step[i]:.5f} rad > {self._max_step[i]:.5f} rad "
-                f"({lim.v_max[i]} rad/s x {self.period * 1000:g} ms)" for i in np.flatnonzero(too_far)
-            ) + "; start trajectories at the last setpoint or joint_state().positions"
-        return None
 
     def set_vacuum(self, on: bool, blow_off: bool = False) -> None:
         """Command the vacuum generator (sent every cycle). Works during a drive fault, so a part stays held."""
@@ -612,20 +591,26 @@ class Cobot:
                     logger.warning("setpoint queue ran dry while moving: holding the last setpoint (%d so far)",
                                    self._underruns)
             targets = self._hold if self._motion else None
-        for i, drive in enumerate(self._drives):
-            fb = drive.feedback
-            if fb is None:  # no position known yet: sending a target could move the joint
-                continue
-            cw = controlword_for(fb.state, command, drive.last_controlword)
-            target = drive.conversion.to_counts(targets[i]) if targets is not None else fb.position
-            if not self._send_frame(partial(drive.send, cw, target)):
+        fbs = [d.feedback for d in self._drives]
+        wanted = targets if targets is not None else np.array(
+            [np.nan if fb is None else d.conversion.to_rad(fb.position) for d, fb in zip(self._drives, fbs)])
+        plan = plan_rpdos([None if fb is None else fb.state for fb in fbs], command,
+                          [d.last_controlword for d in self._drives], wanted,
+                          np.array([d.last_target for d in self._drives]), self.limits, self.joint_names)
+        if plan.refused:
+            drive = self._drives[plan.refused[0]]
+            source = "held setpoint" if targets is not None else "measured position"
+            self._latch(DeviceFaultError(f"{drive.label}: {source} refused as RPDO target: {plan.problem}",
+                                         drive.node.id, drive.name, None))
+        for drive, rpdo in zip(self._drives, plan.frames):
+            if rpdo is not None and not self._send_frame(partial(drive.send, rpdo.controlword, rpdo.target)):
                 return setpoint
         self._send_frame(self._vacuum.send)
-        if command is PowerCommand.ENABLE and targets is None and all(self._state(d) == OPERATION_ENABLED
-                                                                      for d in self._drives):
+        if command is PowerCommand.ENABLE and targets is None and not plan.refused and all(
+                self._state(d) == OPERATION_ENABLED for d in self._drives):
             with self._lock:
                 if self._command is PowerCommand.ENABLE and self._fault is None:
-                    self._hold = self._positions()
+                    self._hold = wanted.copy()  # the measured positions this cycle's guard accepted
                     self._moving = False
                     self._motion = True
         return setpoint
