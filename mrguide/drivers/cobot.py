@@ -53,6 +53,20 @@ NMT_RESET_COMMUNICATION = 0x82
 MOVING_FRACTION = 0.01
 
 
+def _send_nmt(network: canopen.Network, command: int, node_id: int) -> None:
+    """Send an NMT command frame. canopen's `nmt.send_command` is not used: it looks up the node's last
+    reported NMT state, and raises KeyError after a heartbeat that carried an undefined one."""
+    network.send_message(0x000, bytes([command, node_id]))
+
+
+def _best_effort(what: str, action: Callable[[], object]) -> None:
+    """One step of a teardown: whatever it raises is logged, so the following steps still run."""
+    try:
+        action()
+    except Exception as exc:  # noqa: BLE001 - a teardown must never be cut short
+        logger.warning("%s failed: %r", what, exc)
+
+
 def _load_node(node_id: int, eds: str) -> RemoteNode:
     path = eds_path(eds)
     try:
@@ -145,7 +159,9 @@ class Cobot:
         try:
             receiver.start()
             self._boot()
-            self._thread = threading.Thread(target=self._run, name="mrguide-can-cycle", daemon=True)
+            self._stop_thread = threading.Event()  # one per thread: a thread left behind never resumes
+            self._thread = threading.Thread(target=self._run, args=(self._stop_thread,), name="mrguide-can-cycle",
+                                            daemon=True)
             self._thread.start()
             devices = [*self._drives, self._vacuum]
             if not self._wait_for(lambda: all(d.feedback is not None for d in devices), self.config.timing.boot_timeout):
@@ -167,7 +183,7 @@ class Cobot:
         devices = [*self._drives, self._vacuum]
         self._hb.expect_bootup()
         for dev in devices:
-            dev.node.nmt.send_command(NMT_RESET_COMMUNICATION)
+            _send_nmt(dev.node.network, NMT_RESET_COMMUNICATION, dev.node.id)
         missing = self._hb.wait_bootup(timing.boot_timeout)
         if missing:
             labels = ", ".join(self._label(n) for n in missing)
@@ -185,7 +201,7 @@ class Cobot:
         self._vacuum.vacuum_on, self._vacuum.blow_off = self._vacuum_command_on_device()
         self._hb.arm()
         for dev in devices:
-            dev.node.nmt.send_command(NMT_START)
+            _send_nmt(dev.node.network, NMT_START, dev.node.id)
         ids = self.config.node_ids
         if not self._wait_for(lambda: self._hb.all_in_state(OPERATIONAL, ids), timing.boot_timeout):
             states = ", ".join(f"{self._label(n)}: {nmt_state_name(self._hb.state(n))}" for n in ids
@@ -205,27 +221,33 @@ class Cobot:
         """Quick-stop moving drives, disable them, put every node in PRE-OPERATIONAL and close the bus.
 
         The vacuum command is left as it is (a held part stays held); call set_vacuum(False) first to release.
+        Never raises: whatever fails on the way is logged, and the NMT commands and closing the bus still happen.
         """
         if self._network is None:
             return
         try:
-            bus_ok = not isinstance(self._fault, BusError) and self._thread is not None and self._thread.is_alive()
-            powered = (OPERATION_ENABLED, QUICK_STOP_ACTIVE)
-            alive = [d for d in self._drives if d.feedback is not None and not self._misses.get(d.node.id)]
-            if bus_ok and any(self._state(d) in powered for d in alive):
-                self.stop()
-                self._wait_for(lambda: not any(self._state(d) in powered for d in alive),
-                               self.config.timing.enable_timeout)
-            if bus_ok:
-                with self._lock:
-                    self._command = PowerCommand.DISABLE
-                self._wait_for(lambda: all(self._state(d) in (SWITCH_ON_DISABLED, *FAULT_STATES) for d in alive),
-                               self.config.timing.enable_timeout)
-                if self.config.master.heartbeat:
-                    self._sign_off()
+            self._stop_and_disable()
+        except Exception:  # noqa: BLE001 - the teardown below must happen whatever went wrong
+            logger.exception("disconnect: stopping and disabling the drives failed; tearing down anyway")
         finally:
             self._teardown()
         logger.info("cobot disconnected")
+
+    def _stop_and_disable(self) -> None:
+        """Quick-stop moving drives, wait until they are disabled, end the devices' supervision of the master."""
+        if isinstance(self._fault, BusError) or self._thread is None or not self._thread.is_alive():
+            return  # nothing can be sent
+        powered = (OPERATION_ENABLED, QUICK_STOP_ACTIVE)
+        alive = [d for d in self._drives if d.feedback is not None and not self._misses.get(d.node.id)]
+        if any(self._state(d) in powered for d in alive):
+            self.stop()
+            self._wait_for(lambda: not any(self._state(d) in powered for d in alive), self.config.timing.enable_timeout)
+        with self._lock:
+            self._command = PowerCommand.DISABLE
+        self._wait_for(lambda: all(self._state(d) in (SWITCH_ON_DISABLED, *FAULT_STATES) for d in alive),
+                       self.config.timing.enable_timeout)
+        if self.config.master.heartbeat:
+            self._sign_off()
 
     def _set_master_consumer(self, dev: Cia402Drive | VacuumGenerator, time_ms: int) -> None:
         """Make a device consume the master's heartbeat with consumer time `time_ms` (0 switches it off)."""
@@ -246,31 +268,27 @@ class Cobot:
                                dev.label, exc)
 
     def _teardown(self) -> None:
+        """Stop the control thread, send NMT pre-operational to every node, close the bus; never cut short."""
         self._stop_thread.set()
         if self._thread is not None:
             self._thread.join(timeout=2.0)
+            if self._thread.is_alive():
+                logger.error("the control thread did not stop within 2 s; leaving it behind")
         self._thread = None
-        self._stop_thread.clear()
         with self._lock:
             self._motion = False
             self._space.notify_all()
         if self._hb is not None:
-            self._hb.disarm()
+            _best_effort("disarming the heartbeat consumer", self._hb.disarm)
         if self._receiver is not None:
-            self._receiver.stop()
+            _best_effort("stopping the CAN receive thread", self._receiver.stop)
         network, self._network = self._network, None
         if network is None:
             return
         for node_id in self.config.node_ids:
-            try:
-                network[node_id].nmt.send_command(NMT_PRE_OPERATIONAL)
-            except can.CanError as exc:
-                logger.warning("could not send NMT pre-operational to node %d: %s", node_id, exc)
-                break
-        try:
-            network.disconnect()
-        except can.CanError as exc:
-            logger.warning("closing the CAN bus reported: %s", exc)
+            _best_effort(f"NMT pre-operational to node {node_id}",
+                         partial(_send_nmt, network, NMT_PRE_OPERATIONAL, node_id))
+        _best_effort("closing the CAN bus", network.disconnect)
 
     def __enter__(self) -> Cobot:
         self.connect()
@@ -479,12 +497,12 @@ class Cobot:
 
     # ------------------------------------------------------------------ control thread
 
-    def _run(self) -> None:
+    def _run(self, stop: threading.Event) -> None:
         if self.config.timing.realtime_priority:
             make_current_thread_realtime(self.config.timing.realtime_priority)
         timer = CycleTimer(self.period)
         timer.start()
-        while not self._stop_thread.is_set():
+        while not stop.is_set():
             tick = timer.wait()
             try:
                 self._cycle(tick)
