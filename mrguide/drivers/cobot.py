@@ -13,10 +13,12 @@ validated before they enter the queue, and every RPDO's target once more right b
 from __future__ import annotations
 
 import logging
+import queue
 import threading
 import time
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from functools import partial
 
 import can
@@ -51,6 +53,9 @@ NMT_PRE_OPERATIONAL = 0x80
 NMT_RESET_COMMUNICATION = 0x82
 #: A setpoint step above this fraction of v_max * period means the arm is moving (for underrun counting).
 MOVING_FRACTION = 0.01
+#: Longest wait (s) of an application call for the driver lock, which the control thread holds for
+#: microseconds per cycle: longer means the control thread is hung, and the call raises DriverError.
+LOCK_TIMEOUT = 0.5
 
 
 def _send_nmt(network: canopen.Network, command: int, node_id: int) -> None:
@@ -98,7 +103,8 @@ class Cobot:
         self._max_step = self.limits.v_max * self.period
         self._heartbeat_cycles = max(1, round(self.config.timing.heartbeat_period / self.period))
         self._lock = threading.RLock()
-        self._space = threading.Condition(self._lock)
+        #: Set whenever the setpoint queue gets room or streaming ends (wakes a blocked `stream`).
+        self._space = threading.Event()
         self._queue: deque[np.ndarray] = deque()
         self._network: canopen.Network | None = None
         self._receiver: BusReceiver | None = None
@@ -127,6 +133,9 @@ class Cobot:
         self._frames_tx = self._bits_tx = 0
         self._lost_feedback = self._underruns = self._refused = self._emcy_count = 0
         self._queue.clear()
+        #: Posted without the lock (stop(), EMCY callbacks), carried out by the control thread: None is a
+        #: quick stop, an error is a fault to latch.
+        self._requests: queue.SimpleQueue[DriverError | None] = queue.SimpleQueue()
 
     # ------------------------------------------------------------------ lifecycle
 
@@ -242,7 +251,7 @@ class Cobot:
         if any(self._state(d) in powered for d in alive):
             self.stop()
             self._wait_for(lambda: not any(self._state(d) in powered for d in alive), self.config.timing.enable_timeout)
-        with self._lock:
+        with self._locked():
             self._command = PowerCommand.DISABLE
         self._wait_for(lambda: all(self._state(d) in (SWITCH_ON_DISABLED, *FAULT_STATES) for d in alive),
                        self.config.timing.enable_timeout)
@@ -275,9 +284,8 @@ class Cobot:
             if self._thread.is_alive():
                 logger.error("the control thread did not stop within 2 s; leaving it behind")
         self._thread = None
-        with self._lock:
-            self._motion = False
-            self._space.notify_all()
+        self._motion = False  # the control thread is gone (or hung): no lock needed, none waited for
+        self._space.set()
         if self._hb is not None:
             _best_effort("disarming the heartbeat consumer", self._hb.disarm)
         if self._receiver is not None:
@@ -302,7 +310,7 @@ class Cobot:
     def enable(self, timeout: float | None = None) -> None:
         """Bring every drive to OPERATION ENABLED, holding the current position; then `stream` is allowed."""
         timeout = self.config.timing.enable_timeout if timeout is None else timeout
-        with self._lock:
+        with self._locked():
             self._require_connected()
             self._raise_fault()
             if self._motion:
@@ -314,7 +322,7 @@ class Cobot:
                 raise NotReadyError(f"cannot enable: joints outside their limits: {'; '.join(outside)}")
             self._command = PowerCommand.ENABLE
         self._wait_for(lambda: self._motion or self._fault is not None, timeout)
-        with self._lock:
+        with self._locked():
             self._raise_fault()
             if not self._motion:
                 self._command = PowerCommand.DISABLE
@@ -327,7 +335,8 @@ class Cobot:
 
         Refused with SetpointError (nothing queued, nothing sent) unless finite, within the joint limits
         and at most v_max * period away from the previous setpoint. Blocks while the queue is full; raises
-        the latched fault if one occurs, NotReadyError if the drives are not enabled.
+        the latched fault if one occurs, NotReadyError if the drives are not enabled, DriverError if the
+        control cycle stalls (queue still full after `timeout`) or hangs (driver lock held).
         """
         depth = self.config.timing.setpoint_queue_depth
         timeout = self.period * (depth + 25) if timeout is None else timeout
@@ -337,19 +346,20 @@ class Cobot:
             self._refused += 1
             raise SetpointError(f"setpoint is not an array of joint positions: {exc}") from exc
         end = time.monotonic() + timeout
-        with self._lock:
-            while True:
+        while True:
+            with self._locked():
                 self._require_streaming()
                 if len(self._queue) < depth:
-                    break
-                remaining = end - time.monotonic()
-                if remaining <= 0:
-                    raise DriverError(f"setpoint queue still full after {timeout:.3f} s: the control cycle is stalled")
-                self._space.wait(remaining)
-            reference = self._queue[-1] if self._queue else self._hold
-            assert reference is not None
-            self._validate(q, reference)
-            self._queue.append(q)
+                    reference = self._queue[-1] if self._queue else self._hold
+                    assert reference is not None
+                    self._validate(q, reference)
+                    self._queue.append(q)
+                    return
+                self._space.clear()  # under the lock: a setpoint taken from here on sets it again
+            remaining = end - time.monotonic()
+            if remaining <= 0:
+                raise DriverError(f"setpoint queue still full after {timeout:.3f} s: the control cycle is stalled")
+            self._space.wait(remaining)
 
     def _validate(self, q: np.ndarray, reference: np.ndarray) -> None:
         problem = setpoint_problem(q, reference, self.limits, self.period, self.joint_names)
@@ -363,7 +373,7 @@ class Cobot:
             raise SetpointError(f"vacuum command must be booleans, got on={on!r}, blow_off={blow_off!r}")
         if on and blow_off:
             raise SetpointError("vacuum and blow-off cannot be commanded at the same time")
-        with self._lock:
+        with self._locked():
             self._require_connected()
             assert self._vacuum is not None
             fault = self._fault
@@ -373,14 +383,23 @@ class Cobot:
             self._vacuum.vacuum_on, self._vacuum.blow_off = bool(on), bool(blow_off)
 
     def stop(self) -> None:
-        """Quick stop: every enabled drive decelerates on its quick-stop ramp; queued setpoints are dropped."""
-        with self._lock:
-            if self._network is None:
-                return
-            self._command = PowerCommand.QUICK_STOP
-            self._motion = False
-            self._queue.clear()
-            self._space.notify_all()
+        """Quick stop: every enabled drive decelerates on its quick-stop ramp; queued setpoints are dropped.
+
+        Never hangs: the request is posted without the lock and carried out here or by the control thread
+        at its next cycle. If the control thread holds the lock (hung), this logs an error and returns; the
+        request waits for it, and devices consuming the master's heartbeat disable themselves meanwhile.
+        """
+        if self._network is None:
+            return
+        self._requests.put(None)
+        if not self._lock.acquire(timeout=LOCK_TIMEOUT):
+            logger.error("quick stop requested, but the control thread has held the driver lock for %.1f s: "
+                         "it is hung", LOCK_TIMEOUT)
+            return
+        try:
+            self._apply_requests()
+        finally:
+            self._lock.release()
         logger.info("quick stop commanded")
 
     def reset_faults(self, timeout: float | None = None) -> None:
@@ -390,18 +409,17 @@ class Cobot:
         still silent or not OPERATIONAL (reconnect then), or a drive stays in FAULT.
         """
         timeout = self.config.timing.enable_timeout if timeout is None else timeout
-        with self._lock:
+        with self._locked():
             self._require_connected()
             if isinstance(self._fault, BusError):
                 raise self._fault
             self._command = PowerCommand.FAULT_RESET
-            self._motion = False
-            self._queue.clear()
+            self._halt()
         assert self._hb is not None
         ids = self.config.node_ids
         done = self._wait_for(lambda: all(self._state(d) == SWITCH_ON_DISABLED for d in self._drives)
                               and not self._hb.expired() and self._hb.all_in_state(OPERATIONAL, ids), timeout)
-        with self._lock:
+        with self._locked():
             if not done:
                 self._command = PowerCommand.DISABLE
                 problems = [f"{d.label}: {self._state(d)}" for d in self._drives if self._state(d) != SWITCH_ON_DISABLED]
@@ -418,7 +436,7 @@ class Cobot:
 
     def check(self) -> None:
         """Raise the latched fault, if any (for runtimes that poll)."""
-        with self._lock:
+        with self._locked():
             self._raise_fault()
 
     # ------------------------------------------------------------------ state
@@ -426,14 +444,14 @@ class Cobot:
     @property
     def setpoint(self) -> np.ndarray:
         """Last accepted joint setpoint (rad): where the next streamed setpoint must start from."""
-        with self._lock:
+        with self._locked():
             self._require_streaming()
             assert self._hold is not None
             return (self._queue[-1] if self._queue else self._hold).copy()
 
     def joint_state(self) -> JointState:
         """Latest joint positions (rad), velocities (rad/s) and drive states."""
-        with self._lock:
+        with self._locked():
             self._require_connected()
             fbs = [d.feedback for d in self._drives]
         if any(fb is None for fb in fbs):
@@ -449,7 +467,7 @@ class Cobot:
 
     def vacuum_state(self) -> VacuumState:
         """Latest vacuum level (kPa below atmosphere), part-gripped/lost flags and the command being sent."""
-        with self._lock:
+        with self._locked():
             self._require_connected()
             assert self._vacuum is not None
             fb, vac = self._vacuum.feedback, self._vacuum
@@ -512,6 +530,8 @@ class Cobot:
 
     def _cycle(self, tick: Tick) -> None:
         assert self._receiver is not None
+        with self._lock:
+            self._apply_requests()
         if self._receiver.exception is not None:
             self._latch(BusError(f"CAN receive failed on {self._bus_name()}: {self._receiver.exception}"))
             return
@@ -600,7 +620,7 @@ class Cobot:
             if self._motion:
                 if self._queue:
                     setpoint = self._queue.popleft()
-                    self._space.notify_all()
+                    self._space.set()
                     self._moving = bool(np.any(np.abs(setpoint - self._hold) > MOVING_FRACTION * self._max_step))
                     self._hold = setpoint
                 elif self._moving:
@@ -645,15 +665,30 @@ class Cobot:
                 logger.exception("cycle observer %r failed", observer)
 
     def _latch(self, error: DriverError) -> None:
+        """Keep the first fault and quick-stop; control thread only (other threads post to `_requests`)."""
         with self._lock:
             if self._fault is None:
                 self._fault = error
                 self._fault_at = time.monotonic()
                 self._command = PowerCommand.QUICK_STOP
                 logger.error("cobot fault, quick stop: %s", error)
-            self._motion = False
-            self._queue.clear()
-            self._space.notify_all()
+            self._halt()
+
+    def _apply_requests(self) -> None:
+        """Carry out the quick stops and faults other threads posted without the lock; lock held."""
+        while not self._requests.empty():
+            request = self._requests.get_nowait()
+            if request is None:
+                self._command = PowerCommand.QUICK_STOP
+                self._halt()
+            else:
+                self._latch(request)
+
+    def _halt(self) -> None:
+        """Streaming ends: queued setpoints are dropped and a blocked `stream` wakes up; lock held."""
+        self._motion = False
+        self._queue.clear()
+        self._space.set()
 
     def _on_emcy(self, node_id: int, emcy: EmcyError) -> None:
         self._emcy_count += 1
@@ -661,8 +696,8 @@ class Cobot:
             logger.info("%s: EMCY error reset", self._label(node_id))
             return
         text = f"{self._label(node_id)}: EMCY 0x{emcy.code:04X} ({emcy.get_desc()}), error register 0x{emcy.register:02X}"
-        if emcy.register:
-            self._latch(DeviceFaultError(text, node_id, self._name(node_id), emcy.code))
+        if emcy.register:  # latched by the control thread at its next cycle (this is the receive thread)
+            self._requests.put(DeviceFaultError(text, node_id, self._name(node_id), emcy.code))
         else:
             logger.warning("%s (no active error)", text)
 
@@ -699,6 +734,17 @@ class Cobot:
                 return False
             time.sleep(self.period / 2)
         return True
+
+    @contextmanager
+    def _locked(self) -> Iterator[None]:
+        """The driver lock for calls from the application: a DriverError after LOCK_TIMEOUT, never a hang."""
+        if not self._lock.acquire(timeout=LOCK_TIMEOUT):
+            raise DriverError(f"the control thread has held the driver lock for {LOCK_TIMEOUT} s: it is hung "
+                              "(devices consuming the master's heartbeat disable themselves); reconnect")
+        try:
+            yield
+        finally:
+            self._lock.release()
 
     def _require_connected(self) -> None:
         if self._network is None:
