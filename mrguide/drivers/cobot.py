@@ -507,7 +507,8 @@ class Cobot:
         )
 
     def add_cycle_observer(self, observer: Callable[[CycleSample], None]) -> None:
-        """Call `observer` from the control thread after every cycle (keep it fast; exceptions are logged)."""
+        """Call `observer` from the control thread after every cycle (keep it fast). An exception in it
+        latches a fault (quick stop): observers are monitors, and a monitor that fails must not fail open."""
         self._observers.append(observer)
 
     def remove_cycle_observer(self, observer: Callable[[CycleSample], None]) -> None:
@@ -661,8 +662,10 @@ class Cobot:
         for observer in list(self._observers):
             try:
                 observer(sample)
-            except Exception:  # an observer bug must not stop the arm's control loop
+            except Exception as exc:  # observers are safety monitors: one that fails must not fail open
                 logger.exception("cycle observer %r failed", observer)
+                self._latch(DriverError(f"cycle observer {getattr(observer, '__qualname__', observer)!r} "
+                                        f"failed: {exc!r}"))
 
     def _latch(self, error: DriverError) -> None:
         """Keep the first fault and quick-stop; control thread only (other threads post to `_requests`)."""
