@@ -101,7 +101,8 @@ class Cobot:
         self.joint_names = self.robot.joint_names
         self.period = self.config.timing.control_period
         self._max_step = self.limits.v_max * self.period
-        self._heartbeat_cycles = max(1, round(self.config.timing.heartbeat_period / self.period))
+        # rounded down: the master's heartbeat never comes later than the period the devices expect
+        self._heartbeat_cycles = max(1, int(self.config.timing.heartbeat_period / self.period + 1e-9))
         self._lock = threading.RLock()
         #: Set whenever the setpoint queue gets room or streaming ends (wakes a blocked `stream`).
         self._space = threading.Event()

@@ -26,6 +26,12 @@ CIA301_BITRATES = (10_000, 20_000, 50_000, 125_000, 250_000, 500_000, 800_000, 1
 
 INT32_MAX = 2**31 - 1
 
+#: Smallest heartbeat consumer time / producer time accepted: one lost heartbeat plus half a period of
+#: jitter. At 2.0 a single lost or late heartbeat trips the consumer (5 % frame loss quick-stopped the
+#: arm within seconds); CiA 301 practice pads the ratio (>= 1.5-3 x plus jitter).
+MIN_HEARTBEAT_FACTOR = 2.5
+MAX_HEARTBEAT_FACTOR = 10.0
+
 
 def eds_path(name: str) -> Path:
     """Resolve an EDS file name: absolute paths as given, relative ones inside `mrguide/drivers/eds/`."""
@@ -73,10 +79,13 @@ class TimingConfig:
 
     #: SYNC / control period. 4 ms (250 Hz) is the project's requirement for CSP streaming.
     control_period: float = 0.004
-    #: Producer heartbeat time written to every node's 0x1017 (assumed; must be whole ms).
-    heartbeat_period: float = 0.1
-    #: Heartbeat consumer time = factor x producer time (CiA 301 wants it above the producer time).
-    heartbeat_timeout_factor: float = 2.0
+    #: Producer heartbeat time written to every node's 0x1017, and the master's own heartbeat period
+    #: (whole ms, a whole number of control periods for the master's to be exact; assumed).
+    heartbeat_period: float = 0.04
+    #: Heartbeat consumer time = factor x producer time, in both directions (the master consumes the
+    #: devices', every device the master's via 0x1016). 4.5 = three lost heartbeats in a row plus half a
+    #: period of jitter: 180 ms at 40 ms (see configs/cobot_bus.toml); at least MIN_HEARTBEAT_FACTOR.
+    heartbeat_timeout_factor: float = 4.5
     #: Time allowed for all nodes to send their boot-up message after NMT reset communication; [0.01, 60].
     boot_timeout: float = 3.0
     #: Time allowed for all drives to reach OPERATION ENABLED (or to leave FAULT on reset); [0.01, 60].
@@ -99,8 +108,8 @@ class TimingConfig:
             raise ConfigError(f"timing.heartbeat_period = {self.heartbeat_period}: must be whole ms")
         if self.heartbeat_period < 2 * self.control_period:
             raise ConfigError("timing.heartbeat_period must be at least two control periods")
-        if not 1.0 < self.heartbeat_timeout_factor <= 3.0:
-            raise ConfigError(f"timing.heartbeat_timeout_factor = {self.heartbeat_timeout_factor}: outside (1, 3]")
+        check_number("timing.heartbeat_timeout_factor", self.heartbeat_timeout_factor, MIN_HEARTBEAT_FACTOR,
+                     MAX_HEARTBEAT_FACTOR, " (consumer time / producer time: one lost heartbeat plus jitter at least)")
         if self.heartbeat_timeout_ms > 0xFFFF:
             raise ConfigError("timing: heartbeat_period x heartbeat_timeout_factor must fit 65.535 s (the devices "
                               "consume the master's heartbeat with this time)")

@@ -38,6 +38,7 @@ def test_repo_toml_matches_defaults_and_robot_limits(robot):
     ("[master]\nnode_id = 16\n", ["unique", "master.node_id", "16"]),
     ("[master]\nnode_id = 0\n", ["master.node_id", "0"]),
     ("[timing]\nheartbeat_period = 30.0\nheartbeat_timeout_factor = 3.0\n", ["65.535 s", "master"]),
+    ("[timing]\nheartbeat_timeout_factor = 2.0\n", ["timing.heartbeat_timeout_factor", "2.5", "lost heartbeat"]),
     ('[drives]\neds = "nope.eds"\n', ["drives.eds", "nope.eds"]),
     ("[drives]\nquick_stop_option = 3\n", ["quick_stop_option"]),
     ("[[joints]]\nnode_id = 3\ndirection = 2\n", ["direction"]),
