@@ -184,7 +184,7 @@ def main() -> int:
                "heartbeat_ms": t.heartbeat_ms, "consumer_ms": t.heartbeat_timeout_ms,
                "max_missed_feedback": t.max_missed_feedback, "realtime_priority": t.realtime_priority,
                "quick_stops": len(faults), "quick_stop_kinds": dict(kinds), "load_average": os.getloadavg()[0]}
-    for (label, (median, worst), _), key in zip(rows, ("silent_fault", "silent_heartbeat", "heartbeat_only",
+    for (_, (median, worst), _), key in zip(rows, ("silent_fault", "silent_heartbeat", "heartbeat_only",
                                                       "hung_master")):
         figures[f"{key}_median_ms"], figures[f"{key}_max_ms"] = round(median * 1e3, 1), round(worst * 1e3, 1)
     print(json.dumps(figures))

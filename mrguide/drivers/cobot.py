@@ -13,12 +13,10 @@ validated before they enter the queue, and every RPDO's target once more right b
 from __future__ import annotations
 
 import logging
-import queue
 import threading
 import time
 from collections import deque
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from collections.abc import Callable
 from functools import partial
 
 import can
@@ -36,11 +34,13 @@ from mrguide.drivers.cobot_state import CobotStatus, CycleSample, DriverStats, J
 from mrguide.drivers.config import CobotBusConfig, eds_path, resolve_limits
 from mrguide.drivers.conversion import JointConversion
 from mrguide.drivers.cycle import CycleStats, CycleTimer, Tick
+from mrguide.drivers.driver_lock import DriverLock
 from mrguide.drivers.errors import (BootError, BusError, BusOffError, DeviceFaultError, DriverError,
                                     FeedbackLostError, HeartbeatLostError, NodeLostError, NotReadyError,
                                     SetpointError)
-from mrguide.drivers.heartbeat import (CONSUMER_HEARTBEAT, OPERATIONAL, HeartbeatConsumer, consumer_heartbeat_entry,
-                                       nmt_state_name)
+from mrguide.drivers.heartbeat import OPERATIONAL, HeartbeatConsumer, nmt_state_name
+from mrguide.drivers.nmt import (NMT_RESET_COMMUNICATION, NMT_START, close_network, send_nmt, set_master_consumer,
+                                 sign_off)
 from mrguide.drivers.realtime import make_current_thread_realtime
 from mrguide.drivers.setpoint_guard import plan_rpdos, setpoint_problem
 from mrguide.drivers.vacuum import BLOW_OFF_BIT, VACUUM_ON_BIT, VacuumGenerator
@@ -48,28 +48,8 @@ from mrguide.robot import RobotSpec, load_robot
 
 logger = logging.getLogger(__name__)
 
-NMT_START = 0x01
-NMT_PRE_OPERATIONAL = 0x80
-NMT_RESET_COMMUNICATION = 0x82
 #: A setpoint step above this fraction of v_max * period means the arm is moving (for underrun counting).
 MOVING_FRACTION = 0.01
-#: Longest wait (s) of an application call for the driver lock, which the control thread holds for
-#: microseconds per cycle: longer means the control thread is hung, and the call raises DriverError.
-LOCK_TIMEOUT = 0.5
-
-
-def _send_nmt(network: canopen.Network, command: int, node_id: int) -> None:
-    """Send an NMT command frame. canopen's `nmt.send_command` is not used: it looks up the node's last
-    reported NMT state, and raises KeyError after a heartbeat that carried an undefined one."""
-    network.send_message(0x000, bytes([command, node_id]))
-
-
-def _best_effort(what: str, action: Callable[[], object]) -> None:
-    """One step of a teardown: whatever it raises is logged, so the following steps still run."""
-    try:
-        action()
-    except Exception as exc:  # noqa: BLE001 - a teardown must never be cut short
-        logger.warning("%s failed: %r", what, exc)
 
 
 def _load_node(node_id: int, eds: str) -> RemoteNode:
@@ -103,7 +83,7 @@ class Cobot:
         self._max_step = self.limits.v_max * self.period
         # rounded down: the master's heartbeat never comes later than the period the devices expect
         self._heartbeat_cycles = max(1, int(self.config.timing.heartbeat_period / self.period + 1e-9))
-        self._lock = threading.RLock()
+        self._lock = DriverLock()
         #: Set whenever the setpoint queue gets room or streaming ends (wakes a blocked `stream`).
         self._space = threading.Event()
         self._queue: deque[np.ndarray] = deque()
@@ -134,9 +114,7 @@ class Cobot:
         self._frames_tx = self._bits_tx = 0
         self._lost_feedback = self._underruns = self._refused = self._emcy_count = 0
         self._queue.clear()
-        #: Posted without the lock (stop(), EMCY callbacks), carried out by the control thread: None is a
-        #: quick stop, an error is a fault to latch.
-        self._requests: queue.SimpleQueue[DriverError | None] = queue.SimpleQueue()
+        self._lock.discard_requests()
 
     # ------------------------------------------------------------------ lifecycle
 
@@ -193,7 +171,7 @@ class Cobot:
         devices = [*self._drives, self._vacuum]
         self._hb.expect_bootup()
         for dev in devices:
-            _send_nmt(dev.node.network, NMT_RESET_COMMUNICATION, dev.node.id)
+            send_nmt(dev.node.network, NMT_RESET_COMMUNICATION, dev.node.id)
         missing = self._hb.wait_bootup(timing.boot_timeout)
         if missing:
             labels = ", ".join(self._label(n) for n in missing)
@@ -204,14 +182,14 @@ class Cobot:
                 self._receiver.expect(cob_id, (length,))
             if self.config.master.heartbeat:
                 try:
-                    self._set_master_consumer(dev, timing.heartbeat_timeout_ms)
+                    set_master_consumer(dev.node, self.config.master.node_id, timing.heartbeat_timeout_ms)
                 except SdoError as exc:
                     raise BootError(f"{dev.label}: cannot make it consume the master's heartbeat (0x1016:01): {exc}; "
                                     "set [master] heartbeat = false for devices without 0x1016") from exc
         self._vacuum.vacuum_on, self._vacuum.blow_off = self._vacuum_command_on_device()
         self._hb.arm()
         for dev in devices:
-            _send_nmt(dev.node.network, NMT_START, dev.node.id)
+            send_nmt(dev.node.network, NMT_START, dev.node.id)
         ids = self.config.node_ids
         if not self._wait_for(lambda: self._hb.all_in_state(OPERATIONAL, ids), timing.boot_timeout):
             states = ", ".join(f"{self._label(n)}: {nmt_state_name(self._hb.state(n))}" for n in ids
@@ -252,30 +230,13 @@ class Cobot:
         if any(self._state(d) in powered for d in alive):
             self.stop()
             self._wait_for(lambda: not any(self._state(d) in powered for d in alive), self.config.timing.enable_timeout)
-        with self._locked():
+        with self._lock.bounded():
             self._command = PowerCommand.DISABLE
         self._wait_for(lambda: all(self._state(d) in (SWITCH_ON_DISABLED, *FAULT_STATES) for d in alive),
                        self.config.timing.enable_timeout)
         if self.config.master.heartbeat:
-            self._sign_off()
-
-    def _set_master_consumer(self, dev: Cia402Drive | VacuumGenerator, time_ms: int) -> None:
-        """Make a device consume the master's heartbeat with consumer time `time_ms` (0 switches it off)."""
-        dev.node.sdo[CONSUMER_HEARTBEAT][1].raw = consumer_heartbeat_entry(self.config.master.node_id, time_ms)
-
-    def _sign_off(self) -> None:
-        """Switch off the supervision of the master in every device that still sends its heartbeat: a
-        planned disconnect is no master loss (devices left OPERATIONAL by a fault still answer SDO)."""
-        assert self._hb is not None and self._vacuum is not None
-        silent = {node_id for node_id, _ in self._hb.expired()}
-        for dev in (*self._drives, self._vacuum):
-            if dev.node.id in silent or self._hb.state(dev.node.id) is None:
-                continue
-            try:
-                self._set_master_consumer(dev, 0)
-            except (SdoError, can.CanError) as exc:
-                logger.warning("%s: could not switch off its supervision of the master's heartbeat: %s",
-                               dev.label, exc)
+            assert self._hb is not None and self._vacuum is not None
+            sign_off((*self._drives, self._vacuum), self._hb, self.config.master.node_id)
 
     def _teardown(self) -> None:
         """Stop the control thread, send NMT pre-operational to every node, close the bus; never cut short."""
@@ -287,17 +248,9 @@ class Cobot:
         self._thread = None
         self._motion = False  # the control thread is gone (or hung): no lock needed, none waited for
         self._space.set()
-        if self._hb is not None:
-            _best_effort("disarming the heartbeat consumer", self._hb.disarm)
-        if self._receiver is not None:
-            _best_effort("stopping the CAN receive thread", self._receiver.stop)
         network, self._network = self._network, None
-        if network is None:
-            return
-        for node_id in self.config.node_ids:
-            _best_effort(f"NMT pre-operational to node {node_id}",
-                         partial(_send_nmt, network, NMT_PRE_OPERATIONAL, node_id))
-        _best_effort("closing the CAN bus", network.disconnect)
+        if network is not None:
+            close_network(network, self.config.node_ids, self._hb, self._receiver)
 
     def __enter__(self) -> Cobot:
         self.connect()
@@ -311,7 +264,7 @@ class Cobot:
     def enable(self, timeout: float | None = None) -> None:
         """Bring every drive to OPERATION ENABLED, holding the current position; then `stream` is allowed."""
         timeout = self.config.timing.enable_timeout if timeout is None else timeout
-        with self._locked():
+        with self._lock.bounded():
             self._require_connected()
             self._raise_fault()
             if self._motion:
@@ -323,7 +276,7 @@ class Cobot:
                 raise NotReadyError(f"cannot enable: joints outside their limits: {'; '.join(outside)}")
             self._command = PowerCommand.ENABLE
         self._wait_for(lambda: self._motion or self._fault is not None, timeout)
-        with self._locked():
+        with self._lock.bounded():
             self._raise_fault()
             if not self._motion:
                 self._command = PowerCommand.DISABLE
@@ -348,7 +301,7 @@ class Cobot:
             raise SetpointError(f"setpoint is not an array of joint positions: {exc}") from exc
         end = time.monotonic() + timeout
         while True:
-            with self._locked():
+            with self._lock.bounded():
                 self._require_streaming()
                 if len(self._queue) < depth:
                     reference = self._queue[-1] if self._queue else self._hold
@@ -374,7 +327,7 @@ class Cobot:
             raise SetpointError(f"vacuum command must be booleans, got on={on!r}, blow_off={blow_off!r}")
         if on and blow_off:
             raise SetpointError("vacuum and blow-off cannot be commanded at the same time")
-        with self._locked():
+        with self._lock.bounded():
             self._require_connected()
             assert self._vacuum is not None
             fault = self._fault
@@ -392,10 +345,10 @@ class Cobot:
         """
         if self._network is None:
             return
-        self._requests.put(None)
-        if not self._lock.acquire(timeout=LOCK_TIMEOUT):
+        self._lock.post(None)
+        if not self._lock.acquire(timeout=self._lock.timeout):
             logger.error("quick stop requested, but the control thread has held the driver lock for %.1f s: "
-                         "it is hung", LOCK_TIMEOUT)
+                         "it is hung", self._lock.timeout)
             return
         try:
             self._apply_requests()
@@ -410,7 +363,7 @@ class Cobot:
         still silent or not OPERATIONAL (reconnect then), or a drive stays in FAULT.
         """
         timeout = self.config.timing.enable_timeout if timeout is None else timeout
-        with self._locked():
+        with self._lock.bounded():
             self._require_connected()
             if isinstance(self._fault, BusError):
                 raise self._fault
@@ -420,7 +373,7 @@ class Cobot:
         ids = self.config.node_ids
         done = self._wait_for(lambda: all(self._state(d) == SWITCH_ON_DISABLED for d in self._drives)
                               and not self._hb.expired() and self._hb.all_in_state(OPERATIONAL, ids), timeout)
-        with self._locked():
+        with self._lock.bounded():
             if not done:
                 self._command = PowerCommand.DISABLE
                 problems = [f"{d.label}: {self._state(d)}" for d in self._drives if self._state(d) != SWITCH_ON_DISABLED]
@@ -437,7 +390,7 @@ class Cobot:
 
     def check(self) -> None:
         """Raise the latched fault, if any (for runtimes that poll)."""
-        with self._locked():
+        with self._lock.bounded():
             self._raise_fault()
 
     # ------------------------------------------------------------------ state
@@ -445,14 +398,14 @@ class Cobot:
     @property
     def setpoint(self) -> np.ndarray:
         """Last accepted joint setpoint (rad): where the next streamed setpoint must start from."""
-        with self._locked():
+        with self._lock.bounded():
             self._require_streaming()
             assert self._hold is not None
             return (self._queue[-1] if self._queue else self._hold).copy()
 
     def joint_state(self) -> JointState:
         """Latest joint positions (rad), velocities (rad/s) and drive states."""
-        with self._locked():
+        with self._lock.bounded():
             self._require_connected()
             fbs = [d.feedback for d in self._drives]
         if any(fb is None for fb in fbs):
@@ -468,7 +421,7 @@ class Cobot:
 
     def vacuum_state(self) -> VacuumState:
         """Latest vacuum level (kPa below atmosphere), part-gripped/lost flags and the command being sent."""
-        with self._locked():
+        with self._lock.bounded():
             self._require_connected()
             assert self._vacuum is not None
             fb, vac = self._vacuum.feedback, self._vacuum
@@ -669,7 +622,7 @@ class Cobot:
                                         f"failed: {exc!r}"))
 
     def _latch(self, error: DriverError) -> None:
-        """Keep the first fault and quick-stop; control thread only (other threads post to `_requests`)."""
+        """Keep the first fault and quick-stop; control thread only (other threads post to the lock)."""
         with self._lock:
             if self._fault is None:
                 self._fault = error
@@ -680,8 +633,7 @@ class Cobot:
 
     def _apply_requests(self) -> None:
         """Carry out the quick stops and faults other threads posted without the lock; lock held."""
-        while not self._requests.empty():
-            request = self._requests.get_nowait()
+        for request in self._lock.drain():
             if request is None:
                 self._command = PowerCommand.QUICK_STOP
                 self._halt()
@@ -701,7 +653,7 @@ class Cobot:
             return
         text = f"{self._label(node_id)}: EMCY 0x{emcy.code:04X} ({emcy.get_desc()}), error register 0x{emcy.register:02X}"
         if emcy.register:  # latched by the control thread at its next cycle (this is the receive thread)
-            self._requests.put(DeviceFaultError(text, node_id, self._name(node_id), emcy.code))
+            self._lock.post(DeviceFaultError(text, node_id, self._name(node_id), emcy.code))
         else:
             logger.warning("%s (no active error)", text)
 
@@ -738,17 +690,6 @@ class Cobot:
                 return False
             time.sleep(self.period / 2)
         return True
-
-    @contextmanager
-    def _locked(self) -> Iterator[None]:
-        """The driver lock for calls from the application: a DriverError after LOCK_TIMEOUT, never a hang."""
-        if not self._lock.acquire(timeout=LOCK_TIMEOUT):
-            raise DriverError(f"the control thread has held the driver lock for {LOCK_TIMEOUT} s: it is hung "
-                              "(devices consuming the master's heartbeat disable themselves); reconnect")
-        try:
-            yield
-        finally:
-            self._lock.release()
 
     def _require_connected(self) -> None:
         if self._network is None:
