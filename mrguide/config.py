@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 import tomllib
 from pathlib import Path
 from typing import Any, TypeVar
@@ -14,6 +15,18 @@ T = TypeVar("T")
 
 class ConfigError(ValueError):
     """A configuration file or value is invalid; the message names the file and the key."""
+
+
+def check_number(key: str, value: Any, low: float, high: float, unit: str = "", integer: bool = False) -> None:
+    """Refuse `value` of `key` (e.g. "safety.stall_timeout") unless it is a finite number in [low, high].
+
+    For `__post_init__` checks: loaded through `from_dict`, the message also gets the file and section.
+    NaN fails every comparison, so it is refused like any other value out of range.
+    """
+    kinds = (int,) if integer else (int, float)
+    if isinstance(value, bool) or not isinstance(value, kinds) or not (math.isfinite(value) and low <= value <= high):
+        kind = "an integer" if integer else "a finite number"
+        raise ConfigError(f"{key} = {value!r}: expected {kind} in [{low:g}, {high:g}]{unit}")
 
 
 def from_dict(cls: type[T], data: dict[str, Any], where: str = "config") -> T:

@@ -1,12 +1,15 @@
 """Exported policies: a small npz of actor weights + metadata, run with numpy alone on the robot PC.
 
 The file is written by `mrguide.policies.export` and read here; loading checks the format, the
-observation/action layout, the layer shapes, finiteness, and (when given) that the workspace box and
-task parameters match the robot's configuration, so a wrong file is refused before any drive is enabled.
+observation/action layout, the layer shapes, finiteness, (when given) that the workspace box and task
+parameters match the robot's configuration, and probes the policy on observations spanning its
+workspace (every phase, both gripper states): finite weights can still overflow to a NaN/inf action.
+So a wrong file is refused before any drive is enabled.
 """
 
 from __future__ import annotations
 
+import itertools
 import json
 import zipfile
 from dataclasses import dataclass
@@ -15,9 +18,9 @@ from typing import Any
 
 import numpy as np
 
-from mrguide.config import to_dict
+from mrguide.config import ConfigError, to_dict
 from mrguide.robot import Workspace
-from mrguide.task import ACT_DIM, ACT_LAYOUT, OBS_DIM, OBS_LAYOUT, TaskConfig
+from mrguide.task import ACT_DIM, ACT_LAYOUT, N_PHASES, OBS_DIM, OBS_LAYOUT, PHASES, TaskConfig, progress
 
 FORMAT = "mrguide-policy"
 FORMAT_VERSION = 1
@@ -43,9 +46,13 @@ class ExportedPolicy:
         return float(self.metadata["decision_period"])
 
     def __call__(self, obs: np.ndarray) -> np.ndarray:
+        return self.batch(np.asarray(obs, dtype=np.float64)[None])[0]
+
+    def batch(self, obs: np.ndarray) -> np.ndarray:
+        """Actions (n, 4) for observations (n, 11)."""
         x = np.asarray(obs, dtype=np.float64)
         for W, b, act in zip(self.weights, self.biases, self.activations):
-            x = ACTIVATIONS[act](W @ x + b)
+            x = ACTIVATIONS[act](x @ W.T + b)
         return x.astype(np.float32)
 
     @classmethod
@@ -90,13 +97,49 @@ class ExportedPolicy:
             width = W.shape[0]
         if width != ACT_DIM:
             raise PolicyFileError(f"{path}: output width {width}, expected {ACT_DIM}")
+        trained = _trained_workspace(path, meta)
         if workspace is not None:
-            ws = meta.get("workspace", {})
-            if not (np.allclose(ws.get("low", []), workspace.low) and np.allclose(ws.get("high", []), workspace.high)):
-                raise PolicyFileError(f"{path}: trained for workspace {ws}, the robot is configured for low={workspace.low} high={workspace.high}")
+            if not (np.allclose(trained.lo, workspace.lo) and np.allclose(trained.hi, workspace.hi)):
+                raise PolicyFileError(f"{path}: trained for workspace {meta['workspace']}, the robot is configured for low={workspace.low} high={workspace.high}")
         if task is not None:
             theirs, ours = meta.get("task", {}), to_dict(task)
             diff = sorted(k for k in set(theirs) | set(ours) if theirs.get(k) != ours.get(k))
             if diff:
                 raise PolicyFileError(f"{path}: task parameters differ from the configuration: {', '.join(diff)}")
-        return cls(weights, biases, acts, meta)
+        policy = cls(weights, biases, acts, meta)
+        _refuse_non_finite_output(path, policy, trained)
+        return policy
+
+
+def _trained_workspace(path: Path, meta: dict[str, Any]) -> Workspace:
+    ws = meta.get("workspace")
+    try:
+        return Workspace(low=tuple(map(float, ws["low"])), high=tuple(map(float, ws["high"])))
+    except (TypeError, KeyError, ValueError, ConfigError) as exc:
+        raise PolicyFileError(f"{path}: metadata workspace {ws!r} is not a box with low and high corners") from exc
+
+
+def probe_observations(workspace: Workspace) -> np.ndarray:
+    """Deterministic observations spanning `workspace`, ordered by phase, then gripper state: TCP, object
+    and goal each at the box's 8 corners and centre, every phase, g = -1 and +1 (9^3 x 5 x 2 = 7290 rows)."""
+    lo, hi = workspace.lo, workspace.hi
+    points = np.array([lo + (hi - lo) * np.array(c) for c in itertools.product((0.0, 1.0), repeat=3)] + [(lo + hi) / 2])
+    idx = np.array(list(itertools.product(range(N_PHASES), (-1.0, 1.0), *[range(len(points))] * 3)))
+    phi = np.array([progress(p) for p in range(N_PHASES)])
+    tcp, obj, goal = (points[idx[:, k].astype(int)] for k in (2, 3, 4))
+    return np.column_stack([tcp, idx[:, 1], phi[idx[:, 0].astype(int)], obj, goal])
+
+
+def _refuse_non_finite_output(path: Path, policy: ExportedPolicy, workspace: Workspace) -> None:
+    """PolicyFileError if the policy's action is NaN or inf anywhere on the probe observations."""
+    obs = probe_observations(workspace)
+    with np.errstate(over="ignore", invalid="ignore"):  # the overflow is what is being looked for
+        actions = policy.batch(obs)
+    bad = np.flatnonzero(~np.all(np.isfinite(actions), axis=1))
+    if bad.size:
+        o = obs[bad[0]]
+        phase = int(round(o[4] * N_PHASES))
+        raise PolicyFileError(
+            f"{path}: non-finite action for {bad.size} of {len(obs)} probe observations spanning the workspace, "
+            f"e.g. {actions[bad[0]].tolist()} at tcp {np.round(o[:3], 3).tolist()}, g = {o[3]:+.0f}, "
+            f"phase {phase} ({PHASES[phase]}), object {np.round(o[5:8], 3).tolist()}, goal {np.round(o[8:], 3).tolist()}")

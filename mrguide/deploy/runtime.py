@@ -135,8 +135,11 @@ class Runtime:
         problem = self.supervisor.check_setpoint(sp.q, sp.dq, sp.ddq)
         if problem:
             self._quick_stop(Event.JOINT_LIMIT, problem)
-        if self.following.error > self.supervisor.cfg.following_error:
-            self._quick_stop(Event.FOLLOWING_ERROR, f"measured joints {self.following.error:.4f} rad from the setpoints")
+        problem = self.supervisor.check_following(self.following.error)
+        if problem:
+            self._quick_stop(Event.FOLLOWING_ERROR, problem)
+        if not self.watchdog.alive:
+            self._quick_stop(Event.STALL, "the watchdog thread is not running: no stall supervision")
         try:
             self.cobot.stream(sp.q)
         except DriverError as exc:

@@ -6,12 +6,15 @@ Reactions, mildest first:
 - HOLD: the arm brakes to rest on a jerk-limited ramp (Ruckig) and keeps its position; the episode goes on.
 - ABORT: the arm brakes to rest and the episode ends (the run continues with the next one).
 - QUICK_STOP: the drives execute their CiA 402 quick stop; the episode ends and the run stops.
+
+Every check fails closed: a comparison with NaN (in a limit or in a measurement) trips it.
 """
 
 from __future__ import annotations
 
 import enum
 import logging
+import math
 import threading
 import time
 from collections import Counter
@@ -20,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from mrguide.config import check_number
 from mrguide.robot import RobotSpec
 
 log = logging.getLogger(__name__)
@@ -66,12 +70,18 @@ REACTIONS: dict[Event, Reaction] = {
 
 @dataclass(frozen=True)
 class SafetyConfig:
-    """Limits of the supervisor ([safety] in a TOML config)."""
+    """Limits of the supervisor ([safety] in a TOML config); each must be finite and in its range."""
 
-    following_error: float = 0.05  # rad; the drives' own window (0x6065) is the same by default
-    max_consecutive_ik_failures: int = 3
-    stall_timeout: float = 0.25  # s without a new setpoint while moving → quick stop
-    limit_tolerance: float = 1e-6  # relative slack on velocity/acceleration checks
+    following_error: float = 0.05  # rad, in [1e-4, 1]; the drives' own window (0x6065) is the same by default
+    max_consecutive_ik_failures: int = 3  # in [1, 1000]
+    stall_timeout: float = 0.25  # s without a new setpoint while moving → quick stop; in [0.01, 10]
+    limit_tolerance: float = 1e-6  # relative slack on velocity/acceleration checks; in [0, 0.1]
+
+    def __post_init__(self) -> None:
+        check_number("safety.following_error", self.following_error, 1e-4, 1.0, " rad")
+        check_number("safety.max_consecutive_ik_failures", self.max_consecutive_ik_failures, 1, 1000, integer=True)
+        check_number("safety.stall_timeout", self.stall_timeout, 0.01, 10.0, " s")
+        check_number("safety.limit_tolerance", self.limit_tolerance, 0.0, 0.1)
 
 
 class Supervisor:
@@ -108,17 +118,16 @@ class Supervisor:
             return "non-finite setpoint"
         if not s.within_limits(q, tol=1e-9):
             return f"position {np.round(q, 4).tolist()} outside the joint limits"
-        if np.any(np.abs(dq) > s.v_max * tol):
+        if not np.all(np.abs(dq) <= s.v_max * tol):
             return f"velocity {np.round(dq, 3).tolist()} above v_max"
-        if np.any(np.abs(ddq) > s.a_max * tol):
+        if not np.all(np.abs(ddq) <= s.a_max * tol):
             return f"acceleration {np.round(ddq, 3).tolist()} above a_max"
         return None
 
-    def check_following(self, commanded: np.ndarray, measured: np.ndarray) -> str | None:
-        err = np.abs(np.asarray(commanded) - np.asarray(measured))
-        if np.max(err) > self.cfg.following_error:
-            i = int(np.argmax(err))
-            return f"{self.spec.joint_names[i]} is {err[i]:.4f} rad from its setpoint (limit {self.cfg.following_error})"
+    def check_following(self, error: float) -> str | None:
+        """Why the measured joints are too far from the setpoints (`error`: rad, largest joint), or None."""
+        if not error <= self.cfg.following_error:
+            return f"measured joints {error:.4f} rad from the setpoints (limit {self.cfg.following_error} rad)"
         return None
 
 
@@ -126,6 +135,8 @@ class Watchdog:
     """A thread that calls `on_stall` if `feed()` is not called for `timeout` seconds while armed."""
 
     def __init__(self, timeout: float, on_stall: Callable[[float], None]):
+        if not (math.isfinite(timeout) and timeout > 0):
+            raise ValueError(f"stall timeout must be a finite number of seconds > 0, got {timeout}")
         self.timeout = timeout
         self.on_stall = on_stall
         self._last = time.monotonic()
@@ -149,10 +160,15 @@ class Watchdog:
     def fired(self) -> bool:
         return self._fired
 
+    @property
+    def alive(self) -> bool:
+        """Whether the watchdog thread runs (the runtime stops if it does not: no stall supervision)."""
+        return self._thread.is_alive()
+
     def _run(self) -> None:
         while not self._stop.wait(self.timeout / 5):
             age = time.monotonic() - self._last
-            if self._armed and not self._fired and age > self.timeout:
+            if self._armed and not self._fired and not age <= self.timeout:
                 self._fired = True
                 self.on_stall(age)
 

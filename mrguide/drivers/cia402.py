@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import enum
 import logging
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -134,6 +135,8 @@ class Cia402Drive:
         #: Number of TPDO1 frames received (the master checks one arrives per SYNC).
         self.rx_count = 0
         self.last_controlword = 0
+        #: Last target position sent (rad); NaN before the first RPDO.
+        self.last_target = math.nan
         self._rpdo: PdoMap | None = None
         self._velocity = 0
 
@@ -190,13 +193,16 @@ class Cia402Drive:
         if fb is not None:
             self.feedback = DriveFeedback(fb.statusword, fb.position, self._velocity, fb.sync_index, fb.received_at)
 
-    def send(self, controlword: int, target_counts: int) -> int:
-        """Transmit RPDO1 (controlword, target position); returns the frame's data length."""
+    def send(self, controlword: int, target: float) -> int:
+        """Transmit RPDO1 (controlword, target position in rad); returns the frame's data length.
+
+        The target must have passed `setpoint_guard.plan_rpdos` (finite, within the joint limits)."""
         assert self._rpdo is not None, "configure() first"
         self._cw_var.raw = controlword
-        self._target_var.raw = target_counts
+        self._target_var.raw = self.conversion.to_counts(target)
         self._rpdo.transmit()
         self.last_controlword = controlword
+        self.last_target = target
         return len(self._rpdo.data)
 
     def position_rad(self) -> float:

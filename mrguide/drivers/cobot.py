@@ -5,8 +5,9 @@ then one RPDO per drive (controlword + target position) and one to the vacuum ge
 apply them at the next SYNC. The same thread sends the master's heartbeat, which every device consumes
 (0x1016), so a hung control thread or a dead PC disables the drives without the master's help. It also
 supervises heartbeats, PDO feedback, EMCY/statusword faults and the bus, and latches the first fault:
-all drives get quick stop, streaming stops, and the next facade call raises that fault. Setpoints are validated before they enter the queue, so a refused
-setpoint never reaches the bus.
+all drives get quick stop, streaming stops, and the next facade call raises that fault. Setpoints are
+validated before they enter the queue, and every RPDO's target once more right before it is sent
+(`setpoint_guard`), so no non-finite or out-of-limit target reaches the bus by any path.
 """
 
 from __future__ import annotations
@@ -28,27 +29,25 @@ from canopen.sdo.exceptions import SdoError
 from mrguide.config import ConfigError
 from mrguide.drivers.bus import BusReceiver, frame_bits, open_bus
 from mrguide.drivers.cia402 import (FAULT_STATES, OPERATION_ENABLED, QUICK_STOP_ACTIVE, SWITCH_ON_DISABLED,
-                                    Cia402Drive, PowerCommand, controlword_for)
+                                    Cia402Drive, PowerCommand)
 from mrguide.drivers.cobot_state import CobotStatus, CycleSample, DriverStats, JointState, VacuumState
 from mrguide.drivers.config import CobotBusConfig, eds_path, resolve_limits
 from mrguide.drivers.conversion import JointConversion
 from mrguide.drivers.cycle import CycleStats, CycleTimer, Tick
+from mrguide.drivers.driver_lock import DriverLock
 from mrguide.drivers.errors import (BootError, BusError, BusOffError, DeviceFaultError, DriverError,
                                     FeedbackLostError, HeartbeatLostError, NodeLostError, NotReadyError,
                                     SetpointError)
-from mrguide.drivers.heartbeat import (CONSUMER_HEARTBEAT, OPERATIONAL, HeartbeatConsumer, consumer_heartbeat_entry,
-                                       nmt_state_name)
+from mrguide.drivers.heartbeat import OPERATIONAL, HeartbeatConsumer, nmt_state_name
+from mrguide.drivers.nmt import (NMT_RESET_COMMUNICATION, NMT_START, close_network, send_nmt, set_master_consumer,
+                                 sign_off)
 from mrguide.drivers.realtime import make_current_thread_realtime
+from mrguide.drivers.setpoint_guard import plan_rpdos, setpoint_problem
 from mrguide.drivers.vacuum import BLOW_OFF_BIT, VACUUM_ON_BIT, VacuumGenerator
 from mrguide.robot import RobotSpec, load_robot
 
 logger = logging.getLogger(__name__)
 
-NMT_START = 0x01
-NMT_PRE_OPERATIONAL = 0x80
-NMT_RESET_COMMUNICATION = 0x82
-#: Relative slack on the per-cycle step limit (floating-point round-off of trajectory generators).
-STEP_SLACK = 1e-6
 #: A setpoint step above this fraction of v_max * period means the arm is moving (for underrun counting).
 MOVING_FRACTION = 0.01
 
@@ -82,9 +81,11 @@ class Cobot:
         self.joint_names = self.robot.joint_names
         self.period = self.config.timing.control_period
         self._max_step = self.limits.v_max * self.period
-        self._heartbeat_cycles = max(1, round(self.config.timing.heartbeat_period / self.period))
-        self._lock = threading.RLock()
-        self._space = threading.Condition(self._lock)
+        # rounded down: the master's heartbeat never comes later than the period the devices expect
+        self._heartbeat_cycles = max(1, int(self.config.timing.heartbeat_period / self.period + 1e-9))
+        self._lock = DriverLock()
+        #: Set whenever the setpoint queue gets room or streaming ends (wakes a blocked `stream`).
+        self._space = threading.Event()
         self._queue: deque[np.ndarray] = deque()
         self._network: canopen.Network | None = None
         self._receiver: BusReceiver | None = None
@@ -113,6 +114,7 @@ class Cobot:
         self._frames_tx = self._bits_tx = 0
         self._lost_feedback = self._underruns = self._refused = self._emcy_count = 0
         self._queue.clear()
+        self._lock.discard_requests()
 
     # ------------------------------------------------------------------ lifecycle
 
@@ -145,7 +147,9 @@ class Cobot:
         try:
             receiver.start()
             self._boot()
-            self._thread = threading.Thread(target=self._run, name="mrguide-can-cycle", daemon=True)
+            self._stop_thread = threading.Event()  # one per thread: a thread left behind never resumes
+            self._thread = threading.Thread(target=self._run, args=(self._stop_thread,), name="mrguide-can-cycle",
+                                            daemon=True)
             self._thread.start()
             devices = [*self._drives, self._vacuum]
             if not self._wait_for(lambda: all(d.feedback is not None for d in devices), self.config.timing.boot_timeout):
@@ -167,7 +171,7 @@ class Cobot:
         devices = [*self._drives, self._vacuum]
         self._hb.expect_bootup()
         for dev in devices:
-            dev.node.nmt.send_command(NMT_RESET_COMMUNICATION)
+            send_nmt(dev.node.network, NMT_RESET_COMMUNICATION, dev.node.id)
         missing = self._hb.wait_bootup(timing.boot_timeout)
         if missing:
             labels = ", ".join(self._label(n) for n in missing)
@@ -178,14 +182,14 @@ class Cobot:
                 self._receiver.expect(cob_id, (length,))
             if self.config.master.heartbeat:
                 try:
-                    self._set_master_consumer(dev, timing.heartbeat_timeout_ms)
+                    set_master_consumer(dev.node, self.config.master.node_id, timing.heartbeat_timeout_ms)
                 except SdoError as exc:
                     raise BootError(f"{dev.label}: cannot make it consume the master's heartbeat (0x1016:01): {exc}; "
                                     "set [master] heartbeat = false for devices without 0x1016") from exc
         self._vacuum.vacuum_on, self._vacuum.blow_off = self._vacuum_command_on_device()
         self._hb.arm()
         for dev in devices:
-            dev.node.nmt.send_command(NMT_START)
+            send_nmt(dev.node.network, NMT_START, dev.node.id)
         ids = self.config.node_ids
         if not self._wait_for(lambda: self._hb.all_in_state(OPERATIONAL, ids), timing.boot_timeout):
             states = ", ".join(f"{self._label(n)}: {nmt_state_name(self._hb.state(n))}" for n in ids
@@ -205,72 +209,48 @@ class Cobot:
         """Quick-stop moving drives, disable them, put every node in PRE-OPERATIONAL and close the bus.
 
         The vacuum command is left as it is (a held part stays held); call set_vacuum(False) first to release.
+        Never raises: whatever fails on the way is logged, and the NMT commands and closing the bus still happen.
         """
         if self._network is None:
             return
         try:
-            bus_ok = not isinstance(self._fault, BusError) and self._thread is not None and self._thread.is_alive()
-            powered = (OPERATION_ENABLED, QUICK_STOP_ACTIVE)
-            alive = [d for d in self._drives if d.feedback is not None and not self._misses.get(d.node.id)]
-            if bus_ok and any(self._state(d) in powered for d in alive):
-                self.stop()
-                self._wait_for(lambda: not any(self._state(d) in powered for d in alive),
-                               self.config.timing.enable_timeout)
-            if bus_ok:
-                with self._lock:
-                    self._command = PowerCommand.DISABLE
-                self._wait_for(lambda: all(self._state(d) in (SWITCH_ON_DISABLED, *FAULT_STATES) for d in alive),
-                               self.config.timing.enable_timeout)
-                if self.config.master.heartbeat:
-                    self._sign_off()
+            self._stop_and_disable()
+        except Exception:  # noqa: BLE001 - the teardown below must happen whatever went wrong
+            logger.exception("disconnect: stopping and disabling the drives failed; tearing down anyway")
         finally:
             self._teardown()
         logger.info("cobot disconnected")
 
-    def _set_master_consumer(self, dev: Cia402Drive | VacuumGenerator, time_ms: int) -> None:
-        """Make a device consume the master's heartbeat with consumer time `time_ms` (0 switches it off)."""
-        dev.node.sdo[CONSUMER_HEARTBEAT][1].raw = consumer_heartbeat_entry(self.config.master.node_id, time_ms)
-
-    def _sign_off(self) -> None:
-        """Switch off the supervision of the master in every device that still sends its heartbeat: a
-        planned disconnect is no master loss (devices left OPERATIONAL by a fault still answer SDO)."""
-        assert self._hb is not None and self._vacuum is not None
-        silent = {node_id for node_id, _ in self._hb.expired()}
-        for dev in (*self._drives, self._vacuum):
-            if dev.node.id in silent or self._hb.state(dev.node.id) is None:
-                continue
-            try:
-                self._set_master_consumer(dev, 0)
-            except (SdoError, can.CanError) as exc:
-                logger.warning("%s: could not switch off its supervision of the master's heartbeat: %s",
-                               dev.label, exc)
+    def _stop_and_disable(self) -> None:
+        """Quick-stop moving drives, wait until they are disabled, end the devices' supervision of the master."""
+        if isinstance(self._fault, BusError) or self._thread is None or not self._thread.is_alive():
+            return  # nothing can be sent
+        powered = (OPERATION_ENABLED, QUICK_STOP_ACTIVE)
+        alive = [d for d in self._drives if d.feedback is not None and not self._misses.get(d.node.id)]
+        if any(self._state(d) in powered for d in alive):
+            self.stop()
+            self._wait_for(lambda: not any(self._state(d) in powered for d in alive), self.config.timing.enable_timeout)
+        with self._lock.bounded():
+            self._command = PowerCommand.DISABLE
+        self._wait_for(lambda: all(self._state(d) in (SWITCH_ON_DISABLED, *FAULT_STATES) for d in alive),
+                       self.config.timing.enable_timeout)
+        if self.config.master.heartbeat:
+            assert self._hb is not None and self._vacuum is not None
+            sign_off((*self._drives, self._vacuum), self._hb, self.config.master.node_id)
 
     def _teardown(self) -> None:
+        """Stop the control thread, send NMT pre-operational to every node, close the bus; never cut short."""
         self._stop_thread.set()
         if self._thread is not None:
             self._thread.join(timeout=2.0)
+            if self._thread.is_alive():
+                logger.error("the control thread did not stop within 2 s; leaving it behind")
         self._thread = None
-        self._stop_thread.clear()
-        with self._lock:
-            self._motion = False
-            self._space.notify_all()
-        if self._hb is not None:
-            self._hb.disarm()
-        if self._receiver is not None:
-            self._receiver.stop()
+        self._motion = False  # the control thread is gone (or hung): no lock needed, none waited for
+        self._space.set()
         network, self._network = self._network, None
-        if network is None:
-            return
-        for node_id in self.config.node_ids:
-            try:
-                network[node_id].nmt.send_command(NMT_PRE_OPERATIONAL)
-            except can.CanError as exc:
-                logger.warning("could not send NMT pre-operational to node %d: %s", node_id, exc)
-                break
-        try:
-            network.disconnect()
-        except can.CanError as exc:
-            logger.warning("closing the CAN bus reported: %s", exc)
+        if network is not None:
+            close_network(network, self.config.node_ids, self._hb, self._receiver)
 
     def __enter__(self) -> Cobot:
         self.connect()
@@ -284,7 +264,7 @@ class Cobot:
     def enable(self, timeout: float | None = None) -> None:
         """Bring every drive to OPERATION ENABLED, holding the current position; then `stream` is allowed."""
         timeout = self.config.timing.enable_timeout if timeout is None else timeout
-        with self._lock:
+        with self._lock.bounded():
             self._require_connected()
             self._raise_fault()
             if self._motion:
@@ -296,7 +276,7 @@ class Cobot:
                 raise NotReadyError(f"cannot enable: joints outside their limits: {'; '.join(outside)}")
             self._command = PowerCommand.ENABLE
         self._wait_for(lambda: self._motion or self._fault is not None, timeout)
-        with self._lock:
+        with self._lock.bounded():
             self._raise_fault()
             if not self._motion:
                 self._command = PowerCommand.DISABLE
@@ -309,7 +289,8 @@ class Cobot:
 
         Refused with SetpointError (nothing queued, nothing sent) unless finite, within the joint limits
         and at most v_max * period away from the previous setpoint. Blocks while the queue is full; raises
-        the latched fault if one occurs, NotReadyError if the drives are not enabled.
+        the latched fault if one occurs, NotReadyError if the drives are not enabled, DriverError if the
+        control cycle stalls (queue still full after `timeout`) or hangs (driver lock held).
         """
         depth = self.config.timing.setpoint_queue_depth
         timeout = self.period * (depth + 25) if timeout is None else timeout
@@ -319,46 +300,26 @@ class Cobot:
             self._refused += 1
             raise SetpointError(f"setpoint is not an array of joint positions: {exc}") from exc
         end = time.monotonic() + timeout
-        with self._lock:
-            while True:
+        while True:
+            with self._lock.bounded():
                 self._require_streaming()
                 if len(self._queue) < depth:
-                    break
-                remaining = end - time.monotonic()
-                if remaining <= 0:
-                    raise DriverError(f"setpoint queue still full after {timeout:.3f} s: the control cycle is stalled")
-                self._space.wait(remaining)
-            reference = self._queue[-1] if self._queue else self._hold
-            assert reference is not None
-            self._validate(q, reference)
-            self._queue.append(q)
+                    reference = self._queue[-1] if self._queue else self._hold
+                    assert reference is not None
+                    self._validate(q, reference)
+                    self._queue.append(q)
+                    return
+                self._space.clear()  # under the lock: a setpoint taken from here on sets it again
+            remaining = end - time.monotonic()
+            if remaining <= 0:
+                raise DriverError(f"setpoint queue still full after {timeout:.3f} s: the control cycle is stalled")
+            self._space.wait(remaining)
 
     def _validate(self, q: np.ndarray, reference: np.ndarray) -> None:
-        problem = self._setpoint_problem(q, reference)
+        problem = setpoint_problem(q, reference, self.limits, self.period, self.joint_names)
         if problem:
             self._refused += 1
             raise SetpointError(f"setpoint refused: {problem}")
-
-    def _setpoint_problem(self, q: np.ndarray, reference: np.ndarray) -> str | None:
-        if q.shape != (len(self.joint_names),):
-            return f"shape {q.shape}, expected ({len(self.joint_names)},) joint positions in rad"
-        bad = ~np.isfinite(q)
-        if bad.any():
-            return "non-finite value for " + ", ".join(f"{self.joint_names[i]} ({q[i]})" for i in np.flatnonzero(bad))
-        lim = self.limits
-        out = (q < lim.q_lower) | (q > lim.q_upper)
-        if out.any():
-            return "outside joint limits: " + "; ".join(
-                f"{self.joint_names[i]} = {q[i]:.4f} rad not in [{lim.q_lower[i]:.3f}, {lim.q_upper[i]:.3f}]"
-                for i in np.flatnonzero(out))
-        step = np.abs(q - reference)
-        too_far = step > self._max_step * (1 + STEP_SLACK) + 1e-12
-        if too_far.any():
-            return "step per cycle exceeds v_max * period: " + "; ".join(
-                f"{self.joint_names[i]} moves {step[i]:.5f} rad > {self._max_step[i]:.5f} rad "
-                f"({lim.v_max[i]} rad/s x {self.period * 1000:g} ms)" for i in np.flatnonzero(too_far)
-            ) + "; start trajectories at the last setpoint or joint_state().positions"
-        return None
 
     def set_vacuum(self, on: bool, blow_off: bool = False) -> None:
         """Command the vacuum generator (sent every cycle). Works during a drive fault, so a part stays held."""
@@ -366,7 +327,7 @@ class Cobot:
             raise SetpointError(f"vacuum command must be booleans, got on={on!r}, blow_off={blow_off!r}")
         if on and blow_off:
             raise SetpointError("vacuum and blow-off cannot be commanded at the same time")
-        with self._lock:
+        with self._lock.bounded():
             self._require_connected()
             assert self._vacuum is not None
             fault = self._fault
@@ -376,14 +337,23 @@ class Cobot:
             self._vacuum.vacuum_on, self._vacuum.blow_off = bool(on), bool(blow_off)
 
     def stop(self) -> None:
-        """Quick stop: every enabled drive decelerates on its quick-stop ramp; queued setpoints are dropped."""
-        with self._lock:
-            if self._network is None:
-                return
-            self._command = PowerCommand.QUICK_STOP
-            self._motion = False
-            self._queue.clear()
-            self._space.notify_all()
+        """Quick stop: every enabled drive decelerates on its quick-stop ramp; queued setpoints are dropped.
+
+        Never hangs: the request is posted without the lock and carried out here or by the control thread
+        at its next cycle. If the control thread holds the lock (hung), this logs an error and returns; the
+        request waits for it, and devices consuming the master's heartbeat disable themselves meanwhile.
+        """
+        if self._network is None:
+            return
+        self._lock.post(None)
+        if not self._lock.acquire(timeout=self._lock.timeout):
+            logger.error("quick stop requested, but the control thread has held the driver lock for %.1f s: "
+                         "it is hung", self._lock.timeout)
+            return
+        try:
+            self._apply_requests()
+        finally:
+            self._lock.release()
         logger.info("quick stop commanded")
 
     def reset_faults(self, timeout: float | None = None) -> None:
@@ -393,18 +363,17 @@ class Cobot:
         still silent or not OPERATIONAL (reconnect then), or a drive stays in FAULT.
         """
         timeout = self.config.timing.enable_timeout if timeout is None else timeout
-        with self._lock:
+        with self._lock.bounded():
             self._require_connected()
             if isinstance(self._fault, BusError):
                 raise self._fault
             self._command = PowerCommand.FAULT_RESET
-            self._motion = False
-            self._queue.clear()
+            self._halt()
         assert self._hb is not None
         ids = self.config.node_ids
         done = self._wait_for(lambda: all(self._state(d) == SWITCH_ON_DISABLED for d in self._drives)
                               and not self._hb.expired() and self._hb.all_in_state(OPERATIONAL, ids), timeout)
-        with self._lock:
+        with self._lock.bounded():
             if not done:
                 self._command = PowerCommand.DISABLE
                 problems = [f"{d.label}: {self._state(d)}" for d in self._drives if self._state(d) != SWITCH_ON_DISABLED]
@@ -421,7 +390,7 @@ class Cobot:
 
     def check(self) -> None:
         """Raise the latched fault, if any (for runtimes that poll)."""
-        with self._lock:
+        with self._lock.bounded():
             self._raise_fault()
 
     # ------------------------------------------------------------------ state
@@ -429,14 +398,14 @@ class Cobot:
     @property
     def setpoint(self) -> np.ndarray:
         """Last accepted joint setpoint (rad): where the next streamed setpoint must start from."""
-        with self._lock:
+        with self._lock.bounded():
             self._require_streaming()
             assert self._hold is not None
             return (self._queue[-1] if self._queue else self._hold).copy()
 
     def joint_state(self) -> JointState:
         """Latest joint positions (rad), velocities (rad/s) and drive states."""
-        with self._lock:
+        with self._lock.bounded():
             self._require_connected()
             fbs = [d.feedback for d in self._drives]
         if any(fb is None for fb in fbs):
@@ -452,7 +421,7 @@ class Cobot:
 
     def vacuum_state(self) -> VacuumState:
         """Latest vacuum level (kPa below atmosphere), part-gripped/lost flags and the command being sent."""
-        with self._lock:
+        with self._lock.bounded():
             self._require_connected()
             assert self._vacuum is not None
             fb, vac = self._vacuum.feedback, self._vacuum
@@ -492,7 +461,8 @@ class Cobot:
         )
 
     def add_cycle_observer(self, observer: Callable[[CycleSample], None]) -> None:
-        """Call `observer` from the control thread after every cycle (keep it fast; exceptions are logged)."""
+        """Call `observer` from the control thread after every cycle (keep it fast). An exception in it
+        latches a fault (quick stop): observers are monitors, and a monitor that fails must not fail open."""
         self._observers.append(observer)
 
     def remove_cycle_observer(self, observer: Callable[[CycleSample], None]) -> None:
@@ -500,12 +470,12 @@ class Cobot:
 
     # ------------------------------------------------------------------ control thread
 
-    def _run(self) -> None:
+    def _run(self, stop: threading.Event) -> None:
         if self.config.timing.realtime_priority:
             make_current_thread_realtime(self.config.timing.realtime_priority)
         timer = CycleTimer(self.period)
         timer.start()
-        while not self._stop_thread.is_set():
+        while not stop.is_set():
             tick = timer.wait()
             try:
                 self._cycle(tick)
@@ -515,6 +485,8 @@ class Cobot:
 
     def _cycle(self, tick: Tick) -> None:
         assert self._receiver is not None
+        with self._lock:
+            self._apply_requests()
         if self._receiver.exception is not None:
             self._latch(BusError(f"CAN receive failed on {self._bus_name()}: {self._receiver.exception}"))
             return
@@ -603,7 +575,7 @@ class Cobot:
             if self._motion:
                 if self._queue:
                     setpoint = self._queue.popleft()
-                    self._space.notify_all()
+                    self._space.set()
                     self._moving = bool(np.any(np.abs(setpoint - self._hold) > MOVING_FRACTION * self._max_step))
                     self._hold = setpoint
                 elif self._moving:
@@ -612,20 +584,26 @@ class Cobot:
                     logger.warning("setpoint queue ran dry while moving: holding the last setpoint (%d so far)",
                                    self._underruns)
             targets = self._hold if self._motion else None
-        for i, drive in enumerate(self._drives):
-            fb = drive.feedback
-            if fb is None:  # no position known yet: sending a target could move the joint
-                continue
-            cw = controlword_for(fb.state, command, drive.last_controlword)
-            target = drive.conversion.to_counts(targets[i]) if targets is not None else fb.position
-            if not self._send_frame(partial(drive.send, cw, target)):
+        fbs = [d.feedback for d in self._drives]
+        wanted = targets if targets is not None else np.array(
+            [np.nan if fb is None else d.conversion.to_rad(fb.position) for d, fb in zip(self._drives, fbs)])
+        plan = plan_rpdos([None if fb is None else fb.state for fb in fbs], command,
+                          [d.last_controlword for d in self._drives], wanted,
+                          np.array([d.last_target for d in self._drives]), self.limits, self.joint_names)
+        if plan.refused:
+            drive = self._drives[plan.refused[0]]
+            source = "held setpoint" if targets is not None else "measured position"
+            self._latch(DeviceFaultError(f"{drive.label}: {source} refused as RPDO target: {plan.problem}",
+                                         drive.node.id, drive.name, None))
+        for drive, rpdo in zip(self._drives, plan.frames):
+            if rpdo is not None and not self._send_frame(partial(drive.send, rpdo.controlword, rpdo.target)):
                 return setpoint
         self._send_frame(self._vacuum.send)
-        if command is PowerCommand.ENABLE and targets is None and all(self._state(d) == OPERATION_ENABLED
-                                                                      for d in self._drives):
+        if command is PowerCommand.ENABLE and targets is None and not plan.refused and all(
+                self._state(d) == OPERATION_ENABLED for d in self._drives):
             with self._lock:
                 if self._command is PowerCommand.ENABLE and self._fault is None:
-                    self._hold = self._positions()
+                    self._hold = wanted.copy()  # the measured positions this cycle's guard accepted
                     self._moving = False
                     self._motion = True
         return setpoint
@@ -638,19 +616,35 @@ class Cobot:
         for observer in list(self._observers):
             try:
                 observer(sample)
-            except Exception:  # an observer bug must not stop the arm's control loop
+            except Exception as exc:  # observers are safety monitors: one that fails must not fail open
                 logger.exception("cycle observer %r failed", observer)
+                self._latch(DriverError(f"cycle observer {getattr(observer, '__qualname__', observer)!r} "
+                                        f"failed: {exc!r}"))
 
     def _latch(self, error: DriverError) -> None:
+        """Keep the first fault and quick-stop; control thread only (other threads post to the lock)."""
         with self._lock:
             if self._fault is None:
                 self._fault = error
                 self._fault_at = time.monotonic()
                 self._command = PowerCommand.QUICK_STOP
                 logger.error("cobot fault, quick stop: %s", error)
-            self._motion = False
-            self._queue.clear()
-            self._space.notify_all()
+            self._halt()
+
+    def _apply_requests(self) -> None:
+        """Carry out the quick stops and faults other threads posted without the lock; lock held."""
+        for request in self._lock.drain():
+            if request is None:
+                self._command = PowerCommand.QUICK_STOP
+                self._halt()
+            else:
+                self._latch(request)
+
+    def _halt(self) -> None:
+        """Streaming ends: queued setpoints are dropped and a blocked `stream` wakes up; lock held."""
+        self._motion = False
+        self._queue.clear()
+        self._space.set()
 
     def _on_emcy(self, node_id: int, emcy: EmcyError) -> None:
         self._emcy_count += 1
@@ -658,8 +652,8 @@ class Cobot:
             logger.info("%s: EMCY error reset", self._label(node_id))
             return
         text = f"{self._label(node_id)}: EMCY 0x{emcy.code:04X} ({emcy.get_desc()}), error register 0x{emcy.register:02X}"
-        if emcy.register:
-            self._latch(DeviceFaultError(text, node_id, self._name(node_id), emcy.code))
+        if emcy.register:  # latched by the control thread at its next cycle (this is the receive thread)
+            self._lock.post(DeviceFaultError(text, node_id, self._name(node_id), emcy.code))
         else:
             logger.warning("%s (no active error)", text)
 

@@ -15,7 +15,7 @@ from pathlib import Path
 import can.interfaces
 import numpy as np
 
-from mrguide.config import ConfigError, from_dict, load_toml
+from mrguide.config import ConfigError, check_number, from_dict, load_toml
 from mrguide.robot import RobotSpec
 
 #: Directory of the EDS files shipped with the package (also read by the simulated devices).
@@ -25,6 +25,12 @@ EDS_DIR = Path(__file__).resolve().parent / "eds"
 CIA301_BITRATES = (10_000, 20_000, 50_000, 125_000, 250_000, 500_000, 800_000, 1_000_000)
 
 INT32_MAX = 2**31 - 1
+
+#: Smallest heartbeat consumer time / producer time accepted: one lost heartbeat plus half a period of
+#: jitter. At 2.0 a single lost or late heartbeat trips the consumer (5 % frame loss quick-stopped the
+#: arm within seconds); CiA 301 practice pads the ratio (>= 1.5-3 x plus jitter).
+MIN_HEARTBEAT_FACTOR = 2.5
+MAX_HEARTBEAT_FACTOR = 10.0
 
 
 def eds_path(name: str) -> Path:
@@ -73,45 +79,46 @@ class TimingConfig:
 
     #: SYNC / control period. 4 ms (250 Hz) is the project's requirement for CSP streaming.
     control_period: float = 0.004
-    #: Producer heartbeat time written to every node's 0x1017 (assumed; must be whole ms).
-    heartbeat_period: float = 0.1
-    #: Heartbeat consumer time = factor x producer time (CiA 301 wants it above the producer time).
-    heartbeat_timeout_factor: float = 2.0
-    #: Time allowed for all nodes to send their boot-up message after NMT reset communication.
+    #: Producer heartbeat time written to every node's 0x1017, and the master's own heartbeat period
+    #: (whole ms, a whole number of control periods for the master's to be exact; assumed).
+    heartbeat_period: float = 0.04
+    #: Heartbeat consumer time = factor x producer time, in both directions (the master consumes the
+    #: devices', every device the master's via 0x1016). 4.5 = three lost heartbeats in a row plus half a
+    #: period of jitter: 180 ms at 40 ms (see configs/cobot_bus.toml); at least MIN_HEARTBEAT_FACTOR.
+    heartbeat_timeout_factor: float = 4.5
+    #: Time allowed for all nodes to send their boot-up message after NMT reset communication; [0.01, 60].
     boot_timeout: float = 3.0
-    #: Time allowed for all drives to reach OPERATION ENABLED (or to leave FAULT on reset).
+    #: Time allowed for all drives to reach OPERATION ENABLED (or to leave FAULT on reset); [0.01, 60].
     enable_timeout: float = 1.0
-    #: SDO response timeout per request during configuration.
+    #: SDO response timeout per request during configuration; [0.001, 10].
     sdo_timeout: float = 0.3
-    #: Joint setpoints buffered ahead of the bus (cycles); `Cobot.stream` blocks when full.
+    #: Joint setpoints buffered ahead of the bus (cycles, 1..1000); `Cobot.stream` blocks when full.
     setpoint_queue_depth: int = 4
-    #: Consecutive SYNC cycles without a node's TPDO before it counts as lost.
+    #: Consecutive SYNC cycles without a node's TPDO before it counts as lost (1..1000).
     max_missed_feedback: int = 5
     #: SCHED_FIFO priority (1..99) of the control and receive threads; 0 = normal scheduling (Linux only).
     realtime_priority: int = 0
 
     def __post_init__(self) -> None:
-        if not 0.0005 <= self.control_period <= 0.1:
-            raise ConfigError(f"timing.control_period: {self.control_period} s outside [0.0005, 0.1]")
+        # Every value arms a supervision: NaN or inf would switch it off (a time-out that never expires).
+        check_number("timing.control_period", self.control_period, 0.0005, 0.1, " s")
+        check_number("timing.heartbeat_period", self.heartbeat_period, 0.001, 65.535, " s")
         hb_ms = self.heartbeat_period * 1000.0
-        if not (1 <= hb_ms <= 65535 and abs(hb_ms - round(hb_ms)) < 1e-9):
-            raise ConfigError(f"timing.heartbeat_period: {self.heartbeat_period} s must be whole ms in [0.001, 65.535]")
+        if abs(hb_ms - round(hb_ms)) > 1e-9:
+            raise ConfigError(f"timing.heartbeat_period = {self.heartbeat_period}: must be whole ms")
         if self.heartbeat_period < 2 * self.control_period:
             raise ConfigError("timing.heartbeat_period must be at least two control periods")
-        if not 1.0 < self.heartbeat_timeout_factor <= 3.0:
-            raise ConfigError(f"timing.heartbeat_timeout_factor: {self.heartbeat_timeout_factor} outside (1, 3]")
+        check_number("timing.heartbeat_timeout_factor", self.heartbeat_timeout_factor, MIN_HEARTBEAT_FACTOR,
+                     MAX_HEARTBEAT_FACTOR, " (consumer time / producer time: one lost heartbeat plus jitter at least)")
         if self.heartbeat_timeout_ms > 0xFFFF:
             raise ConfigError("timing: heartbeat_period x heartbeat_timeout_factor must fit 65.535 s (the devices "
                               "consume the master's heartbeat with this time)")
-        for key in ("boot_timeout", "enable_timeout", "sdo_timeout"):
-            if getattr(self, key) <= 0:
-                raise ConfigError(f"timing.{key} must be > 0")
-        if self.setpoint_queue_depth < 1:
-            raise ConfigError("timing.setpoint_queue_depth must be >= 1")
-        if self.max_missed_feedback < 1:
-            raise ConfigError("timing.max_missed_feedback must be >= 1")
-        if not 0 <= self.realtime_priority <= 99:
-            raise ConfigError(f"timing.realtime_priority: {self.realtime_priority} outside 0..99")
+        check_number("timing.boot_timeout", self.boot_timeout, 0.01, 60.0, " s")
+        check_number("timing.enable_timeout", self.enable_timeout, 0.01, 60.0, " s")
+        check_number("timing.sdo_timeout", self.sdo_timeout, 0.001, 10.0, " s")
+        check_number("timing.setpoint_queue_depth", self.setpoint_queue_depth, 1, 1000, " cycles", integer=True)
+        check_number("timing.max_missed_feedback", self.max_missed_feedback, 1, 1000, " cycles", integer=True)
+        check_number("timing.realtime_priority", self.realtime_priority, 0, 99, integer=True)
 
     @property
     def heartbeat_ms(self) -> int:
@@ -163,27 +170,25 @@ class DriveConfig:
     """Settings shared by all CiA 402 joint drives ([drives])."""
 
     eds: str = "cia402_drive.eds"
-    #: Following-error window (rad), written to 0x6065 in counts (assumed).
+    #: Following-error window (rad, [1e-4, 1]), written to 0x6065 in counts (assumed).
     following_error_window: float = 0.05
     #: Following-error time-out (ms), 0x6066 (assumed).
     following_error_timeout_ms: int = 20
     #: Quick-stop option code 0x605A: 2 = stop on the quick-stop ramp, then SWITCH ON DISABLED.
     quick_stop_option: int = 2
-    #: Quick-stop deceleration (rad/s^2), written to 0x6085 in counts/s^2 (assumed).
+    #: Quick-stop deceleration (rad/s^2, [0.1, 1000]), written to 0x6085 in counts/s^2 (assumed).
     quick_stop_deceleration: float = 10.0
     #: Also map velocity actual value (0x606C) into a second TPDO every cycle.
     velocity_tpdo: bool = True
 
     def __post_init__(self) -> None:
         _check_eds(self.eds, "drives.eds")
-        if not self.following_error_window > 0:
-            raise ConfigError("drives.following_error_window must be > 0 rad")
-        if not 0 <= self.following_error_timeout_ms <= 65535:
-            raise ConfigError("drives.following_error_timeout_ms must be 0..65535")
+        check_number("drives.following_error_window", self.following_error_window, 1e-4, 1.0, " rad")
+        check_number("drives.following_error_timeout_ms", self.following_error_timeout_ms, 0, 65535, " ms",
+                     integer=True)
         if self.quick_stop_option not in (1, 2, 5, 6):
             raise ConfigError(f"drives.quick_stop_option: {self.quick_stop_option} not supported (1, 2, 5 or 6)")
-        if not self.quick_stop_deceleration > 0:
-            raise ConfigError("drives.quick_stop_deceleration must be > 0 rad/s^2")
+        check_number("drives.quick_stop_deceleration", self.quick_stop_deceleration, 0.1, 1000.0, " rad/s^2")
 
 
 @dataclass(frozen=True)

@@ -38,6 +38,7 @@ def test_repo_toml_matches_defaults_and_robot_limits(robot):
     ("[master]\nnode_id = 16\n", ["unique", "master.node_id", "16"]),
     ("[master]\nnode_id = 0\n", ["master.node_id", "0"]),
     ("[timing]\nheartbeat_period = 30.0\nheartbeat_timeout_factor = 3.0\n", ["65.535 s", "master"]),
+    ("[timing]\nheartbeat_timeout_factor = 2.0\n", ["timing.heartbeat_timeout_factor", "2.5", "lost heartbeat"]),
     ('[drives]\neds = "nope.eds"\n', ["drives.eds", "nope.eds"]),
     ("[drives]\nquick_stop_option = 3\n", ["quick_stop_option"]),
     ("[[joints]]\nnode_id = 3\ndirection = 2\n", ["direction"]),
@@ -87,3 +88,22 @@ def test_counts_radians_round_trip(direction, offset):
     assert np.sign(conv.to_counts(offset + 0.1)) == direction
     assert conv.to_counts(offset) == 0
     assert conv.velocity_to_rad(conv.velocity_to_counts(1.5)) == pytest.approx(1.5, abs=1e-6)
+
+
+@pytest.mark.parametrize("section, key, value", [
+    (section, key, value)
+    for section, key in [("timing", "boot_timeout"), ("timing", "enable_timeout"), ("timing", "sdo_timeout"),
+                         ("timing", "heartbeat_timeout_factor"), ("timing", "heartbeat_period"),
+                         ("timing", "control_period"), ("drives", "following_error_window"),
+                         ("drives", "quick_stop_deceleration")]
+    for value in ("nan", "inf", "-inf", "-1.0", "1e9")
+] + [("timing", key, value) for key in ("max_missed_feedback", "setpoint_queue_depth")
+     for value in ("0", "-3", "100000")])
+def test_timing_values_that_arm_safety_must_be_finite_and_in_range(tmp_path, section, key, value):
+    """NaN or inf would switch a supervision off (a time-out that never expires) or crash it later."""
+    path = tmp_path / "bus.toml"
+    path.write_text(f"[{section}]\n{key} = {value}\n")
+    with pytest.raises(ConfigError) as info:
+        load_cobot_bus_config(path)
+    message = str(info.value)
+    assert str(path) in message and f"{section}.{key}" in message

@@ -144,7 +144,7 @@ class SimulatedDrive(SimulatedSlave):
     def cycle(self, q: float, v: float, dt: float) -> float:
         """One SYNC: sample the joint, run the state machine on the controlword; returns the plant target (rad)."""
         conv, image = self.conversion, self.image
-        image[_KEYS["position"]] = conv.to_counts(q)
+        image[_KEYS["position"]] = conv.to_counts(q + self.faults.position_error(self.node_id))
         image[_KEYS["velocity"]] = conv.velocity_to_counts(v)
         controlword = image[_KEYS["controlword"]]
         if self.state == NOT_READY:

@@ -1,7 +1,8 @@
-"""Fault injection for the simulated devices: frame loss, added delay, silent nodes.
+"""Fault injection for the simulated devices: frame loss, added delay, silent nodes, wrong position feedback.
 
 `FaultyBus` wraps the simulator's python-can bus, so every frame the simulated devices send or receive
-(PDOs, SDOs, heartbeats from python-can's cyclic tasks, EMCY) passes through the same faults. Drive
+(PDOs, SDOs, heartbeats from python-can's cyclic tasks, EMCY) passes through the same faults. A wrong
+position feedback (a slipped encoder, a wrong offset) is read by the simulated drives from here. Drive
 faults and vacuum leaks are injected on the simulated cobot itself.
 """
 
@@ -43,6 +44,7 @@ class FaultInjector:
         self._cyclic_only = False
         self._delay = 0.0
         self._silent: dict[int, bool] = {}  # node ID -> heartbeat only
+        self._position_error: dict[int, float] = {}  # node ID -> rad added to the reported position
         self._counts = dict.fromkeys(("dropped_rx", "dropped_tx", "silenced_tx", "delayed_tx"), 0)
 
     def set_drop_rate(self, rate: float, cyclic_only: bool = False) -> None:
@@ -71,6 +73,17 @@ class FaultInjector:
     def is_silent(self, node_id: int) -> bool:
         """True if the node is completely silent (dead)."""
         return self._silent.get(node_id) is False
+
+    def set_position_error(self, node_id: int, offset: float) -> None:
+        """Drive `node_id` reports its position actual value (0x6064) off by `offset` rad; 0 clears it.
+
+        Only the reported value is wrong: the drive's own loop and following-error check see the true joint."""
+        self._position_error[node_id] = offset
+        logger.info("fault injection: node %d reports its position %+.4f rad off", node_id, offset)
+
+    def position_error(self, node_id: int) -> float:
+        """Offset (rad) drive `node_id` adds to the position it reports."""
+        return self._position_error.get(node_id, 0.0)
 
     @property
     def delay(self) -> float:

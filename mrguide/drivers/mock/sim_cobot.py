@@ -45,7 +45,7 @@ def shared_pc_config(config: CobotBusConfig) -> CobotBusConfig:
 
     They share the CPU (and Python's GIL) with the master on an OS without real-time guarantees: the
     control and receive threads get SCHED_FIFO where allowed, and the supervision tolerates 100 ms
-    without feedback (real bus: 5 cycles) and 0.45 s without heartbeat (real bus: 0.2 s), so that a
+    without feedback (real bus: 5 cycles) and 0.45 s without heartbeat (real bus: 0.18 s), so that a
     busy machine is not mistaken for a dead drive. Injected faults still trip them.
     """
     t = config.timing
