@@ -10,8 +10,8 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from mrguide.config import ConfigError
 from mrguide.drivers.errors import DriverError
+from mrguide.errors import InputError
 
 
 def cmd_expert(args: argparse.Namespace) -> int:
@@ -195,18 +195,24 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run one command. Bad input: one line on stderr, exit 2; driver faults: exit 1; Ctrl-C: exit 130."""
     args = build_parser().parse_args(argv)
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    name = f"mrguide {args.command}"
     try:
         return int(args.func(args))
-    except ConfigError as exc:
-        print(f"mrguide: config error: {exc}", file=sys.stderr)
+    except InputError as exc:
+        print(f"{name}: {exc}", file=sys.stderr)
         return 2
     except DriverError as exc:
-        print(f"mrguide: CAN driver error: {exc}", file=sys.stderr)
+        print(f"{name}: CAN driver error: {exc}", file=sys.stderr)
+        return 1
+    except OSError as exc:  # a full disk, a vanished directory: the environment, not the input
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"{name}: {where}{exc.strerror or exc}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
-        print("mrguide: interrupted", file=sys.stderr)
+        print(f"{name}: interrupted", file=sys.stderr)
         return 130
 
 

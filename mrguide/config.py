@@ -5,15 +5,18 @@ from __future__ import annotations
 import dataclasses
 import math
 import tomllib
+import typing
 from pathlib import Path
 from typing import Any, TypeVar
 
 import dacite
 
+from mrguide.errors import InputError
+
 T = TypeVar("T")
 
 
-class ConfigError(ValueError):
+class ConfigError(InputError):
     """A configuration file or value is invalid; the message names the file and the key."""
 
 
@@ -30,13 +33,59 @@ def check_number(key: str, value: Any, low: float, high: float, unit: str = "", 
 
 
 def from_dict(cls: type[T], data: dict[str, Any], where: str = "config") -> T:
-    """Build dataclass `cls` from `data`; unknown keys and wrong types raise ConfigError naming `where`."""
+    """Build dataclass `cls` from `data`; unknown keys, wrong types, NaN/inf and values out of range raise
+    ConfigError naming `where` and the key."""
+    problem = _number_problem(cls, data, "")
+    if problem:
+        raise ConfigError(f"{where}: {problem}")
     try:
         return dacite.from_dict(
             cls, data, config=dacite.Config(strict=True, cast=[tuple], type_hooks={float: _to_float})
         )
     except (dacite.DaciteError, TypeError, ValueError) as exc:
         raise ConfigError(f"{where}: {exc}") from exc
+
+
+def _number_problem(cls: type, data: Any, prefix: str) -> str | None:
+    """The first number of `data` that cannot be a value of its field of `cls`: wrong type or not finite.
+
+    Every float of every config must be finite (no setting means "off" by NaN or inf); range checks are in
+    each dataclass's `__post_init__` (`check_number`).
+    """
+    if not (dataclasses.is_dataclass(cls) and isinstance(data, dict)):
+        return None
+    hints = typing.get_type_hints(cls)
+    for f in dataclasses.fields(cls):
+        if f.name not in data:
+            continue
+        value, hint, key = data[f.name], hints[f.name], prefix + f.name
+        args = typing.get_args(hint)
+        if typing.get_origin(hint) is tuple and args and all(a in (float, int, Ellipsis) for a in args) \
+                and isinstance(value, (list, tuple)):
+            for i, v in enumerate(value):
+                problem = _scalar_problem(f"{key}[{i}]", v, int if args[0] is int else float)
+                if problem:
+                    return problem
+        elif hint in (float, int):
+            problem = _scalar_problem(key, value, hint)
+            if problem:
+                return problem
+        else:
+            problem = _number_problem(hint, value, key + ".")
+            if problem:
+                return problem
+    return None
+
+
+def _scalar_problem(key: str, value: Any, kind: type) -> str | None:
+    if kind is int and (isinstance(value, bool) or not isinstance(value, int)):
+        return f"{key} = {value!r}: expected an integer"
+    if kind is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            return f"{key} = {value!r}: expected a number"
+        if not math.isfinite(value):
+            return f"{key} = {value!r}: must be finite"
+    return None
 
 
 def _to_float(value: Any) -> float:

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from mrguide.config import ConfigError
+from mrguide.errors import InputError
 
 #: URDF files of the arms we know, relative to the installed example-robot-data package.
 KNOWN_ROBOTS: dict[str, str] = {
@@ -25,7 +26,7 @@ KNOWN_ROBOTS: dict[str, str] = {
 R_TOOL_DOWN = np.array([[0.0, -1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
 
 
-class RobotSpecError(ValueError):
+class RobotSpecError(InputError):
     """Unknown robot, missing URDF or inconsistent limits."""
 
 

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+from mrguide.errors import InputError
 
-class CalibrationError(ValueError):
+
+class CalibrationError(InputError):
     """Bad input to calibration: an image, an intrinsics file, a dictionary name, a target layout."""
 
 

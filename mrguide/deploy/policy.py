@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from mrguide.config import ConfigError, to_dict
+from mrguide.errors import InputError
 from mrguide.robot import Workspace
 from mrguide.task import ACT_DIM, ACT_LAYOUT, N_PHASES, OBS_DIM, OBS_LAYOUT, PHASES, TaskConfig, progress
 
@@ -27,7 +28,7 @@ FORMAT_VERSION = 1
 ACTIVATIONS = {"relu": lambda x: np.maximum(x, 0.0), "tanh": np.tanh}
 
 
-class PolicyFileError(ValueError):
+class PolicyFileError(InputError):
     """A policy file that cannot be used here; the message says why."""
 
 

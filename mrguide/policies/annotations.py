@@ -22,12 +22,13 @@ from typing import Any
 
 import numpy as np
 
+from mrguide.errors import InputError
 from mrguide.task import OBS_DIM, phase_from_progress
 
 log = logging.getLogger(__name__)
 
 
-class AnnotationError(ValueError):
+class AnnotationError(InputError):
     """An annotation that cannot be used (NaN/inf, wrong shape), or an annotation file that cannot be read."""
 
 

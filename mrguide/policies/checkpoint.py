@@ -16,12 +16,14 @@ from typing import Any
 
 import torch
 
+from mrguide.errors import InputError
+
 MAGIC = b"MRGUIDE-CHECKPOINT"
 FORMAT = 5  # 2: critics as one ensemble; 3: update counter; 4: evaluation counter; 5: digest header, re-marks
 REQUIRED = ("config", "agent", "agent_pool", "expert_pool", "rng", "torch_rng", "annotator_rng", "counters")
 
 
-class CheckpointError(RuntimeError):
+class CheckpointError(InputError):
     """A checkpoint that is missing, corrupt, of another format, or of another configuration."""
 
 
