@@ -61,8 +61,11 @@ class TaskConfig:
         for name in ("alpha", "eta", "step_penalty", "epsilon", "object_height", "place_tolerance"):
             if not getattr(self, name) > 0:
                 raise ConfigError(f"task.{name} must be > 0 (paper: α, η, λ, ε > 0), got {getattr(self, name)}")
-        if self.horizon < 1:
-            raise ConfigError(f"task.horizon must be >= 1, got {self.horizon}")
+        for name in ("r_success", "r_fail", "approach_height", "lift_height"):
+            if not getattr(self, name) >= 0:
+                raise ConfigError(f"task.{name} must be >= 0, got {getattr(self, name)}")
+        if isinstance(self.horizon, bool) or not isinstance(self.horizon, int) or not 1 <= self.horizon <= 10_000:
+            raise ConfigError(f"task.horizon must be an integer in [1, 10000], got {self.horizon!r}")
 
     @property
     def bonuses(self) -> tuple[float, ...]:

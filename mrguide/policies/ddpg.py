@@ -14,7 +14,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from mrguide.config import ConfigError
+from mrguide.config import ConfigError, check_number
 from mrguide.policies.replay import Batch
 
 
@@ -43,10 +43,18 @@ class DDPGConfig:
     policy_delay: int = 1
 
     def __post_init__(self) -> None:
-        if self.policy_delay < 1:
-            raise ConfigError(f"ddpg.policy_delay must be >= 1, got {self.policy_delay}")
-        if self.target_noise < 0 or self.target_noise_clip < 0:
-            raise ConfigError("ddpg.target_noise and ddpg.target_noise_clip must be >= 0")
+        if not self.hidden or any(isinstance(h, bool) or not isinstance(h, int) or not 1 <= h <= 4096 for h in self.hidden):
+            raise ConfigError(f"ddpg.hidden = {list(self.hidden)!r}: expected one or more layer widths in [1, 4096]")
+        check_number("ddpg.lr_actor", self.lr_actor, 1e-8, 1.0)
+        check_number("ddpg.lr_critic", self.lr_critic, 1e-8, 1.0)
+        check_number("ddpg.gamma", self.gamma, 0.0, 1.0)
+        check_number("ddpg.tau", self.tau, 1e-6, 1.0)
+        check_number("ddpg.exploration_noise", self.exploration_noise, 0.0, 2.0)
+        check_number("ddpg.exploration_noise_final", self.exploration_noise_final, 0.0, 2.0)
+        check_number("ddpg.bc_weight", self.bc_weight, 0.0, 1e4)
+        check_number("ddpg.target_noise", self.target_noise, 0.0, 2.0)
+        check_number("ddpg.target_noise_clip", self.target_noise_clip, 0.0, 2.0)
+        check_number("ddpg.policy_delay", self.policy_delay, 1, 100, integer=True)
 
 
 def mlp(sizes: list[int], out_act: type[nn.Module] | None = None) -> nn.Sequential:

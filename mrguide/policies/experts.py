@@ -8,6 +8,7 @@ from typing import Protocol
 
 import numpy as np
 
+from mrguide.config import ConfigError, check_number
 from mrguide.policies.annotations import Annotation, AnnotationCache, AnnotationError
 from mrguide.robot import Workspace
 from mrguide.task import TaskConfig, oracle_target
@@ -47,8 +48,13 @@ class AnnotatorNoise:
     outlier_scale: float = 0.15  # m, std per axis of an outlier's error
 
     def __post_init__(self) -> None:
-        if self.sigma < 0 or self.outlier_scale < 0 or not 0.0 <= self.outlier_rate <= 1.0:
-            raise ValueError(f"annotator noise: sigma/outlier_scale must be >= 0 and outlier_rate in [0, 1], got {self}")
+        check_number("guidance.noise.sigma", self.sigma, 0.0, 1.0, " m")
+        check_number("guidance.noise.outlier_rate", self.outlier_rate, 0.0, 1.0)
+        check_number("guidance.noise.outlier_scale", self.outlier_scale, 0.0, 1.0, " m")
+        if len(self.bias) != 3:
+            raise ConfigError(f"guidance.noise.bias = {list(self.bias)!r}: expected 3 numbers (m)")
+        for i, b in enumerate(self.bias):
+            check_number(f"guidance.noise.bias[{i}]", b, -1.0, 1.0, " m")
 
 
 class SimulatedAnnotator:

@@ -22,7 +22,7 @@ import numpy as np
 import torch
 
 from mrguide import __version__
-from mrguide.config import ConfigError, load_section, to_dict
+from mrguide.config import ConfigError, check_number, load_section, to_dict
 from mrguide.policies.ddpg import DDPG, DDPGConfig
 from mrguide.policies.annotations import Annotation, AnnotationCache
 from mrguide.policies.checkpoint import CheckpointError, read_checkpoint, write_checkpoint
@@ -70,12 +70,15 @@ class GuidanceConfig:
             raise ConfigError(f"guidance.reference must be 'nominal' or 'running_median', got {self.reference!r}")
         if self.source not in ("oracle", "annotator", "file", "live"):
             raise ConfigError(f"guidance.source must be 'oracle', 'annotator', 'file' or 'live', got {self.source!r}")
-        if self.reask_after < 0:
-            raise ConfigError(f"guidance.reask_after must be >= 0, got {self.reask_after}")
         if self.source == "file" and not self.annotation_file:
             raise ConfigError("guidance.source = 'file' needs guidance.annotation_file")
         if not 0.0 <= self.lam_min <= self.lam_max <= 1.0:
             raise ConfigError(f"guidance: need 0 <= lam_min <= lam_max <= 1, got {self.lam_min}, {self.lam_max}")
+        check_number("guidance.r_threshold", self.r_threshold, -1e4, 0.0)
+        check_number("guidance.intake_steps", self.intake_steps, 0, 10**9, integer=True)
+        check_number("guidance.delta", self.delta, 1e-4, 1.0, " m")
+        check_number("guidance.cache_tolerance", self.cache_tolerance, 0.0, 0.1, " m")
+        check_number("guidance.reask_after", self.reask_after, 0, 10**6, integer=True)
 
 
 @dataclass(frozen=True)
@@ -91,6 +94,17 @@ class TrainConfig:
     eval_episodes: int = 10  # per evaluation; each evaluation draws new start states (see Trainer.evaluate)
     checkpoint_every: int = 2_000  # steps; checkpoints are written at the next episode end
     torch_threads: int = 1
+
+    def __post_init__(self) -> None:
+        check_number("train.total_steps", self.total_steps, 1, 10**9, integer=True)
+        check_number("train.seed", self.seed, 0, 2**32 - 1, integer=True)
+        check_number("train.batch_size", self.batch_size, 1, 1 << 20, integer=True)
+        check_number("train.buffer_size", self.buffer_size, 1, 10**8, integer=True)
+        check_number("train.learning_starts", self.learning_starts, 1, 10**9, integer=True)
+        check_number("train.eval_every", self.eval_every, 1, 10**9, integer=True)
+        check_number("train.eval_episodes", self.eval_episodes, 1, 10**5, integer=True)
+        check_number("train.checkpoint_every", self.checkpoint_every, 1, 10**9, integer=True)
+        check_number("train.torch_threads", self.torch_threads, 1, 1024, integer=True)
 
 
 def load_train_config(path: str | Path | None) -> tuple[TrainConfig, DDPGConfig, GuidanceConfig, EnvConfig]:

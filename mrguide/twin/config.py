@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from mrguide.config import ConfigError
+from mrguide.config import ConfigError, check_number
 from mrguide.twin.camera import CameraConfig
 
 
@@ -25,12 +25,13 @@ class RealityGap:
     vacuum_noise: float = 0.0  # kPa; std of the vacuum-level reading
 
     def __post_init__(self) -> None:
-        for name in ("object_mass", "object_friction", "suction_break_force"):
-            if not getattr(self, name) > 0:
-                raise ConfigError(f"reality_gap.{name} must be > 0, got {getattr(self, name)}")
-        for name in ("actuator_latency", "actuator_lag", "joint_noise", "vacuum_noise"):
-            if getattr(self, name) < 0:
-                raise ConfigError(f"reality_gap.{name} must be >= 0, got {getattr(self, name)}")
+        check_number("reality_gap.object_mass", self.object_mass, 1e-3, 100.0, " kg")
+        check_number("reality_gap.object_friction", self.object_friction, 1e-3, 10.0)
+        check_number("reality_gap.suction_break_force", self.suction_break_force, 1e-3, 1e4, " N")
+        check_number("reality_gap.actuator_latency", self.actuator_latency, 0, 1000, " control periods", integer=True)
+        check_number("reality_gap.actuator_lag", self.actuator_lag, 0.0, 10.0, " s")
+        check_number("reality_gap.joint_noise", self.joint_noise, 0.0, 0.5, " rad")
+        check_number("reality_gap.vacuum_noise", self.vacuum_noise, 0.0, 100.0, " kPa")
 
 
 @dataclass(frozen=True)
@@ -55,6 +56,13 @@ class VacuumConfig:
     time_constant: float = 0.03  # s; first-order response of the level
     seal_distance: float = 0.006  # m; the cup seals when its lip is within this of the object top
 
+    def __post_init__(self) -> None:
+        if not self.level_sealed < self.part_threshold < self.level_open <= 0:
+            raise ConfigError(f"twin.vacuum: need level_sealed < part_threshold < level_open <= 0 kPa, got "
+                              f"{self.level_sealed}, {self.part_threshold}, {self.level_open}")
+        check_number("twin.vacuum.time_constant", self.time_constant, 1e-4, 10.0, " s")
+        check_number("twin.vacuum.seal_distance", self.seal_distance, 1e-5, 0.1, " m")
+
 
 @dataclass(frozen=True)
 class TwinConfig:
@@ -70,8 +78,8 @@ class TwinConfig:
     gui: bool = False
 
     def __post_init__(self) -> None:
-        if not self.control_period > 0:
-            raise ConfigError(f"twin.control_period must be > 0, got {self.control_period}")
+        check_number("twin.control_period", self.control_period, 1e-4, 0.1, " s")
+        check_number("twin.decision_period", self.decision_period, 1e-4, 10.0, " s")
         ratio = self.decision_period / self.control_period
         if self.decision_period <= 0 or abs(ratio - round(ratio)) > 1e-6:
             raise ConfigError(

@@ -39,3 +39,62 @@ def test_a_run_that_never_checkpointed_is_not_appended_to(tmp_path, capsys):
 def test_resume_without_a_checkpoint_is_refused(tmp_path, capsys):
     assert main(["train", "--out", str(tmp_path / "r"), "--resume", "--quiet"]) == 2
     assert "no checkpoint at" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("toml, words", [
+    ("[train]\neval_episodes = 0", "train.eval_episodes = 0"),
+    ("[train]\ncheckpoint_every = 0", "train.checkpoint_every = 0"),
+    ("[train]\ntorch_threads = 0", "train.torch_threads = 0"),
+    ("[train]\nbuffer_size = 0", "train.buffer_size = 0"),
+    ("[train]\nbatch_size = 2.5", "batch_size = 2.5: expected an integer"),
+    ("[ddpg]\nlr_actor = -0.001", "ddpg.lr_actor = -0.001"),
+    ("[ddpg]\nhidden = [0, 96]", "ddpg.hidden"),
+    ("[guidance]\ndelta = 0", "guidance.delta = 0"),
+    ("[guidance.noise]\nsigma = nan", "noise.sigma = nan: must be finite"),
+    ("[guidance.noise]\nbias = [0, 0, inf]", "noise.bias[2] = inf: must be finite"),
+    ("[guidance]\nsource = 'file'", "guidance.source = 'file' needs guidance.annotation_file"),
+    ("[guidance]\nsource = 'file'\nannotation_file = 'missing.jsonl'", "annotation file not found"),
+    ("[guidance]\nturbo = true", "turbo"),
+    ("[robot]\nname = 'ur99'", "unknown robot 'ur99'"),
+    ("[robot]\nq_home = [0, 0, 0, 0, 0, 0]", "q_home lies outside the joint limits"),
+    ("[twin.reality_gap]\nactuator_lag = nan", "actuator_lag = nan: must be finite"),
+    ("[twin]\ncontrol_period = 0", "twin.control_period = 0"),
+    ("[task]\nhorizon = 0", "task.horizon"),
+])
+def test_bad_config_values_end_in_one_line_naming_the_key(tmp_path, capsys, toml, words):
+    cfg = tmp_path / "bad.toml"
+    cfg.write_text(toml + "\n")
+    assert main(["train", "--config", str(cfg), "--out", str(tmp_path / "r"), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert words in err and err.startswith("mrguide train: ") and len(err.splitlines()) == 1, err
+    assert not (tmp_path / "r" / "metrics.csv").exists()
+
+
+@pytest.mark.parametrize("record, words", [
+    ("", "no annotations in the file"),
+    ('{"obs": [0.1], "target": [0.5, 0, 0.1], "grip": 1}', "11 finite numbers"),
+    ('"just a string"', "JSON object"),
+    ('{"obs": OBS, "target": [0.5, NaN, 0.1], "grip": 1}', "3 finite numbers"),
+    ('{"obs": OBS, "target": [0.5, 0, 0.1], "grip": null}', "gripper command"),
+])
+def test_bad_annotation_files_are_refused_naming_file_and_line(tmp_path, capsys, record, words):
+    obs = str([0.5, 0.1, 0.3, -1.0, 0.0, 0.5, -0.1, 0.025, 0.5, 0.2, 0.025])
+    ann = tmp_path / "ann.jsonl"
+    ann.write_text((record.replace("OBS", obs) + "\n\n") if record else "")
+    cfg = tmp_path / "file.toml"
+    cfg.write_text(f"[guidance]\nsource = 'file'\nannotation_file = '{ann}'\n")
+    assert main(["train", "--config", str(cfg), "--out", str(tmp_path / "r"), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert words in err and str(ann) in err and len(err.splitlines()) == 1, err
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["--seeds", "0"], "--seeds"), (["--workers", "0"], "--workers"), (["--steps", "-1"], "--steps"),
+    (["--variants", "guided,turbo"], "--variants"),
+])
+def test_experiment_numbers_refused(tmp_path, capsys, argv, words):
+    try:
+        code = main(["experiment", "learning-curves", "--out", str(tmp_path / "x"), *argv])
+    except SystemExit as exc:
+        code = exc.code
+    assert code == 2 and words in capsys.readouterr().err
