@@ -30,6 +30,7 @@ import numpy as np
 
 from mrguide.annotation.broker import AnnotationBroker, LiveAnswer
 from mrguide.annotation.headless import HeadlessBrowser
+from mrguide.annotation.live import hello_fields
 from mrguide.annotation.protocol import AnnotationRequest
 from mrguide.annotation.server import AnnotationServer
 from mrguide.policies.experts import OracleExpert
@@ -132,10 +133,7 @@ def main() -> None:
     ap.add_argument("--browser-requests", type=int, default=100)
     args = ap.parse_args()
     spec = load_robot()
-    broker = AnnotationBroker(spec.workspace, {"robot": {"name": spec.name, "joint_names": list(spec.joint_names),
-                                                         "urdf_url": "/robot/robot.urdf",
-                                                         "workspace": {"lo": spec.workspace.lo.tolist(), "hi": spec.workspace.hi.tolist()}},
-                                               "task": TaskConfig().__dict__, "registration": None, "on_timeout": "wait"})
+    broker = AnnotationBroker(spec.workspace, hello_fields(spec, TaskConfig()))
     server = AnnotationServer(broker, spec, port=0)
     server.start()
     try:

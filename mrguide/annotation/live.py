@@ -23,7 +23,8 @@ from mrguide.calibration.errors import CalibrationError
 from mrguide.config import ConfigError
 from mrguide.policies.annotations import Annotation
 from mrguide.policies.experts import OracleExpert
-from mrguide.task import phase_from_progress
+from mrguide.robot import RobotSpec
+from mrguide.task import TaskConfig, phase_from_progress
 from mrguide.twin.env import PickPlaceEnv
 
 log = logging.getLogger(__name__)
@@ -115,14 +116,7 @@ class LiveSession:
         """Start serving for `env` (its robot, task and workspace) and return the expert source."""
         o = self.options
         spec = env.robot_spec
-        hello = {
-            "robot": {"name": spec.name, "frame": spec.base_frame, "tcp_frame": "tcp", "units": "m", "angles": "rad",
-                      "quaternion": "xyzw", "up": "z", "urdf_url": "/robot/robot.urdf", "joint_names": list(spec.joint_names),
-                      "workspace": {"lo": spec.workspace.lo.tolist(), "hi": spec.workspace.hi.tolist()}},
-            "task": asdict(env.task_cfg),
-            "registration": self._registration,
-            "on_timeout": o.on_timeout,
-        }
+        hello = hello_fields(spec, env.task_cfg, self._registration, o.on_timeout)
         self.broker = AnnotationBroker(spec.workspace, hello)
         self.broker.on_waiting = self.on_waiting
         self.server = AnnotationServer(self.broker, spec, o.host, o.port, o.cert, o.key, o.token)
@@ -159,6 +153,19 @@ class LiveSession:
             self.broker.close()
         if self.server is not None:
             self.server.stop()
+
+
+def hello_fields(spec: RobotSpec, task: TaskConfig, registration: dict[str, Any] | None = None,
+                 on_timeout: str = "wait") -> dict[str, Any]:
+    """What every client learns on connecting: the robot and its frame conventions, the task, the placement."""
+    return {
+        "robot": {"name": spec.name, "frame": spec.base_frame, "tcp_frame": "tcp", "units": "m", "angles": "rad",
+                  "quaternion": "xyzw", "up": "z", "urdf_url": "/robot/robot.urdf", "joint_names": list(spec.joint_names),
+                  "workspace": {"lo": spec.workspace.lo.tolist(), "hi": spec.workspace.hi.tolist()}},
+        "task": asdict(task),
+        "registration": registration,
+        "on_timeout": on_timeout,
+    }
 
 
 def _load_registration(path: str) -> dict[str, Any]:

@@ -15,6 +15,7 @@ import pytest
 from mrguide.annotation.broker import AnnotationBroker
 from mrguide.annotation.protocol import AnnotationRequest
 from mrguide.annotation.server import AnnotationServer
+from mrguide.deploy.kinematics import Kinematics
 from mrguide.robot import load_robot
 from mrguide.task import observation, progress
 
@@ -22,11 +23,13 @@ OBJ = np.array([0.5, -0.08, 0.025])
 GOAL = np.array([0.48, 0.2, 0.025])
 
 
-def make_request(phase: int = 1, remark: bool = False) -> AnnotationRequest:
+def make_request(phase: int = 1, remark: bool = False, obj: np.ndarray = OBJ, goal: np.ndarray = GOAL,
+                 quat: np.ndarray = np.array([0, 0, 0, 1.0])) -> AnnotationRequest:
+    """The arm at home (TCP by Pinocchio FK), an object and a goal on the table, in phase `phase`."""
     spec = load_robot()
-    tcp = np.array([0.5, -0.08, 0.13])
-    obs = observation(tcp, -1, progress(phase), OBJ, GOAL)
-    return AnnotationRequest(phase, spec.q_home, tcp, False, OBJ, np.array([0, 0, 0, 1.0]), GOAL, obs, remark,
+    tcp = Kinematics(spec).tcp_position(spec.q_home)
+    obs = observation(tcp, -1, progress(phase), obj, goal)
+    return AnnotationRequest(phase, spec.q_home.copy(), tcp, False, obj, quat, goal, obs, remark,
                              np.array([0.5, -0.08, 0.06]) if remark else None)
 
 

@@ -6,16 +6,13 @@ mouse and the keyboard like a person would, and the test checks what reaches the
 
 from __future__ import annotations
 
+import asyncio
+import json
 import os
 import re
 import shutil
 import threading
-from concurrent.futures import Future
-from dataclasses import asdict
 from pathlib import Path
-
-import asyncio
-import json
 
 import aiohttp
 import numpy as np
@@ -23,46 +20,17 @@ import pytest
 
 from mrguide.annotation.broker import AnnotationBroker, LiveAnswer, NoAnswer
 from mrguide.annotation.headless import HeadlessBrowser, chromium_path
-from mrguide.annotation.protocol import PROMPTS, AnnotationRequest
+from mrguide.annotation.live import hello_fields
+from mrguide.annotation.protocol import PROMPTS
 from mrguide.annotation.server import WEB_DIR, AnnotationServer
-from mrguide.deploy.kinematics import Kinematics
 from mrguide.robot import load_robot
-from mrguide.task import TaskConfig, observation, progress
+from mrguide.task import TaskConfig
+from tests.annotation.conftest import ask_in_thread, make_request
 
 REPO = Path(__file__).resolve().parents[2]
 OBJ = np.array([0.52, -0.06, 0.025])
 GOAL = np.array([0.46, 0.22, 0.025])
 QUAT = np.array([0.0, 0.0, 0.2588190, 0.9659258])  # 30 degrees about z
-
-def hello_for(spec, registration=None) -> dict:
-    """The hello fields the live session sends (mrguide.annotation.live)."""
-    return {
-        "robot": {"name": spec.name, "frame": spec.base_frame, "tcp_frame": "tcp", "units": "m", "angles": "rad",
-                  "quaternion": "xyzw", "up": "z", "urdf_url": "/robot/robot.urdf", "joint_names": list(spec.joint_names),
-                  "workspace": {"lo": spec.workspace.lo.tolist(), "hi": spec.workspace.hi.tolist()}},
-        "task": asdict(TaskConfig()), "registration": registration, "on_timeout": "wait",
-    }
-
-
-def make_request(spec, phase: int = 1) -> AnnotationRequest:
-    """The arm at home (TCP by Pinocchio FK), a turned cube on the table, a goal: all in the workspace."""
-    tcp = Kinematics(spec).tcp_position(spec.q_home)
-    obs = observation(tcp, -1, progress(phase), OBJ, GOAL)
-    return AnnotationRequest(phase, spec.q_home.copy(), tcp, False, OBJ, QUAT, GOAL, obs)
-
-
-def ask(broker: AnnotationBroker, req: AnnotationRequest, timeout: float | None = None) -> Future:
-    fut: Future = Future()
-
-    def run() -> None:
-        try:
-            fut.set_result(broker.request(req, timeout))
-        except BaseException as exc:  # handed to the test
-            fut.set_exception(exc)
-
-    threading.Thread(target=run, daemon=True).start()
-    return fut
-
 
 def screen_delta(page, p, dp) -> tuple[float, float]:
     """Screen pixels (dx, dy) between robot-frame points p and p + dp, as the page's camera shows them."""
@@ -87,7 +55,7 @@ def spec():
 
 @pytest.fixture
 def served(spec):
-    broker = AnnotationBroker(spec.workspace, hello_for(spec))
+    broker = AnnotationBroker(spec.workspace, hello_fields(spec, TaskConfig()))
     server = AnnotationServer(broker, spec, port=0)
     server.start()
     yield broker, server
@@ -97,8 +65,8 @@ def served(spec):
 
 def test_page_shows_request_drag_keys_and_submit(browser, served, spec, tmp_path):
     broker, server = served
-    req = make_request(spec, phase=1)
-    fut = ask(broker, req)
+    req = make_request(1, obj=OBJ, goal=GOAL, quat=QUAT)
+    fut = ask_in_thread(broker, req)
     broker.publish_status(step=3120, total_steps=20000, episode=71, success_rate=0.35, asked=212, reused=1930,
                           remarks=3, skipped=1, fallbacks=0, **{"lambda": 0.775})
     page = browser.open(server.url)
@@ -183,7 +151,7 @@ def test_page_shows_request_drag_keys_and_submit(browser, served, spec, tmp_path
 
 def test_target_is_confined_to_the_workspace(browser, served, spec):
     broker, server = served
-    fut = ask(broker, make_request(spec, phase=0))
+    fut = ask_in_thread(broker, make_request(0, obj=OBJ, goal=GOAL, quat=QUAT))
     page = browser.open(server.url)
     try:
         s = page.wait_request()
@@ -207,7 +175,7 @@ def test_target_is_confined_to_the_workspace(browser, served, spec):
 
 def test_skip_key_and_deadline_countdown(browser, served, spec):
     broker, server = served
-    fut = ask(broker, make_request(spec, phase=3), timeout=60.0)
+    fut = ask_in_thread(broker, make_request(3, obj=OBJ, goal=GOAL, quat=QUAT), timeout=60.0)
     page = browser.open(server.url)
     try:
         page.wait_request()
@@ -223,7 +191,7 @@ def test_skip_key_and_deadline_countdown(browser, served, spec):
 
 def test_claimed_by_another_client(browser, served, spec):
     broker, server = served
-    fut = ask(broker, make_request(spec, phase=2))
+    fut = ask_in_thread(broker, make_request(2, obj=OBJ, goal=GOAL, quat=QUAT))
     page = browser.open(server.url)
     page_saw_claim = threading.Event()
 
@@ -290,7 +258,7 @@ def test_refusal_reason_is_shown(browser, served, spec):
     page = browser.open(server.url, setup=hold_back_cancels)
     try:
         page.wait_state("s.connected")
-        fut = ask(broker, make_request(spec, phase=1), timeout=1.0)
+        fut = ask_in_thread(broker, make_request(1, obj=OBJ, goal=GOAL, quat=QUAT), timeout=1.0)
         s = page.wait_request()
         result = fut.result(timeout=15)
         assert isinstance(result, NoAnswer) and result.reason == "timeout"
@@ -308,7 +276,7 @@ def test_refusal_reason_is_shown(browser, served, spec):
 
 def test_reconnect_after_reload_and_server_restart(browser, served, spec):
     broker, server = served
-    fut = ask(broker, make_request(spec, phase=1))
+    fut = ask_in_thread(broker, make_request(1, obj=OBJ, goal=GOAL, quat=QUAT))
     page = browser.open(server.url)
     try:
         s = page.wait_request()

@@ -9,54 +9,22 @@ the trainer.
 from __future__ import annotations
 
 import math
-import threading
-from concurrent.futures import Future
-from dataclasses import asdict
 
 import numpy as np
 import pytest
 
 from mrguide.annotation.broker import AnnotationBroker, LiveAnswer
 from mrguide.annotation.headless import HeadlessBrowser, chromium_path
-from mrguide.annotation.protocol import AnnotationRequest
+from mrguide.annotation.live import hello_fields
 from mrguide.annotation.server import WEB_DIR, AnnotationServer
-from mrguide.deploy.kinematics import Kinematics
 from mrguide.robot import load_robot
-from mrguide.task import TaskConfig, observation, progress
+from mrguide.task import TaskConfig
+from tests.annotation.conftest import ask_in_thread, make_request
 
 OBJ = np.array([0.52, -0.06, 0.025])
 GOAL = np.array([0.46, 0.22, 0.025])
 TABLE_HEIGHT = 0.75  # web/emulation.js: the emulated table surface (local-floor, y up)
 HEAD = np.array([0.0, 1.6, 0.0])  # IWER's default head position
-
-
-def hello_for(spec, registration=None) -> dict:
-    """The hello fields the live session sends (mrguide.annotation.live)."""
-    return {
-        "robot": {"name": spec.name, "frame": spec.base_frame, "tcp_frame": "tcp", "units": "m", "angles": "rad",
-                  "quaternion": "xyzw", "up": "z", "urdf_url": "/robot/robot.urdf", "joint_names": list(spec.joint_names),
-                  "workspace": {"lo": spec.workspace.lo.tolist(), "hi": spec.workspace.hi.tolist()}},
-        "task": asdict(TaskConfig()), "registration": registration, "on_timeout": "wait",
-    }
-
-
-def make_request(spec, phase: int) -> AnnotationRequest:
-    tcp = Kinematics(spec).tcp_position(spec.q_home)
-    obs = observation(tcp, -1, progress(phase), OBJ, GOAL)
-    return AnnotationRequest(phase, spec.q_home.copy(), tcp, False, OBJ, np.array([0, 0, 0, 1.0]), GOAL, obs)
-
-
-def ask(broker: AnnotationBroker, req: AnnotationRequest) -> Future:
-    fut: Future = Future()
-
-    def run() -> None:
-        try:
-            fut.set_result(broker.request(req, None))
-        except BaseException as exc:  # handed to the test
-            fut.set_exception(exc)
-
-    threading.Thread(target=run, daemon=True).start()
-    return fut
 
 
 def placement(state) -> np.ndarray:
@@ -82,7 +50,7 @@ def spec():
 
 
 def serve(spec, registration=None):
-    broker = AnnotationBroker(spec.workspace, hello_for(spec, registration))
+    broker = AnnotationBroker(spec.workspace, hello_fields(spec, TaskConfig(), registration))
     server = AnnotationServer(broker, spec, port=0)
     server.start()
     return broker, server
@@ -105,7 +73,7 @@ def press(page, button: str) -> None:
 
 def test_quest3_immersive_ar_hit_test_and_controller_select(browser, spec, tmp_path):
     broker, server = serve(spec)
-    fut = ask(broker, make_request(spec, phase=1))
+    fut = ask_in_thread(broker, make_request(1, obj=OBJ, goal=GOAL))
     page = browser.open(server.url + "&xr=quest3")
     try:
         s = page.wait_request()
@@ -163,7 +131,7 @@ def test_hololens2_profile_falls_back_to_additive_vr_placed_by_registration(brow
     T_base_hmd[:3, :3] = Rz @ Rx
     T_base_hmd[:3, 3] = [0.9, -0.3, -0.74]
     broker, server = serve(spec, {"T_base_hmd": T_base_hmd.tolist(), "method": "test", "rms_residual_m": 0.001})
-    fut = ask(broker, make_request(spec, phase=4))
+    fut = ask_in_thread(broker, make_request(4, obj=OBJ, goal=GOAL))
     page = browser.open(server.url + "&xr=hololens2")
     try:
         s = page.wait_request()
@@ -204,7 +172,7 @@ def test_hololens2_profile_falls_back_to_additive_vr_placed_by_registration(brow
 
 def test_quest3_without_ar_falls_back_to_vr_and_places_in_front(browser, spec):
     broker, server = serve(spec)
-    fut = ask(broker, make_request(spec, phase=0))
+    fut = ask_in_thread(broker, make_request(0, obj=OBJ, goal=GOAL))
     page = browser.open(server.url + "&xr=quest3-vr")
     try:
         page.wait_request()
