@@ -6,8 +6,9 @@
    `mrguide annotate bot` (its own process) over a real WebSocket, while a third process floods the server
    with the protocol's bad messages (malformed JSON, NaN, stale ids, out-of-box targets, oversize frames).
 2. Browser: the same, answered by the real page in headless Chromium (Debian's chromium through
-   playwright, WebGL on SwiftShader), submitted by the page's test hook as soon as the request shows
-   (after 5 untimed warm-up requests).
+   playwright, WebGL on SwiftShader), submitted by the page's test hook (`autoSubmit`) as soon as the
+   page has shown the request (after 5 untimed warm-up requests); the answer must be the page's start
+   target, the TCP.
 
 An answer is lost when a request ends without the answer that was sent for it. Prints a table and, last,
 one JSON line: round_trip_p99_ms (target <= 20), browser_round_trip_p99_ms (<= 150), answers_lost (0),
@@ -101,13 +102,8 @@ def browser_round_trips(broker: AnnotationBroker, server: AnnotationServer, n: i
     reqs = requests(n, seed=1)
     with HeadlessBrowser() as browser:
         page = browser.open(server.url)
-        # each answer encodes its request's number, so a mixed-up or dropped answer is seen
-        page.page.evaluate("""() => { let last = null;
-            setInterval(() => { const s = window.mrguide.state();
-                if (s.requestId && s.requestId !== last && s.target) { last = s.requestId;
-                    const seq = Number(s.requestId.split('-')[1]);
-                    window.mrguide.setTarget([0.4 + (seq % 100) * 0.001, 0.1, 0.2]);
-                    window.mrguide.submit(); } }, 1); }""")
+        page.wait_robot()
+        page.auto_submit(True)  # the page answers each request the moment it has shown it: its start target (the TCP)
         for req in requests(WARMUP, seed=2):  # the first answers also compile shaders and lay out the panel
             broker.request(req, timeout=30.0)
         times, lost = [], 0
@@ -115,11 +111,7 @@ def browser_round_trips(broker: AnnotationBroker, server: AnnotationServer, n: i
             t = time.perf_counter()
             res = broker.request(req, timeout=10.0)
             times.append(time.perf_counter() - t)
-            ok = isinstance(res, LiveAnswer)
-            if ok:
-                seq = int(res.request_id.split("-")[1])
-                ok = np.allclose(res.target, [0.4 + (seq % 100) * 0.001, 0.1, 0.2], atol=1e-9)
-            lost += int(not ok)
+            lost += int(not (isinstance(res, LiveAnswer) and np.allclose(res.target, np.round(req.tcp, 4), atol=1e-9)))
     return times, lost
 
 
