@@ -20,7 +20,7 @@ from mrguide.errors import InputError
 
 MAGIC = b"MRGUIDE-CHECKPOINT"
 FORMAT = 5  # 2: critics as one ensemble; 3: update counter; 4: evaluation counter; 5: digest header, re-marks
-REQUIRED = ("config", "agent", "agent_pool", "expert_pool", "rng", "torch_rng", "annotator_rng", "counters")
+REQUIRED = ("config", "agent", "agent_pool", "expert_pool", "rng", "torch_rng", "annotator_rng", "expert_noise_rng", "counters")
 
 
 class CheckpointError(InputError):

@@ -61,6 +61,10 @@ class GuidanceConfig:
     reask_after: int = 15  # expert steps on one waypoint without reaching it before it is asked again (0: never; ours)
     source: str = "annotator"  # "oracle", "annotator" (oracle + noise), "file", or "live" (a person: `--expert live`)
     noise: AnnotatorNoise = field(default_factory=AnnotatorNoise)
+    #: m, std per axis of fresh Gaussian noise on every stored expert action, after Eq. 13 (so the bound
+    #: cannot filter it): the paper's "perturbing expert actions" (Sec. V-E, Fig. 7). `noise` above is
+    #: the other reading: a persistent error of each marked waypoint.
+    action_noise: float = 0.0
     annotation_file: str = ""  # for source = "file"
 
     def __post_init__(self) -> None:
@@ -79,6 +83,7 @@ class GuidanceConfig:
         check_number("guidance.delta", self.delta, 1e-4, 1.0, " m")
         check_number("guidance.cache_tolerance", self.cache_tolerance, 0.0, 0.1, " m")
         check_number("guidance.reask_after", self.reask_after, 0, 10**6, integer=True)
+        check_number("guidance.action_noise", self.action_noise, 0.0, 1.0, " m")
 
 
 @dataclass(frozen=True)
@@ -133,8 +138,10 @@ class GuidedExpert:
     """
 
     def __init__(self, source: ExpertSource, reference: ReferencePose, cache: AnnotationCache, delta: float, task: TaskConfig,
-                 to_normalized, reask_after: int = 0):
+                 to_normalized, reask_after: int = 0, action_noise: float = 0.0, seed: int = 0):
         self.source, self.reference, self.cache = source, reference, cache
+        self.action_noise = action_noise
+        self.rng = np.random.default_rng(seed + ACTION_NOISE_SEED_OFFSET)  # draws only when action_noise > 0
         self.delta = delta
         self.task = task
         self.to_normalized = to_normalized
@@ -163,6 +170,8 @@ class GuidedExpert:
         ref = self.reference.reference(obs)
         target = bounded_projection(ann.target, ref, self.delta)
         self.projected += int(not np.allclose(target, ann.target))
+        if self.action_noise > 0:
+            target = target + self.rng.normal(0.0, self.action_noise, 3)
         return annotation_action(obs, target, ann.grip, self.task, self.to_normalized)
 
     def _ask(self, obs: np.ndarray, previous) -> Annotation | None:
@@ -187,6 +196,7 @@ def make_expert_source(g: GuidanceConfig, env: PickPlaceEnv, seed: int) -> Exper
     raise ConfigError("guidance.source = 'live' needs a person: run `mrguide train --expert live`")
 
 
+ACTION_NOISE_SEED_OFFSET = 104_729  # the expert-action noise of training seed s draws from RNG seed s + this
 EVAL_SEED_BASE = 1_000_000  # evaluation env seeds start here (training seeds come from the run's RNG)
 METRIC_FIELDS = ("step", "episode", "kind", "return", "success", "outcome", "length", "triggered", "lambda", "expert_ratio",
                  "asked", "reused", "remarks", "skipped", "wall_s")
@@ -223,7 +233,7 @@ class Trainer:
         )
         self.cache = AnnotationCache(guidance.cache_tolerance, self.out / "annotations.jsonl")
         self.expert = GuidedExpert(self.source, reference, self.cache, guidance.delta, self.env.task_cfg, self.env.workspace.to_normalized,
-                                   guidance.reask_after)
+                                   guidance.reask_after, guidance.action_noise, cfg.seed)
         self.trigger = ThresholdTrigger(guidance.r_threshold)
         self.step = 0
         self.episode = 0
@@ -399,6 +409,7 @@ class Trainer:
             "agent": self.agent.state_dict(), "agent_pool": self.replay.agent.state(), "expert_pool": self.replay.expert.state(),
             "rng": self.rng.bit_generator.state, "torch_rng": torch.get_rng_state(),
             "annotator_rng": getattr(self.source, "rng", None) and self.source.rng.bit_generator.state,
+            "expert_noise_rng": self.expert.rng.bit_generator.state,
             "counters": {
                 "step": self.step, "episode": self.episode, "interventions": self.interventions, "asked": self.cache.asked,
                 "reused": self.cache.reused, "projected": self.expert.projected, "remarks": self.expert.remarks,
@@ -423,6 +434,7 @@ class Trainer:
             torch.set_rng_state(state["torch_rng"])
             if state["annotator_rng"] is not None:
                 self.source.rng.bit_generator.state = state["annotator_rng"]
+            self.expert.rng.bit_generator.state = state["expert_noise_rng"]
             c = state["counters"]
             self.step, self.episode, self.interventions = c["step"], c["episode"], c["interventions"]
             self.expert.projected, self.last_ratio, self._next_eval = c["projected"], c["last_ratio"], c["next_eval"]

@@ -232,3 +232,26 @@ def test_reask_disabled_and_a_new_demonstration_restarts_the_count(tmp_path):
 def test_nobody_answering_gives_no_action(tmp_path):
     expert, cache = _guided(_Recorder([None]), tmp_path, reask_after=15)
     assert expert.action(_obs(0)) is None and len(cache) == 0 and cache.asked == 1
+
+
+def test_action_noise_perturbs_every_stored_action_afresh_after_the_projection(tmp_path):
+    from mrguide.policies.guidance import NominalReference
+    from mrguide.policies.train import GuidedExpert
+
+    task, ws = TaskConfig(), Workspace()
+    exact = Annotation(np.array([0.5, -0.1, 0.13]), -1.0)
+
+    class Exact:
+        def annotate(self, obs, previous=None):
+            return exact
+
+    def actions(sigma, seed=0):
+        expert = GuidedExpert(Exact(), NominalReference(task), AnnotationCache(0.005), 0.05, task, ws.to_normalized, 0, sigma, seed)
+        return np.array([expert.action(_obs(0))[:3] for _ in range(400)])
+
+    clean, noisy = actions(0.0), actions(0.03)
+    assert np.allclose(clean, clean[0])  # one mark, one action
+    err = ws.to_cartesian(noisy) - ws.to_cartesian(clean)
+    assert err.std(axis=0) == pytest.approx([0.03] * 3, rel=0.15)  # fresh per step, not clipped to Δ = 5 cm
+    assert np.abs(err).max() > 0.05 and len({tuple(r) for r in noisy}) == 400
+    assert np.array_equal(actions(0.03), noisy) and not np.array_equal(actions(0.03, seed=1), noisy)
