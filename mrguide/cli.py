@@ -198,7 +198,7 @@ def main(argv: list[str] | None = None) -> int:
     """Run one command. Bad input: one line on stderr, exit 2; driver faults: exit 1; Ctrl-C: exit 130."""
     args = build_parser().parse_args(argv)
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
-    name = f"mrguide {args.command}"
+    name = f"mrguide {getattr(args, 'command_name', args.command)}"
     try:
         return int(args.func(args))
     except InputError as exc:
