@@ -30,7 +30,7 @@ from mrguide.calibration.pose_sources import MarkerPoseSource
 from mrguide.calibration.procedure import CalibrationRun, calibrate_frames
 from mrguide.calibration.se3 import apply, invert, make_T, rotation_from_rpy_deg
 from mrguide.calibration.targets import layout_from_config
-from mrguide.config import ConfigError
+from mrguide.config import ConfigError, check_number
 from mrguide.twin.camera import Camera, Intrinsics, look_at
 
 log = logging.getLogger(__name__)
@@ -262,8 +262,7 @@ class TwinCalibrationConfig:
     def __post_init__(self) -> None:
         if not self.views:
             raise ConfigError("calibration_twin.views: at least one camera position is needed")
-        if self.supersample < 1:
-            raise ConfigError(f"calibration_twin.supersample must be >= 1, got {self.supersample}")
+        check_number("calibration_twin.supersample", self.supersample, 1, 8, integer=True)
 
     @property
     def T_base_hmd(self) -> np.ndarray:
