@@ -14,6 +14,17 @@ BOARD_KINDS = ("grid", "charuco")
 MAX_MARKER_ID = 1023
 #: Size bounds of printed markers, squares and boards (m).
 MIN_SIZE_M, MAX_SIZE_M = 1e-3, 2.0
+#: Farthest a target may be from the robot base on any axis (m).
+MAX_REACH_M = 5.0
+
+
+def check_points(key: str, points: tuple[tuple[float, ...], ...], limit: float = MAX_REACH_M) -> None:
+    """ConfigError unless every coordinate of every point is a finite number within +-`limit` (m).
+
+    For tuples of points, which `mrguide.config.from_dict` does not look into."""
+    for i, point in enumerate(points):
+        for k, v in enumerate(point):
+            check_number(f"{key}[{i}][{k}]", v, -limit, limit, " m")
 
 
 @dataclass(frozen=True)
@@ -83,6 +94,8 @@ class MarkerPlacement:
 
     def __post_init__(self) -> None:
         check_number("calibration.targets.markers.id", self.id, 0, MAX_MARKER_ID, integer=True)
+        check_points(f"calibration.targets.markers (id {self.id}).xyz", (self.xyz,))
+        check_number(f"calibration.targets.markers (id {self.id}).yaw_deg", self.yaw_deg, -360.0, 360.0, " deg")
 
 
 @dataclass(frozen=True)
@@ -102,6 +115,7 @@ class TargetsConfig:
     markers: tuple[MarkerPlacement, ...] = ()  # single markers (size from the detector config)
 
     def __post_init__(self) -> None:
+        check_points("calibration.targets.board_touched_corners", self.board_touched_corners)
         if self.board_touched_corners and len(self.board_touched_corners) not in (3, 4):
             raise ConfigError(
                 f"calibration.targets.board_touched_corners needs 3 or 4 points, got {len(self.board_touched_corners)}"

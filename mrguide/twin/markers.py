@@ -23,7 +23,7 @@ import pybullet as pb
 
 from mrguide.calibration.boards import Board, printable_board, printable_marker, single_marker_corners
 from mrguide.calibration.camera_model import CameraModel
-from mrguide.calibration.config import CalibrationConfig, DetectorConfig, HmdNoiseConfig
+from mrguide.calibration.config import CalibrationConfig, DetectorConfig, HmdNoiseConfig, check_points
 from mrguide.calibration.detection import MarkerDetector, get_dictionary
 from mrguide.calibration.hmd import HmdFrame, with_calibration_error, with_tracking_noise
 from mrguide.calibration.pose_sources import MarkerPoseSource
@@ -262,6 +262,7 @@ class TwinCalibrationConfig:
     def __post_init__(self) -> None:
         if not self.views:
             raise ConfigError("calibration_twin.views: at least one camera position is needed")
+        check_points("calibration_twin.views", self.views)
         check_number("calibration_twin.supersample", self.supersample, 1, 8, integer=True)
 
     @property
