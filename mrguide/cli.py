@@ -210,18 +210,20 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
     name = f"mrguide {getattr(args, 'command_name', args.command)}"
+
+    def fail(message: str, code: int) -> int:
+        # one line, whatever the message quotes (a TOML key or a file name may hold a line break)
+        print(f"{name}: " + message.replace("\r", "\\r").replace("\n", "\\n"), file=sys.stderr)
+        return code
+
     try:
         return int(args.func(args))
     except InputError as exc:
-        print(f"{name}: {exc}", file=sys.stderr)
-        return 2
+        return fail(str(exc), 2)
     except DriverError as exc:
-        print(f"{name}: CAN driver error: {exc}", file=sys.stderr)
-        return 1
+        return fail(f"CAN driver error: {exc}", 1)
     except OSError as exc:  # a full disk, a vanished directory: the environment, not the input
-        where = f"{exc.filename}: " if exc.filename else ""
-        print(f"{name}: {where}{exc.strerror or exc}", file=sys.stderr)
-        return 1
+        return fail((f"{exc.filename}: " if exc.filename else "") + str(exc.strerror or exc), 1)
     except KeyboardInterrupt:
         print(f"{name}: interrupted", file=sys.stderr)
         return 130

@@ -34,13 +34,13 @@ def check_bus_options(interface: str, options: dict[str, object]) -> None:
     """ConfigError naming the key unless every key of `options` is taken by `interface` and every number is finite."""
     for key, value in options.items():
         if isinstance(value, float) and not math.isfinite(value):
-            raise ConfigError(f"bus.options.{key} = {value!r}: must be finite")
+            raise ConfigError(f"bus.options: {key!r} = {value!r}: must be finite")
     if not options:
         return
     accepted = accepted_options(interface)
     unknown = sorted(set(options) - accepted)
     if unknown:
-        raise ConfigError(f"bus.options: {', '.join(unknown)} not taken by python-can's {interface!r} interface; "
+        raise ConfigError(f"bus.options: {', '.join(map(repr, unknown))} not taken by python-can's {interface!r} interface; "
                           f"it takes: {', '.join(sorted(accepted)) or 'no options'}")
 
 

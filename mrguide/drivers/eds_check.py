@@ -28,7 +28,7 @@ def check_eds(path: Path, required: tuple[int, ...], key: str) -> None:
     """ConfigError naming `key` (e.g. "drives.eds") and the file unless `path` is a readable EDS file with
     every object in `required`."""
     if not path.is_file():
-        raise ConfigError(f"{key}: EDS file not found: {path}")
+        raise ConfigError(f"{key}: EDS file not found: {str(path)!r}")
     stat = path.stat()
     problem = _eds_problem(str(path.resolve()), stat.st_mtime_ns, stat.st_size, required)
     if problem:

@@ -103,6 +103,8 @@ RUN_CASES = [
     ("five drives", _log, lambda d: _config(d, deploy='bus_config = "five.toml"'), ["five.toml", "joints: 5 drives configured"]),
     ("dry run on a real bus", _log, lambda d: _config(d, deploy='bus_config = "real_bus.toml"'),
      ["--dry-run needs the virtual CAN interface", "'socketcan'"]),
+    ("key with a line break", _log, lambda d: _config(d, deploy='bus_config = "bus.toml"\n"a\\nb" = 1'),
+     ["cfg.toml [deploy]", '"a\\nb"']),
     ("[safety] stall_timeout nan", _log, lambda d: _config(d, extra="[safety]\nstall_timeout = nan\n"),
      ["cfg.toml [safety]", "stall_timeout = nan"]),
 ]

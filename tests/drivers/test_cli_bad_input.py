@@ -54,7 +54,7 @@ CASES = [
      ["bus.toml", "bus.options", "recieve_own_messages", "'virtual'", "receive_own_messages"]),
     ("option for another interface", lambda d: "[bus]\noptions = { tty_baudrate = 115200 }\n",
      ["bus.options", "tty_baudrate"]),
-    ("non-finite option", lambda d: "[bus]\noptions = { rx_queue_size = inf }\n", ["bus.options.rx_queue_size = inf"]),
+    ("non-finite option", lambda d: "[bus]\noptions = { rx_queue_size = inf }\n", ["bus.options: 'rx_queue_size' = inf"]),
     ("wrong-typed number", lambda d: '[timing]\nboot_timeout = "3 s"\n', ["bus.toml", "timing.boot_timeout", "'3 s'"]),
     ("boot timeout nan", lambda d: "[timing]\nboot_timeout = nan\n", ["bus.toml", "timing.boot_timeout = nan"]),
     ("enable timeout inf", lambda d: "[timing]\nenable_timeout = inf\n", ["timing.enable_timeout = inf"]),
