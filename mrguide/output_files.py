@@ -16,13 +16,9 @@ def check_output_dir(path: str | Path, option: str) -> Path:
     """Refuse directory `path` (given by `option`, e.g. "--out") unless it exists or can be created, and can be
     written into. Creates nothing."""
     path = Path(path)
-    ancestor = path
-    while not ancestor.exists() and ancestor != ancestor.parent:
-        ancestor = ancestor.parent
-    if not ancestor.is_dir():
-        raise OutputPathError(f"{option} {path}: {ancestor} is not a directory")
-    if not os.access(ancestor, os.W_OK | os.X_OK):
-        raise OutputPathError(f"{option} {path}: cannot write in {ancestor}")
+    problem = _directory_problem(path)
+    if problem:
+        raise OutputPathError(f"{option} {path}: {problem}")
     return path
 
 
@@ -30,10 +26,22 @@ def check_output_file(path: str | Path, option: str) -> Path:
     """Refuse file `path` (given by `option`) unless a regular file can be created or replaced there. Creates
     nothing."""
     path = Path(path)
-    if path.exists() and not path.is_file():
-        raise OutputPathError(f"{option} {path}: exists and is not a regular file")
-    check_output_dir(path.parent, option)
+    problem = "exists and is not a regular file" if path.exists() and not path.is_file() else _directory_problem(path.parent)
+    if problem:
+        raise OutputPathError(f"{option} {path}: {problem}")
     return path
+
+
+def _directory_problem(path: Path) -> str | None:
+    """Why directory `path` cannot be created or written into, or None (judged by its nearest existing ancestor)."""
+    ancestor = path
+    while not ancestor.exists() and ancestor != ancestor.parent:
+        ancestor = ancestor.parent
+    if not ancestor.is_dir():
+        return f"{ancestor} is not a directory"
+    if not os.access(ancestor, os.W_OK | os.X_OK):
+        return f"cannot write in {ancestor}"
+    return None
 
 
 def write_files_atomically(contents: dict[Path, bytes]) -> None:

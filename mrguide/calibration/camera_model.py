@@ -100,8 +100,9 @@ def load_camera_model(path: str | Path) -> CameraModel:
         else:
             raise CalibrationError(f"{path}: unknown intrinsics format {suffix!r} (use .json, .toml, .yaml or .xml)")
     except (json.JSONDecodeError, tomllib.TOMLDecodeError, UnicodeDecodeError, cv2.error, SystemError) as exc:
-        # OpenCV's FileStorage raises SystemError (wrapping cv2.error) on a corrupt YAML/XML file
-        raise CalibrationError(f"{path}: cannot parse intrinsics: {' '.join(str(exc).split())}") from exc
+        # OpenCV's FileStorage raises SystemError on a corrupt YAML/XML file, the cv2.error inside says why
+        cause = exc.__context__ if isinstance(exc, SystemError) and exc.__context__ else exc
+        raise CalibrationError(f"{path}: cannot parse intrinsics: {' '.join(str(cause).split())}") from exc
     return camera_from_dict(data, str(path))
 
 
@@ -135,6 +136,8 @@ def camera_from_dict(data: Any, where: str) -> CameraModel:
         else:
             fx, fy, cx, cy = (float(data[k]) for k in ("fx", "fy", "cx", "cy"))
         dist = tuple(float(d) for d in data.get("dist", data.get("dist_coeffs", ())))
+    except CalibrationError:
+        raise
     except KeyError as exc:
         raise CalibrationError(f"{where}: missing intrinsics key {exc.args[0]!r}") from exc
     except (TypeError, ValueError) as exc:

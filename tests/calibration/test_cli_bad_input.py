@@ -63,7 +63,7 @@ CASES = [
                           _intrinsics(d / "k.json", json.dumps({**GOOD_K, "fx": float("nan")}))],
      ["k.json", "non-finite"]),
     ("corrupt YAML", lambda d: ["--images", d / "images", "--intrinsics", _intrinsics(d / "k.yaml", CORRUPT_YAML)],
-     ["k.yaml", "cannot parse intrinsics"]),
+     ["k.yaml", "cannot parse intrinsics", "Parsing error"]),
     ("--out under a file", lambda d: ["--twin", "--out", d / "afile" / "cal.json", "--overlay", d / "o.png"],
      ["--out", "afile", "is not a directory"]),
     ("--out is a directory", lambda d: ["--twin", "--out", d / "images", "--overlay", d / "o.png"],
