@@ -55,8 +55,9 @@ def main() -> None:
     cfg = EnvConfig.load(Path(__file__).parents[1] / "configs" / "real_cell.toml")
     ws = load_robot().workspace
     with tempfile.TemporaryDirectory() as tmp:
-        summary = dry_run(None, cfg, CobotBusConfig(), args.episodes, 0, RunLog(Path(tmp) / "log.jsonl", {"benchmark": "deploy"}),
-                          policy=lambda obs: oracle_action(obs, cfg.task, ws.to_normalized))
+        with RunLog(Path(tmp) / "log.jsonl", {"benchmark": "deploy"}) as run_log:
+            summary = dry_run(None, cfg, CobotBusConfig(), args.episodes, 0, run_log,
+                              policy=lambda obs: oracle_action(obs, cfg.task, ws.to_normalized))
     lat = summary.latency_ms()
     inference_ms, hidden = bench_inference()
     res = {

@@ -91,23 +91,18 @@ def cmd_deploy(args: argparse.Namespace) -> int:
     header = {"command": "deploy", "dry_run": args.dry_run, "policy": str(args.policy), "config": args.config,
               "bus": f"{bus.bus.interface}:{bus.bus.channel}", "episodes": episodes, "seed": seed if args.dry_run else None,
               "decision_period": policy.decision_period, "started": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
-    run_log = RunLog(log_path, header, where)
-    bar = tqdm(total=episodes, desc="deploy" + (" (dry run)" if args.dry_run else ""), unit="ep", disable=args.quiet)
+    with RunLog(log_path, header, where) as run_log, \
+            tqdm(total=episodes, desc="deploy" + (" (dry run)" if args.dry_run else ""), unit="ep", disable=args.quiet) as bar:
+        def tick(report) -> None:
+            bar.update(1)
+            bar.set_postfix(last=report.outcome, decisions=report.decisions)
 
-    def tick(report) -> None:
-        bar.update(1)
-        bar.set_postfix(last=report.outcome, decisions=report.decisions)
-
-    try:
         if args.dry_run:
             from mrguide.twin.dry_run import dry_run
 
             summary = dry_run(args.policy, env_cfg, bus, episodes, seed, run_log, safety, after_episode=tick, policy=policy)
         else:
             summary = _deploy_real(policy, bus, spec, task, dcfg, safety, episodes, run_log, tick)
-    finally:
-        run_log.close()
-        bar.close()
     print(summary.text())
     print(f"run log: {log_path}")
     return 0 if summary.stopped is None else 1

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import itertools
 import json
-import math
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -26,6 +25,8 @@ from mrguide.task import ACT_DIM, ACT_LAYOUT, N_PHASES, OBS_DIM, OBS_LAYOUT, PHA
 
 FORMAT = "mrguide-policy"
 FORMAT_VERSION = 1
+#: Longest decision period (s) a policy file may declare (the paper's policy acts every 0.1 s).
+MAX_DECISION_PERIOD = 10.0
 ACTIVATIONS = {"relu": lambda x: np.maximum(x, 0.0), "tanh": np.tanh}
 
 
@@ -123,8 +124,8 @@ def _metadata(path: Path, arrays: dict[str, np.ndarray]) -> dict[str, Any]:
     if meta.get("obs_layout") != list(OBS_LAYOUT) or meta.get("act_layout") != list(ACT_LAYOUT):
         raise PolicyFileError(f"{path}: observation/action layout {meta.get('obs_layout')!r} / {meta.get('act_layout')!r} differs from this stack's {OBS_LAYOUT} / {ACT_LAYOUT}")
     period = meta.get("decision_period")
-    if isinstance(period, bool) or not isinstance(period, (int, float)) or not (math.isfinite(period) and period > 0):
-        raise PolicyFileError(f"{path}: metadata lacks a positive finite decision_period (got {period!r})")
+    if isinstance(period, bool) or not isinstance(period, (int, float)) or not 0 < period <= MAX_DECISION_PERIOD:
+        raise PolicyFileError(f"{path}: metadata lacks a decision_period in (0, {MAX_DECISION_PERIOD:g}] s (got {period!r})")
     acts = meta.get("activations")
     if not isinstance(acts, list) or not acts or any(not isinstance(a, str) or a not in ACTIVATIONS for a in acts):
         raise PolicyFileError(f"{path}: activations {acts!r} not understood (a list of {sorted(ACTIVATIONS)})")

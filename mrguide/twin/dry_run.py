@@ -91,32 +91,29 @@ def dry_run(
     """Run `episodes` seeded episodes of a policy through the whole stack against the simulated cell.
 
     The policy file is loaded (unless `policy` is given) and checked before any drive is enabled. `policy`
-    may also be any callable obs → action (the scripted expert in tests). `run_log` (open, its header
-    written) is closed at the end. `on_placed` runs after the object was put in place for an episode
-    (e.g. to wait for a fresh HMD estimate). `max_recoveries` safety stops may be followed by a fault
+    may also be any callable obs → action (the scripted expert in tests). `run_log` is the caller's open
+    log (its header written; the caller closes it). `on_placed` runs after the object was put in place for
+    an episode (e.g. to wait for a fresh HMD estimate). `max_recoveries` safety stops may be followed by a fault
     reset and the next episode (see `run_session`).
     """
-    try:
-        spec = load_robot(env_cfg.robot)
-        if policy is None:
-            policy = ExportedPolicy.load(policy_path, spec.workspace, env_cfg.task)
-        if isinstance(policy, ExportedPolicy):
-            check_decision_period(policy, policy_path, bus_cfg.timing.control_period, env_cfg.twin.decision_period)
-        layouts = episode_layouts(env_cfg, episodes, seed)
-        with simulated_cell(env_cfg, bus_cfg, seed) as cell:
-            pose = pose_factory(cell) if pose_factory else TwinObjectPose(cell.plant)
-            # Without a [safety] config the simulated cell allows 0.1 rad of following error (robot: 0.05):
-            # on a loaded PC the simulated arm can fall behind for lack of CPU, not of torque.
-            runtime = Runtime(cell.cobot, policy, pose, spec, env_cfg.task, run_log,
-                              RuntimeConfig(decision_period=env_cfg.twin.decision_period),
-                              safety or SafetyConfig(following_error=0.1))
-            def place(i: int) -> None:
-                cell.plant.place_objects(*layouts[i])
-                if on_placed:
-                    on_placed()
+    spec = load_robot(env_cfg.robot)
+    if policy is None:
+        policy = ExportedPolicy.load(policy_path, spec.workspace, env_cfg.task)
+    if isinstance(policy, ExportedPolicy):
+        check_decision_period(policy, policy_path, bus_cfg.timing.control_period, env_cfg.twin.decision_period)
+    layouts = episode_layouts(env_cfg, episodes, seed)
+    with simulated_cell(env_cfg, bus_cfg, seed) as cell:
+        pose = pose_factory(cell) if pose_factory else TwinObjectPose(cell.plant)
+        # Without a [safety] config the simulated cell allows 0.1 rad of following error (robot: 0.05):
+        # on a loaded PC the simulated arm can fall behind for lack of CPU, not of torque.
+        runtime = Runtime(cell.cobot, policy, pose, spec, env_cfg.task, run_log,
+                          RuntimeConfig(decision_period=env_cfg.twin.decision_period),
+                          safety or SafetyConfig(following_error=0.1))
+        def place(i: int) -> None:
+            cell.plant.place_objects(*layouts[i])
+            if on_placed:
+                on_placed()
 
-            with runtime:
-                return run_session(runtime, [g for _, g in layouts], before_episode=place, after_episode=after_episode,
-                                   max_recoveries=max_recoveries)
-    finally:
-        run_log.close()
+        with runtime:
+            return run_session(runtime, [g for _, g in layouts], before_episode=place, after_episode=after_episode,
+                               max_recoveries=max_recoveries)

@@ -133,9 +133,10 @@ def run_real(policy_path: Path, real_cfg: EnvConfig, bus_cfg: CobotBusConfig, se
               "seed": seed, "episodes": episodes, "hmd_overrides": hmd_overrides or {},
               "reality_gap": to_dict(real_cfg.twin.reality_gap)}
     try:
-        summary = dry_run(policy_path, real_cfg, bus_cfg, episodes, seed, RunLog(log_path, header), safety,
-                          pose_factory=pose_factory, after_episode=judge, on_placed=refresh, policy=policy,
-                          max_recoveries=episodes if recover else 0)
+        with RunLog(log_path, header) as run_log:
+            summary = dry_run(policy_path, real_cfg, bus_cfg, episodes, seed, run_log, safety,
+                              pose_factory=pose_factory, after_episode=judge, on_placed=refresh, policy=policy,
+                              max_recoveries=episodes if recover else 0)
     finally:
         for s in streams:
             s.close()

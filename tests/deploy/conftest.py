@@ -51,10 +51,11 @@ def run_dry(tmp_path):
             return TwinObjectPose(cell.plant)
 
         log = tmp_path / f"run-{seed}.jsonl"
-        summary = dry_run(None, cfg, bus_config(), episodes, seed, RunLog(log, {"test": "dry run"}), safety,
-                          pose_factory=pose_factory,
-                          policy=Expert(cfg, (lambda o, p, a: hook(o, p, a, cells[0])) if hook else None),
-                          max_recoveries=max_recoveries)
+        with RunLog(log, {"test": "dry run"}) as run_log:
+            summary = dry_run(None, cfg, bus_config(), episodes, seed, run_log, safety,
+                              pose_factory=pose_factory,
+                              policy=Expert(cfg, (lambda o, p, a: hook(o, p, a, cells[0])) if hook else None),
+                              max_recoveries=max_recoveries)
         return summary, log, cells[0]
 
     return run

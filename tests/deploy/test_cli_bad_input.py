@@ -45,6 +45,7 @@ POLICY_CASES = [
     ("decision period 0.2", {"decision_period": 0.2}, ["p.npz", "trained with a 0.2 s decision period", "runs 0.1 s"]),
     ("decision period true", {"decision_period": True}, ["p.npz", "decision_period"]),
     ("decision period inf", {"decision_period": float("inf")}, ["p.npz", "decision_period"]),
+    ("decision period 1e6 s", {"decision_period": 1e6}, ["p.npz", "decision_period in (0, 10] s", "1000000.0"]),
     ("metadata a list", {"metadata": ["format"]}, ["p.npz", "metadata is a JSON list"]),
     ("metadata a number", {"metadata": 3}, ["p.npz", "metadata is a JSON int"]),
     ("workspace missing", {"drop": ("workspace",)}, ["p.npz", "metadata workspace None"]),
