@@ -17,7 +17,9 @@ from pathlib import Path
 
 import numpy as np
 
+from mrguide.cli_args import positive_int
 from mrguide.deploy.policy import ExportedPolicy
+from mrguide.deploy.runlog import RunLog
 from mrguide.drivers.config import CobotBusConfig
 from mrguide.robot import load_robot
 from mrguide.task import oracle_action
@@ -48,13 +50,14 @@ def bench_inference(n: int = 20000) -> tuple[float, str]:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--episodes", type=int, default=10)
+    ap.add_argument("--episodes", type=positive_int, default=10)
     args = ap.parse_args()
     cfg = EnvConfig.load(Path(__file__).parents[1] / "configs" / "real_cell.toml")
     ws = load_robot().workspace
     with tempfile.TemporaryDirectory() as tmp:
-        summary = dry_run(None, cfg, CobotBusConfig(), args.episodes, 0, Path(tmp) / "log.jsonl",
-                          policy=lambda obs: oracle_action(obs, cfg.task, ws.to_normalized))
+        with RunLog(Path(tmp) / "log.jsonl", {"benchmark": "deploy"}) as run_log:
+            summary = dry_run(None, cfg, CobotBusConfig(), args.episodes, 0, run_log,
+                              policy=lambda obs: oracle_action(obs, cfg.task, ws.to_normalized))
     lat = summary.latency_ms()
     inference_ms, hidden = bench_inference()
     res = {

@@ -10,6 +10,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
+from mrguide.cli_args import nonnegative_int, positive_int
 from mrguide.drivers.errors import DriverError
 from mrguide.errors import InputError
 
@@ -37,19 +38,24 @@ def cmd_expert(args: argparse.Namespace) -> int:
     return 0
 
 
-def _bus_config(config_path: str | None, bus_config: str):
+def _bus_config(config_path: str | None, bus_config: str, robot):
+    """The bus description named by [deploy] bus_config (relative to the config file), checked against `robot`."""
     from mrguide.drivers.config import load_cobot_bus_config
 
     if not bus_config:
-        return load_cobot_bus_config(None)
+        return load_cobot_bus_config(None, robot)
     base = Path(config_path).parent if config_path else Path.cwd()
-    return load_cobot_bus_config(base / bus_config)
+    return load_cobot_bus_config(base / bus_config, robot)
 
 
 def cmd_deploy(args: argparse.Namespace) -> int:
-    """Run an exported policy on the cobot (real bus), or dry-run it against the simulated cell."""
-    from mrguide.config import load_optional_section, load_section
-    from mrguide.deploy.policy import ExportedPolicy, PolicyFileError
+    """Run an exported policy on the cobot (real bus), or dry-run it against the simulated cell.
+
+    Every input (configs, bus description, policy, run log location) is checked before anything is
+    connected or enabled; the run log's header is on disk before the first frame is sent."""
+    from mrguide.config import ConfigError, load_optional_section, load_section
+    from mrguide.deploy.policy import ExportedPolicy, check_decision_period
+    from mrguide.deploy.runlog import RunLog
     from mrguide.deploy.safety import SafetyConfig
     from mrguide.deploy.session import DeployConfig
     from mrguide.robot import RobotConfig, load_robot
@@ -58,64 +64,64 @@ def cmd_deploy(args: argparse.Namespace) -> int:
     dcfg = load_section(DeployConfig, args.config, "deploy")
     safety = load_optional_section(SafetyConfig, args.config, "safety")
     episodes = args.episodes if args.episodes is not None else dcfg.episodes
-    bus = _bus_config(args.config, dcfg.bus_config)
-    log_path = Path(args.log or Path(dcfg.log_dir) / f"deploy-{time.strftime('%Y%m%d-%H%M%S')}.jsonl")
+    seed = args.seed if args.seed is not None else dcfg.seed
     spec = load_robot(load_section(RobotConfig, args.config, "robot"))
     task = load_section(TaskConfig, args.config, "task")
-    try:  # checked before anything is connected or enabled
-        ExportedPolicy.load(args.policy, spec.workspace, task)
-    except PolicyFileError as exc:
-        print(f"mrguide deploy: {exc}", file=sys.stderr)
-        return 2
-    bar = tqdm(total=episodes, desc="deploy" + (" (dry run)" if args.dry_run else ""), unit="ep", disable=args.quiet)
-
-    def tick(report) -> None:
-        bar.update(1)
-        bar.set_postfix(last=report.outcome, decisions=report.decisions)
-
+    bus = _bus_config(args.config, dcfg.bus_config, spec)
+    if args.dry_run and bus.bus.interface != "virtual":
+        raise ConfigError(f"--dry-run needs the virtual CAN interface; the bus config names {bus.bus.interface!r}")
+    policy = ExportedPolicy.load(args.policy, spec.workspace, task)
     if args.dry_run:
-        from mrguide.twin.dry_run import dry_run
-        from mrguide.twin.env import EnvConfig
+        from mrguide.twin.env import EnvConfig  # imports PyBullet: after the checks that need none
 
-        summary = dry_run(args.policy, EnvConfig.load(args.config), bus, episodes, args.seed if args.seed is not None else dcfg.seed,
-                          log_path, safety, after_episode=tick)
+        env_cfg = EnvConfig.load(args.config)
+        check_decision_period(policy, args.policy, bus.timing.control_period, env_cfg.twin.decision_period)
     else:
+        check_decision_period(policy, args.policy, bus.timing.control_period)
         if bus.bus.interface == "virtual":
-            print("mrguide deploy: the bus config names the virtual interface; use --dry-run, or configure the real bus",
-                  file=sys.stderr)
-            return 2
+            raise ConfigError("the bus config names the virtual interface; use --dry-run, or configure the real bus")
         if not args.enable_drives:
-            print(f"mrguide deploy: this will enable the drives on {bus.bus.interface}:{bus.bus.channel} and move the arm.\n"
-                  "Clear the cell, keep the E-stop at hand, and re-run with --enable-drives to confirm.", file=sys.stderr)
-            return 2
-        summary = _deploy_real(args.policy, args.config, bus, spec, task, dcfg, safety, episodes, log_path, tick)
-    bar.close()
+            raise InputError(f"this will enable the drives on {bus.bus.interface}:{bus.bus.channel} and move the arm. "
+                              "Clear the cell, keep the E-stop at hand, and re-run with --enable-drives to confirm.")
+    if args.log:
+        log_path, where = Path(args.log), "--log"
+    else:
+        log_path = Path(dcfg.log_dir) / f"deploy-{time.strftime('%Y%m%d-%H%M%S')}.jsonl"
+        where = f"{args.config or 'default'} [deploy] log_dir:"
+    header = {"command": "deploy", "dry_run": args.dry_run, "policy": str(args.policy), "config": args.config,
+              "bus": f"{bus.bus.interface}:{bus.bus.channel}", "episodes": episodes, "seed": seed if args.dry_run else None,
+              "decision_period": policy.decision_period, "started": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
+    with RunLog(log_path, header, where) as run_log, \
+            tqdm(total=episodes, desc="deploy" + (" (dry run)" if args.dry_run else ""), unit="ep", disable=args.quiet) as bar:
+        def tick(report) -> None:
+            bar.update(1)
+            bar.set_postfix(last=report.outcome, decisions=report.decisions)
+
+        if args.dry_run:
+            from mrguide.twin.dry_run import dry_run
+
+            summary = dry_run(args.policy, env_cfg, bus, episodes, seed, run_log, safety, after_episode=tick, policy=policy)
+        else:
+            summary = _deploy_real(policy, bus, spec, task, dcfg, safety, episodes, run_log, tick)
     print(summary.text())
     print(f"run log: {log_path}")
     return 0 if summary.stopped is None else 1
 
 
-def _deploy_real(policy_path, config_path, bus, spec, task, dcfg, safety, episodes, log_path, tick):
-    from mrguide.deploy.policy import ExportedPolicy
-    from mrguide.deploy.runlog import RunLog
+def _deploy_real(policy, bus, spec, task, dcfg, safety, episodes, run_log, tick):
     from mrguide.deploy.runtime import Runtime, RuntimeConfig
     from mrguide.deploy.session import FixedObjectPose, run_session
     from mrguide.drivers.cobot import Cobot
     from mrguide.drivers.realtime import freeze_heap
 
-    policy = ExportedPolicy.load(policy_path, spec.workspace, task)
     rcfg = RuntimeConfig(decision_period=policy.decision_period)
     goals = [dcfg.goals[i % len(dcfg.goals)] for i in range(episodes)]
-    run_log = RunLog(log_path)
     freeze_heap()
-    try:
-        with Cobot(bus, spec) as cobot:
-            cobot.enable()
-            with Runtime(cobot, policy, FixedObjectPose(dcfg.object_position), spec, task, run_log, rcfg, safety) as rt:
-                return run_session(rt, goals, before_episode=lambda i: input(
-                    f"episode {i}: place the object at {dcfg.object_position} and press Enter "), after_episode=tick)
-    finally:
-        run_log.close()
+    with Cobot(bus, spec) as cobot:
+        cobot.enable()
+        with Runtime(cobot, policy, FixedObjectPose(dcfg.object_position), spec, task, run_log, rcfg, safety) as rt:
+            return run_session(rt, goals, before_episode=lambda i: input(
+                f"episode {i}: place the object at {dcfg.object_position} and press Enter "), after_episode=tick)
 
 
 def cmd_main(args: argparse.Namespace) -> int:
@@ -149,19 +155,19 @@ def build_parser() -> argparse.ArgumentParser:
 
     sp = sub.add_parser("main", help="the Quick-start main job: train briefly -> dry-run deploy -> sim-to-real")
     sp.add_argument("--out", default="runs/main")
-    sp.add_argument("--train-steps", type=int, default=5000)
-    sp.add_argument("--deploy-episodes", type=int, default=3)
-    sp.add_argument("--seeds", type=int, default=2, help="sim-to-real seeds")
-    sp.add_argument("--episodes", type=int, default=5, help="sim-to-real episodes per seed and condition")
-    sp.add_argument("--seed", type=int, default=0, help="training seed")
+    sp.add_argument("--train-steps", type=positive_int, default=5000)
+    sp.add_argument("--deploy-episodes", type=positive_int, default=3)
+    sp.add_argument("--seeds", type=positive_int, default=2, help="sim-to-real seeds")
+    sp.add_argument("--episodes", type=positive_int, default=5, help="sim-to-real episodes per seed and condition")
+    sp.add_argument("--seed", type=nonnegative_int, default=0, help="training seed")
     sp.add_argument("--real-config", default=str(Path(__file__).resolve().parents[1] / "configs" / "real_cell.toml"))
     sp.add_argument("--quiet", action="store_true", help="no progress bars")
     sp.set_defaults(func=cmd_main)
 
     sp = sub.add_parser("expert", help="run the scripted expert in the twin")
     sp.add_argument("--config", help="TOML config ([robot], [twin], [task])")
-    sp.add_argument("--episodes", type=int, default=50)
-    sp.add_argument("--seed", type=int, default=0)
+    sp.add_argument("--episodes", type=positive_int, default=50)
+    sp.add_argument("--seed", type=nonnegative_int, default=0, help="first seed; episode i uses seed + i")
     sp.add_argument("--quiet", action="store_true", help="no progress bar")
     sp.set_defaults(func=cmd_expert)
     sp = sub.add_parser("deploy", help="run an exported policy on the cobot, or --dry-run it against the simulated bus")
@@ -169,8 +175,8 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--config", help="TOML config ([deploy], [safety], [robot], [task]; [twin] for dry runs)")
     sp.add_argument("--dry-run", action="store_true", help="virtual CAN bus + simulated drives on a twin with reality gap")
     sp.add_argument("--enable-drives", action="store_true", help="confirm enabling the real drives (real bus only)")
-    sp.add_argument("--episodes", type=int)
-    sp.add_argument("--seed", type=int, help="dry run: object/goal layouts")
+    sp.add_argument("--episodes", type=positive_int, help="default: [deploy] episodes")
+    sp.add_argument("--seed", type=nonnegative_int, help="dry run: object/goal layouts; default: [deploy] seed")
     sp.add_argument("--log", help="run log path (JSONL); default under [deploy] log_dir")
     sp.add_argument("--quiet", action="store_true")
     sp.set_defaults(func=cmd_deploy)
@@ -198,19 +204,21 @@ def main(argv: list[str] | None = None) -> int:
     """Run one command. Bad input: one line on stderr, exit 2; driver faults: exit 1; Ctrl-C: exit 130."""
     args = build_parser().parse_args(argv)
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
-    name = f"mrguide {args.command}"
+    name = f"mrguide {getattr(args, 'command_name', args.command)}"
+
+    def fail(message: str, code: int) -> int:
+        # one line, whatever the message quotes (a TOML key or a file name may hold a line break)
+        print(f"{name}: " + message.replace("\r", "\\r").replace("\n", "\\n"), file=sys.stderr)
+        return code
+
     try:
         return int(args.func(args))
     except InputError as exc:
-        print(f"{name}: {exc}", file=sys.stderr)
-        return 2
+        return fail(str(exc), 2)
     except DriverError as exc:
-        print(f"{name}: CAN driver error: {exc}", file=sys.stderr)
-        return 1
+        return fail(f"CAN driver error: {exc}", 1)
     except OSError as exc:  # a full disk, a vanished directory: the environment, not the input
-        where = f"{exc.filename}: " if exc.filename else ""
-        print(f"{name}: {where}{exc.strerror or exc}", file=sys.stderr)
-        return 1
+        return fail((f"{exc.filename}: " if exc.filename else "") + str(exc.strerror or exc), 1)
     except KeyboardInterrupt:
         print(f"{name}: interrupted", file=sys.stderr)
         return 130

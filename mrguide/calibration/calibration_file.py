@@ -12,15 +12,26 @@ from typing import Any
 
 import numpy as np
 
+from mrguide.calibration.camera_model import camera_from_dict
+from mrguide.calibration.config import BoardConfig
 from mrguide.calibration.detection import canonical_dictionary_name
 from mrguide.calibration.errors import CalibrationError, CalibrationFileError
 from mrguide.calibration.se3 import is_rigid
+from mrguide.config import ConfigError, from_dict
+from mrguide.output_files import write_files_atomically
 
 log = logging.getLogger(__name__)
 
 FORMAT = "mrguide-calibration"
 VERSION = 1
 METHODS = ("board", "markers", "board+markers", "hand-eye")
+#: Every key of a calibration file.
+KEYS = frozenset({"format", "version", "T_base_hmd", "dictionary", "marker_size_m", "method", "rms_residual_m",
+                  "max_residual_m", "n_frames", "n_points", "created", "camera", "board", "extra"})
+#: Plausibility bounds of the numbers in a calibration file (m, counts).
+MAX_MARKER_SIZE_M = 2.0
+MAX_RESIDUAL_M = 1.0
+MAX_COUNT = 10_000_000
 
 
 @dataclass(frozen=True)
@@ -58,14 +69,15 @@ class CalibrationRecord:
             "extra": self.extra,
         }
 
+    def encode(self) -> bytes:
+        """The calibration file's bytes."""
+        return (json.dumps(self.to_json(), indent=2) + "\n").encode()
+
 
 def save_calibration(record: CalibrationRecord, path: str | Path) -> Path:
     """Write `record` as JSON (atomically: a partial file never replaces a good one)."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(record.to_json(), indent=2) + "\n")
-    tmp.replace(path)
+    write_files_atomically({path: record.encode()})
     log.info("wrote calibration %s (rms %.2f mm)", path, record.rms_residual_m * 1e3)
     return path
 
@@ -97,6 +109,10 @@ def load_calibration(path: str | Path, expect_dictionary: str | None = None,
 
 
 def _record_from_json(data: dict[str, Any], path: Path) -> CalibrationRecord:
+    unknown = sorted(set(data) - KEYS)
+    if unknown:
+        raise CalibrationFileError(f"{path}: unknown keys {unknown}")
+
     def need(key: str, kind: type | tuple[type, ...]):
         if key not in data:
             raise CalibrationFileError(f"{path}: missing key {key!r}")
@@ -105,35 +121,64 @@ def _record_from_json(data: dict[str, Any], path: Path) -> CalibrationRecord:
             raise CalibrationFileError(f"{path}: {key!r} has the wrong type ({type(value).__name__})")
         return value
 
+    def number(key: str, low: float, high: float, integer: bool = False) -> Any:
+        value = need(key, int if integer else (int, float))
+        if not (math.isfinite(value) and low <= value <= high):
+            raise CalibrationFileError(f"{path}: {key!r} = {value!r}: expected {'an integer' if integer else 'a finite number'} "
+                                       f"in [{low:g}, {high:g}]")
+        return value
+
     matrix = need("T_base_hmd", list)
     try:
         T = np.asarray(matrix, dtype=float)
     except (TypeError, ValueError) as exc:
         raise CalibrationFileError(f"{path}: 'T_base_hmd' is not a numeric 4x4 matrix") from exc
     if not is_rigid(T, tol=1e-5):
-        raise CalibrationFileError(f"{path}: 'T_base_hmd' is not a rigid 4x4 transform")
+        raise CalibrationFileError(f"{path}: 'T_base_hmd' is not a rigid 4x4 transform (finite, orthonormal, last row 0 0 0 1)")
     name = need("dictionary", str)
     try:
         dictionary = canonical_dictionary_name(name)
     except CalibrationError as exc:
         raise CalibrationFileError(f"{path}: {exc}") from exc
-    numbers = {k: float(need(k, (int, float))) for k in ("marker_size_m", "rms_residual_m", "max_residual_m")}
-    if not all(math.isfinite(v) and v >= 0 for v in numbers.values()) or numbers["marker_size_m"] == 0:
-        raise CalibrationFileError(f"{path}: marker size and residuals must be finite and non-negative: {numbers}")
+    marker_size = float(number("marker_size_m", 1e-4, MAX_MARKER_SIZE_M))
+    rms, worst = (float(number(k, 0.0, MAX_RESIDUAL_M)) for k in ("rms_residual_m", "max_residual_m"))
+    if rms > worst * (1 + 1e-9):
+        raise CalibrationFileError(f"{path}: rms_residual_m {rms} exceeds max_residual_m {worst}")
+    n_frames = int(number("n_frames", 1, MAX_COUNT, integer=True))
+    n_points = int(number("n_points", n_frames, MAX_COUNT, integer=True))
     method = need("method", str)
     if method not in METHODS:
         raise CalibrationFileError(f"{path}: unknown method {method!r} (one of {METHODS})")
+    camera = _optional_table(data, "camera", path)
+    if camera is not None:
+        try:
+            camera_from_dict(camera, f"{path}: 'camera'")
+        except CalibrationError as exc:
+            raise CalibrationFileError(str(exc)) from exc
+    board = _optional_table(data, "board", path)
+    if board is not None:
+        try:
+            from_dict(BoardConfig, board, where=f"{path}: 'board'")
+        except ConfigError as exc:
+            raise CalibrationFileError(str(exc)) from exc
     return CalibrationRecord(
         T_base_hmd=T,
         dictionary=dictionary,
-        marker_size_m=numbers["marker_size_m"],
+        marker_size_m=marker_size,
         method=method,
-        rms_residual_m=numbers["rms_residual_m"],
-        max_residual_m=numbers["max_residual_m"],
-        n_frames=int(need("n_frames", int)),
-        n_points=int(need("n_points", int)),
+        rms_residual_m=rms,
+        max_residual_m=worst,
+        n_frames=n_frames,
+        n_points=n_points,
         created=need("created", str),
-        camera=data.get("camera"),
-        board=data.get("board"),
-        extra=data.get("extra") or {},
+        camera=camera,
+        board=board,
+        extra=_optional_table(data, "extra", path) or {},
     )
+
+
+def _optional_table(data: dict[str, Any], key: str, path: Path) -> dict[str, Any] | None:
+    value = data.get(key)
+    if value is not None and not isinstance(value, dict):
+        raise CalibrationFileError(f"{path}: {key!r} must be an object or null, got {type(value).__name__}")
+    return value

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
@@ -12,6 +13,9 @@ import cv2
 import numpy as np
 
 from mrguide.calibration.errors import CalibrationError
+
+#: Largest image side (px) accepted in intrinsics (16K).
+MAX_IMAGE_SIDE = 16384
 
 
 @dataclass(frozen=True)
@@ -27,8 +31,14 @@ class CameraModel:
     dist: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
-        if self.width <= 0 or self.height <= 0 or self.fx <= 0 or self.fy <= 0:
-            raise CalibrationError(f"camera intrinsics: size and focal lengths must be positive, got {self}")
+        if not all(isinstance(v, int) and not isinstance(v, bool) and 0 < v <= MAX_IMAGE_SIDE
+                   for v in (self.width, self.height)):
+            raise CalibrationError(f"camera intrinsics: width and height must be whole pixels in [1, {MAX_IMAGE_SIDE}], "
+                                   f"got {self.width!r} x {self.height!r}")
+        if not np.all(np.isfinite([self.fx, self.fy, self.cx, self.cy, *self.dist])):
+            raise CalibrationError(f"camera intrinsics: non-finite values in {self}")
+        if self.fx <= 0 or self.fy <= 0:
+            raise CalibrationError(f"camera intrinsics: focal lengths must be positive, got fx {self.fx}, fy {self.fy}")
         if len(self.dist) not in (0, 4, 5, 8, 12, 14):
             raise CalibrationError(
                 f"camera intrinsics: {len(self.dist)} distortion coefficients; OpenCV takes 4, 5, 8, 12 or 14"
@@ -89,9 +99,11 @@ def load_camera_model(path: str | Path) -> CameraModel:
             data = _read_opencv_storage(path)
         else:
             raise CalibrationError(f"{path}: unknown intrinsics format {suffix!r} (use .json, .toml, .yaml or .xml)")
-    except (json.JSONDecodeError, tomllib.TOMLDecodeError, UnicodeDecodeError, cv2.error) as exc:
-        raise CalibrationError(f"{path}: cannot parse intrinsics: {exc}") from exc
-    return _camera_from_dict(data, str(path))
+    except (json.JSONDecodeError, tomllib.TOMLDecodeError, UnicodeDecodeError, cv2.error, SystemError) as exc:
+        # OpenCV's FileStorage raises SystemError on a corrupt YAML/XML file, the cv2.error inside says why
+        cause = exc.__context__ if isinstance(exc, SystemError) and exc.__context__ else exc
+        raise CalibrationError(f"{path}: cannot parse intrinsics: {' '.join(str(cause).split())}") from exc
+    return camera_from_dict(data, str(path))
 
 
 def _read_opencv_storage(path: Path) -> dict[str, Any]:
@@ -110,11 +122,12 @@ def _read_opencv_storage(path: Path) -> dict[str, Any]:
         fs.release()
 
 
-def _camera_from_dict(data: Any, where: str) -> CameraModel:
+def camera_from_dict(data: Any, where: str) -> CameraModel:
+    """Intrinsics from a parsed file (or a calibration file's "camera"); CalibrationError naming `where`."""
     if not isinstance(data, dict):
         raise CalibrationError(f"{where}: intrinsics must be a table/object, got {type(data).__name__}")
     try:
-        width, height = int(data["width"]), int(data["height"])
+        width, height = _pixels(data["width"], "width", where), _pixels(data["height"], "height", where)
         if "camera_matrix" in data and data["camera_matrix"] is not None:
             K = np.asarray(data["camera_matrix"], dtype=float)
             if K.shape != (3, 3):
@@ -123,10 +136,22 @@ def _camera_from_dict(data: Any, where: str) -> CameraModel:
         else:
             fx, fy, cx, cy = (float(data[k]) for k in ("fx", "fy", "cx", "cy"))
         dist = tuple(float(d) for d in data.get("dist", data.get("dist_coeffs", ())))
+    except CalibrationError:
+        raise
     except KeyError as exc:
         raise CalibrationError(f"{where}: missing intrinsics key {exc.args[0]!r}") from exc
     except (TypeError, ValueError) as exc:
         raise CalibrationError(f"{where}: bad intrinsics value: {exc}") from exc
     if not np.all(np.isfinite([fx, fy, cx, cy, *dist])):
         raise CalibrationError(f"{where}: intrinsics contain non-finite values")
-    return CameraModel(width, height, float(fx), float(fy), float(cx), float(cy), dist)
+    try:
+        return CameraModel(width, height, float(fx), float(fy), float(cx), float(cy), dist)
+    except CalibrationError as exc:
+        raise CalibrationError(f"{where}: {exc}") from exc
+
+
+def _pixels(value: Any, key: str, where: str) -> int:
+    """A whole number of pixels (an integral float from OpenCV's FileStorage is fine; 640.5 or inf is not)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value != int(value):
+        raise CalibrationError(f"{where}: intrinsics {key} = {value!r}: expected a whole number of pixels")
+    return int(value)

@@ -12,14 +12,14 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
-from mrguide.calibration.calibration_file import save_calibration
 from mrguide.calibration.camera_model import CameraModel, load_camera_model
 from mrguide.calibration.config import CalibrationConfig, load_calibration_config
 from mrguide.calibration.errors import CalibrationError
-from mrguide.calibration.overlay import save_mosaic
+from mrguide.calibration.overlay import can_write_image, encode_image, mosaic
 from mrguide.calibration.procedure import CalibrationRun, calibrate_frames
 from mrguide.calibration.se3 import apply, invert, is_rigid, rotation_angle_deg
-from mrguide.config import ConfigError, load_section
+from mrguide.config import load_section
+from mrguide.output_files import check_output_file, write_files_atomically
 
 log = logging.getLogger(__name__)
 
@@ -49,24 +49,32 @@ def add_calibrate_command(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run_calibrate(args: argparse.Namespace) -> int:
-    try:
-        cfg = load_calibration_config(args.config)
-        if args.twin:
-            run, truth = _run_twin(args, cfg)
-        else:
-            if args.intrinsics is None:
-                raise CalibrationError("--images needs --intrinsics FILE (the camera matrix of the images' camera mode)")
-            camera = load_camera_model(args.intrinsics)
-            frames = _image_frames(args.images, camera, args.poses)
-            run, truth = calibrate_frames(tqdm(frames, desc="frames", disable=not sys.stderr.isatty()), cfg, camera), None
-    except (CalibrationError, ConfigError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+    """Bad input raises CalibrationError/ConfigError before anything is written; both files are written together."""
+    _check_outputs(args.out, args.overlay)
+    cfg = load_calibration_config(args.config)
+    if args.twin:
+        run, truth = _run_twin(args, cfg)
+    else:
+        if args.intrinsics is None:
+            raise CalibrationError("--images needs --intrinsics FILE (the camera matrix of the images' camera mode)")
+        camera = load_camera_model(args.intrinsics)
+        frames = _image_frames(args.images, camera, args.poses)
+        run, truth = calibrate_frames(tqdm(frames, desc="frames", disable=not sys.stderr.isatty()), cfg, camera), None
     _report(run, truth)
-    save_calibration(run.record, args.out)
-    save_mosaic(args.overlay, run.overlays)
+    write_files_atomically({args.out: run.record.encode(), args.overlay: encode_image(mosaic(run.overlays), args.overlay)})
     print(f"wrote {args.out} and {args.overlay}")
     return 0
+
+
+def _check_outputs(out: Path, overlay: Path) -> None:
+    """Refuse output locations that cannot be written, before any work is done."""
+    check_output_file(out, "--out")
+    check_output_file(overlay, "--overlay")
+    if not can_write_image(overlay):
+        raise CalibrationError(f"--overlay {overlay}: OpenCV cannot write images with extension {overlay.suffix!r} "
+                               "(use .png)")
+    if out.resolve() == overlay.resolve():
+        raise CalibrationError(f"--out and --overlay are the same file: {out}")
 
 
 def _image_frames(folder: Path, camera: CameraModel, poses_path: Path | None):

@@ -5,17 +5,26 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from mrguide.config import ConfigError, load_section
+from mrguide.config import ConfigError, check_number, load_section
 
 #: Corner refinement methods of the ArUco detector, by config name.
 CORNER_REFINEMENTS = ("none", "subpix", "contour", "apriltag", "edges")
 BOARD_KINDS = ("grid", "charuco")
+#: Largest marker id accepted: OpenCV's largest predefined dictionary (DICT_ARUCO_ORIGINAL) has 1024 markers.
+MAX_MARKER_ID = 1023
+#: Size bounds of printed markers, squares and boards (m).
+MIN_SIZE_M, MAX_SIZE_M = 1e-3, 2.0
+#: Farthest a target may be from the robot base on any axis (m).
+MAX_REACH_M = 5.0
 
 
-def _positive(where: str, **values: float) -> None:
-    for name, value in values.items():
-        if not value > 0:
-            raise ConfigError(f"{where}.{name} must be > 0, got {value}")
+def check_points(key: str, points: tuple[tuple[float, ...], ...], limit: float = MAX_REACH_M) -> None:
+    """ConfigError unless every coordinate of every point is a finite number within +-`limit` (m).
+
+    For tuples of points, which `mrguide.config.from_dict` does not look into."""
+    for i, point in enumerate(points):
+        for k, v in enumerate(point):
+            check_number(f"{key}[{i}][{k}]", v, -limit, limit, " m")
 
 
 @dataclass(frozen=True)
@@ -30,14 +39,14 @@ class DetectorConfig:
     ambiguity_ratio: float = 0.6  # IPPE solutions whose error ratio (best/second) exceeds this are ambiguous
 
     def __post_init__(self) -> None:
-        _positive("calibration.detector", marker_size_m=self.marker_size_m, corner_window_px=self.corner_window_px,
-                  min_marker_perimeter_rate=self.min_marker_perimeter_rate, ambiguity_ratio=self.ambiguity_ratio)
+        check_number("calibration.detector.marker_size_m", self.marker_size_m, MIN_SIZE_M, MAX_SIZE_M, " m")
+        check_number("calibration.detector.corner_window_px", self.corner_window_px, 1, 50, " px", integer=True)
+        check_number("calibration.detector.min_marker_perimeter_rate", self.min_marker_perimeter_rate, 1e-4, 4.0)
+        check_number("calibration.detector.ambiguity_ratio", self.ambiguity_ratio, 1e-3, 1.0)
         if self.corner_refinement not in CORNER_REFINEMENTS:
             raise ConfigError(
                 f"calibration.detector.corner_refinement must be one of {CORNER_REFINEMENTS}, got {self.corner_refinement!r}"
             )
-        if self.ambiguity_ratio > 1:
-            raise ConfigError(f"calibration.detector.ambiguity_ratio must be <= 1, got {self.ambiguity_ratio}")
 
 
 @dataclass(frozen=True)
@@ -57,19 +66,21 @@ class BoardConfig:
     def __post_init__(self) -> None:
         if self.kind not in BOARD_KINDS:
             raise ConfigError(f"calibration.board.kind must be one of {BOARD_KINDS}, got {self.kind!r}")
-        _positive("calibration.board", columns=self.columns, rows=self.rows, marker_size_m=self.marker_size_m,
-                  margin_m=self.margin_m)
-        if self.first_id < 0:
-            raise ConfigError(f"calibration.board.first_id must be >= 0, got {self.first_id}")
-        if self.thickness_m < 0:
-            raise ConfigError(f"calibration.board.thickness_m must be >= 0, got {self.thickness_m}")
+        check_number("calibration.board.columns", self.columns, 1, 100, integer=True)
+        check_number("calibration.board.rows", self.rows, 1, 100, integer=True)
+        check_number("calibration.board.marker_size_m", self.marker_size_m, MIN_SIZE_M, MAX_SIZE_M, " m")
+        check_number("calibration.board.first_id", self.first_id, 0, MAX_MARKER_ID, integer=True)
+        check_number("calibration.board.margin_m", self.margin_m, 1e-4, 1.0, " m")
+        check_number("calibration.board.thickness_m", self.thickness_m, 0.0, 0.1, " m")
         if self.kind == "grid":
-            _positive("calibration.board", separation_m=self.separation_m)
-        elif not self.square_size_m > self.marker_size_m:
+            check_number("calibration.board.separation_m", self.separation_m, 1e-4, MAX_SIZE_M, " m")
+            return
+        check_number("calibration.board.square_size_m", self.square_size_m, MIN_SIZE_M, MAX_SIZE_M, " m")
+        if not self.square_size_m > self.marker_size_m:
             raise ConfigError(
                 f"calibration.board.square_size_m ({self.square_size_m}) must exceed marker_size_m ({self.marker_size_m})"
             )
-        if self.kind == "charuco" and min(self.columns, self.rows) < 2:
+        if min(self.columns, self.rows) < 2:
             raise ConfigError("calibration.board: a ChArUco board needs at least 2 columns and 2 rows")
 
 
@@ -80,6 +91,11 @@ class MarkerPlacement:
     id: int
     xyz: tuple[float, float, float]
     yaw_deg: float = 0.0
+
+    def __post_init__(self) -> None:
+        check_number("calibration.targets.markers.id", self.id, 0, MAX_MARKER_ID, integer=True)
+        check_points(f"calibration.targets.markers (id {self.id}).xyz", (self.xyz,))
+        check_number(f"calibration.targets.markers (id {self.id}).yaw_deg", self.yaw_deg, -360.0, 360.0, " deg")
 
 
 @dataclass(frozen=True)
@@ -99,13 +115,14 @@ class TargetsConfig:
     markers: tuple[MarkerPlacement, ...] = ()  # single markers (size from the detector config)
 
     def __post_init__(self) -> None:
+        check_points("calibration.targets.board_touched_corners", self.board_touched_corners)
         if self.board_touched_corners and len(self.board_touched_corners) not in (3, 4):
             raise ConfigError(
                 f"calibration.targets.board_touched_corners needs 3 or 4 points, got {len(self.board_touched_corners)}"
             )
         if not self.use_board and not self.markers:
             raise ConfigError("calibration.targets: no targets (use_board = false and no markers)")
-        _positive("calibration.targets", touch_tolerance_m=self.touch_tolerance_m)
+        check_number("calibration.targets.touch_tolerance_m", self.touch_tolerance_m, 1e-5, 0.1, " m")
 
 
 @dataclass(frozen=True)
@@ -119,10 +136,11 @@ class RegistrationConfig:
     max_rms_residual_m: float = 0.005  # a larger RMS residual is reported as a warning
 
     def __post_init__(self) -> None:
-        if self.min_markers < 1 or self.min_frames < 1:
-            raise ConfigError("calibration.registration: min_markers and min_frames must be >= 1")
-        _positive("calibration.registration", outlier_translation_m=self.outlier_translation_m,
-                  outlier_rotation_deg=self.outlier_rotation_deg, max_rms_residual_m=self.max_rms_residual_m)
+        check_number("calibration.registration.min_markers", self.min_markers, 1, 1000, integer=True)
+        check_number("calibration.registration.min_frames", self.min_frames, 1, 1000, integer=True)
+        check_number("calibration.registration.outlier_translation_m", self.outlier_translation_m, 1e-5, 1.0, " m")
+        check_number("calibration.registration.outlier_rotation_deg", self.outlier_rotation_deg, 1e-3, 180.0, " deg")
+        check_number("calibration.registration.max_rms_residual_m", self.max_rms_residual_m, 1e-6, 1.0, " m")
 
 
 @dataclass(frozen=True)
@@ -137,9 +155,10 @@ class HmdNoiseConfig:
     seed: int = 0
 
     def __post_init__(self) -> None:
-        for name in ("tracking_noise_m", "tracking_noise_deg", "calibration_error_m", "calibration_error_deg"):
-            if getattr(self, name) < 0:
-                raise ConfigError(f"calibration.hmd.{name} must be >= 0, got {getattr(self, name)}")
+        for name, high, unit in (("tracking_noise_m", 0.1, " m"), ("tracking_noise_deg", 10.0, " deg"),
+                                 ("calibration_error_m", 0.5, " m"), ("calibration_error_deg", 45.0, " deg")):
+            check_number(f"calibration.hmd.{name}", getattr(self, name), 0.0, high, unit)
+        check_number("calibration.hmd.seed", self.seed, 0, 2**32 - 1, integer=True)
 
 
 @dataclass(frozen=True)

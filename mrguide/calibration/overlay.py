@@ -30,17 +30,25 @@ def draw_overlay(image: np.ndarray, detections: Detections, poses: Sequence[tupl
     return out
 
 
-def save_mosaic(path: str | Path, images: Sequence[np.ndarray], max_width: int = 1920) -> Path:
-    """Write BGR images side by side (two per row, scaled to fit `max_width`) as one PNG."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
+def mosaic(images: Sequence[np.ndarray], max_width: int = 1920) -> np.ndarray:
+    """BGR images side by side (two per row, scaled to fit `max_width`) as one BGR image."""
     cols = 1 if len(images) == 1 else 2
     h, w = images[0].shape[:2]
     scale = min(1.0, max_width / (cols * w))
     size = (int(w * scale), int(h * scale))
     tiles = [cv2.resize(im, size, interpolation=cv2.INTER_AREA) for im in images]
     tiles += [np.zeros_like(tiles[0])] * (-len(tiles) % cols)
-    rows = [np.hstack(tiles[i:i + cols]) for i in range(0, len(tiles), cols)]
-    if not cv2.imwrite(str(path), np.vstack(rows)):
-        raise OSError(f"could not write {path}")
-    return path
+    return np.vstack([np.hstack(tiles[i:i + cols]) for i in range(0, len(tiles), cols)])
+
+
+def encode_image(image: np.ndarray, path: str | Path) -> bytes:
+    """The bytes of `image` in the format of `path`'s extension (checked beforehand with `can_write_image`)."""
+    ok, data = cv2.imencode(Path(path).suffix, image)
+    if not ok:
+        raise ValueError(f"OpenCV could not encode an image as {Path(path).suffix}")
+    return data.tobytes()
+
+
+def can_write_image(path: str | Path) -> bool:
+    """Whether OpenCV has an encoder for `path`'s extension."""
+    return cv2.haveImageWriter(str(path))

@@ -25,6 +25,8 @@ from mrguide.task import ACT_DIM, ACT_LAYOUT, N_PHASES, OBS_DIM, OBS_LAYOUT, PHA
 
 FORMAT = "mrguide-policy"
 FORMAT_VERSION = 1
+#: Longest decision period (s) a policy file may declare (the paper's policy acts every 0.1 s).
+MAX_DECISION_PERIOD = 10.0
 ACTIVATIONS = {"relu": lambda x: np.maximum(x, 0.0), "tanh": np.tanh}
 
 
@@ -67,28 +69,10 @@ class ExportedPolicy:
                 arrays = {k: npz[k] for k in npz.files}
         except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
             raise PolicyFileError(f"{path}: not a readable policy file ({exc})") from exc
-        if "metadata" not in arrays:
-            raise PolicyFileError(f"{path}: no metadata in the file")
-        try:
-            meta = json.loads(str(arrays["metadata"]))
-        except json.JSONDecodeError as exc:
-            raise PolicyFileError(f"{path}: metadata is not valid JSON ({exc})") from exc
-        if meta.get("format") != FORMAT or meta.get("format_version") != FORMAT_VERSION:
-            raise PolicyFileError(f"{path}: format {meta.get('format')} v{meta.get('format_version')}, expected {FORMAT} v{FORMAT_VERSION}")
-        if list(meta.get("obs_layout", [])) != list(OBS_LAYOUT) or list(meta.get("act_layout", [])) != list(ACT_LAYOUT):
-            raise PolicyFileError(f"{path}: observation/action layout {meta.get('obs_layout')} / {meta.get('act_layout')} differs from this stack's {OBS_LAYOUT} / {ACT_LAYOUT}")
-        period = meta.get("decision_period")
-        if not isinstance(period, (int, float)) or not period > 0:
-            raise PolicyFileError(f"{path}: metadata lacks a positive decision_period (got {period!r})")
-        acts = list(meta.get("activations", []))
-        n = len(acts)
-        if n == 0 or any(a not in ACTIVATIONS for a in acts):
-            raise PolicyFileError(f"{path}: activations {acts} not understood (known: {sorted(ACTIVATIONS)})")
-        try:
-            weights = [arrays[f"W{i}"].astype(np.float64) for i in range(n)]
-            biases = [arrays[f"b{i}"].astype(np.float64) for i in range(n)]
-        except KeyError as exc:
-            raise PolicyFileError(f"{path}: layer array {exc} missing") from exc
+        meta = _metadata(path, arrays)
+        acts = meta["activations"]
+        weights = [_layer_array(path, arrays, f"W{i}") for i in range(len(acts))]
+        biases = [_layer_array(path, arrays, f"b{i}") for i in range(len(acts))]
         width = OBS_DIM
         for i, (W, b) in enumerate(zip(weights, biases)):
             if W.ndim != 2 or W.shape[1] != width or b.shape != (W.shape[0],):
@@ -103,7 +87,7 @@ class ExportedPolicy:
             if not (np.allclose(trained.lo, workspace.lo) and np.allclose(trained.hi, workspace.hi)):
                 raise PolicyFileError(f"{path}: trained for workspace {meta['workspace']}, the robot is configured for low={workspace.low} high={workspace.high}")
         if task is not None:
-            theirs, ours = meta.get("task", {}), to_dict(task)
+            theirs, ours = meta["task"], to_dict(task)
             diff = sorted(k for k in set(theirs) | set(ours) if theirs.get(k) != ours.get(k))
             if diff:
                 raise PolicyFileError(f"{path}: task parameters differ from the configuration: {', '.join(diff)}")
@@ -112,12 +96,64 @@ class ExportedPolicy:
         return policy
 
 
+def check_decision_period(policy: ExportedPolicy, path: str | Path, control_period: float,
+                          configured: float | None = None) -> None:
+    """PolicyFileError unless the policy's decision period is `configured` (when given) and a whole number of
+    control periods (s): the runtime acts at the rate the policy was trained for, or not at all."""
+    period = policy.decision_period
+    if configured is not None and abs(period - configured) > 1e-9:
+        raise PolicyFileError(f"{path}: trained with a {period} s decision period, the configuration runs {configured} s")
+    ratio = period / control_period
+    if ratio < 1 - 1e-9 or abs(ratio - round(ratio)) > 1e-6:
+        raise PolicyFileError(f"{path}: decision period {period} s is not a whole number of control periods "
+                              f"({control_period} s)")
+
+
+def _metadata(path: Path, arrays: dict[str, np.ndarray]) -> dict[str, Any]:
+    """The file's metadata, every field checked for its type (PolicyFileError naming the field otherwise)."""
+    if "metadata" not in arrays:
+        raise PolicyFileError(f"{path}: no metadata in the file")
+    try:
+        meta = json.loads(str(arrays["metadata"]))
+    except json.JSONDecodeError as exc:
+        raise PolicyFileError(f"{path}: metadata is not valid JSON ({exc})") from exc
+    if not isinstance(meta, dict):
+        raise PolicyFileError(f"{path}: metadata is a JSON {type(meta).__name__}, expected an object")
+    if meta.get("format") != FORMAT or meta.get("format_version") != FORMAT_VERSION:
+        raise PolicyFileError(f"{path}: format {meta.get('format')!r} v{meta.get('format_version')!r}, expected {FORMAT} v{FORMAT_VERSION}")
+    if meta.get("obs_layout") != list(OBS_LAYOUT) or meta.get("act_layout") != list(ACT_LAYOUT):
+        raise PolicyFileError(f"{path}: observation/action layout {meta.get('obs_layout')!r} / {meta.get('act_layout')!r} differs from this stack's {OBS_LAYOUT} / {ACT_LAYOUT}")
+    period = meta.get("decision_period")
+    if isinstance(period, bool) or not isinstance(period, (int, float)) or not 0 < period <= MAX_DECISION_PERIOD:
+        raise PolicyFileError(f"{path}: metadata lacks a decision_period in (0, {MAX_DECISION_PERIOD:g}] s (got {period!r})")
+    acts = meta.get("activations")
+    if not isinstance(acts, list) or not acts or any(not isinstance(a, str) or a not in ACTIVATIONS for a in acts):
+        raise PolicyFileError(f"{path}: activations {acts!r} not understood (a list of {sorted(ACTIVATIONS)})")
+    if not isinstance(meta.get("task", {}), dict):
+        raise PolicyFileError(f"{path}: metadata task {meta['task']!r} is not an object of task parameters")
+    meta.setdefault("task", {})
+    return meta
+
+
+def _layer_array(path: Path, arrays: dict[str, np.ndarray], name: str) -> np.ndarray:
+    """Layer array `name` as float64; only real numbers are weights (no strings, booleans, complex)."""
+    if name not in arrays:
+        raise PolicyFileError(f"{path}: layer array {name!r} missing")
+    a = arrays[name]
+    if a.dtype.kind not in "iuf":
+        raise PolicyFileError(f"{path}: layer array {name} holds {a.dtype} values, expected real numbers")
+    return a.astype(np.float64)
+
+
 def _trained_workspace(path: Path, meta: dict[str, Any]) -> Workspace:
     ws = meta.get("workspace")
     try:
-        return Workspace(low=tuple(map(float, ws["low"])), high=tuple(map(float, ws["high"])))
+        box = Workspace(low=tuple(map(float, ws["low"])), high=tuple(map(float, ws["high"])))
     except (TypeError, KeyError, ValueError, ConfigError) as exc:
         raise PolicyFileError(f"{path}: metadata workspace {ws!r} is not a box with low and high corners") from exc
+    if not (np.all(np.isfinite(box.lo)) and np.all(np.isfinite(box.hi))):
+        raise PolicyFileError(f"{path}: metadata workspace {ws!r} has non-finite corners")
+    return box
 
 
 def probe_observations(workspace: Workspace) -> np.ndarray:

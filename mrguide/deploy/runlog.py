@@ -1,13 +1,20 @@
-"""The run log: one JSON object per line, flushed as written, so a crash loses at most the line in flight."""
+"""The run log: one JSON object per line, flushed as written, so a crash loses at most the line in flight.
+
+The first record ("run") holds the run's metadata; it is on disk before the log is handed out, so a log
+that cannot be written is refused before any drive is enabled, and no run leaves an empty log behind.
+"""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from mrguide.errors import InputError
 
 
 def _plain(value: Any) -> Any:
@@ -22,13 +29,38 @@ def _plain(value: Any) -> Any:
     return value
 
 
-class RunLog:
-    """Append-only JSONL file; `sync()` forces it to disk (called at episode ends)."""
+class RunLogError(InputError):
+    """The run log cannot be created or written where it was asked for."""
 
-    def __init__(self, path: str | Path):
+
+class RunLog:
+    """Append-only JSONL file; `sync()` forces it to disk (called at episode ends). A context manager."""
+
+    def __init__(self, path: str | Path, header: dict[str, Any], where: str = "run log"):
+        """Open the log at `path` (given by `where`, e.g. "--log") and write the header record `header` to disk;
+        RunLogError if that fails (a file created for it is removed again)."""
         self.path = Path(path)
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._fh = self.path.open("a", buffering=1)
+        created = not self.path.exists()
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self._fh = self.path.open("a", buffering=1)
+        except OSError as exc:
+            raise RunLogError(f"{where} {self.path}: cannot create the run log: {exc.strerror or exc}") from exc
+        try:
+            self.write("run", **header)
+            self.sync()
+        except OSError as exc:
+            with contextlib.suppress(OSError):  # closing flushes the failed line once more
+                self._fh.close()
+            if created:
+                self.path.unlink(missing_ok=True)
+            raise RunLogError(f"{where} {self.path}: cannot write the run log: {exc.strerror or exc}") from exc
+
+    def __enter__(self) -> "RunLog":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
 
     def write(self, kind: str, **fields: Any) -> None:
         self._fh.write(json.dumps({"kind": kind, **_plain(fields)}) + "\n")

@@ -9,11 +9,17 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from mrguide.config import ConfigError, check_number
 from mrguide.deploy.runtime import EpisodeReport, RunStopped, Runtime
 from mrguide.drivers.errors import DriverError
 from mrguide.pose_source import ObjectPoseSource
 
 log = logging.getLogger(__name__)
+
+#: Most episodes of one session.
+MAX_EPISODES = 100_000
+#: Farthest a goal or object may be from the robot base on any axis (m): beyond the reach of any cobot.
+MAX_REACH_M = 5.0
 
 
 @dataclass(frozen=True)
@@ -28,6 +34,19 @@ class DeployConfig:
     object_position: tuple[float, float, float] = (0.50, -0.075, 0.025)
     #: Goals (object centre, m), used in turn.
     goals: tuple[tuple[float, float, float], ...] = ((0.50, 0.21, 0.025),)
+
+    def __post_init__(self) -> None:
+        check_number("deploy.episodes", self.episodes, 1, MAX_EPISODES, integer=True)
+        check_number("deploy.seed", self.seed, 0, 2**32 - 1, integer=True)
+        if not self.log_dir:
+            raise ConfigError("deploy.log_dir must not be empty")
+        if not self.goals:
+            raise ConfigError("deploy.goals: at least one goal is needed")
+        for i, goal in enumerate(self.goals):
+            for k, v in enumerate(goal):
+                check_number(f"deploy.goals[{i}][{k}]", v, -MAX_REACH_M, MAX_REACH_M, " m")
+        for k, v in enumerate(self.object_position):
+            check_number(f"deploy.object_position[{k}]", v, -MAX_REACH_M, MAX_REACH_M, " m")
 
 
 @dataclass

@@ -42,7 +42,7 @@ from mrguide.drivers.heartbeat import OPERATIONAL, HeartbeatConsumer, nmt_state_
 from mrguide.drivers.nmt import (NMT_RESET_COMMUNICATION, NMT_START, close_network, send_nmt, set_master_consumer,
                                  sign_off)
 from mrguide.drivers.realtime import make_current_thread_realtime
-from mrguide.drivers.setpoint_guard import plan_rpdos, setpoint_problem
+from mrguide.drivers.setpoint_guard import plan_rpdos, setpoint_array, setpoint_problem
 from mrguide.drivers.vacuum import BLOW_OFF_BIT, VACUUM_ON_BIT, VacuumGenerator
 from mrguide.robot import RobotSpec, load_robot
 
@@ -295,7 +295,7 @@ class Cobot:
         depth = self.config.timing.setpoint_queue_depth
         timeout = self.period * (depth + 25) if timeout is None else timeout
         try:
-            q = np.array(q, dtype=float)
+            q = setpoint_array(q)
         except (TypeError, ValueError) as exc:
             self._refused += 1
             raise SetpointError(f"setpoint is not an array of joint positions: {exc}") from exc

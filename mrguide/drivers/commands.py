@@ -1,20 +1,21 @@
 """`mrguide bus selftest` and `mrguide bus monitor`: argparse wiring for the top-level CLI.
 
 The top-level `mrguide` parser calls `add_bus_commands(subparsers)`; each command stores a handler in
-`func` that takes the parsed arguments and returns the process exit code.
+`func` that takes the parsed arguments and returns the process exit code. Bad input raises ConfigError
+(or another InputError) and a bus fault DriverError: `mrguide.cli.main` turns them into one line on
+stderr and exit 2 or 1.
 """
 
 from __future__ import annotations
 
 import argparse
 import logging
-import sys
 import threading
-from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 
+from mrguide.cli_args import positive_float
 from mrguide.config import ConfigError
 from mrguide.drivers.cobot import Cobot
 from mrguide.drivers.config import CobotBusConfig, load_cobot_bus_config
@@ -23,12 +24,11 @@ from mrguide.drivers.mock.first_order_plant import FirstOrderPlant
 from mrguide.drivers.mock.sim_cobot import SimulatedCobot, shared_pc_config
 from mrguide.drivers.monitor import monitor
 from mrguide.drivers.selftest import run_selftest
-from mrguide.robot import RobotSpecError, load_robot
+from mrguide.robot import load_robot
 
 logger = logging.getLogger(__name__)
 
 EXIT_FAILED = 1
-EXIT_CONFIG = 2
 #: Demo motion while monitoring a simulated cobot: amplitude (rad) and period (s) of a sine per joint.
 DEMO_AMPLITUDE = 0.05
 DEMO_PERIOD = 2.0
@@ -47,15 +47,15 @@ def add_bus_commands(subparsers: argparse._SubParsersAction) -> None:
     _add_config(selftest)
     selftest.add_argument("--allow-motion", action="store_true",
                           help="required on a real bus: confirms the arm may move each joint by 0.05 rad")
-    selftest.set_defaults(func=_selftest_command)
+    selftest.set_defaults(func=_selftest_command, command_name="bus selftest")
 
     mon = commands.add_parser("monitor", help="decode live CAN traffic into readable lines",
                               description="Print NMT, SYNC, PDO, SDO, EMCY and heartbeat frames as readable lines.")
     _add_config(mon)
-    mon.add_argument("--duration", type=float, default=2.0, help="seconds to monitor (default: 2)")
+    mon.add_argument("--duration", type=positive_float, default=2.0, help="seconds to monitor (default: 2)")
     mon.add_argument("--simulate", action="store_true",
                      help="virtual bus only: run the simulated cobot and a master streaming a small motion meanwhile")
-    mon.set_defaults(func=_monitor_command)
+    mon.set_defaults(func=_monitor_command, command_name="bus monitor")
 
 
 def _add_config(parser: argparse.ArgumentParser) -> None:
@@ -64,48 +64,30 @@ def _add_config(parser: argparse.ArgumentParser) -> None:
                              "virtual bus)")
 
 
-def _run(name: str, body: Callable[[], int]) -> int:
-    try:
-        return body()
-    except (ConfigError, RobotSpecError) as exc:
-        print(f"mrguide bus {name}: configuration error: {exc}", file=sys.stderr)
-        return EXIT_CONFIG
-    except DriverError as exc:
-        print(f"mrguide bus {name}: {type(exc).__name__}: {exc}", file=sys.stderr)
-        return EXIT_FAILED
-
-
 def _selftest_command(args: argparse.Namespace) -> int:
-    def body() -> int:
-        config = load_cobot_bus_config(args.config)
-        if config.bus.interface != "virtual" and not args.allow_motion:
-            raise ConfigError(f"bus interface {config.bus.interface!r} is a real bus: the selftest moves every "
-                              "joint; pass --allow-motion to confirm")
-        return 0 if run_selftest(config, load_robot(), print) else EXIT_FAILED
-
-    return _run("selftest", body)
+    robot = load_robot()
+    config = load_cobot_bus_config(args.config, robot)
+    if config.bus.interface != "virtual" and not args.allow_motion:
+        raise ConfigError(f"bus interface {config.bus.interface!r} is a real bus: the selftest moves every "
+                          "joint; pass --allow-motion to confirm")
+    return 0 if run_selftest(config, robot, print) else EXIT_FAILED
 
 
 def _monitor_command(args: argparse.Namespace) -> int:
-    def body() -> int:
-        if not args.duration > 0:
-            raise ConfigError(f"--duration must be > 0 s, got {args.duration}")
-        config = load_cobot_bus_config(args.config)
-        if args.simulate and config.bus.interface != "virtual":
-            raise ConfigError("--simulate needs the virtual bus: simulated devices must not join a real bus")
-        robot = load_robot()
-        demo = _SimulatedDemo(config) if args.simulate else None
-        try:
-            counts = monitor(config, robot.joint_names, args.duration, print, demo.start if demo else None)
-        finally:
-            if demo is not None:
-                demo.stop()
-        total = sum(counts.values())
-        summary = ", ".join(f"{kind} {n}" for kind, n in sorted(counts.items()))
-        print(f"{total} frames in {args.duration:g} s ({summary or 'no traffic'})")
-        return 0
-
-    return _run("monitor", body)
+    robot = load_robot()
+    config = load_cobot_bus_config(args.config, robot)
+    if args.simulate and config.bus.interface != "virtual":
+        raise ConfigError("--simulate needs the virtual bus: simulated devices must not join a real bus")
+    demo = _SimulatedDemo(config) if args.simulate else None
+    try:
+        counts = monitor(config, robot.joint_names, args.duration, print, demo.start if demo else None)
+    finally:
+        if demo is not None:
+            demo.stop()
+    total = sum(counts.values())
+    summary = ", ".join(f"{kind} {n}" for kind, n in sorted(counts.items()))
+    print(f"{total} frames in {args.duration:g} s ({summary or 'no traffic'})")
+    return 0
 
 
 class _SimulatedDemo:

@@ -16,6 +16,8 @@ import can.interfaces
 import numpy as np
 
 from mrguide.config import ConfigError, check_number, from_dict, load_toml
+from mrguide.drivers.bus_options import check_bus_options
+from mrguide.drivers.eds_check import DRIVE_OBJECTS, VACUUM_OBJECTS, VELOCITY_TPDO_OBJECTS, check_eds
 from mrguide.robot import RobotSpec
 
 #: Directory of the EDS files shipped with the package (also read by the simulated devices).
@@ -44,9 +46,6 @@ def _check_node_id(node_id: int, where: str) -> None:
         raise ConfigError(f"{where}: CANopen node ID must be 1..127, got {node_id}")
 
 
-def _check_eds(name: str, where: str) -> None:
-    if not eds_path(name).is_file():
-        raise ConfigError(f"{where}: EDS file not found: {eds_path(name)}")
 
 
 @dataclass(frozen=True)
@@ -71,6 +70,7 @@ class BusConfig:
         reserved = {"interface", "channel", "bitrate"} & set(self.options)
         if reserved:
             raise ConfigError(f"bus.options: set {sorted(reserved)} as bus keys, not options")
+        check_bus_options(self.interface, self.options)
 
 
 @dataclass(frozen=True)
@@ -150,12 +150,10 @@ class JointDriveConfig:
 
     def __post_init__(self) -> None:
         _check_node_id(self.node_id, "joints.node_id")
-        if self.encoder_resolution <= 0:
-            raise ConfigError(f"joints (node {self.node_id}).encoder_resolution must be > 0")
-        if not (math.isfinite(self.gear_ratio) and self.gear_ratio > 0):
-            raise ConfigError(f"joints (node {self.node_id}).gear_ratio must be a positive number")
-        if not math.isfinite(self.offset):
-            raise ConfigError(f"joints (node {self.node_id}).offset must be finite")
+        where = f"joints (node {self.node_id})"
+        check_number(f"{where}.encoder_resolution", self.encoder_resolution, 1, INT32_MAX, " counts/rev", integer=True)
+        check_number(f"{where}.gear_ratio", self.gear_ratio, 1e-3, 1e6)
+        check_number(f"{where}.offset", self.offset, -100.0, 100.0, " rad")
         if self.direction not in (1, -1):
             raise ConfigError(f"joints (node {self.node_id}).direction must be 1 or -1, got {self.direction}")
 
@@ -182,7 +180,7 @@ class DriveConfig:
     velocity_tpdo: bool = True
 
     def __post_init__(self) -> None:
-        _check_eds(self.eds, "drives.eds")
+        check_eds(eds_path(self.eds), DRIVE_OBJECTS + (VELOCITY_TPDO_OBJECTS if self.velocity_tpdo else ()), "drives.eds")
         check_number("drives.following_error_window", self.following_error_window, 1e-4, 1.0, " rad")
         check_number("drives.following_error_timeout_ms", self.following_error_timeout_ms, 0, 65535, " ms",
                      integer=True)
@@ -204,7 +202,7 @@ class VacuumConfig:
 
     def __post_init__(self) -> None:
         _check_node_id(self.node_id, "vacuum.node_id")
-        _check_eds(self.eds, "vacuum.eds")
+        check_eds(eds_path(self.eds), VACUUM_OBJECTS, "vacuum.eds")
         if not 0 < self.grip_threshold_kpa < 101.3:
             raise ConfigError("vacuum.grip_threshold_kpa must lie in (0, 101.3) kPa")
         if not 0 <= self.grip_hysteresis_kpa < self.grip_threshold_kpa:
@@ -266,11 +264,16 @@ class JointLimits:
     v_max: np.ndarray
 
 
-def load_cobot_bus_config(path: str | Path | None) -> CobotBusConfig:
-    """Load a bus description from TOML; None gives the defaults (virtual bus)."""
-    if path is None:
-        return CobotBusConfig()
-    return from_dict(CobotBusConfig, load_toml(path), where=str(path))
+def load_cobot_bus_config(path: str | Path | None, robot: RobotSpec | None = None) -> CobotBusConfig:
+    """Load a bus description from TOML; None gives the defaults (virtual bus). With `robot`, also check that
+    it fits the robot (`resolve_limits`: one drive per joint, limits), naming the file."""
+    config = CobotBusConfig() if path is None else from_dict(CobotBusConfig, load_toml(path), where=str(path))
+    if robot is not None:
+        try:
+            resolve_limits(config, robot)
+        except ConfigError as exc:
+            raise ConfigError(f"{path or 'default bus config'}: {exc}") from exc
+    return config
 
 
 def resolve_limits(config: CobotBusConfig, robot: RobotSpec) -> JointLimits:

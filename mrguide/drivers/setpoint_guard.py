@@ -1,6 +1,6 @@
 """The last checks before the bus: streamed setpoints, and what every drive's RPDO carries.
 
-`setpoint_problem` validates a streamed joint setpoint before it enters the queue. `plan_rpdos` decides,
+`setpoint_array` takes a streamed setpoint only if it holds real numbers. `setpoint_problem` validates a streamed joint setpoint before it enters the queue. `plan_rpdos` decides,
 every cycle, the controlword and the target of every drive's RPDO, whatever produced the target (a
 streamed or held setpoint, or the measured position sent back while enabling, quick-stopping, resetting
 a fault or disabling). A target that is non-finite or outside the joint limits never goes out: every
@@ -21,6 +21,15 @@ from mrguide.drivers.config import JointLimits
 
 #: Relative slack on the per-cycle step limit (floating-point round-off of trajectory generators).
 STEP_SLACK = 1e-6
+
+
+def setpoint_array(q: object) -> np.ndarray:
+    """`q` as a new float array; TypeError unless it holds real numbers only (np.array(dtype=float) would drop
+    the imaginary part of a complex value, and a bool or a string is no joint position)."""
+    a = np.asarray(q)
+    if a.dtype.kind not in "iuf":
+        raise TypeError(f"expected real numbers (rad), got {a.dtype} values")
+    return np.array(a, dtype=float)
 
 
 def setpoint_problem(q: np.ndarray, reference: np.ndarray, limits: JointLimits, period: float,

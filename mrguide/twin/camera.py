@@ -11,7 +11,10 @@ from dataclasses import dataclass, field
 import numpy as np
 import pybullet as pb
 
-from mrguide.config import ConfigError
+from mrguide.config import ConfigError, check_number
+
+#: Largest rendered image side (px).
+MAX_IMAGE_SIDE = 16384
 
 
 @dataclass(frozen=True)
@@ -26,8 +29,10 @@ class Intrinsics:
     cy: float = 240.0
 
     def __post_init__(self) -> None:
-        if self.width <= 0 or self.height <= 0 or self.fx <= 0 or self.fy <= 0:
-            raise ConfigError(f"camera intrinsics: size and focal lengths must be positive, got {self}")
+        check_number("intrinsics.width", self.width, 1, MAX_IMAGE_SIDE, " px", integer=True)
+        check_number("intrinsics.height", self.height, 1, MAX_IMAGE_SIDE, " px", integer=True)
+        check_number("intrinsics.fx", self.fx, 1.0, 1e6, " px")
+        check_number("intrinsics.fy", self.fy, 1.0, 1e6, " px")
 
     @property
     def K(self) -> np.ndarray:
@@ -43,8 +48,12 @@ class CameraConfig:
     target: tuple[float, float, float] = (0.48, 0.10, 0.0)
     up: tuple[float, float, float] = (0.0, 0.0, 1.0)
     intrinsics: Intrinsics = field(default_factory=Intrinsics)
-    near: float = 0.05
-    far: float = 5.0
+    near: float = 0.05  # m; in [0.001, 10]
+    far: float = 5.0  # m; beyond `near`, at most 1000
+
+    def __post_init__(self) -> None:
+        check_number("camera.near", self.near, 1e-3, 10.0, " m")
+        check_number("camera.far", self.far, self.near * (1 + 1e-6), 1000.0, " m (beyond camera.near)")
 
 
 def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray) -> np.ndarray:

@@ -13,7 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-from mrguide.deploy.policy import ExportedPolicy, PolicyFileError
+from mrguide.config import ConfigError
+from mrguide.deploy.policy import ExportedPolicy, check_decision_period
 from mrguide.deploy.runlog import RunLog
 from mrguide.deploy.runtime import EpisodeReport, Runtime, RuntimeConfig
 from mrguide.deploy.safety import SafetyConfig
@@ -43,7 +44,7 @@ class SimulatedCell:
 def simulated_cell(env_cfg: EnvConfig, bus_cfg: CobotBusConfig, seed: int = 0) -> Iterator[SimulatedCell]:
     """Start the twin + simulated devices, connect and enable the cobot; tear everything down on exit."""
     if bus_cfg.bus.interface != "virtual":
-        raise ValueError(f"a dry run needs the virtual CAN interface, the bus config says {bus_cfg.bus.interface!r}")
+        raise ConfigError(f"a dry run needs the virtual CAN interface, the bus config says {bus_cfg.bus.interface!r}")
     bus_cfg = shared_pc_config(bus_cfg)
     twin_cfg = replace(env_cfg.twin, control_period=bus_cfg.timing.control_period, gui=False)
     spec = load_robot(env_cfg.robot)
@@ -79,7 +80,7 @@ def dry_run(
     bus_cfg: CobotBusConfig,
     episodes: int,
     seed: int,
-    log_path: str | Path,
+    run_log: RunLog,
     safety: SafetyConfig | None = None,
     pose_factory: Callable[[SimulatedCell], ObjectPoseSource] | None = None,
     after_episode: Callable[[EpisodeReport], None] | None = None,
@@ -89,33 +90,30 @@ def dry_run(
 ) -> DeploySummary:
     """Run `episodes` seeded episodes of a policy through the whole stack against the simulated cell.
 
-    The policy file is loaded and checked before any drive is enabled. `policy` may replace the loaded
-    policy by any callable obs → action (the scripted expert in tests). `on_placed` runs after the object
-    was put in place for an episode (e.g. to wait for a fresh HMD estimate). `max_recoveries` safety
-    stops may be followed by a fault reset and the next episode (see `run_session`).
+    The policy file is loaded (unless `policy` is given) and checked before any drive is enabled. `policy`
+    may also be any callable obs → action (the scripted expert in tests). `run_log` is the caller's open
+    log (its header written; the caller closes it). `on_placed` runs after the object was put in place for
+    an episode (e.g. to wait for a fresh HMD estimate). `max_recoveries` safety stops may be followed by a fault
+    reset and the next episode (see `run_session`).
     """
     spec = load_robot(env_cfg.robot)
-    loaded = ExportedPolicy.load(policy_path, spec.workspace, env_cfg.task) if policy is None else policy
-    if isinstance(loaded, ExportedPolicy) and abs(loaded.decision_period - env_cfg.twin.decision_period) > 1e-9:
-        raise PolicyFileError(f"{policy_path}: trained with a {loaded.decision_period} s decision period, "
-                              f"the configuration runs {env_cfg.twin.decision_period} s")
+    if policy is None:
+        policy = ExportedPolicy.load(policy_path, spec.workspace, env_cfg.task)
+    if isinstance(policy, ExportedPolicy):
+        check_decision_period(policy, policy_path, bus_cfg.timing.control_period, env_cfg.twin.decision_period)
     layouts = episode_layouts(env_cfg, episodes, seed)
-    run_log = RunLog(log_path)
-    try:
-        with simulated_cell(env_cfg, bus_cfg, seed) as cell:
-            pose = pose_factory(cell) if pose_factory else TwinObjectPose(cell.plant)
-            # Without a [safety] config the simulated cell allows 0.1 rad of following error (robot: 0.05):
-            # on a loaded PC the simulated arm can fall behind for lack of CPU, not of torque.
-            runtime = Runtime(cell.cobot, loaded, pose, spec, env_cfg.task, run_log,
-                              RuntimeConfig(decision_period=env_cfg.twin.decision_period),
-                              safety or SafetyConfig(following_error=0.1))
-            def place(i: int) -> None:
-                cell.plant.place_objects(*layouts[i])
-                if on_placed:
-                    on_placed()
+    with simulated_cell(env_cfg, bus_cfg, seed) as cell:
+        pose = pose_factory(cell) if pose_factory else TwinObjectPose(cell.plant)
+        # Without a [safety] config the simulated cell allows 0.1 rad of following error (robot: 0.05):
+        # on a loaded PC the simulated arm can fall behind for lack of CPU, not of torque.
+        runtime = Runtime(cell.cobot, policy, pose, spec, env_cfg.task, run_log,
+                          RuntimeConfig(decision_period=env_cfg.twin.decision_period),
+                          safety or SafetyConfig(following_error=0.1))
+        def place(i: int) -> None:
+            cell.plant.place_objects(*layouts[i])
+            if on_placed:
+                on_placed()
 
-            with runtime:
-                return run_session(runtime, [g for _, g in layouts], before_episode=place, after_episode=after_episode,
-                                   max_recoveries=max_recoveries)
-    finally:
-        run_log.close()
+        with runtime:
+            return run_session(runtime, [g for _, g in layouts], before_episode=place, after_episode=after_episode,
+                               max_recoveries=max_recoveries)

@@ -23,14 +23,14 @@ import pybullet as pb
 
 from mrguide.calibration.boards import Board, printable_board, printable_marker, single_marker_corners
 from mrguide.calibration.camera_model import CameraModel
-from mrguide.calibration.config import CalibrationConfig, DetectorConfig, HmdNoiseConfig
+from mrguide.calibration.config import CalibrationConfig, DetectorConfig, HmdNoiseConfig, check_points
 from mrguide.calibration.detection import MarkerDetector, get_dictionary
 from mrguide.calibration.hmd import HmdFrame, with_calibration_error, with_tracking_noise
 from mrguide.calibration.pose_sources import MarkerPoseSource
 from mrguide.calibration.procedure import CalibrationRun, calibrate_frames
 from mrguide.calibration.se3 import apply, invert, make_T, rotation_from_rpy_deg
 from mrguide.calibration.targets import layout_from_config
-from mrguide.config import ConfigError
+from mrguide.config import ConfigError, check_number
 from mrguide.twin.camera import Camera, Intrinsics, look_at
 
 log = logging.getLogger(__name__)
@@ -262,8 +262,8 @@ class TwinCalibrationConfig:
     def __post_init__(self) -> None:
         if not self.views:
             raise ConfigError("calibration_twin.views: at least one camera position is needed")
-        if self.supersample < 1:
-            raise ConfigError(f"calibration_twin.supersample must be >= 1, got {self.supersample}")
+        check_points("calibration_twin.views", self.views)
+        check_number("calibration_twin.supersample", self.supersample, 1, 8, integer=True)
 
     @property
     def T_base_hmd(self) -> np.ndarray:

@@ -11,6 +11,7 @@ Every episode is judged on the ground truth of the twin that played the robot.
 from __future__ import annotations
 
 import csv
+import io
 import logging
 from collections import Counter
 from collections.abc import Callable
@@ -20,10 +21,13 @@ from pathlib import Path
 import numpy as np
 from scipy import stats
 
+from mrguide.config import to_dict
 from mrguide.deploy.policy import ExportedPolicy
+from mrguide.deploy.runlog import RunLog
 from mrguide.deploy.runtime import EpisodeReport
 from mrguide.deploy.safety import SafetyConfig
 from mrguide.drivers.config import CobotBusConfig
+from mrguide.output_files import write_files_atomically
 from mrguide.twin.dry_run import SimulatedCell, dry_run, episode_layouts
 from mrguide.twin.env import EnvConfig, PickPlaceEnv
 from mrguide.twin.hmd_stream import HmdPoseStream
@@ -31,7 +35,6 @@ from mrguide.twin.plant import TwinObjectPose
 
 log = logging.getLogger(__name__)
 
-CONDITIONS = ("sim", "real_exact", "real_hmd")
 LABELS = {"sim": "simulation,\nexact poses", "real_exact": "'real' robot,\nexact poses", "real_hmd": "'real' robot,\nHMD poses"}
 #: Failure causes as reported (safety stops and aborted episodes count as "safety_stop").
 CAUSES = ("no_grasp", "dropped", "misplaced", "knocked_off", "timeout", "safety_stop")
@@ -126,10 +129,14 @@ def run_real(policy_path: Path, real_cfg: EnvConfig, bus_cfg: CobotBusConfig, se
         if on_episode:
             on_episode(outcome)
 
+    header = {"command": "sim2real", "condition": "real_hmd" if use_hmd else "real_exact", "policy": str(policy_path),
+              "seed": seed, "episodes": episodes, "hmd_overrides": hmd_overrides or {},
+              "reality_gap": to_dict(real_cfg.twin.reality_gap)}
     try:
-        summary = dry_run(policy_path, real_cfg, bus_cfg, episodes, seed, log_path, safety,
-                          pose_factory=pose_factory, after_episode=judge, on_placed=refresh, policy=policy,
-                          max_recoveries=episodes if recover else 0)
+        with RunLog(log_path, header) as run_log:
+            summary = dry_run(policy_path, real_cfg, bus_cfg, episodes, seed, run_log, safety,
+                              pose_factory=pose_factory, after_episode=judge, on_placed=refresh, policy=policy,
+                              max_recoveries=episodes if recover else 0)
     finally:
         for s in streams:
             s.close()
@@ -143,27 +150,31 @@ def run_real(policy_path: Path, real_cfg: EnvConfig, bus_cfg: CobotBusConfig, se
 
 
 def write_report(results: list[ConditionResult], out: Path, gap_text: str) -> Path:
+    """sim2real.csv, fig8_sim2real.png and sim2real.md in `out`, written together (whole or not at all)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    if not results:
+        raise ValueError("no results to report")
     rows = [r.summary() for r in results]
-    with (out / "sim2real.csv").open("w", newline="") as fh:
-        w = csv.DictWriter(fh, list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
+    table = io.StringIO()
+    w = csv.DictWriter(table, list(rows[0]))
+    w.writeheader()
+    w.writerows(rows)
     fig, ax = plt.subplots(figsize=(6, 4))
     x = np.arange(len(rows))
     err = np.clip(np.array([[r["success_rate"] - r["ci95_low"], r["ci95_high"] - r["success_rate"]] for r in rows]).T * 100, 0, None)
     ax.bar(x, [100 * r["success_rate"] for r in rows], yerr=err,
            color=["tab:blue", "tab:green", "tab:orange"][: len(rows)], capsize=6)
-    ax.set_xticks(x, [LABELS[r["condition"]] for r in rows])
+    ax.set_xticks(x, [LABELS.get(r["condition"], r["condition"]) for r in rows])
     ax.set(ylabel="success rate (%)", ylim=(0, 105), title="Sim-to-real (pooled episodes, 95 % Wilson CI)")
     for i, r in enumerate(rows):
         ax.text(i, 2, f"{100 * r['success_rate']:.0f}%", ha="center", color="white", fontweight="bold")
     fig.tight_layout()
-    fig.savefig(out / "fig8_sim2real.png", dpi=120)
+    png = io.BytesIO()
+    fig.savefig(png, format="png", dpi=120)
     plt.close(fig)
     lines = ["| condition | seeds × episodes | success | 95 % CI (Wilson) | std over seeds | " + " | ".join(CAUSES) + " |",
              "| --- | --- | --- | --- | --- | " + " | ".join("---" for _ in CAUSES) + " |"]
@@ -173,7 +184,8 @@ def write_report(results: list[ConditionResult], out: Path, gap_text: str) -> Pa
                      + " | ".join(str(r[c]) for c in CAUSES) + " |")
     lines += ["", gap_text]
     md = out / "sim2real.md"
-    md.write_text("\n".join(lines) + "\n")
+    write_files_atomically({out / "sim2real.csv": table.getvalue().encode(), out / "fig8_sim2real.png": png.getvalue(),
+                            md: ("\n".join(lines) + "\n").encode()})
     return md
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -52,13 +53,27 @@ def _write(tmp_path, mutate) -> str:
         (lambda d: d.update(T_base_hmd=[[1, 2], [3, 4]]), "not a rigid"),
         (lambda d: d.update(T_base_hmd="eye"), "wrong type"),
         (lambda d: d.update(dictionary="DICT_9X9_7"), "unknown ArUco dictionary"),
-        (lambda d: d.update(rms_residual_m=-1.0), "non-negative"),
+        (lambda d: d.update(rms_residual_m=-1.0), "'rms_residual_m' = -1.0"),
         (lambda d: d.update(method="guess"), "unknown method"),
+        (lambda d: d.update(n_frames=-3), "'n_frames' = -3"),
+        (lambda d: d.update(n_frames=2.5), "'n_frames' has the wrong type"),
+        (lambda d: d.update(n_frames=True), "'n_frames' has the wrong type"),
+        (lambda d: d.update(n_points=2), "'n_points' = 2"),  # fewer points than frames
+        (lambda d: d.update(marker_size_m=float("inf")), "'marker_size_m' = inf"),
+        (lambda d: d.update(max_residual_m=float("nan")), "'max_residual_m' = nan"),
+        (lambda d: d.update(rms_residual_m=0.002), "exceeds max_residual_m"),
+        (lambda d: d["T_base_hmd"][0].__setitem__(3, float("nan")), "not a rigid"),
+        (lambda d: d.update(created=5), "'created' has the wrong type"),
+        (lambda d: d.update(camera={**d["camera"], "width": float("inf")}), "'camera': intrinsics width = inf"),
+        (lambda d: d.update(camera=[1280, 720]), "'camera' must be an object"),
+        (lambda d: d.update(board={"columns": -1}), "calibration.board.columns = -1"),
+        (lambda d: d.update(extra="none"), "'extra' must be an object"),
+        (lambda d: d.update(note="hand-edited"), "unknown keys ['note']"),
     ],
 )
 def test_bad_files_are_named_and_explained(tmp_path, mutate, message):
     path = _write(tmp_path, mutate)
-    with pytest.raises(CalibrationFileError, match=message) as err:
+    with pytest.raises(CalibrationFileError, match=re.escape(message)) as err:
         load_calibration(path)
     assert "cal.json" in str(err.value)
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import argparse
 import json
 
 import cv2
@@ -10,7 +9,7 @@ import numpy as np
 import pytest
 
 from mrguide.calibration.calibration_file import load_calibration
-from mrguide.calibration.commands import add_calibrate_command
+from mrguide.cli import main
 from mrguide.calibration.se3 import invert, rotation_angle_deg
 from mrguide.twin.camera import look_at
 from mrguide.twin.markers import TwinCalibrationConfig, TwinHmd, add_targets
@@ -20,10 +19,7 @@ TWIN = TwinCalibrationConfig()
 
 
 def _run(argv: list[str]) -> int:
-    parser = argparse.ArgumentParser(prog="mrguide")
-    add_calibrate_command(parser.add_subparsers(required=True))
-    args = parser.parse_args(["calibrate", *argv])
-    return args.func(args)
+    return main(["calibrate", *argv])
 
 
 @pytest.fixture

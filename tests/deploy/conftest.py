@@ -5,6 +5,7 @@ import itertools
 import numpy as np
 import pytest
 
+from mrguide.deploy.runlog import RunLog
 from mrguide.drivers.config import BusConfig, CobotBusConfig
 from mrguide.robot import load_robot
 from mrguide.task import oracle_action, phase_from_progress
@@ -50,9 +51,11 @@ def run_dry(tmp_path):
             return TwinObjectPose(cell.plant)
 
         log = tmp_path / f"run-{seed}.jsonl"
-        summary = dry_run(None, cfg, bus_config(), episodes, seed, log, safety, pose_factory=pose_factory,
-                          policy=Expert(cfg, (lambda o, p, a: hook(o, p, a, cells[0])) if hook else None),
-                          max_recoveries=max_recoveries)
+        with RunLog(log, {"test": "dry run"}) as run_log:
+            summary = dry_run(None, cfg, bus_config(), episodes, seed, run_log, safety,
+                              pose_factory=pose_factory,
+                              policy=Expert(cfg, (lambda o, p, a: hook(o, p, a, cells[0])) if hook else None),
+                              max_recoveries=max_recoveries)
         return summary, log, cells[0]
 
     return run

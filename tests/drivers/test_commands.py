@@ -2,18 +2,13 @@
 
 from __future__ import annotations
 
-import argparse
-
 import pytest
 
-from mrguide.drivers.commands import add_bus_commands
+from mrguide.cli import main
 
 
 def _run(argv):
-    parser = argparse.ArgumentParser(prog="mrguide")
-    add_bus_commands(parser.add_subparsers(dest="command", required=True))
-    args = parser.parse_args(argv)
-    return args.func(args)
+    return main(argv)
 
 
 def _toml(tmp_path, text):
@@ -40,18 +35,18 @@ def test_monitor_with_simulated_cobot_decodes_traffic(tmp_path, capsys):
         assert word in out
 
 
-@pytest.mark.parametrize("argv_tail, toml, words", [
-    (["selftest"], "[bus]\nbitrate = 7\n", ["configuration error", "bus.bitrate"]),
-    (["monitor", "--duration", "0.1"], "[timing\n", ["configuration error", "not valid TOML"]),
-    (["selftest"], '[bus]\ninterface = "socketcan"\nchannel = "can9"\n', ["--allow-motion"]),
-    (["monitor", "--simulate"], '[bus]\ninterface = "socketcan"\nchannel = "can9"\n', ["virtual bus"]),
+@pytest.mark.parametrize("argv_tail, toml, words, exit_code", [
+    (["selftest"], "[bus]\nbitrate = 7\n", ["mrguide bus selftest: ", "bus.bitrate"], 2),
+    (["monitor", "--duration", "0.1"], "[timing\n", ["mrguide bus monitor: ", "not valid TOML"], 2),
+    (["selftest"], '[bus]\ninterface = "socketcan"\nchannel = "can9"\n', ["--allow-motion"], 2),
+    (["monitor", "--simulate"], '[bus]\ninterface = "socketcan"\nchannel = "can9"\n', ["virtual bus"], 2),
     (["selftest", "--allow-motion"], '[bus]\ninterface = "socketcan"\nchannel = "mrguide-no-if"\n',
-     ["BusError", "mrguide-no-if"]),
+     ["CAN driver error", "mrguide-no-if"], 1),
 ])
-def test_bad_config_or_bus_gives_one_clear_line_and_nonzero_exit(tmp_path, capsys, argv_tail, toml, words):
+def test_bad_config_or_bus_gives_one_clear_line_and_nonzero_exit(tmp_path, capsys, argv_tail, toml, words, exit_code):
     config = _toml(tmp_path, toml)
     code = _run(["bus", *argv_tail[:1], "--config", config, *argv_tail[1:]])
-    assert code != 0
+    assert code == exit_code
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1
     for word in words:

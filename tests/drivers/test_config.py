@@ -42,7 +42,12 @@ def test_repo_toml_matches_defaults_and_robot_limits(robot):
     ('[drives]\neds = "nope.eds"\n', ["drives.eds", "nope.eds"]),
     ("[drives]\nquick_stop_option = 3\n", ["quick_stop_option"]),
     ("[[joints]]\nnode_id = 3\ndirection = 2\n", ["direction"]),
-    ('[timing]\nboot_timeout = "long"\n', ["'long'"]),  # mrguide.config's float hook does not name the key
+    ('[timing]\nboot_timeout = "long"\n', ["timing.boot_timeout", "'long'"]),
+    ("[timing]\nboot_timeout = nan\n", ["timing.boot_timeout", "nan"]),
+    ("[timing]\nenable_timeout = inf\n", ["timing.enable_timeout", "inf"]),
+    ("[bus]\noptions = { recieve_own_messages = true }\n", ["bus.options", "recieve_own_messages", "virtual"]),
+    ("[bus]\noptions = { rx_queue_size = nan }\n", ["bus.options: 'rx_queue_size' = nan"]),
+    ("[[joints]]\nnode_id = 3\ngear_ratio = 0.0\n", ["joints (node 3).gear_ratio"]),
 ])
 def test_bad_values_name_the_key_and_the_file(tmp_path, toml, words):
     path = tmp_path / "bus.toml"

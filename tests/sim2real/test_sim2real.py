@@ -70,3 +70,28 @@ def test_cli_refuses_a_bad_policy(tmp_path, capsys):
     bad = tmp_path / "bad.npz"
     np.savez(bad, W0=np.zeros((4, 11)))
     assert main(["sim2real", "--policy", str(bad), "--real-config", str(REAL), "--out", str(tmp_path), "--quiet"]) == 2
+
+
+def test_sweep_runs_each_value_as_its_type_and_reports_it(tmp_path, run_cli, policy_file, monkeypatch):
+    """A sweep reaches the runs with the parameter's own type (whole latencies) and its rows get into the report
+    (the figure labels sweep rows by their name)."""
+    seen = []
+
+    def run_real(policy_path, cfg, bus, seed, episodes, log_path, *args, hmd_overrides=None, **kwargs):
+        seen.append((cfg.twin.reality_gap.actuator_latency, hmd_overrides, seed))
+        return ["success"] * episodes
+
+    monkeypatch.setattr(s2r, "run_real", run_real)
+    out = tmp_path / "out"
+    result = run_cli(["sim2real", "--policy", policy_file(tmp_path / "p.npz"), "--real-config", REAL, "--out", out,
+                      "--quiet", "--seeds", 2, "--episodes", 3, "--sweep", "actuator_latency=0,3",
+                      "--sweep", "tracking_noise_m=0.004"])
+    assert result.code == 0, result.err
+    assert seen == [(0, None, 0), (0, None, 1), (3, None, 0), (3, None, 1),
+                    (2, {"tracking_noise_m": 0.004}, 0), (2, {"tracking_noise_m": 0.004}, 1)]
+    assert all(type(latency) is int for latency, *_ in seen)
+    rows = (out / "sim2real.csv").read_text().splitlines()
+    assert [r.split(",")[0] for r in rows[1:]] == ["real_exact actuator_latency=0", "real_exact actuator_latency=3",
+                                                   "real_hmd tracking_noise_m=0.004"]
+    assert (out / "fig8_sim2real.png").stat().st_size > 1000 and "| real_hmd tracking_noise_m=0.004 |" in result.out
+    assert sorted(p.name for p in out.iterdir()) == ["fig8_sim2real.png", "sim2real.csv", "sim2real.md"]

@@ -23,6 +23,7 @@ from dataclasses import dataclass, replace
 import canopen
 import numpy as np
 
+from mrguide.config import ConfigError
 from mrguide.drivers.bus import BusReceiver, ReceiverStats, open_bus
 from mrguide.drivers.config import CobotBusConfig, eds_path
 from mrguide.drivers.conversion import JointConversion
@@ -66,7 +67,7 @@ class SimulatedCobot:
 
     def __init__(self, config: CobotBusConfig, plant: Plant, seed: int = 0) -> None:
         if plant.dof != len(config.joints):
-            raise ValueError(f"plant has {plant.dof} joints, bus config {len(config.joints)} drives")
+            raise ConfigError(f"joints: {len(config.joints)} drives configured, the plant has {plant.dof} joints")
         self.config = config
         self.plant = plant
         self.faults = FaultInjector(seed)

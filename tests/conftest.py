@@ -1,0 +1,76 @@
+"""Shared by the CLI tests: run `mrguide.cli.main` in-process and check how a bad input was refused."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+
+@dataclass
+class CliRun:
+    """Exit code (argparse's SystemExit included) and output of one `mrguide` command."""
+
+    code: int
+    out: str
+    err: str
+
+    def assert_refused(self, *words: str) -> str:
+        """Exit 2, no traceback, and one line on stderr naming each of `words` (argparse may print its usage
+        lines before it). Returns that line."""
+        assert self.code == 2, (self.code, self.err)
+        assert "Traceback" not in self.err and "Traceback" not in self.out
+        lines = self.err.strip().splitlines()
+        assert lines, "nothing on stderr"
+        usage = lines[:-1]
+        if usage:  # argparse: "usage: mrguide ..." (wrapped lines indented), then "mrguide ...: error: ..."
+            assert usage[0].startswith("usage: ") and all(line.startswith(" ") for line in usage[1:]), lines
+            assert ": error: argument " in lines[-1], lines
+        assert lines[-1].startswith("mrguide "), lines
+        for word in words:
+            assert word in lines[-1], (word, lines[-1])
+        return lines[-1]
+
+
+@pytest.fixture
+def run_cli(capsys):
+    """run_cli(argv) -> CliRun: `mrguide.cli.main(argv)` in-process."""
+    from mrguide.cli import main
+
+    def run(argv: list) -> CliRun:
+        try:
+            code = main([str(a) for a in argv])
+        except SystemExit as exc:
+            code = exc.code
+        out, err = capsys.readouterr()
+        return CliRun(code, out, err)
+
+    return run
+
+
+@pytest.fixture
+def policy_file():
+    """policy_file(path, metadata=None, arrays=None, drop=(), **changes) -> path: a valid one-layer policy file
+    (zero weights: a finite action everywhere, decision period 0.1 s) with `changes` to its metadata and the
+    keys in `drop` removed, or `metadata` replacing it whole, and `arrays` replacing layer arrays."""
+    from mrguide.config import to_dict
+    from mrguide.deploy.policy import FORMAT, FORMAT_VERSION
+    from mrguide.robot import Workspace
+    from mrguide.task import ACT_DIM, ACT_LAYOUT, OBS_DIM, OBS_LAYOUT, TaskConfig
+
+    good = {"format": FORMAT, "format_version": FORMAT_VERSION, "obs_layout": list(OBS_LAYOUT),
+            "act_layout": list(ACT_LAYOUT), "activations": ["tanh"],
+            "workspace": {"low": list(Workspace().low), "high": list(Workspace().high)},
+            "task": to_dict(TaskConfig()), "decision_period": 0.1}
+
+    def write(path: Path, metadata: Any = None, arrays: dict | None = None, drop: tuple = (), **changes: Any) -> Path:
+        meta = metadata if metadata is not None else {k: v for k, v in {**good, **changes}.items() if k not in drop}
+        layers = {"W0": np.zeros((ACT_DIM, OBS_DIM)), "b0": np.zeros(ACT_DIM), **(arrays or {})}
+        np.savez(path, metadata=np.array(json.dumps(meta)), **layers)
+        return path
+
+    return write
