@@ -10,7 +10,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from mrguide.cli_args import nonnegative_int, positive_int
+from mrguide.cli_args import ArgumentParser, nonnegative_int, positive_int
 from mrguide.drivers.errors import DriverError
 from mrguide.errors import InputError
 
@@ -149,7 +149,7 @@ def cmd_main(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="mrguide", description=__doc__)
+    p = ArgumentParser(prog="mrguide", description=__doc__)
     p.add_argument("-v", "--verbose", action="store_true", help="debug logging")
     sub = p.add_subparsers(dest="command", required=True)
 

@@ -6,6 +6,19 @@ import argparse
 import math
 
 
+class ArgumentParser(argparse.ArgumentParser):
+    """argparse's parser, but an option given "--" as its value is an error.
+
+    Python 3.11's argparse drops that "--" and hands the option an empty list (`--episodes --` gives
+    episodes = []), which would fail later with a traceback. Subparsers inherit this class.
+    """
+
+    def _get_values(self, action: argparse.Action, arg_strings: list[str]):
+        if action.option_strings and action.nargs is None and arg_strings == ["--"]:
+            self.error(f"argument {'/'.join(action.option_strings)}: expected a value, got '--'")
+        return super()._get_values(action, arg_strings)
+
+
 def positive_int(text: str) -> int:
     """An integer >= 1."""
     value = _int(text)

@@ -46,32 +46,31 @@ def from_dict(cls: type[T], data: dict[str, Any], where: str = "config") -> T:
         raise ConfigError(f"{where}: {exc}") from exc
 
 
-def _number_problem(cls: type, data: Any, prefix: str) -> str | None:
-    """The first number of `data` that cannot be a value of its field of `cls`: wrong type or not finite.
+def _number_problem(cls: Any, data: Any, prefix: str) -> str | None:
+    """The first number in `data` that cannot be a value of type `cls`: wrong type or not finite.
 
-    Every float of every config must be finite (no setting means "off" by NaN or inf); range checks are in
-    each dataclass's `__post_init__` (`check_number`).
+    Walks dataclasses, tuples (of numbers, of points, of tables) and plain numbers. Every float of every
+    config must be finite (no setting means "off" by NaN or inf); range checks are in each dataclass's
+    `__post_init__` (`check_number`). Other mismatches are left to dacite, which names them too.
     """
-    if not (dataclasses.is_dataclass(cls) and isinstance(data, dict)):
-        return None
-    hints = typing.get_type_hints(cls)
-    for f in dataclasses.fields(cls):
-        if f.name not in data:
-            continue
-        value, hint, key = data[f.name], hints[f.name], prefix + f.name
-        args = typing.get_args(hint)
-        if typing.get_origin(hint) is tuple and args and all(a in (float, int, Ellipsis) for a in args) \
-                and isinstance(value, (list, tuple)):
-            for i, v in enumerate(value):
-                problem = _scalar_problem(f"{key}[{i}]", v, int if args[0] is int else float)
+    key = prefix.rstrip(".")
+    if cls in (float, int):
+        return _scalar_problem(key, data, cls)
+    if dataclasses.is_dataclass(cls):
+        if not isinstance(data, dict):
+            return None
+        hints = typing.get_type_hints(cls)
+        for f in dataclasses.fields(cls):
+            if f.name in data:
+                problem = _number_problem(hints[f.name], data[f.name], f"{prefix}{f.name}.")
                 if problem:
                     return problem
-        elif hint in (float, int):
-            problem = _scalar_problem(key, value, hint)
-            if problem:
-                return problem
-        else:
-            problem = _number_problem(hint, value, key + ".")
+        return None
+    args = typing.get_args(cls)
+    if typing.get_origin(cls) is tuple and args and isinstance(data, (list, tuple)):
+        items = [args[0]] * len(data) if len(args) == 2 and args[1] is Ellipsis else list(args)
+        for i, (item_type, value) in enumerate(zip(items, data)):
+            problem = _number_problem(item_type, value, f"{key}[{i}].")
             if problem:
                 return problem
     return None

@@ -25,13 +25,13 @@ class RealityGap:
     vacuum_noise: float = 0.0  # kPa; std of the vacuum-level reading
 
     def __post_init__(self) -> None:
-        check_number("reality_gap.object_mass", self.object_mass, 1e-3, 100.0, " kg")
-        check_number("reality_gap.object_friction", self.object_friction, 1e-3, 10.0)
-        check_number("reality_gap.suction_break_force", self.suction_break_force, 1e-3, 1e4, " N")
-        check_number("reality_gap.actuator_latency", self.actuator_latency, 0, 1000, " control periods", integer=True)
-        check_number("reality_gap.actuator_lag", self.actuator_lag, 0.0, 10.0, " s")
-        check_number("reality_gap.joint_noise", self.joint_noise, 0.0, 0.5, " rad")
-        check_number("reality_gap.vacuum_noise", self.vacuum_noise, 0.0, 100.0, " kPa")
+        check_number("reality_gap.object_mass", self.object_mass, 1e-3, 10.0, " kg")
+        check_number("reality_gap.object_friction", self.object_friction, 0.01, 2.0)
+        check_number("reality_gap.suction_break_force", self.suction_break_force, 0.1, 1000.0, " N")
+        check_number("reality_gap.actuator_latency", self.actuator_latency, 0, 100, " control periods", integer=True)
+        check_number("reality_gap.actuator_lag", self.actuator_lag, 0.0, 1.0, " s")
+        check_number("reality_gap.joint_noise", self.joint_noise, 0.0, 0.1, " rad")
+        check_number("reality_gap.vacuum_noise", self.vacuum_noise, 0.0, 50.0, " kPa")
 
 
 @dataclass(frozen=True)
@@ -78,7 +78,7 @@ class TwinConfig:
     gui: bool = False
 
     def __post_init__(self) -> None:
-        check_number("twin.control_period", self.control_period, 1e-4, 0.1, " s")
+        check_number("twin.control_period", self.control_period, 5e-4, 0.1, " s")
         check_number("twin.decision_period", self.decision_period, 1e-4, 10.0, " s")
         ratio = self.decision_period / self.control_period
         if self.decision_period <= 0 or abs(ratio - round(ratio)) > 1e-6:

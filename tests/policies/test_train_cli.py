@@ -98,3 +98,9 @@ def test_experiment_numbers_refused(tmp_path, capsys, argv, words):
     except SystemExit as exc:
         code = exc.code
     assert code == 2 and words in capsys.readouterr().err
+
+
+def test_an_option_given_double_dash_is_refused_not_an_empty_list(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["train", "--steps=--"])
+    assert exc.value.code == 2 and "--steps: expected a value, got '--'" in capsys.readouterr().err
