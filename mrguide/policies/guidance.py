@@ -5,11 +5,14 @@ from __future__ import annotations
 
 import logging
 from collections import deque
+from dataclasses import dataclass, field
 from typing import Protocol
 
 import numpy as np
 
+from mrguide.config import ConfigError, check_number
 from mrguide.policies.annotations import Annotation, AnnotationError
+from mrguide.policies.experts import AnnotatorNoise
 from mrguide.task import TaskConfig, phase_from_progress, phase_target
 
 log = logging.getLogger(__name__)
@@ -94,3 +97,44 @@ class RunningMedianReference:
     def observe(self, obs: np.ndarray, annotation: Annotation) -> None:
         phase = phase_from_progress(obs[4])
         self.offsets[phase].append(np.asarray(annotation.target) - phase_target(phase, obs[5:8], obs[8:11], self.task))
+
+
+@dataclass(frozen=True)
+class GuidanceConfig:
+    """Expert guidance ([guidance] in a TOML config)."""
+
+    enabled: bool = True
+    r_threshold: float = -5.0  # R_th of Eq. 12 (ours; the paper gives no value)
+    intake_steps: int = 10_000  # expert intake window: the first 10k of 20k steps (paper, Sec. IV-B)
+    lam_max: float = 0.9  # λ_max (Table I)
+    lam_min: float = 0.1  # λ_min (Table I)
+    mode: str = "replay"  # "replay": restore the episode start and demonstrate; "takeover": from now on
+    delta: float = 0.05  # Δ of Eq. 13, m (ours)
+    reference: str = "nominal"  # a^e of Eq. 13: "nominal" (model target) or "running_median"
+    cache_tolerance: float = 0.005  # m; observations this close reuse a cached annotation
+    reask_after: int = 15  # expert steps on one waypoint without reaching it before it is asked again (0: never; ours)
+    source: str = "annotator"  # "oracle", "annotator" (oracle + noise), "file", or "live" (a person: `--expert live`)
+    noise: AnnotatorNoise = field(default_factory=AnnotatorNoise)
+    #: m, std per axis of fresh Gaussian noise on every stored expert action, after Eq. 13 (so the bound
+    #: cannot filter it): the paper's "perturbing expert actions" (Sec. V-E, Fig. 7). `noise` above is
+    #: the other reading: a persistent error of each marked waypoint.
+    action_noise: float = 0.0
+    annotation_file: str = ""  # for source = "file"
+
+    def __post_init__(self) -> None:
+        if self.mode not in ("replay", "takeover"):
+            raise ConfigError(f"guidance.mode must be 'replay' or 'takeover', got {self.mode!r}")
+        if self.reference not in ("nominal", "running_median"):
+            raise ConfigError(f"guidance.reference must be 'nominal' or 'running_median', got {self.reference!r}")
+        if self.source not in ("oracle", "annotator", "file", "live"):
+            raise ConfigError(f"guidance.source must be 'oracle', 'annotator', 'file' or 'live', got {self.source!r}")
+        if self.source == "file" and not self.annotation_file:
+            raise ConfigError("guidance.source = 'file' needs guidance.annotation_file")
+        if not 0.0 <= self.lam_min <= self.lam_max <= 1.0:
+            raise ConfigError(f"guidance: need 0 <= lam_min <= lam_max <= 1, got {self.lam_min}, {self.lam_max}")
+        check_number("guidance.r_threshold", self.r_threshold, -1e4, 0.0)
+        check_number("guidance.intake_steps", self.intake_steps, 0, 10**9, integer=True)
+        check_number("guidance.delta", self.delta, 1e-4, 1.0, " m")
+        check_number("guidance.cache_tolerance", self.cache_tolerance, 0.0, 0.1, " m")
+        check_number("guidance.reask_after", self.reask_after, 0, 10**6, integer=True)
+        check_number("guidance.action_noise", self.action_noise, 0.0, 1.0, " m")

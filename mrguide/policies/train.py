@@ -15,75 +15,28 @@ import logging
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import torch
 
 from mrguide import __version__
-from mrguide.config import ConfigError, check_number, load_section, to_dict
-from mrguide.policies.ddpg import DDPG, DDPGConfig
-from mrguide.policies.annotations import Annotation, AnnotationCache
+from mrguide.config import check_number, load_section, to_dict
+from mrguide.policies.annotations import AnnotationCache
 from mrguide.policies.checkpoint import CheckpointError, read_checkpoint, write_checkpoint
-from mrguide.policies.experts import (ANNOTATOR_SEED_OFFSET, AnnotatorNoise, ExpertSource, FileExpert, OracleExpert,
-                                      SimulatedAnnotator)
-from mrguide.policies.guidance import (
-    NominalReference,
-    ReferencePose,
-    RunningMedianReference,
-    ThresholdTrigger,
-    bounded_projection,
-    expert_ratio,
-)
+from mrguide.policies.ddpg import DDPG, DDPGConfig
+from mrguide.policies.experts import ExpertSource
+from mrguide.policies.guidance import (GuidanceConfig, NominalReference, ReferencePose, RunningMedianReference,
+                                       ThresholdTrigger, expert_ratio)
+from mrguide.policies.guided_expert import GuidedExpert, make_expert_source
 from mrguide.policies.replay import TaggedReplay
 from mrguide.robot import Workspace
-from mrguide.task import ACT_DIM, OBS_DIM, TaskConfig, annotation_action
+from mrguide.task import ACT_DIM, OBS_DIM
 from mrguide.twin.env import EnvConfig, PickPlaceEnv
 
 log = logging.getLogger(__name__)
 
-
-
-@dataclass(frozen=True)
-class GuidanceConfig:
-    """Expert guidance ([guidance] in a TOML config)."""
-
-    enabled: bool = True
-    r_threshold: float = -5.0  # R_th of Eq. 12 (ours; the paper gives no value)
-    intake_steps: int = 10_000  # expert intake window: the first 10k of 20k steps (paper, Sec. IV-B)
-    lam_max: float = 0.9  # λ_max (Table I)
-    lam_min: float = 0.1  # λ_min (Table I)
-    mode: str = "replay"  # "replay": restore the episode start and demonstrate; "takeover": from now on
-    delta: float = 0.05  # Δ of Eq. 13, m (ours)
-    reference: str = "nominal"  # a^e of Eq. 13: "nominal" (model target) or "running_median"
-    cache_tolerance: float = 0.005  # m; observations this close reuse a cached annotation
-    reask_after: int = 15  # expert steps on one waypoint without reaching it before it is asked again (0: never; ours)
-    source: str = "annotator"  # "oracle", "annotator" (oracle + noise), "file", or "live" (a person: `--expert live`)
-    noise: AnnotatorNoise = field(default_factory=AnnotatorNoise)
-    #: m, std per axis of fresh Gaussian noise on every stored expert action, after Eq. 13 (so the bound
-    #: cannot filter it): the paper's "perturbing expert actions" (Sec. V-E, Fig. 7). `noise` above is
-    #: the other reading: a persistent error of each marked waypoint.
-    action_noise: float = 0.0
-    annotation_file: str = ""  # for source = "file"
-
-    def __post_init__(self) -> None:
-        if self.mode not in ("replay", "takeover"):
-            raise ConfigError(f"guidance.mode must be 'replay' or 'takeover', got {self.mode!r}")
-        if self.reference not in ("nominal", "running_median"):
-            raise ConfigError(f"guidance.reference must be 'nominal' or 'running_median', got {self.reference!r}")
-        if self.source not in ("oracle", "annotator", "file", "live"):
-            raise ConfigError(f"guidance.source must be 'oracle', 'annotator', 'file' or 'live', got {self.source!r}")
-        if self.source == "file" and not self.annotation_file:
-            raise ConfigError("guidance.source = 'file' needs guidance.annotation_file")
-        if not 0.0 <= self.lam_min <= self.lam_max <= 1.0:
-            raise ConfigError(f"guidance: need 0 <= lam_min <= lam_max <= 1, got {self.lam_min}, {self.lam_max}")
-        check_number("guidance.r_threshold", self.r_threshold, -1e4, 0.0)
-        check_number("guidance.intake_steps", self.intake_steps, 0, 10**9, integer=True)
-        check_number("guidance.delta", self.delta, 1e-4, 1.0, " m")
-        check_number("guidance.cache_tolerance", self.cache_tolerance, 0.0, 0.1, " m")
-        check_number("guidance.reask_after", self.reask_after, 0, 10**6, integer=True)
-        check_number("guidance.action_noise", self.action_noise, 0.0, 1.0, " m")
 
 
 @dataclass(frozen=True)
@@ -129,74 +82,6 @@ def obs_scaling(ws: Workspace) -> tuple[np.ndarray, np.ndarray]:
     return offset, scale
 
 
-class GuidedExpert:
-    """Expert actions for the learner: cache → source (counted) → bounded projection → normalized action.
-
-    A waypoint the arm has followed for `reask_after` consecutive expert steps without the phase
-    advancing was not reachable as marked (noise, a slip of the hand): it is asked again, as a person
-    watching the arm would re-mark it, and the new mark supersedes the old one in the cache.
-    """
-
-    def __init__(self, source: ExpertSource, reference: ReferencePose, cache: AnnotationCache, delta: float, task: TaskConfig,
-                 to_normalized, reask_after: int = 0, action_noise: float = 0.0, seed: int = 0):
-        self.source, self.reference, self.cache = source, reference, cache
-        self.action_noise = action_noise
-        self.rng = np.random.default_rng(seed + ACTION_NOISE_SEED_OFFSET)  # draws only when action_noise > 0
-        self.delta = delta
-        self.task = task
-        self.to_normalized = to_normalized
-        self.reask_after = reask_after
-        self.projected = 0  # annotations moved onto the Δ-sphere
-        self.remarks = 0  # waypoints asked again because the arm did not reach them
-        self._streak = (-1, 0)  # (cache index in use, consecutive expert steps on it)
-
-    def begin_demonstration(self) -> None:
-        self._streak = (-1, 0)
-
-    def action(self, obs: np.ndarray) -> np.ndarray | None:
-        """The expert's normalized action for `obs`, or None when nobody annotated (drop the demonstration)."""
-        hit = self.cache.lookup(obs)
-        if hit is None:
-            ann = self._ask(obs, None)
-        elif self.reask_after and self._streak == (hit.index, self.reask_after):
-            self.remarks += 1
-            ann = self._ask(obs, hit)
-        else:
-            self.cache.reused += 1
-            ann = hit.annotation
-            self._streak = (hit.index, self._streak[1] + 1 if self._streak[0] == hit.index else 1)
-        if ann is None:
-            return None
-        ref = self.reference.reference(obs)
-        target = bounded_projection(ann.target, ref, self.delta)
-        self.projected += int(not np.allclose(target, ann.target))
-        if self.action_noise > 0:
-            target = target + self.rng.normal(0.0, self.action_noise, 3)
-        return annotation_action(obs, target, ann.grip, self.task, self.to_normalized)
-
-    def _ask(self, obs: np.ndarray, previous) -> Annotation | None:
-        ann = self.source.annotate(obs, previous.annotation if previous else None)
-        self.cache.asked += 1
-        if ann is None:
-            return None
-        index = self.cache.insert(obs, ann, supersedes=previous.index if previous else None)
-        self.reference.observe(obs, ann)
-        self._streak = (index, 1)
-        return ann
-
-
-def make_expert_source(g: GuidanceConfig, env: PickPlaceEnv, seed: int) -> ExpertSource:
-    """The configured in-process expert source (a live person is attached by `mrguide train --expert live`)."""
-    if g.source == "oracle":
-        return OracleExpert(env.task_cfg)
-    if g.source == "annotator":
-        return SimulatedAnnotator(env.task_cfg, g.noise, env.workspace, seed=seed + ANNOTATOR_SEED_OFFSET)
-    if g.source == "file":
-        return FileExpert(g.annotation_file, g.cache_tolerance)
-    raise ConfigError("guidance.source = 'live' needs a person: run `mrguide train --expert live`")
-
-
-ACTION_NOISE_SEED_OFFSET = 104_729  # the expert-action noise of training seed s draws from RNG seed s + this
 EVAL_SEED_BASE = 1_000_000  # evaluation env seeds start here (training seeds come from the run's RNG)
 METRIC_FIELDS = ("step", "episode", "kind", "return", "success", "outcome", "length", "triggered", "lambda", "expert_ratio",
                  "asked", "reused", "remarks", "skipped", "wall_s")

@@ -13,7 +13,8 @@ from hypothesis import strategies as st
 
 from mrguide.config import ConfigError, from_dict
 from mrguide.policies.ddpg import DDPGConfig
-from mrguide.policies.train import GuidanceConfig, TrainConfig
+from mrguide.policies.guidance import GuidanceConfig
+from mrguide.policies.train import TrainConfig
 from mrguide.task import TaskConfig
 from mrguide.twin.config import TwinConfig
 

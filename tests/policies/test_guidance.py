@@ -191,7 +191,7 @@ class _Recorder:
 
 def _guided(source, tmp_path, reask_after):
     from mrguide.policies.guidance import NominalReference
-    from mrguide.policies.train import GuidedExpert
+    from mrguide.policies.guided_expert import GuidedExpert
 
     task = TaskConfig()
     cache = AnnotationCache(0.005, tmp_path / "ann.jsonl")
@@ -236,7 +236,7 @@ def test_nobody_answering_gives_no_action(tmp_path):
 
 def test_action_noise_perturbs_every_stored_action_afresh_after_the_projection(tmp_path):
     from mrguide.policies.guidance import NominalReference
-    from mrguide.policies.train import GuidedExpert
+    from mrguide.policies.guided_expert import GuidedExpert
 
     task, ws = TaskConfig(), Workspace()
     exact = Annotation(np.array([0.5, -0.1, 0.13]), -1.0)
