@@ -104,3 +104,19 @@ def test_an_option_given_double_dash_is_refused_not_an_empty_list(capsys):
     with pytest.raises(SystemExit) as exc:
         main(["train", "--steps=--"])
     assert exc.value.code == 2 and "--steps: expected a value, got '--'" in capsys.readouterr().err
+
+
+def test_a_refusal_is_exactly_one_line_on_stderr_in_a_real_process(tmp_path):
+    """Nothing else reaches stderr either (PyBullet's import banner is kept off it)."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    cfg = tmp_path / "bad.toml"
+    cfg.write_text("[train]\neval_episodes = 0\n")
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[2])}
+    res = subprocess.run([sys.executable, "-m", "mrguide.cli", "train", "--config", str(cfg), "--out", str(tmp_path / "r")],
+                         capture_output=True, text=True, env=env, timeout=120)
+    assert res.returncode == 2 and res.stdout == ""
+    assert res.stderr.splitlines() == [f"mrguide train: {cfg} [train]: train.eval_episodes = 0: expected an integer in [1, 100000]"]
