@@ -119,6 +119,9 @@ class GuidanceConfig:
     #: cannot filter it): the paper's "perturbing expert actions" (Sec. V-E, Fig. 7). `noise` above is
     #: the other reading: a persistent error of each marked waypoint.
     action_noise: float = 0.0
+    #: "executed": the perturbed action also drives the arm; "stored": the arm follows the clean action
+    #: and only the stored transition carries the perturbed one (label noise).
+    action_noise_on: str = "executed"
     annotation_file: str = ""  # for source = "file"
 
     def __post_init__(self) -> None:
@@ -138,3 +141,5 @@ class GuidanceConfig:
         check_number("guidance.cache_tolerance", self.cache_tolerance, 0.0, 0.1, " m")
         check_number("guidance.reask_after", self.reask_after, 0, 10**6, integer=True)
         check_number("guidance.action_noise", self.action_noise, 0.0, 1.0, " m")
+        if self.action_noise_on not in ("executed", "stored"):
+            raise ConfigError(f"guidance.action_noise_on must be 'executed' or 'stored', got {self.action_noise_on!r}")

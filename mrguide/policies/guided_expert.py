@@ -3,6 +3,8 @@ bounded by Eq. 13, optionally perturbed, and turned into normalized actions."""
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from mrguide.config import ConfigError
@@ -15,6 +17,16 @@ from mrguide.twin.env import PickPlaceEnv
 ACTION_NOISE_SEED_OFFSET = 104_729  # the expert-action noise of training seed s draws from RNG seed s + this
 
 
+class ExpertStep(NamedTuple):
+    """What the expert does at one step: the action that drives the arm and the one stored with ζ = 1.
+
+    They differ only under `guidance.action_noise_on = "stored"` (noisy labels, clean execution).
+    """
+
+    executed: np.ndarray
+    stored: np.ndarray
+
+
 class GuidedExpert:
     """Expert actions for the learner: cache → source (counted) → bounded projection → normalized action.
 
@@ -24,9 +36,9 @@ class GuidedExpert:
     """
 
     def __init__(self, source: ExpertSource, reference: ReferencePose, cache: AnnotationCache, delta: float, task: TaskConfig,
-                 to_normalized, reask_after: int = 0, action_noise: float = 0.0, seed: int = 0):
+                 to_normalized, reask_after: int = 0, action_noise: float = 0.0, noise_on: str = "executed", seed: int = 0):
         self.source, self.reference, self.cache = source, reference, cache
-        self.action_noise = action_noise
+        self.action_noise, self.noise_on = action_noise, noise_on
         self.rng = np.random.default_rng(seed + ACTION_NOISE_SEED_OFFSET)  # draws only when action_noise > 0
         self.delta = delta
         self.task = task
@@ -39,8 +51,8 @@ class GuidedExpert:
     def begin_demonstration(self) -> None:
         self._streak = (-1, 0)
 
-    def action(self, obs: np.ndarray) -> np.ndarray | None:
-        """The expert's normalized action for `obs`, or None when nobody annotated (drop the demonstration)."""
+    def action(self, obs: np.ndarray) -> ExpertStep | None:
+        """The expert's normalized action for `obs` (executed and stored), or None when nobody annotated."""
         hit = self.cache.lookup(obs)
         if hit is None:
             ann = self._ask(obs, None)
@@ -56,9 +68,11 @@ class GuidedExpert:
         ref = self.reference.reference(obs)
         target = bounded_projection(ann.target, ref, self.delta)
         self.projected += int(not np.allclose(target, ann.target))
-        if self.action_noise > 0:
-            target = target + self.rng.normal(0.0, self.action_noise, 3)
-        return annotation_action(obs, target, ann.grip, self.task, self.to_normalized)
+        clean = annotation_action(obs, target, ann.grip, self.task, self.to_normalized)
+        if self.action_noise == 0:
+            return ExpertStep(clean, clean)
+        noisy = annotation_action(obs, target + self.rng.normal(0.0, self.action_noise, 3), ann.grip, self.task, self.to_normalized)
+        return ExpertStep(noisy, noisy) if self.noise_on == "executed" else ExpertStep(clean, noisy)
 
     def _ask(self, obs: np.ndarray, previous) -> Annotation | None:
         ann = self.source.annotate(obs, previous.annotation if previous else None)

@@ -118,7 +118,7 @@ class Trainer:
         )
         self.cache = AnnotationCache(guidance.cache_tolerance, self.out / "annotations.jsonl")
         self.expert = GuidedExpert(self.source, reference, self.cache, guidance.delta, self.env.task_cfg, self.env.workspace.to_normalized,
-                                   guidance.reask_after, guidance.action_noise, cfg.seed)
+                                   guidance.reask_after, guidance.action_noise, guidance.action_noise_on, cfg.seed)
         self.trigger = ThresholdTrigger(guidance.r_threshold)
         self.step = 0
         self.episode = 0
@@ -171,9 +171,10 @@ class Trainer:
     def lam(self) -> float:
         return expert_ratio(self.step, self.cfg.total_steps, self.guidance.lam_max, self.guidance.lam_min) if self.guidance.enabled else 0.0
 
-    def _env_step(self, action: np.ndarray, zeta: int, obs: np.ndarray):
+    def _env_step(self, action: np.ndarray, zeta: int, obs: np.ndarray, stored: np.ndarray | None = None):
+        """Execute `action`; store the transition with `stored` as its action (default: the executed one)."""
         next_obs, r, term, trunc, info = self.env.step(action)
-        self.replay.add(obs, action, r, next_obs, term, zeta)
+        self.replay.add(obs, action if stored is None else stored, r, next_obs, term, zeta)
         self.step += 1
         if len(self.replay) >= self.cfg.learning_starts:
             t = time.perf_counter()
@@ -220,12 +221,12 @@ class Trainer:
         ret, length, info = 0.0, 0, {"outcome": None, "is_success": False}
         self.expert.begin_demonstration()
         while self.step < end and not self.stop_requested.is_set():
-            action = self.expert.action(obs)
-            if action is None:
+            step = self.expert.action(obs)
+            if step is None:
                 self.skipped += int(not self.stop_requested.is_set())
                 info = {"outcome": "skipped", "is_success": False}
                 break
-            obs, r, term, trunc, info = self._env_step(action, 1, obs)
+            obs, r, term, trunc, info = self._env_step(step.executed, 1, obs, step.stored)
             ret += r
             length += 1
             if term or trunc:

@@ -203,10 +203,10 @@ def test_a_waypoint_not_reached_is_asked_again_and_supersedes_the_first(tmp_path
     expert, cache = _guided(src, tmp_path, reask_after=15)
     expert.begin_demonstration()
     obs = _obs(1)  # grasp phase; the arm never gets there, so the phase does not advance
-    actions = [expert.action(obs) for _ in range(15)]  # the mark is followed for 15 steps
+    actions = [expert.action(obs).executed for _ in range(15)]  # the mark is followed for 15 steps
     assert src.previous == [None] and cache.asked == 1 and cache.reused == 14 and expert.remarks == 0
     assert np.allclose(actions[0], actions[14])
-    again = expert.action(obs)  # 16th step on the same waypoint: asked again, with the old mark
+    again = expert.action(obs).executed  # 16th step on the same waypoint: asked again, with the old mark
     assert expert.remarks == 1 and cache.asked == 2 and np.allclose(src.previous[1].target, [0.5, -0.1, 0.06])
     assert not np.allclose(again, actions[0]) and cache.lookup(obs).index == 1 and len(cache) == 1
     fresh = AnnotationCache(0.005)
@@ -234,7 +234,7 @@ def test_nobody_answering_gives_no_action(tmp_path):
     assert expert.action(_obs(0)) is None and len(cache) == 0 and cache.asked == 1
 
 
-def test_action_noise_perturbs_every_stored_action_afresh_after_the_projection(tmp_path):
+def test_action_noise_perturbs_every_action_afresh_after_the_projection(tmp_path):
     from mrguide.policies.guidance import NominalReference
     from mrguide.policies.guided_expert import GuidedExpert
 
@@ -245,13 +245,19 @@ def test_action_noise_perturbs_every_stored_action_afresh_after_the_projection(t
         def annotate(self, obs, previous=None):
             return exact
 
-    def actions(sigma, seed=0):
-        expert = GuidedExpert(Exact(), NominalReference(task), AnnotationCache(0.005), 0.05, task, ws.to_normalized, 0, sigma, seed)
-        return np.array([expert.action(_obs(0))[:3] for _ in range(400)])
+    def steps(sigma, seed=0, on="executed"):
+        expert = GuidedExpert(Exact(), NominalReference(task), AnnotationCache(0.005), 0.05, task, ws.to_normalized, 0, sigma,
+                              on, seed)
+        out = [expert.action(_obs(0)) for _ in range(400)]
+        return np.array([s.executed[:3] for s in out]), np.array([s.stored[:3] for s in out])
 
-    clean, noisy = actions(0.0), actions(0.03)
+    clean, _ = steps(0.0)
     assert np.allclose(clean, clean[0])  # one mark, one action
+    noisy, stored = steps(0.03)
+    assert np.array_equal(noisy, stored)  # "executed": the perturbed action drives the arm and is stored
     err = ws.to_cartesian(noisy) - ws.to_cartesian(clean)
     assert err.std(axis=0) == pytest.approx([0.03] * 3, rel=0.15)  # fresh per step, not clipped to Δ = 5 cm
     assert np.abs(err).max() > 0.05 and len({tuple(r) for r in noisy}) == 400
-    assert np.array_equal(actions(0.03), noisy) and not np.array_equal(actions(0.03, seed=1), noisy)
+    assert np.array_equal(steps(0.03)[0], noisy) and not np.array_equal(steps(0.03, seed=1)[0], noisy)
+    executed, labels = steps(0.03, on="stored")  # "stored": clean execution, noisy labels (same draws)
+    assert np.allclose(executed, clean) and np.array_equal(labels, noisy)
