@@ -182,7 +182,8 @@ def build_parser() -> argparse.ArgumentParser:
     sp.set_defaults(func=cmd_deploy)
 
     from mrguide.calibration.commands import add_calibrate_command
-    from mrguide.policies.commands import add_experiment_command, add_train_command
+    from mrguide.experiments.commands import add_experiment_command
+    from mrguide.policies.commands import add_train_command
 
     add_calibrate_command(sub)
     from mrguide.drivers.commands import add_bus_commands

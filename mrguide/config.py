@@ -122,6 +122,23 @@ def load_optional_section(cls: type[T], path: str | Path | None, section: str) -
     return load_section(cls, path, section)
 
 
+def replace_path(obj: T, path: str, value: Any, where: str = "override") -> T:
+    """A copy of config `obj` with the field at dotted `path` (e.g. "noise.sigma") set to `value`.
+
+    Checked exactly as a value read from a file (types, finiteness, unknown keys, ranges).
+    """
+    data = to_dict(obj)
+    node, keys = data, path.split(".")
+    for key in keys[:-1]:
+        if not isinstance(node.get(key), dict):
+            raise ConfigError(f"{where}: {path}: {key!r} is not a table of {type(obj).__name__}")
+        node = node[key]
+    if keys[-1] not in node:
+        raise ConfigError(f"{where}: {path}: no such key in {type(obj).__name__}")
+    node[keys[-1]] = value
+    return from_dict(type(obj), data, where)
+
+
 def to_dict(obj: Any) -> dict[str, Any]:
     """A dataclass as a plain dict (tuples become lists), for metadata and logs."""
     return dataclasses.asdict(obj)

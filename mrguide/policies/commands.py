@@ -1,4 +1,4 @@
-"""`mrguide train` and `mrguide experiment`: argument parsing and progress display for the policies package."""
+"""`mrguide train`: argument parsing, progress display, Ctrl-C handling and the live-session hook."""
 
 from __future__ import annotations
 
@@ -184,30 +184,3 @@ def _stop_on_sigint(tr, session: LiveSessionLike | None, bar: tqdm):
         yield
     finally:
         signal.signal(signal.SIGINT, previous)
-
-
-def add_experiment_command(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("experiment", help="the paper's experiments")
-    p.add_argument("name", choices=["learning-curves"], help="learning-curves: baseline vs guided DDPG (Fig. 3, 5, 9)")
-    p.add_argument("--config", help="TOML config for every run")
-    p.add_argument("--out", default="runs/learning-curves")
-    p.add_argument("--seeds", type=positive_int, default=10)
-    p.add_argument("--steps", type=positive_int, default=20_000)
-    p.add_argument("--workers", type=positive_int, default=2, help="parallel worker processes")
-    p.add_argument("--variants", default="baseline,guided", help="comma-separated subset of baseline,guided")
-    p.add_argument("--quiet", action="store_true")
-    p.set_defaults(func=cmd_experiment)
-
-
-def cmd_experiment(args: argparse.Namespace) -> int:
-    from mrguide.policies.experiments import VARIANTS, run_learning_curves
-
-    variants = tuple(v for v in VARIANTS if v in args.variants.split(","))
-    unknown = set(args.variants.split(",")) - set(VARIANTS)
-    if unknown or not variants:
-        print(f"mrguide experiment: --variants must name some of {', '.join(VARIANTS)}, got {args.variants!r}", file=sys.stderr)
-        return 2
-    md = run_learning_curves(Path(args.out), args.seeds, args.steps, args.workers, args.config, not args.quiet, variants)
-    print(md.read_text())
-    print(f"figures and CSVs in {args.out}")
-    return 0

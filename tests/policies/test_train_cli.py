@@ -90,14 +90,21 @@ def test_bad_annotation_files_are_refused_naming_file_and_line(tmp_path, capsys,
 
 @pytest.mark.parametrize("argv, words", [
     (["--seeds", "0"], "--seeds"), (["--workers", "0"], "--workers"), (["--steps", "-1"], "--steps"),
-    (["--variants", "guided,turbo"], "--variants"),
 ])
 def test_experiment_numbers_refused(tmp_path, capsys, argv, words):
-    try:
-        code = main(["experiment", "learning-curves", "--out", str(tmp_path / "x"), *argv])
-    except SystemExit as exc:
-        code = exc.code
-    assert code == 2 and words in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exc:
+        main(["experiment", "learning-curves", "--out", str(tmp_path / "x"), *argv])
+    assert exc.value.code == 2 and words in capsys.readouterr().err
+
+
+def test_experiment_config_refused_before_any_run(tmp_path, capsys):
+    cfg = tmp_path / "e.toml"
+    cfg.write_text('[experiment]\nvariants = ["guided", "turbo"]\n')
+    assert main(["experiment", "learning-curves", "--config", str(cfg), "--out", str(tmp_path / "x")]) == 2
+    assert "experiment.variants" in capsys.readouterr().err and not (tmp_path / "x").exists()
+    cfg.write_text('[experiment]\noverrides = {"guidance.noise.sigma" = -1}\n')
+    assert main(["experiment", "learning-curves", "--config", str(cfg), "--out", str(tmp_path / "x")]) == 2
+    assert "guidance.noise.sigma = -1" in capsys.readouterr().err and not (tmp_path / "x").exists()
 
 
 def test_an_option_given_double_dash_is_refused_not_an_empty_list(capsys):

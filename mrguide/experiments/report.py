@@ -1,0 +1,65 @@
+"""Experiment reports: CSV and markdown tables written whole, run files read back, figures with the
+paper's numbers drawn beside ours."""
+
+from __future__ import annotations
+
+import csv
+import io
+from pathlib import Path
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402  (after choosing the non-interactive backend)
+
+from mrguide.output_files import write_files_atomically  # noqa: E402
+
+PAPER_COLOR = "0.35"
+
+
+def read_csv(path: Path) -> list[dict[str, str]]:
+    with path.open() as fh:
+        return list(csv.DictReader(fh))
+
+
+def csv_bytes(rows: list[dict[str, Any]], fields: list[str]) -> bytes:
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fields, extrasaction="ignore", lineterminator="\n")
+    w.writeheader()
+    w.writerows(rows)
+    return buf.getvalue().encode()
+
+
+def markdown(rows: list[dict[str, Any]], columns: list[tuple[str, str]]) -> str:
+    """A markdown table of `rows` with (key, header) columns; None shows as an em dash."""
+    lines = ["| " + " | ".join(h for _, h in columns) + " |", "|" + " --- |" * len(columns)]
+    for r in rows:
+        lines.append("| " + " | ".join("—" if r.get(k) is None else str(r[k]) for k, _ in columns) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def write_report(out: Path, files: dict[str, bytes]) -> None:
+    """Write the named report files into `out` together (each whole, via temporary files and renames)."""
+    out.mkdir(parents=True, exist_ok=True)
+    write_files_atomically({out / name: data for name, data in files.items()})
+
+
+def figure(title: str, xlabel: str, ylabel: str, size: tuple[float, float] = (7.0, 4.0)):
+    fig, ax = plt.subplots(figsize=size)
+    ax.set(title=title, xlabel=xlabel, ylabel=ylabel)
+    return fig, ax
+
+
+def png_bytes(fig) -> bytes:
+    buf = io.BytesIO()
+    fig.tight_layout()
+    fig.savefig(buf, format="png", dpi=120)
+    plt.close(fig)
+    return buf.getvalue()
+
+
+def paper_note(ax, text: str) -> None:
+    """The paper's figure for this plot, as a boxed note in the corner (when it gives no curve to draw)."""
+    ax.text(0.99, 0.02, f"paper: {text}", transform=ax.transAxes, ha="right", va="bottom", fontsize=8,
+            color=PAPER_COLOR, bbox={"boxstyle": "round", "fc": "white", "ec": PAPER_COLOR, "alpha": 0.9})

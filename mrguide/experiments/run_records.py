@@ -1,0 +1,71 @@
+"""What one finished training run says, read back from its files (eval.csv, metrics.csv, done)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from mrguide.experiments.report import read_csv
+from mrguide.experiments.runs import TrainRun, finished
+from mrguide.experiments.stats import Convergence, convergence
+
+
+@dataclass(frozen=True)
+class RunRecord:
+    """A run's evaluations, cumulative annotations, realized expert ratios and its convergence."""
+
+    run: TrainRun
+    eval_steps: np.ndarray
+    eval_rates: np.ndarray
+    eval_returns: np.ndarray
+    row_steps: np.ndarray  # metrics.csv: one row per episode
+    asked: np.ndarray  # cumulative annotations asked, per row
+    ratio: np.ndarray  # realized expert ratio per row
+    converged: Convergence
+    wall_s: float
+
+    @property
+    def annotations_until_convergence(self) -> int | None:
+        c = self.converged.step
+        if c is None:
+            return None
+        before = self.row_steps <= c
+        return int(self.asked[before].max()) if before.any() else 0
+
+    @property
+    def annotations_total(self) -> int:
+        return int(self.asked.max(initial=0))
+
+    def returns_on(self, grid: np.ndarray, half: int) -> np.ndarray:
+        """The latest evaluation return at each grid step (NaN before the first evaluation)."""
+        out = []
+        for g in grid:
+            seen = self.eval_steps <= g + half
+            out.append(float(self.eval_returns[seen][-1]) if seen.any() else np.nan)
+        return np.array(out)
+
+    def asked_on(self, grid: np.ndarray) -> np.ndarray:
+        return np.array([self.asked[self.row_steps <= g].max(initial=0) for g in grid], dtype=float)
+
+    def ratio_on(self, grid: np.ndarray, step: int) -> np.ndarray:
+        out = []
+        for g in grid:
+            sel = (self.row_steps > g - step) & (self.row_steps <= g)
+            out.append(float(self.ratio[sel].mean()) if sel.any() else np.nan)
+        return np.array(out)
+
+
+def read_run(run: TrainRun, root: Path, episodes_per_eval: int) -> RunRecord:
+    """The record of a finished run (its `done` marker must exist)."""
+    out = run.directory(root)
+    ev, rows = read_csv(out / "eval.csv"), read_csv(out / "metrics.csv")
+    steps = np.array([int(r["step"]) for r in ev])
+    rates = np.array([float(r["success_rate"]) for r in ev])
+    return RunRecord(
+        run, steps, rates, np.array([float(r["mean_return"]) for r in ev]),
+        np.array([int(r["step"]) for r in rows]), np.array([int(r["asked"]) for r in rows]),
+        np.array([float(r["expert_ratio"]) for r in rows]),
+        convergence(steps.tolist(), rates.tolist(), episodes_per_eval), finished(run, root).wall_s,
+    )

@@ -1,0 +1,121 @@
+"""One training run of an experiment: what it trains, where it writes, and how it resumes.
+
+A run directory is the unit of work and of resumption: `done` marks a finished run (it is skipped), a
+`checkpoint.pt` an interrupted one (it resumes from there), anything else starts afresh. So killing an
+experiment and starting it again only finishes what is left.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from mrguide.config import ConfigError, replace_path
+
+#: Which config an override key's first part addresses: train, ddpg, guidance, or the env's robot/twin/task.
+SECTIONS = ("train", "ddpg", "guidance", "robot", "twin", "task")
+
+
+@dataclass(frozen=True)
+class TrainRun:
+    """A training run: base config file, overrides ("guidance.noise.sigma" → 0.05, ...), seed, steps."""
+
+    name: str  # relative run directory, e.g. "guided/seed3" or "sigma_0.05/seed3"
+    seed: int
+    steps: int
+    guided: bool
+    config: str | None = None
+    overrides: dict[str, Any] = field(default_factory=dict)
+
+    def directory(self, root: Path) -> Path:
+        return root / self.name
+
+
+@dataclass(frozen=True)
+class RunResult:
+    """What a finished run reports: wall time, mean update time, its directory."""
+
+    name: str
+    wall_s: float
+    update_ms: float
+    steps: int
+
+
+def configs(run: TrainRun, where: str = "experiment"):
+    """(TrainConfig, DDPGConfig, GuidanceConfig, EnvConfig) of `run`: its file, its overrides, its seed/steps."""
+    from mrguide.policies.train import load_train_config
+
+    tc, dc, gc, ec = load_train_config(run.config)
+    tc = dataclasses.replace(tc, total_steps=run.steps, seed=run.seed)
+    gc = dataclasses.replace(gc, enabled=run.guided)
+    for key, value in run.overrides.items():
+        section, _, path = key.partition(".")
+        if section not in SECTIONS or not path:
+            raise ConfigError(f"{where}: override {key!r}: expected '<section>.<key>' with section one of {', '.join(SECTIONS)}")
+        if section == "train":
+            tc = replace_path(tc, path, value, where)
+        elif section == "ddpg":
+            dc = replace_path(dc, path, value, where)
+        elif section == "guidance":
+            gc = replace_path(gc, path, value, where)
+        else:
+            ec = dataclasses.replace(ec, **{section: replace_path(getattr(ec, section), path, value, where)})
+    return tc, dc, gc, ec
+
+
+def is_done(run: TrainRun, root: Path) -> bool:
+    return (run.directory(root) / "done").exists()
+
+
+def progress_steps(run: TrainRun, root: Path) -> int:
+    """Steps a run has reached, read from the last line of its metrics.csv (0 if none)."""
+    path = run.directory(root) / "metrics.csv"
+    try:
+        with path.open("rb") as fh:
+            fh.seek(max(0, path.stat().st_size - 512))
+            last = fh.read().splitlines()[-1].decode()
+        return int(last.split(",", 1)[0])
+    except (OSError, IndexError, ValueError):
+        return 0
+
+
+def train(run: TrainRun, root: str, on_episode: Callable[[dict], None] | None = None) -> RunResult:
+    """Train `run` to the end (resuming from its checkpoint if it has one) and mark it done."""
+    from mrguide.policies.train import Trainer
+
+    out = run.directory(Path(root))
+    if (out / "done").exists():
+        return finished(run, Path(root))
+    tc, dc, gc, ec = configs(run)
+    out.mkdir(parents=True, exist_ok=True)
+    if not (out / "checkpoint.pt").exists():
+        for stale in ("metrics.csv", "eval.csv", "annotations.jsonl"):  # a start that never checkpointed
+            (out / stale).unlink(missing_ok=True)
+    (out / "run.json").write_text(json.dumps(dataclasses.asdict(run), indent=1) + "\n")
+    tr = Trainer(tc, dc, gc, ec, out)
+    try:
+        if (out / "checkpoint.pt").exists():
+            tr.load_checkpoint()
+        tr.run(on_episode)
+        tr.save_checkpoint()
+        tmp = out / "done.tmp"
+        tmp.write_text(json.dumps({"wall_s": round(tr.wall_s(), 1), "update_ms": round(tr.update_ms(), 3), "steps": tr.step}) + "\n")
+        tmp.replace(out / "done")
+    finally:
+        tr.close()
+    return finished(run, Path(root))
+
+
+def finished(run: TrainRun, root: Path) -> RunResult:
+    """The result a finished run recorded in its `done` marker."""
+    text = (run.directory(root) / "done").read_text()
+    try:
+        d = json.loads(text)
+    except json.JSONDecodeError:  # runs finished before this module: "wall_s\nupdate_ms\n"
+        wall, update = (float(x) for x in text.split()[:2])
+        d = {"wall_s": wall, "update_ms": update, "steps": run.steps}
+    return RunResult(run.name, float(d["wall_s"]), float(d["update_ms"]), int(d["steps"]))
