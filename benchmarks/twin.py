@@ -13,8 +13,8 @@ import time
 
 import numpy as np
 
-from mrguide.deploy.kinematics import Kinematics
-from mrguide.deploy.trajectory import JointStreamer
+from mrguide.motion.kinematics import Kinematics
+from mrguide.motion.trajectory import JointStreamer
 from mrguide.robot import load_robot
 from mrguide.twin.env import PickPlaceEnv
 from mrguide.twin.rollout import run_episodes

@@ -15,11 +15,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from mrguide.deploy.kinematics import IKError, Kinematics
+from mrguide.motion.kinematics import IKError, Kinematics
 from mrguide.deploy.policy import ExportedPolicy
 from mrguide.deploy.runlog import RunLog
 from mrguide.deploy.safety import Event, Reaction, SafetyConfig, Supervisor, Watchdog
-from mrguide.deploy.trajectory import JointStreamer
+from mrguide.motion.trajectory import JointStreamer
 from mrguide.drivers.cobot import Cobot
 from mrguide.drivers.cobot_state import CycleSample
 from mrguide.drivers.errors import DriverError

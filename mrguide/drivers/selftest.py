@@ -10,13 +10,13 @@ import time
 from collections.abc import Callable
 
 import numpy as np
-from ruckig import InputParameter, Result, Ruckig, Trajectory
 
 from mrguide.drivers.cobot import Cobot
 from mrguide.drivers.config import CobotBusConfig
 from mrguide.drivers.mock.first_order_plant import FirstOrderPlant
 from mrguide.drivers.mock.sim_cobot import SimulatedCobot, shared_pc_config
 from mrguide.drivers.tracking import TrackingRecorder
+from mrguide.motion.trajectory import point_to_point
 from mrguide.robot import RobotSpec
 
 #: How far each joint moves (rad) and the pass criteria (rad).
@@ -27,20 +27,6 @@ MAX_FINAL_ERROR = 1e-3
 SETTLE = 0.1
 #: On real hardware without a part, vacuum on must at least raise the level this much (kPa).
 OPEN_CUP_MIN_KPA = 1.0
-
-
-def joint_trajectory(q_from: np.ndarray, q_to: np.ndarray, robot: RobotSpec, period: float) -> list[np.ndarray]:
-    """Jerk-limited point-to-point joint path (Ruckig), sampled every control period; ends at `q_to`."""
-    dof = len(q_from)
-    inp = InputParameter(dof)
-    inp.current_position, inp.target_position = list(q_from), list(q_to)
-    inp.max_velocity, inp.max_acceleration, inp.max_jerk = list(robot.v_max), list(robot.a_max), list(robot.j_max)
-    trajectory = Trajectory(dof)
-    result = Ruckig(dof).calculate(inp, trajectory)
-    if result not in (Result.Working, Result.Finished):
-        raise ValueError(f"Ruckig cannot plan {q_from} -> {q_to}: {result}")
-    steps = int(np.ceil(trajectory.duration / period))
-    return [np.array(trajectory.at_time(min(k * period, trajectory.duration))[0]) for k in range(1, steps + 1)]
 
 
 def run_selftest(config: CobotBusConfig, robot: RobotSpec, write: Callable[[str], None]) -> bool:
@@ -92,7 +78,7 @@ def _move_joint(cobot: Cobot, robot: RobotSpec, recorder: TrackingRecorder, i: i
     goal[i] += step
     recorder.reset()
     for q_from, q_to in ((start, goal), (goal, start)):
-        for q in joint_trajectory(q_from, q_to, robot, cobot.period):
+        for q in point_to_point(robot, q_from, q_to, cobot.period):
             cobot.stream(q)
         time.sleep(SETTLE)
     final = float(np.max(np.abs(cobot.joint_state().positions - start)))

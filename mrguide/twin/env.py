@@ -16,8 +16,8 @@ import gymnasium as gym
 import numpy as np
 
 from mrguide.config import load_section
-from mrguide.deploy.kinematics import IKError, Kinematics
-from mrguide.deploy.trajectory import JointStreamer
+from mrguide.motion.kinematics import IKError, Kinematics
+from mrguide.motion.trajectory import JointStreamer
 from mrguide.robot import RobotConfig, RobotSpec, load_robot
 from mrguide.task import ACT_DIM, OBS_DIM, Outcome, TaskConfig, observation, oracle_action, progress, task_step
 from mrguide.twin.config import Region, TwinConfig

@@ -15,7 +15,7 @@ import pytest
 from mrguide.annotation.broker import AnnotationBroker
 from mrguide.annotation.protocol import AnnotationRequest
 from mrguide.annotation.server import AnnotationServer
-from mrguide.deploy.kinematics import Kinematics
+from mrguide.motion.kinematics import Kinematics
 from mrguide.robot import load_robot
 from mrguide.task import observation, progress
 

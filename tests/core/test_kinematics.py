@@ -4,7 +4,7 @@ import numpy as np
 import pybullet as pb
 import pytest
 
-from mrguide.deploy.kinematics import IKError, Kinematics
+from mrguide.motion.kinematics import IKError, Kinematics
 from mrguide.robot import R_TOOL_DOWN, load_robot
 from mrguide.twin.config import TwinConfig
 from mrguide.twin.scene import Scene

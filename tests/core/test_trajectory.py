@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from mrguide.deploy.trajectory import JointStreamer, TrajectoryError
+from mrguide.motion.trajectory import JointStreamer, TrajectoryError
 from mrguide.robot import load_robot
 
 

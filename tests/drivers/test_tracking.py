@@ -6,8 +6,8 @@ import time
 
 import numpy as np
 
-from mrguide.drivers.selftest import joint_trajectory
 from mrguide.drivers.tracking import TrackingRecorder
+from mrguide.motion.trajectory import point_to_point
 
 #: Tracking tolerance: measured position vs the setpoint it answers (2-cycle pipeline), rad.
 #: The first-order plant (tau 5 ms) lags v * T * exp(-T/tau) / (1 - exp(-T/tau)) ~ 0.8 v T ~ 5 mrad at 1.5 rad/s;
@@ -24,7 +24,7 @@ def _run_trajectory(rig, robot):
     recorder = TrackingRecorder(robot.dof)
     cobot.add_cycle_observer(recorder)
     start = cobot.setpoint
-    path = joint_trajectory(start, start + MOVE, robot, cobot.period)
+    path = point_to_point(robot, start, start + MOVE, cobot.period)
     peak_speed = np.max(np.abs(np.diff(path, axis=0)), axis=0) / cobot.period
     assert np.any(peak_speed > 0.9 * robot.v_max)  # the test really drives near the velocity limit
     for q in path:

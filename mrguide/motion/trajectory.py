@@ -101,3 +101,16 @@ class JointStreamer:
         )
         out.pass_to_input(self._inp)
         return sp
+
+
+def point_to_point(spec: RobotSpec, q_from: np.ndarray, q_to: np.ndarray, control_period: float) -> list[np.ndarray]:
+    """A jerk-limited move from rest at `q_from` to rest at `q_to`, one setpoint per control period (ends at `q_to`)."""
+    streamer = JointStreamer(spec, control_period)
+    streamer.reset(q_from)
+    streamer.set_target(q_to)
+    path = []
+    while True:
+        sp = streamer.step()
+        path.append(sp.q)
+        if sp.finished:
+            return path

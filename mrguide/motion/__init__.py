@@ -1,0 +1,1 @@
+"""Motion: Pinocchio kinematics and Ruckig trajectories, shared by the twin, the deploy runtime and the drivers' self-test."""
