@@ -1,4 +1,5 @@
-"""`mrguide experiment {learning-curves, long-baseline, noise-robustness, report}`: the paper's experiments on Ray.
+"""`mrguide experiment {learning-curves, long-baseline, noise-robustness, generalization, report}`: the paper's
+experiments on Ray.
 
 Each experiment reads `[experiment]` of a TOML file under configs/experiments/, trains what is not done
 yet (one Ray task per run), then writes its report (CSV, markdown, PNG) from the run directories.
@@ -24,35 +25,48 @@ CONFIG_DIR = Path(__file__).resolve().parents[2] / "configs" / "experiments"
 
 @dataclass(frozen=True)
 class Experiment:
-    """How to run and report one experiment."""
+    """How to run and report one experiment: its config class and file, its runs, an optional evaluation of
+    the trained runs (Ray tasks), and its report built from the run directories."""
 
     config_cls: type
     default_config: str
     default_out: str
     runs: Callable[[Any, str | None], list]
-    records: Callable[[Any, str | None, Path, int], Any]
-    report: Callable[[Any, Any], dict[str, bytes]]
+    report: Callable[[Any, str | None, Path, int], dict[str, bytes]]
+    evaluate: Callable[..., None] | None = None
 
 
 def _experiments() -> dict[str, Experiment]:
+    from mrguide.experiments import generalization as gen
     from mrguide.experiments import learning_curves as lc
     from mrguide.experiments import noise_robustness as nr
 
     return {
-        "learning-curves": Experiment(lc.CurvesConfig, "learning_curves.toml", "runs/learning-curves", lc.runs, lc.records,
-                                      lc.learning_curves_report),
-        "long-baseline": Experiment(lc.CurvesConfig, "long_baseline.toml", "runs/long-baseline", lc.runs, lc.records,
-                                    lc.long_baseline_report),
-        "noise-robustness": Experiment(nr.NoiseConfig, "noise_robustness.toml", "runs/noise-robustness", nr.runs, nr.records,
-                                       nr.noise_report),
+        "learning-curves": Experiment(lc.CurvesConfig, "learning_curves.toml", "runs/learning-curves", lc.runs,
+                                      lambda c, b, r, e: lc.learning_curves_report(c, lc.records(c, b, r, e))),
+        "long-baseline": Experiment(lc.CurvesConfig, "long_baseline.toml", "runs/long-baseline", lc.runs,
+                                    lambda c, b, r, e: lc.long_baseline_report(c, lc.records(c, b, r, e))),
+        "noise-robustness": Experiment(nr.NoiseConfig, "noise_robustness.toml", "runs/noise-robustness", nr.runs,
+                                       lambda c, b, r, e: nr.noise_report(c, nr.records(c, b, r, e))),
+        "generalization": Experiment(gen.GeneralizationConfig, "generalization.toml", "runs/generalization", gen.runs,
+                                     lambda c, b, r, e: gen.generalization_report(c, r, gen.runs(c, b)), _evaluate_goals),
     }
 
 
-NAMES = ("learning-curves", "long-baseline", "noise-robustness")
+def _evaluate_goals(cfg: Any, base: str | None, out: Path, workers: int, address: str | None, show_progress: bool) -> None:
+    """Fig. 6: every trained run on the goal grid (one Ray task per run; a run with its goals.csv is skipped)."""
+    from mrguide.experiments import generalization as gen
+    from mrguide.experiments.execution import map_tasks
+
+    todo = [r for r in gen.runs(cfg, base) if not (r.directory(out) / "goals.csv").exists()]
+    map_tasks(gen.evaluate, [(r, str(out), cfg) for r in todo], workers, address, "goal grid", show_progress)
+
+
+NAMES = ("learning-curves", "long-baseline", "noise-robustness", "generalization")
 
 
 def add_experiment_command(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("experiment", help="the paper's experiments (Fig. 3-7), run on Ray, resumable")
+    p = sub.add_parser("experiment", help="the paper's experiments (Fig. 3-7, 9), run on Ray, resumable")
     esub = p.add_subparsers(dest="experiment", required=True)
     for name in NAMES:
         e = esub.add_parser(name, help=f"{name}: train what is not done yet, then report")
@@ -97,6 +111,8 @@ def cmd_experiment(args: argparse.Namespace) -> int:
     specs = exp.runs(cfg, base)
     try:
         run_all(specs, out, args.workers, args.address, show_progress=not args.quiet)
+        if exp.evaluate is not None:
+            exp.evaluate(cfg, base, out, args.workers, args.address, not args.quiet)
     except ExperimentError as exc:
         print(f"mrguide experiment {args.name}: {exc}", file=sys.stderr)
         return 1
@@ -105,7 +121,8 @@ def cmd_experiment(args: argparse.Namespace) -> int:
 
 def cmd_report(args: argparse.Namespace) -> int:
     exp, cfg, base, out = _setup(args)
-    missing = [r.name for r in exp.runs(cfg, base) if not (r.directory(out) / "done").exists()]
+    missing = [r.name for r in exp.runs(cfg, base) if not (r.directory(out) / "done").exists()
+               or (exp.evaluate is not None and not (r.directory(out) / "goals.csv").exists())]
     if missing:
         raise ConfigError(f"{out}: {len(missing)} runs are not finished (e.g. {missing[0]}); run the experiment to finish them")
     return _write_report(exp, cfg, base, out)
@@ -115,7 +132,7 @@ def _write_report(exp: Experiment, cfg: Any, base: str | None, out: Path) -> int
     from mrguide.experiments.report import write_report
 
     eval_episodes = configs(exp.runs(cfg, base)[0])[0].eval_episodes
-    files = exp.report(cfg, exp.records(cfg, base, out, eval_episodes))
+    files = exp.report(cfg, base, out, eval_episodes)
     write_report(out, files)
     print(files["summary.md"].decode())
     print(f"report and figures in {out}")

@@ -11,7 +11,10 @@ from __future__ import annotations
 
 import logging
 import os
+from collections.abc import Callable
+from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
 from tqdm import tqdm
 
@@ -32,21 +35,55 @@ def run_all(runs: list[TrainRun], root: Path, workers: int = 2, address: str | N
     root.mkdir(parents=True, exist_ok=True)
     todo = [r for r in runs if not is_done(r, root)]
     if todo:
-        _init_ray(ray, workers, address)
-        try:
+        with ray_session(workers, address):
             _execute(ray, todo, root, show_progress)
-        finally:
-            ray.shutdown()
     return [finished(r, root) for r in runs]
 
 
-def _init_ray(ray, workers: int, address: str | None) -> None:
+def map_tasks(fn: Callable[..., Any], calls: list[tuple], workers: int = 2, address: str | None = None,
+              desc: str = "tasks", show_progress: bool = True) -> list[Any]:
+    """`fn(*args)` for every args tuple of `calls`, one Ray task each (1 CPU); results in order."""
+    import ray
+
+    if not calls:
+        return []
+    with ray_session(workers, address):
+        task = ray.remote(num_cpus=1, max_retries=0)(fn)
+        refs = [task.remote(*args) for args in calls]
+        results: dict[Any, Any] = {}
+        with tqdm(total=len(refs), desc=desc, disable=not show_progress) as bar:
+            try:
+                pending = list(refs)
+                while pending:
+                    ready, pending = ray.wait(pending, num_returns=1, timeout=2.0)
+                    for ref in ready:
+                        try:
+                            results[ref] = ray.get(ref)
+                        except Exception as exc:
+                            raise ExperimentError(f"{desc}: a task failed: {_cause(exc)}") from None
+                        bar.update(1)
+            except KeyboardInterrupt:
+                for ref in refs:
+                    ray.cancel(ref, force=True)
+                raise
+        return [results[r] for r in refs]
+
+
+@contextmanager
+def ray_session(workers: int, address: str | None):
+    """A private local Ray with `workers` CPUs, or a connection to the cluster at `address`; shut down after."""
+    import ray
+
     env = {"env_vars": {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "RAY_DEDUP_LOGS": "0"}}
     if address:
         ray.init(address=address, runtime_env=env, log_to_driver=False)
     else:
         os.environ.setdefault("RAY_AUTH_MODE", "disabled")  # a private instance on this machine
         ray.init(num_cpus=workers, include_dashboard=False, log_to_driver=False, runtime_env=env)
+    try:
+        yield
+    finally:
+        ray.shutdown()
 
 
 def _execute(ray, todo: list[TrainRun], root: Path, show_progress: bool) -> None:
