@@ -17,6 +17,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Protocol
 
 import numpy as np
 import torch
@@ -83,9 +84,22 @@ def obs_scaling(ws: Workspace) -> tuple[np.ndarray, np.ndarray]:
 
 
 EVAL_SEED_BASE = 1_000_000  # evaluation env seeds start here (training seeds come from the run's RNG)
+#: Update statistics in metrics.csv, each the mean over the updates since the previous row (see DDPG.update):
+#: critic loss, actor loss, mean and max Q_φ1(s, a) of the batch, BC loss. Empty in a row with no update
+#: since the previous one (before learning_starts; the agent row of a triggered episode, which follows
+#: its expert row); the actor's are also empty when no actor step fell in the row (policy_delay > 1).
+UPDATE_FIELDS = ("critic_loss", "actor_loss", "q_mean", "q_max", "bc_loss")
 METRIC_FIELDS = ("step", "episode", "kind", "return", "success", "outcome", "length", "triggered", "lambda", "expert_ratio",
-                 "asked", "reused", "remarks", "skipped", "wall_s")
+                 "asked", "reused", "remarks", "skipped", "wall_s", *UPDATE_FIELDS)  # new columns go at the end
 EVAL_FIELDS = ("step", "success_rate", "mean_return")
+
+
+class MetricSink(Protocol):
+    """Receives what the trainer writes to metrics.csv and eval.csv, as it writes it."""
+
+    def row(self, row: dict) -> None: ...
+
+    def evaluation(self, res: dict) -> None: ...
 
 
 def _append_csv(path: Path, fields: tuple[str, ...], row: dict) -> None:
@@ -127,6 +141,9 @@ class Trainer:
         self.stop_requested = threading.Event()  # set (e.g. on Ctrl-C) to stop at the next step
         self.last_ratio = 0.0
         self._ratio_sum, self._ratio_n = 0.0, 0
+        self._stat_sum: dict[str, float] = {}  # update statistics summed since the last metrics row
+        self._stat_n: dict[str, int] = {}
+        self.sinks: list[MetricSink] = []  # also receive every metrics row and evaluation
         self.update_s = 0.0
         self._next_checkpoint = cfg.checkpoint_every
         self._next_eval = cfg.eval_every
@@ -179,11 +196,14 @@ class Trainer:
         if len(self.replay) >= self.cfg.learning_starts:
             t = time.perf_counter()
             batch = self.replay.sample(self.cfg.batch_size, self.lam(), self.rng)
-            self.agent.update(batch)
+            stats = self.agent.update(batch)
             self.update_s += time.perf_counter() - t
             self.last_ratio = batch.expert_ratio
             self._ratio_sum += batch.expert_ratio
             self._ratio_n += 1
+            for k, v in stats.items():
+                self._stat_sum[k] = self._stat_sum.get(k, 0.0) + v
+                self._stat_n[k] = self._stat_n.get(k, 0) + 1
         return next_obs, r, term, trunc, info
 
     def _agent_episode(self, end: int) -> dict:
@@ -242,18 +262,23 @@ class Trainer:
         return self._wall_before + time.perf_counter() - self._t0
 
     def _row(self, kind: str, ret: float, success: bool, outcome, length: int, triggered: bool) -> dict:
-        """A metrics row; `expert_ratio` is the mean realized ratio of the updates since the last row."""
+        """A metrics row; `expert_ratio` and the UPDATE_FIELDS are means over the updates since the last row."""
         ratio = self._ratio_sum / self._ratio_n if self._ratio_n else self.last_ratio
         self._ratio_sum, self._ratio_n = 0.0, 0
+        means = {k: float(f"{self._stat_sum[k] / n:.6g}") for k, n in self._stat_n.items()}
+        self._stat_sum, self._stat_n = {}, {}
         return {
             "step": self.step, "episode": self.episode, "kind": kind, "return": round(ret, 4), "success": int(success),
             "outcome": outcome, "length": length, "triggered": int(triggered), "lambda": round(self.lam(), 4),
             "expert_ratio": round(ratio, 4), "asked": self.cache.asked, "reused": self.cache.reused,
             "remarks": self.expert.remarks, "skipped": self.skipped, "wall_s": round(self.wall_s(), 2),
+            **{k: means.get(k, "") for k in UPDATE_FIELDS},
         }
 
     def _log(self, row: dict) -> None:
         _append_csv(self.out / "metrics.csv", METRIC_FIELDS, row)
+        for sink in self.sinks:
+            sink.row(row)
 
     def evaluate(self) -> dict:
         """Deterministic policy from start states that differ from one evaluation to the next.
@@ -277,6 +302,8 @@ class Trainer:
         self.evaluations += 1
         res = {"step": self.step, "success_rate": successes / n, "mean_return": float(np.mean(returns))}
         _append_csv(self.out / "eval.csv", EVAL_FIELDS, res)
+        for sink in self.sinks:
+            sink.evaluation(res)
         log.info("eval at step %d: success %.0f%%", self.step, 100 * res["success_rate"])
         self.last_eval = res
         return res
