@@ -6,6 +6,10 @@ open, the episode is cut and the expert demonstrates it — from the episode's s
 the twin (default) or taking over from the current step — and those transitions are stored with ζ = 1.
 Every env step (agent or expert) counts as a training step and is followed by one update on a
 minibatch mixed by λ_t (Eq. 9, 11).
+
+Files in the run directory: `metrics.csv` (one row per agent or expert episode), `eval.csv` (one row per
+evaluation), `annotations.jsonl`, `checkpoint.pt`; with a `TensorBoardLog` attached (`mrguide train
+--tensorboard`), the same figures as TensorBoard event files in `tensorboard/`.
 """
 
 from __future__ import annotations
@@ -95,7 +99,7 @@ EVAL_FIELDS = ("step", "success_rate", "mean_return")
 
 
 class MetricSink(Protocol):
-    """Receives what the trainer writes to metrics.csv and eval.csv, as it writes it."""
+    """Receives what the trainer writes to metrics.csv and eval.csv, as it writes it (e.g. TensorBoardLog)."""
 
     def row(self, row: dict) -> None: ...
 
@@ -110,6 +114,50 @@ def _append_csv(path: Path, fields: tuple[str, ...], row: dict) -> None:
         if new:
             w.writeheader()
         w.writerow(row)
+
+
+def summary_writer_class() -> type:
+    """torch's TensorBoard SummaryWriter; ImportError when the optional `tensorboard` package is missing."""
+    from torch.utils.tensorboard import SummaryWriter  # imports tensorboard, which is optional
+
+    return SummaryWriter
+
+
+class TensorBoardLog:
+    """A MetricSink writing TensorBoard event files into `log_dir`, at the training step as global step.
+
+    Tags: train/{critic_loss, actor_loss, q_mean, q_max, bc_loss, expert_ratio} for every metrics row
+    with updates in it, train/lambda and annotations/{asked, reused, remarks, skipped} per metrics row
+    (once per step), eval/{success_rate, mean_return} per evaluation. On a resume pass the step of the
+    checkpoint + 1 as `purge_step`: TensorBoard then hides what an earlier process wrote after the
+    checkpoint (those episodes run again), as metrics.csv drops those rows. Close it when done.
+    """
+
+    ROW_TAGS = {k: f"train/{k}" for k in (*UPDATE_FIELDS, "expert_ratio")}
+    PER_STEP_TAGS = {"lambda": "train/lambda", **{k: f"annotations/{k}" for k in ("asked", "reused", "remarks", "skipped")}}
+    EVAL_TAGS = {"success_rate": "eval/success_rate", "mean_return": "eval/mean_return"}
+
+    def __init__(self, log_dir: str | Path, purge_step: int | None = None):
+        self.writer = summary_writer_class()(log_dir=str(log_dir), purge_step=purge_step)
+        self._last_step: int | None = None
+
+    def row(self, row: dict) -> None:
+        step = row["step"]
+        if row["critic_loss"] != "":  # expert_ratio of a row without updates only repeats the previous one
+            for key, tag in self.ROW_TAGS.items():
+                if row[key] != "":
+                    self.writer.add_scalar(tag, row[key], step)
+        if step != self._last_step:  # an agent row after its expert row shares the step and the counters
+            for key, tag in self.PER_STEP_TAGS.items():
+                self.writer.add_scalar(tag, row[key], step)
+            self._last_step = step
+
+    def evaluation(self, res: dict) -> None:
+        for key, tag in self.EVAL_TAGS.items():
+            self.writer.add_scalar(tag, res[key], res["step"])
+
+    def close(self) -> None:
+        self.writer.close()
 
 
 class Trainer:
