@@ -60,6 +60,9 @@ def add_train_command(sub: argparse._SubParsersAction, live: LivePlugin | None =
                         "annotation file (guidance.annotation_file), or a person through the live annotation page")
     p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--tensorboard", action="store_true",
+                   help="also write TensorBoard event files to OUT/tensorboard/: losses, Q, BC term, λ_t, expert ratio, "
+                        "annotation counters, evaluations (needs the tensorboard package: pip install 'mrguide[tensorboard]')")
     if live is not None:
         live.add_arguments(p)
     p.set_defaults(func=partial(cmd_train, live=live))
@@ -72,8 +75,13 @@ def _refuse(message: str) -> int:
 
 def cmd_train(args: argparse.Namespace, live: LivePlugin | None = None) -> int:
     """Train (or resume), show progress, export the policy; Ctrl-C checkpoints and exits 130."""
-    from mrguide.policies.train import CheckpointError, Trainer, load_train_config
+    from mrguide.policies.train import CheckpointError, TensorBoardLog, Trainer, load_train_config, summary_writer_class
 
+    if args.tensorboard:
+        try:
+            summary_writer_class()
+        except ImportError as exc:
+            return _refuse(f"--tensorboard needs the tensorboard package (pip install 'mrguide[tensorboard]'): {exc}")
     tc, dc, gc, ec = load_train_config(args.config)
     if args.steps is not None:
         tc = dataclasses.replace(tc, total_steps=args.steps)
@@ -105,12 +113,16 @@ def cmd_train(args: argparse.Namespace, live: LivePlugin | None = None) -> int:
         raise
     if session:
         bar.write(f"annotation page: {session.url}")
+    tb = None
     try:
         if args.resume:
             try:
                 tr.load_checkpoint()
             except CheckpointError as exc:
                 return _refuse(str(exc))
+        if args.tensorboard:  # on a resume, what was logged after the checkpoint is purged (it runs again)
+            tb = TensorBoardLog(out / "tensorboard", purge_step=tr.step + 1 if args.resume else None)
+            tr.sinks.append(tb)
         bar.n = tr.step
         bar.refresh()
         with _stop_on_sigint(tr, session, bar):
@@ -123,10 +135,14 @@ def cmd_train(args: argparse.Namespace, live: LivePlugin | None = None) -> int:
             return 130
         bar.close()
         _finish(tr, tc, gc, out)
+        if tb is not None:
+            print(f"TensorBoard: tensorboard --logdir {out / 'tensorboard'}")
         if session:
             print(session.summary())
     finally:
         bar.close()
+        if tb is not None:
+            tb.close()
         tr.close()
         if session:
             session.close()

@@ -161,8 +161,22 @@ class DDPG:
             a = a + rng.normal(0.0, self.cfg.exploration_noise if sigma is None else sigma, a.shape)
         return np.clip(a, -1.0, 1.0).astype(np.float32)
 
+    #: Keys of `update`'s statistics; the actor's three are present only when the actor stepped.
+    CRITIC_STATS = ("critic_loss", "q_mean", "q_max")
+    ACTOR_STATS = ("actor_loss", "actor_q", "bc_loss")
+
     def update(self, batch: Batch) -> dict[str, float]:
-        """One critic step; every `policy_delay`-th call also an actor step and the soft target updates."""
+        """One critic step; every `policy_delay`-th call also an actor step and the soft target updates.
+
+        Returns the update's statistics (gathered into floats with one conversion):
+        - critic_loss: the critics' summed MSE to the TD target (the loss the critic step minimizes);
+        - q_mean, q_max: mean and max over the batch of Q_φ1(s, a) for the stored actions, as evaluated
+          for this step (before the critic step);
+        - when the actor stepped: actor_loss = actor_q + bc_weight · bc_loss, where actor_q is the Q term
+          (−mean Q_φ1(s, μ(s)), divided by the batch's mean |Q| when the BC term is on) and bc_loss the
+          squared action error on the batch's expert (ζ = 1) samples; bc_loss is 0 when the batch holds
+          none (always, without guidance) or bc_weight is 0.
+        """
         obs = torch.as_tensor(batch.obs)
         act = torch.as_tensor(batch.act)
         rew = torch.as_tensor(batch.rew)
@@ -182,30 +196,34 @@ class DDPG:
         self.critic_opt.step()
 
         self.updates += 1
-        losses = {"critic_loss": critic_loss.item()}
+        names, actor_stats = self.CRITIC_STATS, []
         if self.updates % self.cfg.policy_delay == 0:
-            losses |= self._actor_step(obs, act, batch.expert)
+            names, actor_stats = names + self.ACTOR_STATS, self._actor_step(obs, act, batch.expert)
             with torch.no_grad():
                 for params, targets in self._soft_pairs:
                     torch._foreach_lerp_(targets, params, self.cfg.tau)
-        return losses
+        with torch.no_grad():  # the hot path: no autograd records, one tensor-to-Python conversion per update
+            q1 = q[0]
+            return dict(zip(names, torch.stack([critic_loss, q1.mean(), q1.max(), *actor_stats]).tolist()))
 
-    def _actor_step(self, obs: torch.Tensor, act: torch.Tensor, expert_mask: np.ndarray) -> dict[str, float]:
-        """Deterministic policy gradient on the first critic, plus behaviour cloning on expert samples."""
+    def _actor_step(self, obs: torch.Tensor, act: torch.Tensor, expert_mask: np.ndarray) -> list[torch.Tensor]:
+        """Deterministic policy gradient on the first critic, plus behaviour cloning on expert samples.
+        Returns the (actor loss, Q term, BC loss) tensors."""
         pi = self.actor(obs)
         q_pi = self.critic(obs, pi, slice(0, 1)).squeeze(0)  # the actor follows the first critic (as TD3)
         bc_loss = torch.zeros(())
         if self.cfg.bc_weight > 0 and expert_mask.any():
             expert = torch.as_tensor(expert_mask)
             bc_loss = ((pi[expert] - act[expert]) ** 2).sum(-1).mean()
-            actor_loss = -q_pi.mean() / (q_pi.abs().mean().detach() + 1e-6) + self.cfg.bc_weight * bc_loss
+            q_term = -q_pi.mean() / (q_pi.abs().mean().detach() + 1e-6)
+            actor_loss = q_term + self.cfg.bc_weight * bc_loss
         else:
-            actor_loss = -q_pi.mean()
+            actor_loss = q_term = -q_pi.mean()
         # gradients w.r.t. the actor only: the critic's weight gradients are never computed
         for p, g in zip(self.actor_params, torch.autograd.grad(actor_loss, self.actor_params)):
             p.grad = g
         self.actor_opt.step()
-        return {"actor_loss": actor_loss.item(), "bc_loss": bc_loss.item()}
+        return [actor_loss, q_term, bc_loss]
 
     def state_dict(self) -> dict:
         return {

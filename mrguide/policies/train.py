@@ -6,6 +6,10 @@ open, the episode is cut and the expert demonstrates it — from the episode's s
 the twin (default) or taking over from the current step — and those transitions are stored with ζ = 1.
 Every env step (agent or expert) counts as a training step and is followed by one update on a
 minibatch mixed by λ_t (Eq. 9, 11).
+
+Files in the run directory: `metrics.csv` (one row per agent or expert episode), `eval.csv` (one row per
+evaluation), `annotations.jsonl`, `checkpoint.pt`; with a `TensorBoardLog` attached (`mrguide train
+--tensorboard`), the same figures as TensorBoard event files in `tensorboard/`.
 """
 
 from __future__ import annotations
@@ -17,6 +21,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Protocol
 
 import numpy as np
 import torch
@@ -83,9 +88,22 @@ def obs_scaling(ws: Workspace) -> tuple[np.ndarray, np.ndarray]:
 
 
 EVAL_SEED_BASE = 1_000_000  # evaluation env seeds start here (training seeds come from the run's RNG)
+#: Update statistics in metrics.csv, each the mean over the updates since the previous row (see DDPG.update):
+#: critic loss, actor loss, mean and max Q_φ1(s, a) of the batch, BC loss. Empty in a row with no update
+#: since the previous one (before learning_starts; the agent row of a triggered episode, which follows
+#: its expert row); the actor's are also empty when no actor step fell in the row (policy_delay > 1).
+UPDATE_FIELDS = ("critic_loss", "actor_loss", "q_mean", "q_max", "bc_loss")
 METRIC_FIELDS = ("step", "episode", "kind", "return", "success", "outcome", "length", "triggered", "lambda", "expert_ratio",
-                 "asked", "reused", "remarks", "skipped", "wall_s")
+                 "asked", "reused", "remarks", "skipped", "wall_s", *UPDATE_FIELDS)  # new columns go at the end
 EVAL_FIELDS = ("step", "success_rate", "mean_return")
+
+
+class MetricSink(Protocol):
+    """Receives what the trainer writes to metrics.csv and eval.csv, as it writes it (e.g. TensorBoardLog)."""
+
+    def row(self, row: dict) -> None: ...
+
+    def evaluation(self, res: dict) -> None: ...
 
 
 def _append_csv(path: Path, fields: tuple[str, ...], row: dict) -> None:
@@ -96,6 +114,50 @@ def _append_csv(path: Path, fields: tuple[str, ...], row: dict) -> None:
         if new:
             w.writeheader()
         w.writerow(row)
+
+
+def summary_writer_class() -> type:
+    """torch's TensorBoard SummaryWriter; ImportError when the optional `tensorboard` package is missing."""
+    from torch.utils.tensorboard import SummaryWriter  # imports tensorboard, which is optional
+
+    return SummaryWriter
+
+
+class TensorBoardLog:
+    """A MetricSink writing TensorBoard event files into `log_dir`, at the training step as global step.
+
+    Tags: train/{critic_loss, actor_loss, q_mean, q_max, bc_loss, expert_ratio} for every metrics row
+    with updates in it, train/lambda and annotations/{asked, reused, remarks, skipped} per metrics row
+    (once per step), eval/{success_rate, mean_return} per evaluation. On a resume pass the step of the
+    checkpoint + 1 as `purge_step`: TensorBoard then hides what an earlier process wrote after the
+    checkpoint (those episodes run again), as metrics.csv drops those rows. Close it when done.
+    """
+
+    ROW_TAGS = {k: f"train/{k}" for k in (*UPDATE_FIELDS, "expert_ratio")}
+    PER_STEP_TAGS = {"lambda": "train/lambda", **{k: f"annotations/{k}" for k in ("asked", "reused", "remarks", "skipped")}}
+    EVAL_TAGS = {"success_rate": "eval/success_rate", "mean_return": "eval/mean_return"}
+
+    def __init__(self, log_dir: str | Path, purge_step: int | None = None):
+        self.writer = summary_writer_class()(log_dir=str(log_dir), purge_step=purge_step)
+        self._last_step: int | None = None
+
+    def row(self, row: dict) -> None:
+        step = row["step"]
+        if row["critic_loss"] != "":  # expert_ratio of a row without updates only repeats the previous one
+            for key, tag in self.ROW_TAGS.items():
+                if row[key] != "":
+                    self.writer.add_scalar(tag, row[key], step)
+        if step != self._last_step:  # an agent row after its expert row shares the step and the counters
+            for key, tag in self.PER_STEP_TAGS.items():
+                self.writer.add_scalar(tag, row[key], step)
+            self._last_step = step
+
+    def evaluation(self, res: dict) -> None:
+        for key, tag in self.EVAL_TAGS.items():
+            self.writer.add_scalar(tag, res[key], res["step"])
+
+    def close(self) -> None:
+        self.writer.close()
 
 
 class Trainer:
@@ -127,6 +189,9 @@ class Trainer:
         self.stop_requested = threading.Event()  # set (e.g. on Ctrl-C) to stop at the next step
         self.last_ratio = 0.0
         self._ratio_sum, self._ratio_n = 0.0, 0
+        self._stat_sum: dict[str, float] = {}  # update statistics summed since the last metrics row
+        self._stat_n: dict[str, int] = {}
+        self.sinks: list[MetricSink] = []  # also receive every metrics row and evaluation
         self.update_s = 0.0
         self._next_checkpoint = cfg.checkpoint_every
         self._next_eval = cfg.eval_every
@@ -179,11 +244,14 @@ class Trainer:
         if len(self.replay) >= self.cfg.learning_starts:
             t = time.perf_counter()
             batch = self.replay.sample(self.cfg.batch_size, self.lam(), self.rng)
-            self.agent.update(batch)
+            stats = self.agent.update(batch)
             self.update_s += time.perf_counter() - t
             self.last_ratio = batch.expert_ratio
             self._ratio_sum += batch.expert_ratio
             self._ratio_n += 1
+            for k, v in stats.items():
+                self._stat_sum[k] = self._stat_sum.get(k, 0.0) + v
+                self._stat_n[k] = self._stat_n.get(k, 0) + 1
         return next_obs, r, term, trunc, info
 
     def _agent_episode(self, end: int) -> dict:
@@ -242,18 +310,23 @@ class Trainer:
         return self._wall_before + time.perf_counter() - self._t0
 
     def _row(self, kind: str, ret: float, success: bool, outcome, length: int, triggered: bool) -> dict:
-        """A metrics row; `expert_ratio` is the mean realized ratio of the updates since the last row."""
+        """A metrics row; `expert_ratio` and the UPDATE_FIELDS are means over the updates since the last row."""
         ratio = self._ratio_sum / self._ratio_n if self._ratio_n else self.last_ratio
         self._ratio_sum, self._ratio_n = 0.0, 0
+        means = {k: float(f"{self._stat_sum[k] / n:.6g}") for k, n in self._stat_n.items()}
+        self._stat_sum, self._stat_n = {}, {}
         return {
             "step": self.step, "episode": self.episode, "kind": kind, "return": round(ret, 4), "success": int(success),
             "outcome": outcome, "length": length, "triggered": int(triggered), "lambda": round(self.lam(), 4),
             "expert_ratio": round(ratio, 4), "asked": self.cache.asked, "reused": self.cache.reused,
             "remarks": self.expert.remarks, "skipped": self.skipped, "wall_s": round(self.wall_s(), 2),
+            **{k: means.get(k, "") for k in UPDATE_FIELDS},
         }
 
     def _log(self, row: dict) -> None:
         _append_csv(self.out / "metrics.csv", METRIC_FIELDS, row)
+        for sink in self.sinks:
+            sink.row(row)
 
     def evaluate(self) -> dict:
         """Deterministic policy from start states that differ from one evaluation to the next.
@@ -277,6 +350,8 @@ class Trainer:
         self.evaluations += 1
         res = {"step": self.step, "success_rate": successes / n, "mean_return": float(np.mean(returns))}
         _append_csv(self.out / "eval.csv", EVAL_FIELDS, res)
+        for sink in self.sinks:
+            sink.evaluation(res)
         log.info("eval at step %d: success %.0f%%", self.step, 100 * res["success_rate"])
         self.last_eval = res
         return res

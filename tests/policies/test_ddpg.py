@@ -68,3 +68,61 @@ def test_update_state_round_trip_continues_identically():
 def test_bad_config_refused(bad):
     with pytest.raises(ConfigError):
         DDPGConfig(**bad)
+
+
+def one_batch(expert_share, size=64, seed=0):
+    """A batch whose expert share is `expert_share` (pools of random transitions, ζ = 1 every third)."""
+    rb = TaggedReplay(1000, 11, 4)
+    rng = np.random.default_rng(seed)
+    for i in range(300):
+        rb.add(rng.normal(size=11), rng.uniform(-1, 1, 4), rng.normal(), rng.normal(size=11), i % 7 == 0, i % 3 == 0)
+    return rb.sample(size, expert_share, rng)
+
+
+@pytest.mark.parametrize("clipped_double_q", [True, False])
+def test_update_statistics_agree_with_a_direct_evaluation_on_the_same_batch(clipped_double_q):
+    cfg = DDPGConfig(hidden=(16, 16), clipped_double_q=clipped_double_q)
+    agent = DDPG(np.zeros(11), np.ones(11), 4, cfg, seed=3)
+    for b in batches(5):  # away from the initialization
+        agent.update(b)
+    batch = one_batch(0.5)
+    assert batch.expert.any() and not batch.expert.all()
+    before = copy.deepcopy(agent)
+    stats = agent.update(batch)
+    assert set(stats) == {"critic_loss", "q_mean", "q_max", "actor_loss", "actor_q", "bc_loss"}
+    assert all(np.isfinite(v) and isinstance(v, float) for v in stats.values())
+    obs, act = torch.as_tensor(batch.obs), torch.as_tensor(batch.act)
+    with torch.no_grad():
+        q = before.critic(obs, act)  # the critic as the update found it
+        next_obs = torch.as_tensor(batch.next_obs)
+        next_q = before.critic_target(next_obs, before.actor_target(next_obs)).min(0).values
+        target = torch.as_tensor(batch.rew) + cfg.gamma * (1 - torch.as_tensor(batch.done)) * next_q
+        pi = before.actor(obs)  # the actor before its step, against the critic after its step
+        q_pi = agent.critic(obs, pi)[0]
+    expert = torch.as_tensor(batch.expert)
+    assert stats["q_mean"] == pytest.approx(q[0].mean().item(), rel=1e-6)
+    assert stats["q_max"] == pytest.approx(q[0].max().item(), rel=1e-6)
+    assert stats["q_max"] > stats["q_mean"]
+    assert stats["critic_loss"] == pytest.approx(((q - target) ** 2).mean(1).sum().item(), rel=1e-5)
+    bc = ((pi[expert] - act[expert]) ** 2).sum(-1).mean().item()
+    assert stats["bc_loss"] == pytest.approx(bc, rel=1e-5) and bc > 0
+    assert stats["actor_q"] == pytest.approx((-q_pi.mean() / (q_pi.abs().mean() + 1e-6)).item(), rel=1e-5)
+    assert stats["actor_loss"] == pytest.approx(stats["actor_q"] + cfg.bc_weight * stats["bc_loss"], rel=1e-6)
+
+
+def test_bc_term_is_zero_without_expert_samples_and_positive_with_them():
+    agent = DDPG(np.zeros(11), np.ones(11), 4, DDPGConfig(hidden=(16, 16)), seed=0)
+    no_expert = one_batch(0.0)
+    assert not no_expert.expert.any()
+    stats = agent.update(no_expert)
+    assert stats["bc_loss"] == 0.0 and stats["actor_loss"] == stats["actor_q"]  # plain DDPG's actor loss: -mean Q
+    assert agent.update(one_batch(0.5, seed=1))["bc_loss"] > 0
+    off = DDPG(np.zeros(11), np.ones(11), 4, DDPGConfig(hidden=(16, 16), bc_weight=0.0), seed=0)
+    assert off.update(one_batch(0.5, seed=1))["bc_loss"] == 0.0
+
+
+def test_actor_statistics_only_on_actor_steps():
+    agent = DDPG(np.zeros(11), np.ones(11), 4, DDPGConfig(hidden=(16, 16), policy_delay=2))
+    keys = [set(agent.update(b)) for b in batches(4)]
+    assert keys[0] == keys[2] == {"critic_loss", "q_mean", "q_max"}
+    assert keys[1] == keys[3] == {"critic_loss", "q_mean", "q_max", "actor_loss", "actor_q", "bc_loss"}
