@@ -12,7 +12,7 @@ import pytest
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator  # the dev extra installs tensorboard
 
 from mrguide.cli import main
-from mrguide.policies import train as train_mod
+from mrguide.policies import tensorboard_log as tb_mod
 
 TAGS = {
     *(f"train/{k}" for k in ("critic_loss", "actor_loss", "q_mean", "q_max", "bc_loss", "expert_ratio", "lambda")),
@@ -72,9 +72,9 @@ def test_tensorboard_event_files_hold_the_training_metrics(tmp_path, tiny, capsy
 def test_writer_closed_on_crash_and_ctrl_c_and_resume_hides_what_ran_after_the_checkpoint(tmp_path, tiny, monkeypatch):
     out = tmp_path / "run"
     argv = ["train", "--config", str(tiny), "--steps", "400", "--out", str(out), "--quiet", "--tensorboard"]
-    closed, row = [], train_mod.TensorBoardLog.row
-    close = train_mod.TensorBoardLog.close
-    monkeypatch.setattr(train_mod.TensorBoardLog, "close", lambda self: closed.append(self) or close(self))
+    closed, row = [], tb_mod.TensorBoardLog.row
+    close = tb_mod.TensorBoardLog.close
+    monkeypatch.setattr(tb_mod.TensorBoardLog, "close", lambda self: closed.append(self) or close(self))
 
     def crash_after(step):
         def row_then_crash(self, r):
@@ -83,7 +83,7 @@ def test_writer_closed_on_crash_and_ctrl_c_and_resume_hides_what_ran_after_the_c
                 raise RuntimeError("crash")
         return row_then_crash
 
-    monkeypatch.setattr(train_mod.TensorBoardLog, "row", crash_after(180))  # checkpointed at 100-something
+    monkeypatch.setattr(tb_mod.TensorBoardLog, "row", crash_after(180))  # checkpointed at 100-something
     with pytest.raises(RuntimeError, match="crash"):
         main(argv)
     assert len(closed) == 1
@@ -95,10 +95,10 @@ def test_writer_closed_on_crash_and_ctrl_c_and_resume_hides_what_ran_after_the_c
         if r["step"] > 250:
             signal.raise_signal(signal.SIGINT)
 
-    monkeypatch.setattr(train_mod.TensorBoardLog, "row", row_then_ctrl_c)
+    monkeypatch.setattr(tb_mod.TensorBoardLog, "row", row_then_ctrl_c)
     assert main([*argv, "--resume"]) == 130
     assert len(closed) == 2
-    monkeypatch.setattr(train_mod.TensorBoardLog, "row", row)
+    monkeypatch.setattr(tb_mod.TensorBoardLog, "row", row)
     assert main([*argv, "--resume"]) == 0
     assert len(closed) == 3
     sc = check_against_csv(out)  # one value per step: the crashed process's steps after its checkpoint are purged
@@ -109,7 +109,7 @@ def test_without_the_flag_nothing_changes(tmp_path, tiny, monkeypatch, capsys):
     def refuse():
         raise AssertionError("SummaryWriter requested without --tensorboard")
 
-    monkeypatch.setattr(train_mod, "summary_writer_class", refuse)
+    monkeypatch.setattr(tb_mod, "summary_writer_class", refuse)
     out = tmp_path / "run"
     assert main(["train", "--config", str(tiny), "--steps", "100", "--out", str(out), "--quiet"]) == 0
     assert not (out / "tensorboard").exists() and "TensorBoard" not in capsys.readouterr().out
