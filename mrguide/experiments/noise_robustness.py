@@ -59,14 +59,20 @@ def _noise(reading: str, sigma: float) -> dict[str, Any]:
 
 
 def runs(cfg: NoiseConfig, base_config: str | None) -> list[TrainRun]:
-    return [TrainRun(f"sigma_{sigma:.3f}/seed{s}", s, cfg.steps, True, base_config, {**cfg.overrides, **_noise(cfg.reading, sigma)})
-            for sigma in cfg.sigmas for s in range(cfg.seeds)]
+    """Seed by seed, every σ within: an experiment stopped early still covers every noise level."""
+    return [TrainRun(_name(sigma, s), s, cfg.steps, True, base_config, {**cfg.overrides, **_noise(cfg.reading, sigma)})
+            for s in range(cfg.seeds) for sigma in cfg.sigmas]
+
+
+def _name(sigma: float, seed: int) -> str:
+    return f"sigma_{sigma:.3f}/seed{seed}"
 
 
 def records(cfg: NoiseConfig, base_config: str | None, root: Path, episodes_per_eval: int) -> dict[float, list[RunRecord]]:
-    """Run records grouped by σ (runs() lists them σ by σ, seeds within)."""
-    rs = [read_run(r, root, episodes_per_eval) for r in runs(cfg, base_config)]
-    return {sigma: rs[i * cfg.seeds:(i + 1) * cfg.seeds] for i, sigma in enumerate(cfg.sigmas)}
+    """Run records grouped by σ."""
+    by_name = {r.name: r for r in runs(cfg, base_config)}
+    return {sigma: [read_run(by_name[_name(sigma, s)], root, episodes_per_eval) for s in range(cfg.seeds)]
+            for sigma in cfg.sigmas}
 
 
 def noise_report(cfg: NoiseConfig, recs: dict[float, list[RunRecord]]) -> dict[str, bytes]:
