@@ -98,9 +98,11 @@ def cmd_deploy(args: argparse.Namespace) -> int:
             bar.set_postfix(last=report.outcome, decisions=report.decisions)
 
         if args.dry_run:
+            from mrguide.deploy.runtime import RuntimeConfig
             from mrguide.twin.dry_run import dry_run
 
-            summary = dry_run(args.policy, env_cfg, bus, episodes, seed, run_log, safety, after_episode=tick, policy=policy)
+            summary = dry_run(args.policy, env_cfg, bus, episodes, seed, run_log, safety, after_episode=tick, policy=policy,
+                              runtime_cfg=RuntimeConfig(max_pose_misses=dcfg.max_pose_misses))
         else:
             summary = _deploy_real(policy, bus, spec, task, dcfg, safety, episodes, run_log, tick)
     print(summary.text())
@@ -114,7 +116,7 @@ def _deploy_real(policy, bus, spec, task, dcfg, safety, episodes, run_log, tick)
     from mrguide.drivers.cobot import Cobot
     from mrguide.drivers.realtime import freeze_heap
 
-    rcfg = RuntimeConfig(decision_period=policy.decision_period)
+    rcfg = RuntimeConfig(decision_period=policy.decision_period, max_pose_misses=dcfg.max_pose_misses)
     goals = [dcfg.goals[i % len(dcfg.goals)] for i in range(episodes)]
     freeze_heap()
     with Cobot(bus, spec) as cobot:
