@@ -22,9 +22,9 @@ from mrguide.deploy.decision import NON_FINITE, ActionError, DecisionStep
 from mrguide.deploy.policy import ExportedPolicy
 from mrguide.deploy.runlog import RunLog
 from mrguide.deploy.safety import Event, Reaction, SafetyConfig, Supervisor, Watchdog
-from mrguide.drivers.cobot import Cobot
 from mrguide.drivers.cobot_state import CycleSample, JointState, VacuumState
 from mrguide.drivers.errors import DriverError
+from mrguide.drivers.interface import CobotInterface
 from mrguide.pose_source import ObjectPoseSource, PoseUnavailable
 from mrguide.robot import RobotSpec
 from mrguide.task import Outcome, TaskConfig
@@ -89,11 +89,11 @@ class _FollowingMonitor:
 
 
 class Runtime:
-    """Runs episodes of an exported policy on a connected, enabled `Cobot`."""
+    """Runs episodes of an exported policy on a connected, enabled cobot (any `CobotInterface`)."""
 
     def __init__(
         self,
-        cobot: Cobot,
+        cobot: CobotInterface,
         policy: ExportedPolicy,
         pose: ObjectPoseSource,
         spec: RobotSpec,
@@ -112,7 +112,7 @@ class Runtime:
         self.decision = DecisionStep(spec, task, period)
         self.kin, self.streamer = self.decision.kin, self.decision.streamer
         self.supervisor = Supervisor(spec, safety or SafetyConfig(), self._on_event)
-        self.following = _FollowingMonitor(depth=max(25, 2 * cobot.config.timing.setpoint_queue_depth))  # 100 ms at 4 ms
+        self.following = _FollowingMonitor(depth=max(25, 2 * cobot.setpoint_queue_depth))  # 100 ms at 4 ms
         self.watchdog = Watchdog(self.supervisor.cfg.stall_timeout, self._on_stall)
         self._episode_events: Counter[str] = Counter()
         self._t = 0

@@ -52,8 +52,8 @@ def test_hung_control_thread_disables_the_drives_and_keeps_the_vacuum(rig, tap_o
         cobot.stream(q)
     assert rig.wait_until(lambda: sim.vacuum.commands()[0])
     release = threading.Event()
-    cycle = cobot._cycle
-    cobot._cycle = lambda tick: release.wait()  # the control thread hangs: no SYNC, no heartbeat
+    cycle = cobot._loop.cycle
+    cobot._loop.cycle = lambda tick: release.wait()  # the control thread hangs: no SYNC, no heartbeat
     hung_at = time.monotonic()
     try:
         assert rig.wait_until(lambda: all(d.state == SWITCH_ON_DISABLED for d in sim.drives)
@@ -64,7 +64,7 @@ def test_hung_control_thread_disables_the_drives_and_keeps_the_vacuum(rig, tap_o
         assert rig.wait_until(lambda: all(HEARTBEAT_ERROR in _emcy_codes(tap, n) for n in rig.config.node_ids))
         assert sim.vacuum.commands() == (True, False)  # the held part stays held
     finally:
-        cobot._cycle = cycle
+        cobot._loop.cycle = cycle
         release.set()
     assert rig.wait_until(lambda: cobot.status().fault is not None)
     assert "0x8130" in str(cobot.status().fault) or "OPERATIONAL" in str(cobot.status().fault)
