@@ -15,6 +15,12 @@ from mrguide.drivers.errors import DriverError
 from mrguide.errors import InputError
 
 
+#: Test seam: lets tests drive the real-robot path of `deploy` (--enable-drives) over a python-can virtual
+#: channel with simulated devices on it. Users always get the refusal of the virtual interface; only a test
+#: sets this.
+ALLOW_VIRTUAL_REAL_BUS = False
+
+
 def cmd_expert(args: argparse.Namespace) -> int:
     """Run the scripted expert in the twin and report success rate and timing."""
     from mrguide.twin.env import EnvConfig, PickPlaceEnv
@@ -78,7 +84,7 @@ def cmd_deploy(args: argparse.Namespace) -> int:
         check_decision_period(policy, args.policy, bus.timing.control_period, env_cfg.twin.decision_period)
     else:
         check_decision_period(policy, args.policy, bus.timing.control_period)
-        if bus.bus.interface == "virtual":
+        if bus.bus.interface == "virtual" and not ALLOW_VIRTUAL_REAL_BUS:
             raise ConfigError("the bus config names the virtual interface; use --dry-run, or configure the real bus")
         if not args.enable_drives:
             raise InputError(f"this will enable the drives on {bus.bus.interface}:{bus.bus.channel} and move the arm. "
