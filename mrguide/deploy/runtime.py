@@ -222,6 +222,9 @@ class Runtime:
             report.outcome = Outcome.SAFETY_STOP.value
             exc.report = report
             raise
+        except DriverError:  # a fault surfaced outside the streaming (reading the state, the vacuum command)
+            report.outcome = Outcome.SAFETY_STOP.value
+            raise
         finally:
             self.watchdog.arm(False)
             report.events = dict(self._episode_events)

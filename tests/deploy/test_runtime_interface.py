@@ -7,11 +7,13 @@ import ast
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from mrguide.deploy.runlog import RunLog, read_log
 from mrguide.deploy.runtime import Runtime, RuntimeConfig
 from mrguide.deploy.session import FixedObjectPose
 from mrguide.drivers.cobot_state import DriverStats, JointState, VacuumState
+from mrguide.drivers.errors import DriverError
 from mrguide.drivers.interface import CobotInterface
 from mrguide.robot import load_robot
 from mrguide.task import TaskConfig, oracle_action
@@ -81,3 +83,25 @@ def test_runtime_module_does_not_import_the_concrete_cobot():
     modules = {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)}
     modules |= {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
     assert "mrguide.drivers.interface" in modules and "mrguide.drivers.cobot" not in modules
+
+
+def test_a_driver_fault_outside_the_streaming_ends_the_episode_as_a_safety_stop(tmp_path):
+    spec, task = load_robot(), TaskConfig(horizon=8)
+    cobot = IdealCobot(spec.q_home)
+    reads = []
+    joint_state = cobot.joint_state
+
+    def failing_joint_state():
+        reads.append(1)
+        if len(reads) == 3:
+            raise DriverError("the control thread has held the driver lock for 0.5 s: it is hung (test)")
+        return joint_state()
+
+    cobot.joint_state = failing_joint_state
+    policy = lambda obs: oracle_action(obs, task, spec.workspace.to_normalized)  # noqa: E731
+    with RunLog(tmp_path / "log.jsonl", {"test": "interface"}) as log:
+        with Runtime(cobot, policy, FixedObjectPose((0.5, -0.075, 0.025)), spec, task, log, RuntimeConfig()) as rt:
+            with pytest.raises(DriverError, match="hung"):
+                rt.run_episode(np.array([0.5, 0.21, 0.025]), 0)
+    ends = [r for r in read_log(tmp_path / "log.jsonl") if r["kind"] == "episode_end"]
+    assert [e["outcome"] for e in ends] == ["safety_stop"] and ends[0]["decisions"] == 2
