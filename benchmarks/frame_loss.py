@@ -117,13 +117,13 @@ def detect_hung_master(config: CobotBusConfig, robot: RobotSpec) -> dict[str, fl
     release = threading.Event()
     with SimulatedCobot(config, FirstOrderPlant(robot.q_home)) as sim, Cobot(config, robot) as cobot:
         cobot.enable()
-        cycle = cobot._cycle
-        cobot._cycle = lambda tick: release.wait()  # noqa: SLF001 - a hung control thread, as in the tests
+        cycle = cobot._loop.cycle
+        cobot._loop.cycle = lambda tick: release.wait()  # noqa: SLF001 - a hung control thread, as in the tests
         try:
             took = _until(lambda: all(d.state != OPERATION_ENABLED for d in sim.drives)
                           and not any(s.operational for s in (*sim.drives, sim.vacuum)))
         finally:
-            cobot._cycle = cycle  # noqa: SLF001
+            cobot._loop.cycle = cycle  # noqa: SLF001
             release.set()
     return {"devices_s": took}
 

@@ -15,6 +15,12 @@ from mrguide.drivers.errors import DriverError
 from mrguide.errors import InputError
 
 
+#: Test seam: lets tests drive the real-robot path of `deploy` (--enable-drives) over a python-can virtual
+#: channel with simulated devices on it. Users always get the refusal of the virtual interface; only a test
+#: sets this.
+ALLOW_VIRTUAL_REAL_BUS = False
+
+
 def cmd_expert(args: argparse.Namespace) -> int:
     """Run the scripted expert in the twin and report success rate and timing."""
     from mrguide.twin.env import EnvConfig, PickPlaceEnv
@@ -78,7 +84,7 @@ def cmd_deploy(args: argparse.Namespace) -> int:
         check_decision_period(policy, args.policy, bus.timing.control_period, env_cfg.twin.decision_period)
     else:
         check_decision_period(policy, args.policy, bus.timing.control_period)
-        if bus.bus.interface == "virtual":
+        if bus.bus.interface == "virtual" and not ALLOW_VIRTUAL_REAL_BUS:
             raise ConfigError("the bus config names the virtual interface; use --dry-run, or configure the real bus")
         if not args.enable_drives:
             raise InputError(f"this will enable the drives on {bus.bus.interface}:{bus.bus.channel} and move the arm. "
@@ -98,9 +104,11 @@ def cmd_deploy(args: argparse.Namespace) -> int:
             bar.set_postfix(last=report.outcome, decisions=report.decisions)
 
         if args.dry_run:
+            from mrguide.deploy.runtime import RuntimeConfig
             from mrguide.twin.dry_run import dry_run
 
-            summary = dry_run(args.policy, env_cfg, bus, episodes, seed, run_log, safety, after_episode=tick, policy=policy)
+            summary = dry_run(args.policy, env_cfg, bus, episodes, seed, run_log, safety, after_episode=tick, policy=policy,
+                              runtime_cfg=RuntimeConfig(max_pose_misses=dcfg.max_pose_misses))
         else:
             summary = _deploy_real(policy, bus, spec, task, dcfg, safety, episodes, run_log, tick)
     print(summary.text())
@@ -114,7 +122,7 @@ def _deploy_real(policy, bus, spec, task, dcfg, safety, episodes, run_log, tick)
     from mrguide.drivers.cobot import Cobot
     from mrguide.drivers.realtime import freeze_heap
 
-    rcfg = RuntimeConfig(decision_period=policy.decision_period)
+    rcfg = RuntimeConfig(decision_period=policy.decision_period, max_pose_misses=dcfg.max_pose_misses)
     goals = [dcfg.goals[i % len(dcfg.goals)] for i in range(episodes)]
     freeze_heap()
     with Cobot(bus, spec) as cobot:

@@ -30,7 +30,10 @@ N_PHASES = len(PHASES)
 
 
 class Outcome(str, enum.Enum):
-    """How an episode ended."""
+    """How an episode ended: every outcome of the twin and of the robot, in one enum.
+
+    The task model (`task_step`) gives the first six; the deploy runtime adds the ones only a robot has
+    (its safety supervisor ended the episode). `terminated`/`truncated` are the Gymnasium reading."""
 
     SUCCESS = "success"
     NO_GRASP = "no_grasp"  # horizon reached before the object was grasped
@@ -38,6 +41,28 @@ class Outcome(str, enum.Enum):
     MISPLACED = "misplaced"  # released outside the tolerance region
     KNOCKED_OFF = "knocked_off"  # the object, not held, fell below the table surface (pushed off the table)
     TIMEOUT = "timeout"  # horizon reached after the grasp
+    ABORTED = "aborted"  # deploy: the supervisor ended the episode (non-finite action, repeated IK failures)
+    POSE_LOST = "pose_lost"  # deploy: no object pose for more decisions than allowed; the arm held still
+    SAFETY_STOP = "safety_stop"  # deploy: quick stop (fault, limit, following error, stall, Ctrl-C)
+
+    @property
+    def terminated(self) -> bool:
+        """The task itself ended (success or failure): no bootstrapping past it."""
+        return self in _TERMINATED
+
+    @property
+    def truncated(self) -> bool:
+        """The horizon cut the episode short."""
+        return self in _TRUNCATED
+
+    @property
+    def from_task(self) -> bool:
+        """Judged by the task model (as opposed to ended by the deploy runtime's supervisor)."""
+        return self in _TERMINATED or self in _TRUNCATED
+
+
+_TERMINATED = frozenset({Outcome.SUCCESS, Outcome.DROPPED, Outcome.MISPLACED, Outcome.KNOCKED_OFF})
+_TRUNCATED = frozenset({Outcome.NO_GRASP, Outcome.TIMEOUT})
 
 
 @dataclass(frozen=True)
@@ -101,6 +126,11 @@ def phase_from_progress(phi: float) -> int:
     return int(min(N_PHASES - 1, max(0, round(float(phi) * N_PHASES))))
 
 
+def placed_at_goal(cfg: TaskConfig, obj: np.ndarray, goal: np.ndarray) -> bool:
+    """The success rule's placement test: the object centre within `place_tolerance` of the goal (xy)."""
+    return float(np.linalg.norm(np.asarray(obj)[:2] - np.asarray(goal)[:2])) < cfg.place_tolerance
+
+
 @dataclass(frozen=True)
 class StepResult:
     """Outcome of one task-model step: reward and its terms, the next phase, and the episode outcome."""
@@ -150,8 +180,7 @@ def task_step(
     elif not part_present and np.asarray(obj)[2] < cfg.table_height:
         outcome = Outcome.KNOCKED_OFF  # no phase target can be reached any more: end it, don't track a falling object
     elif phase == 4 and g == -1:
-        placed = float(np.linalg.norm(np.asarray(obj)[:2] - np.asarray(goal)[:2])) < cfg.place_tolerance
-        if reached and placed:
+        if reached and placed_at_goal(cfg, obj, goal):
             terms["phase_bonus"] = cfg.bonuses[phase]
             terms["terminal"] = cfg.r_success
             outcome = Outcome.SUCCESS

@@ -76,11 +76,28 @@ class RunLog:
 
 
 def read_log(path: str | Path) -> list[dict]:
-    """All complete records of a run log (a torn last line is skipped)."""
+    """All records of a run log. Only a torn last line (the one in flight when the writer died: no line
+    break after it) is skipped; any other line that is not a JSON object raises RunLogError naming file:line."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise RunLogError(f"{path}: cannot read the run log: {exc}") from exc
+    lines = text.split("\n")  # the last element is "" when the log ends with a line break
     records = []
-    for line in Path(path).read_text().splitlines():
+    for number, line in enumerate(lines, start=1):
+        torn = number == len(lines)
+        if torn and line == "":
+            break
         try:
-            records.append(json.loads(line))
-        except json.JSONDecodeError:
-            continue
+            record = json.loads(line)
+        except json.JSONDecodeError as exc:
+            if torn:
+                break
+            raise RunLogError(f"{path}:{number}: corrupt run log record ({exc.msg} at column {exc.colno})") from exc
+        if not isinstance(record, dict):
+            if torn:
+                break
+            raise RunLogError(f"{path}:{number}: a run log record must be a JSON object, got {type(record).__name__}")
+        records.append(record)
     return records

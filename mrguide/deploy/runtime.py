@@ -1,9 +1,11 @@
 """The deploy runtime: an exported policy driving the cobot through the CAN driver layer.
 
-Each decision: joint state → FK → TCP; vacuum signal → g; object pose from the pose source; the shared
-task model → phase, φ, reward, outcome; observation; policy (numpy) → action; workspace clamp; IK
-warm-started at the measured joints; a Ruckig stream handed to the driver one control period at a time;
-vacuum command from g'. The safety supervisor (`safety.py`) watches every step. No PyBullet, no torch.
+Each decision: joint state → FK → TCP; vacuum signal → g; object pose from the pose source (or, while
+the part hangs under the cup, from the TCP); then the `DecisionStep` the twin trains with (decision.py):
+task model → phase, φ, reward, outcome; observation; policy (numpy) → action; clamp; IK warm-started at
+the measured joints; a Ruckig stream handed to the driver one control period at a time; vacuum command
+from g'. The safety supervisor (`safety.py`) watches every step and decides how to react. No PyBullet, no
+torch.
 """
 
 from __future__ import annotations
@@ -15,17 +17,17 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from mrguide.motion.kinematics import IKError, Kinematics
+from mrguide.config import check_number
+from mrguide.deploy.decision import NON_FINITE, ActionError, DecisionStep
 from mrguide.deploy.policy import ExportedPolicy
 from mrguide.deploy.runlog import RunLog
 from mrguide.deploy.safety import Event, Reaction, SafetyConfig, Supervisor, Watchdog
-from mrguide.motion.trajectory import JointStreamer
-from mrguide.drivers.cobot import Cobot
-from mrguide.drivers.cobot_state import CycleSample
+from mrguide.drivers.cobot_state import CycleSample, JointState, VacuumState
 from mrguide.drivers.errors import DriverError
+from mrguide.drivers.interface import CobotInterface
 from mrguide.pose_source import ObjectPoseSource, PoseUnavailable
 from mrguide.robot import RobotSpec
-from mrguide.task import Outcome, TaskConfig, observation, progress, task_step
+from mrguide.task import Outcome, TaskConfig
 
 log = logging.getLogger(__name__)
 
@@ -33,7 +35,7 @@ log = logging.getLogger(__name__)
 class RunStopped(RuntimeError):
     """The run cannot go on (quick stop after a fault, a stall or an interrupt).
 
-    `report` is the report of the episode it stopped, if it stopped one (outcome "safety_stop")."""
+    `report` is the report of the episode it stopped, if it stopped one (outcome `Outcome.SAFETY_STOP`)."""
 
     report: EpisodeReport | None = None
 
@@ -47,12 +49,18 @@ class RuntimeConfig:
     #: While the vacuum generator reports a part after the grasp, the object hangs under the cup: take its
     #: position from the TCP (forward kinematics) instead of the pose source, which may lag (an HMD does).
     track_carried_object: bool = True
+    #: Decisions in a row that may use the last object pose when the pose source has none (a marker out of
+    #: view, a dead HMD process); one more ends the episode as `pose_lost` with the arm held. In [0, 1000].
+    max_pose_misses: int = 3
+
+    def __post_init__(self) -> None:
+        check_number("deploy.max_pose_misses", self.max_pose_misses, 0, 1000, integer=True)
 
 
 @dataclass
 class EpisodeReport:
     index: int
-    outcome: str
+    outcome: str  # an `Outcome` value
     decisions: int
     events: dict[str, int]
     latency_ms: list[float] = field(default_factory=list)
@@ -81,11 +89,11 @@ class _FollowingMonitor:
 
 
 class Runtime:
-    """Runs episodes of an exported policy on a connected, enabled `Cobot`."""
+    """Runs episodes of an exported policy on a connected, enabled cobot (any `CobotInterface`)."""
 
     def __init__(
         self,
-        cobot: Cobot,
+        cobot: CobotInterface,
         policy: ExportedPolicy,
         pose: ObjectPoseSource,
         spec: RobotSpec,
@@ -101,13 +109,16 @@ class Runtime:
         if abs(ratio - round(ratio)) > 1e-6 or ratio < 1:
             raise ValueError(f"decision period {self.cfg.decision_period} s is not a multiple of the control period {period} s")
         self.cycles = int(round(ratio))
-        self.kin = Kinematics(spec)
-        self.streamer = JointStreamer(spec, period)
+        self.decision = DecisionStep(spec, task, period)
+        self.kin, self.streamer = self.decision.kin, self.decision.streamer
         self.supervisor = Supervisor(spec, safety or SafetyConfig(), self._on_event)
-        self.following = _FollowingMonitor(depth=max(25, 2 * cobot.config.timing.setpoint_queue_depth))  # 100 ms at 4 ms
+        self.following = _FollowingMonitor(depth=max(25, 2 * cobot.setpoint_queue_depth))  # 100 ms at 4 ms
         self.watchdog = Watchdog(self.supervisor.cfg.stall_timeout, self._on_stall)
         self._episode_events: Counter[str] = Counter()
         self._t = 0
+        self._last_obj: np.ndarray | None = None  # last pose the source gave in this episode
+        self._pose_misses = 0  # decisions in a row without a pose from the source
+        self._carried: np.ndarray | None = None  # where the part hung under the cup, last seen
 
     # -- lifecycle ----------------------------------------------------------------------------------
     def __enter__(self) -> "Runtime":
@@ -189,81 +200,15 @@ class Runtime:
         """One episode toward `goal` from the home pose; returns its report (RunStopped ends the run)."""
         goal = np.asarray(goal, dtype=float)
         self._episode_events = Counter()
-        report = EpisodeReport(index, "aborted", 0, {})
+        report = EpisodeReport(index, Outcome.ABORTED.value, 0, {})
         t0 = time.perf_counter()
         self.log.write("episode_start", episode=index, goal=goal)
-        self.streamer.reset(self.cobot.setpoint)
+        self.decision.reset(self.cobot.setpoint)
+        self._last_obj, self._pose_misses, self._carried = None, 0, None
         self.watchdog.arm(True)
-        phase, prev_obj, outcome, carried = 0, None, None, None
         try:
-            for t in range(self.task.horizon + 1):
-                self._t = t
-                t_read = time.perf_counter()
-                js = self.cobot.joint_state()
-                vac = self.cobot.vacuum_state()
-                tcp = self.kin.tcp_position(js.positions)
-                g = 1 if vac.vacuum_on else -1
-                try:
-                    obj = self.pose.object_position()
-                    prev_obj = obj
-                except PoseUnavailable as exc:
-                    if prev_obj is None:
-                        raise RunStopped(f"no object pose at the start of the episode: {exc}") from exc
-                    self.supervisor.report(Event.POSE_UNAVAILABLE, f"{exc}; using the last pose")
-                    obj = prev_obj
-                if self.cfg.track_carried_object and phase >= 2:
-                    if vac.part_gripped:
-                        obj = carried = tcp - np.array([0.0, 0.0, 0.5 * self.task.object_height])
-                    elif carried is not None and phase == 4:
-                        obj = carried  # just released: it lies where the cup let it go
-
-                reward = None
-                if t > 0:
-                    res = task_step(self.task, phase, tcp, g, vac.part_gripped, obj, goal, t - 1)
-                    phase, reward, outcome = res.phase, res.reward, res.outcome
-                    if outcome is Outcome.DROPPED:
-                        self.supervisor.report(Event.VACUUM_LOST, f"part lost in phase {res.phase} (vacuum {vac.level_kpa:.0f} kPa)")
-                if outcome is not None:
-                    self.log.write("decision", t=t, tcp=tcp, g=g, phase=phase, reward=reward, outcome=outcome.value)
-                    break
-                obs = observation(tcp, g, progress(phase), obj, goal)
-                t_inf = time.perf_counter()
-                action = self.policy(obs)
-                inference_ms = (time.perf_counter() - t_inf) * 1e3
-                record = {"episode": index, "t": t, "obs": obs, "action": action, "phase": phase, "reward": reward,
-                          "q": js.positions, "vacuum_kpa": vac.level_kpa, "part": vac.part_gripped}
-                if not np.all(np.isfinite(action)):
-                    self.supervisor.report(Event.NON_FINITE_ACTION, f"policy output {action.tolist()}")
-                    self.log.write("decision", **record)
-                    break
-                target, clamped = self.spec.workspace.clamp(self.spec.workspace.to_cartesian(np.clip(action[:3], -1.0, 1.0)))
-                if np.any(np.abs(action[:3]) > 1.0):
-                    self.supervisor.report(Event.WORKSPACE, f"action {action[:3].tolist()} outside [-1, 1]")
-                try:
-                    q_target = self.kin.ik(target, js.positions)
-                    self.supervisor.ik_result(True)
-                    self.streamer.set_target(q_target)
-                    record["q_target"] = q_target
-                except IKError as exc:
-                    if self.supervisor.ik_result(False, str(exc)) is Reaction.ABORT:
-                        self.log.write("decision", **record)
-                        break
-                    self.streamer.brake()
-                self.cobot.set_vacuum(bool(action[3] > 0))
-                record["target"] = target
-                setpoints = []
-                for k in range(self.cycles):
-                    if k == 0:
-                        latency_ms = (time.perf_counter() - t_read) * 1e3
-                    setpoints.append(self._stream_cycle()[0])
-                record["latency_ms"], record["inference_ms"] = latency_ms, inference_ms
-                record["setpoints"] = np.round(np.array(setpoints), 7)
-                report.latency_ms.append(latency_ms)
-                report.inference_ms.append(inference_ms)
-                report.decisions = t + 1
-                self.log.write("decision", **record)
-            if outcome is not None:
-                report.outcome = outcome.value
+            outcome = self._decisions(goal, index, report)
+            report.outcome = outcome.value
             self.streamer.brake()
             self._settle()
             if outcome is not Outcome.SUCCESS:
@@ -271,11 +216,14 @@ class Runtime:
         except KeyboardInterrupt:
             self.cobot.stop()
             self.supervisor.report(Event.INTERRUPT, "Ctrl-C")
-            report.outcome = "safety_stop"
+            report.outcome = Outcome.SAFETY_STOP.value
             raise
         except RunStopped as exc:
-            report.outcome = "safety_stop"
+            report.outcome = Outcome.SAFETY_STOP.value
             exc.report = report
+            raise
+        except DriverError:  # a fault surfaced outside the streaming (reading the state, the vacuum command)
+            report.outcome = Outcome.SAFETY_STOP.value
             raise
         finally:
             self.watchdog.arm(False)
@@ -285,3 +233,94 @@ class Runtime:
                            events=report.events, wall_s=report.wall_s)
             self.log.sync()
         return report
+
+    def _decisions(self, goal: np.ndarray, index: int, report: EpisodeReport) -> Outcome:
+        """The episode's decisions until an outcome: the task's, or the supervisor's (aborted, pose lost)."""
+        for t in range(self.task.horizon + 1):
+            self._t = t
+            t_read = time.perf_counter()
+            js, vac = self.cobot.joint_state(), self.cobot.vacuum_state()
+            tcp = self.decision.tcp(js.positions)
+            g = 1 if vac.vacuum_on else -1
+            obj = self._object_position(tcp, vac)
+            if obj is None:
+                self.log.write("decision", t=t, tcp=tcp, g=g, phase=self.decision.phase, outcome=Outcome.POSE_LOST.value)
+                return Outcome.POSE_LOST
+            reward = None
+            if t > 0:
+                res = self.decision.judge(tcp, g, vac.part_gripped, obj, goal)
+                reward = res.reward
+                if res.outcome is Outcome.DROPPED:
+                    self.supervisor.report(Event.VACUUM_LOST, f"part lost in phase {res.phase} (vacuum {vac.level_kpa:.0f} kPa)")
+                if res.outcome is not None:
+                    self.log.write("decision", t=t, tcp=tcp, g=g, phase=res.phase, reward=reward, outcome=res.outcome.value)
+                    return res.outcome
+            ended = self._decide(t, t_read, js, vac, self.decision.observe(tcp, g, obj, goal), index, reward, report)
+            if ended is not None:
+                return ended
+        raise AssertionError("the task model ends every episode at its horizon")  # pragma: no cover
+
+    def _decide(self, t: int, t_read: float, js: JointState, vac: VacuumState, obs: np.ndarray, index: int,
+                reward: float | None, report: EpisodeReport) -> Outcome | None:
+        """Policy → decision step → one decision period streamed; an outcome if the supervisor ends the episode."""
+        t_inf = time.perf_counter()
+        action = self.policy(obs)
+        inference_ms = (time.perf_counter() - t_inf) * 1e3
+        record = {"episode": index, "t": t, "obs": obs, "action": action, "phase": self.decision.phase, "reward": reward,
+                  "q": js.positions, "vacuum_kpa": vac.level_kpa, "part": vac.part_gripped}
+        try:
+            cmd = self.decision.act(action, js.positions)
+        except ActionError as exc:
+            event = Event.NON_FINITE_ACTION if exc.kind == NON_FINITE else Event.INVALID_ACTION
+            self.supervisor.report(event, f"policy output: {exc}")
+            self.log.write("decision", **record)
+            return Outcome.ABORTED
+        if cmd.clamped:
+            self.supervisor.report(Event.WORKSPACE, f"action {np.asarray(action)[:3].tolist()} outside [-1, 1]: "
+                                                    f"target clamped to {np.round(cmd.target, 4).tolist()}")
+        record["target"] = cmd.target
+        if cmd.q_target is None:
+            if self.supervisor.ik_result(False, cmd.ik_error or "") is Reaction.ABORT:
+                self.log.write("decision", **record)
+                return Outcome.ABORTED
+        else:
+            self.supervisor.ik_result(True)
+            record["q_target"] = cmd.q_target
+        self.cobot.set_vacuum(cmd.vacuum)
+        latency_ms = (time.perf_counter() - t_read) * 1e3
+        setpoints = [self._stream_cycle()[0] for _ in range(self.cycles)]
+        record["latency_ms"], record["inference_ms"] = latency_ms, inference_ms
+        record["setpoints"] = np.round(np.array(setpoints), 7)
+        report.latency_ms.append(latency_ms)
+        report.inference_ms.append(inference_ms)
+        report.decisions = t + 1
+        self.log.write("decision", **record)
+        return None
+
+    def _object_position(self, tcp: np.ndarray, vac: VacuumState) -> np.ndarray | None:
+        """Where the object is for this decision; None once the pose has been missing for too long.
+
+        While the part hangs under the cup (after the grasp) it is where the TCP is; just released, where the
+        cup let it go. Otherwise the pose source says; when it has no pose, the last one is used for at most
+        `max_pose_misses` decisions in a row (each counted and logged), then the episode ends."""
+        if self.cfg.track_carried_object and self.decision.phase >= 2:
+            if vac.part_gripped:
+                self._carried = tcp - np.array([0.0, 0.0, 0.5 * self.task.object_height])
+                return self._carried
+            if self._carried is not None and self.decision.phase == 4:
+                return self._carried
+        try:
+            obj = self.pose.object_position()
+        except PoseUnavailable as exc:
+            if self._last_obj is None:
+                raise RunStopped(f"no object pose at the start of the episode: {exc}") from exc
+            self._pose_misses += 1
+            if self._pose_misses > self.cfg.max_pose_misses:
+                self.supervisor.report(Event.POSE_LOST, f"no object pose for {self._pose_misses} decisions in a row "
+                                                        f"(at most {self.cfg.max_pose_misses} may use the last one): {exc}")
+                return None
+            self.supervisor.report(Event.POSE_UNAVAILABLE, f"{exc}; using the last pose "
+                                                           f"({self._pose_misses} of at most {self.cfg.max_pose_misses})")
+            return self._last_obj
+        self._last_obj, self._pose_misses = obj, 0
+        return obj

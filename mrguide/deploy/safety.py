@@ -42,9 +42,11 @@ class Event(str, enum.Enum):
 
     WORKSPACE = "workspace"  # policy target outside the workspace box
     NON_FINITE_ACTION = "non_finite_action"  # NaN/inf from the policy
+    INVALID_ACTION = "invalid_action"  # an action of the wrong shape from the policy
     IK_FAILURE = "ik_failure"  # target not reachable with the tool down
     IK_FAILURES_REPEATED = "ik_failures_repeated"  # several in a row
-    POSE_UNAVAILABLE = "pose_unavailable"  # no object pose this decision
+    POSE_UNAVAILABLE = "pose_unavailable"  # no object pose this decision (the last one is used)
+    POSE_LOST = "pose_lost"  # no object pose for more decisions in a row than allowed
     JOINT_LIMIT = "joint_limit"  # a setpoint outside position/velocity/acceleration limits
     FOLLOWING_ERROR = "following_error"  # measured joints too far from the commanded ones
     DRIVE_FAULT = "drive_fault"  # EMCY, heartbeat loss, lost feedback, bus error (latched by the driver)
@@ -56,9 +58,11 @@ class Event(str, enum.Enum):
 REACTIONS: dict[Event, Reaction] = {
     Event.WORKSPACE: Reaction.CLAMP,
     Event.NON_FINITE_ACTION: Reaction.ABORT,
+    Event.INVALID_ACTION: Reaction.ABORT,
     Event.IK_FAILURE: Reaction.HOLD,
     Event.IK_FAILURES_REPEATED: Reaction.ABORT,
     Event.POSE_UNAVAILABLE: Reaction.LAST_KNOWN,
+    Event.POSE_LOST: Reaction.ABORT,
     Event.JOINT_LIMIT: Reaction.QUICK_STOP,
     Event.FOLLOWING_ERROR: Reaction.QUICK_STOP,
     Event.DRIVE_FAULT: Reaction.QUICK_STOP,

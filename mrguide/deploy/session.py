@@ -10,9 +10,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from mrguide.config import ConfigError, check_number
-from mrguide.deploy.runtime import EpisodeReport, RunStopped, Runtime
+from mrguide.deploy.runtime import EpisodeReport, RunStopped, Runtime, RuntimeConfig
 from mrguide.drivers.errors import DriverError
-from mrguide.pose_source import ObjectPoseSource
+from mrguide.pose_source import ObjectPoseSource, PoseUnavailable
+from mrguide.task import Outcome
 
 log = logging.getLogger(__name__)
 
@@ -34,10 +35,14 @@ class DeployConfig:
     object_position: tuple[float, float, float] = (0.50, -0.075, 0.025)
     #: Goals (object centre, m), used in turn.
     goals: tuple[tuple[float, float, float], ...] = ((0.50, 0.21, 0.025),)
+    #: Decisions in a row that may use the last object pose when the pose source has none; one more ends
+    #: the episode (`pose_lost`). In [0, 1000].
+    max_pose_misses: int = RuntimeConfig.max_pose_misses
 
     def __post_init__(self) -> None:
         check_number("deploy.episodes", self.episodes, 1, MAX_EPISODES, integer=True)
         check_number("deploy.seed", self.seed, 0, 2**32 - 1, integer=True)
+        check_number("deploy.max_pose_misses", self.max_pose_misses, 0, 1000, integer=True)
         if not self.log_dir:
             raise ConfigError("deploy.log_dir must not be empty")
         if not self.goals:
@@ -61,7 +66,7 @@ class DeploySummary:
 
     @property
     def successes(self) -> int:
-        return sum(e.outcome == "success" for e in self.episodes)
+        return sum(e.outcome == Outcome.SUCCESS.value for e in self.episodes)
 
     def outcomes(self) -> Counter:
         return Counter(e.outcome for e in self.episodes)
@@ -106,7 +111,8 @@ def run_session(
 
     A safety stop (RunStopped, or a driver fault latched between episodes) fails its episode as
     "safety_stop" and ends the session with a reason, unless `max_recoveries` allows a fault reset and
-    the next episode (evaluations in the simulated cell; the real robot wants its operator)."""
+    the next episode (evaluations in the simulated cell; the real robot wants its operator). A pose
+    source that has no pose while the scene is set (`before_episode`) is such a stop too."""
     summary = DeploySummary()
 
     def record(report: EpisodeReport) -> None:
@@ -119,11 +125,11 @@ def run_session(
             try:
                 runtime.home()
                 if before_episode:
-                    before_episode(i)
+                    _set_scene(before_episode, i)
                 report = runtime.run_episode(goal, i)
             except (RunStopped, DriverError) as exc:
                 stopped = exc.report if isinstance(exc, RunStopped) else None
-                record(stopped or EpisodeReport(i, "safety_stop", 0, {}))
+                record(stopped or EpisodeReport(i, Outcome.SAFETY_STOP.value, 0, {}))
                 if summary.recoveries >= max_recoveries or i == len(goals) - 1:
                     raise
                 _recover(runtime, exc)
@@ -140,6 +146,13 @@ def run_session(
         summary.cycle_lateness_p99_ms = stats.lateness_p99 * 1e3
         summary.missed_cycles = stats.missed_cycles
     return summary
+
+
+def _set_scene(before_episode: Callable[[int], None], index: int) -> None:
+    try:
+        before_episode(index)
+    except PoseUnavailable as exc:
+        raise RunStopped(f"episode {index}: no object pose after setting the scene: {exc}") from exc
 
 
 def _recover(runtime: Runtime, stop: Exception) -> None:

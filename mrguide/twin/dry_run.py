@@ -87,6 +87,7 @@ def dry_run(
     policy=None,
     on_placed: Callable[[], None] | None = None,
     max_recoveries: int = 0,
+    runtime_cfg: RuntimeConfig | None = None,
 ) -> DeploySummary:
     """Run `episodes` seeded episodes of a policy through the whole stack against the simulated cell.
 
@@ -94,7 +95,8 @@ def dry_run(
     may also be any callable obs → action (the scripted expert in tests). `run_log` is the caller's open
     log (its header written; the caller closes it). `on_placed` runs after the object was put in place for
     an episode (e.g. to wait for a fresh HMD estimate). `max_recoveries` safety stops may be followed by a fault
-    reset and the next episode (see `run_session`).
+    reset and the next episode (see `run_session`). `runtime_cfg` sets the runtime (its decision period is
+    the twin's).
     """
     spec = load_robot(env_cfg.robot)
     if policy is None:
@@ -106,8 +108,8 @@ def dry_run(
         pose = pose_factory(cell) if pose_factory else TwinObjectPose(cell.plant)
         # Without a [safety] config the simulated cell allows 0.1 rad of following error (robot: 0.05):
         # on a loaded PC the simulated arm can fall behind for lack of CPU, not of torque.
-        runtime = Runtime(cell.cobot, policy, pose, spec, env_cfg.task, run_log,
-                          RuntimeConfig(decision_period=env_cfg.twin.decision_period),
+        rcfg = replace(runtime_cfg or RuntimeConfig(), decision_period=env_cfg.twin.decision_period)
+        runtime = Runtime(cell.cobot, policy, pose, spec, env_cfg.task, run_log, rcfg,
                           safety or SafetyConfig(following_error=0.1))
         def place(i: int) -> None:
             cell.plant.place_objects(*layouts[i])

@@ -1,8 +1,9 @@
 """`PickPlaceEnv`: the paper's pick-and-place MDP as a Gymnasium env on the PyBullet twin.
 
-One step is one policy decision: the normalized action is mapped into the workspace box, solved by
+One step is one policy decision, made by the deploy stack's `DecisionStep` (deploy/decision.py), the same
+code the robot runs: the normalized action is clamped and mapped into the workspace box, solved by
 Pinocchio IK (warm-started at the measured joints) and executed as a Ruckig stream through the twin's
-joint servos for one decision period. The reward, phases and outcomes come from `mrguide.task`.
+joint servos for one decision period; the task model then gives the reward, phase and outcome.
 """
 
 from __future__ import annotations
@@ -16,18 +17,16 @@ import gymnasium as gym
 import numpy as np
 
 from mrguide.config import load_section
-from mrguide.motion.kinematics import IKError, Kinematics
-from mrguide.motion.trajectory import JointStreamer
+from mrguide.deploy.decision import ActionError, DecisionState, DecisionStep
 from mrguide.robot import RobotConfig, RobotSpec, load_robot
-from mrguide.task import ACT_DIM, OBS_DIM, Outcome, TaskConfig, observation, oracle_action, progress, task_step
+from mrguide.task import ACT_DIM, OBS_DIM, Outcome, TaskConfig, oracle_action
 from mrguide.twin.config import Region, TwinConfig
 from mrguide.twin.scene import Scene, SceneSnapshot
 
 log = logging.getLogger(__name__)
 
 
-class ActionError(ValueError):
-    """An action that cannot be executed (wrong shape, NaN or inf)."""
+__all__ = ["ActionError", "EnvConfig", "EnvSnapshot", "PickPlaceEnv"]
 
 
 @dataclass(frozen=True)
@@ -52,12 +51,9 @@ class EnvSnapshot:
     """A restorable env state (see `PickPlaceEnv.snapshot`)."""
 
     scene: SceneSnapshot
-    streamer: tuple[list[float], ...]
-    phase: int
-    t: int
+    decision: tuple[DecisionState, tuple[list[float], ...]]
     vacuum: bool
     obs: np.ndarray
-    clamped: int
 
 
 def _sample(rng: np.random.Generator, region: Region) -> np.ndarray:
@@ -77,19 +73,15 @@ class PickPlaceEnv(gym.Env):
         self.workspace = self.robot_spec.workspace
         self.render_mode = render_mode
         self.scene = Scene(self.robot_spec, self.twin_cfg, self.task_cfg.object_height)
-        self.kin = Kinematics(self.robot_spec)
-        self.streamer = JointStreamer(self.robot_spec, self.twin_cfg.control_period)
+        self.decision = DecisionStep(self.robot_spec, self.task_cfg, self.twin_cfg.control_period)
+        self.kin, self.streamer = self.decision.kin, self.decision.streamer
         self.action_space = gym.spaces.Box(-1.0, 1.0, (ACT_DIM,), np.float32)
         lim = np.full(OBS_DIM, 5.0, np.float32)
         lim[3], lim[4] = 1.0, 1.0
         low = -lim.copy()
         low[4] = 0.0
         self.observation_space = gym.spaces.Box(low, lim, (OBS_DIM,), np.float32)
-        self.phase = 0
-        self.t = 0
         self.vacuum = False
-        self.clamped = 0
-        self.ik_failures = 0
         self._obs = np.zeros(OBS_DIM, np.float32)
         self._camera = None
 
@@ -103,8 +95,8 @@ class PickPlaceEnv(gym.Env):
         goal = self._position(options.get("goal"), self.twin_cfg.goal_region, h)
         self.scene.reseed(int(self.np_random.integers(2**63)))
         self.scene.place(self.robot_spec.q_home, obj, goal)
-        self.streamer.reset(self.robot_spec.q_home)
-        self.phase, self.t, self.vacuum, self.clamped, self.ik_failures = 0, 0, False, 0, 0
+        self.decision.reset(self.robot_spec.q_home)
+        self.vacuum = False
         self._obs = self._observe()
         return self._obs.copy(), {"phase": 0, "object": obj, "goal": goal}
 
@@ -118,55 +110,41 @@ class PickPlaceEnv(gym.Env):
         return np.array([xy[0], xy[1], h])
 
     def step(self, action: np.ndarray):
-        a = np.asarray(action, dtype=float)
-        if a.shape != (ACT_DIM,):
-            raise ActionError(f"action must have shape ({ACT_DIM},), got {a.shape}")
-        if not np.all(np.isfinite(a)):
-            raise ActionError(f"action contains NaN or inf: {a.tolist()}")
-        clipped = np.clip(a, -1.0, 1.0)
-        was_clamped = bool(np.any(clipped[:3] != a[:3]))
-        self.clamped += int(was_clamped)
-        if was_clamped:
-            log.debug("action %s outside [-1, 1]: target clamped to the workspace box", a[:3])
-        target = self.workspace.to_cartesian(clipped[:3])
-        ik_failed = False
-        try:
-            q_target = self.kin.ik(target, self.scene.joint_positions())
-            self.streamer.set_target(q_target)
-        except IKError as exc:
-            ik_failed = True
-            self.ik_failures += 1
-            log.debug("IK failed, holding the previous target: %s", exc)
-        self.vacuum = bool(clipped[3] > 0)
+        """One decision (see `DecisionStep`); ActionError for a misshaped or non-finite action."""
+        decision = self.decision
+        cmd = decision.act(action, self.scene.joint_positions())
+        if cmd.clamped:
+            log.debug("action %s outside [-1, 1]: target clamped to the workspace box", np.asarray(action)[:3])
+        if cmd.ik_error:
+            log.debug("IK failed, holding (braking to rest): %s", cmd.ik_error)
+        self.vacuum = cmd.vacuum
         self.scene.set_vacuum(self.vacuum)
         for _ in range(self.twin_cfg.cycles_per_decision):
-            sp = self.streamer.step()
+            sp = decision.streamer.step()
             self.scene.command(sp.q, sp.dq)
             self.scene.step()
-        tcp = self.kin.tcp_position(self.scene.joint_positions())
+        tcp = decision.tcp(self.scene.joint_positions())
         g = 1 if self.vacuum else -1
         part = self.scene.suction.part_present(self.scene.vacuum_level())
         obj = self.scene.object_position()
-        res = task_step(self.task_cfg, self.phase, tcp, g, part, obj, self.scene.goal, self.t)
-        self.t += 1
-        self.phase = res.phase
+        res = decision.judge(tcp, g, part, obj, self.scene.goal)
         success = res.outcome is Outcome.SUCCESS
-        self._obs = observation(tcp, g, progress(self.phase, success), obj, self.scene.goal)
-        terminated = res.outcome in (Outcome.SUCCESS, Outcome.DROPPED, Outcome.MISPLACED, Outcome.KNOCKED_OFF)
-        truncated = res.outcome in (Outcome.NO_GRASP, Outcome.TIMEOUT)
+        self._obs = decision.observe(tcp, g, obj, self.scene.goal, success)
+        state = decision.state
         info = {
-            "phase": self.phase,
+            "phase": state.phase,
             "outcome": res.outcome.value if res.outcome else None,
             "is_success": success,
             "reward_terms": res.terms,
             "distance": res.distance,
             "part_present": part,
-            "clamped": was_clamped,
-            "clamped_total": self.clamped,
-            "ik_failed": ik_failed,
-            "ik_failures_total": self.ik_failures,
+            "clamped": cmd.clamped,
+            "clamped_total": state.clamped,
+            "ik_failed": cmd.q_target is None,
+            "ik_failures_total": state.ik_failures,
         }
-        return self._obs.copy(), res.reward, terminated, truncated, info
+        done = res.outcome is not None
+        return self._obs.copy(), res.reward, done and res.outcome.terminated, done and res.outcome.truncated, info
 
     def render(self) -> np.ndarray | None:
         if self.render_mode != "rgb_array":
@@ -179,9 +157,29 @@ class PickPlaceEnv(gym.Env):
         self.scene.close()
 
     # -- beyond gymnasium ------------------------------------------------------------------------
+    @property
+    def phase(self) -> int:
+        """Current task phase (0..4)."""
+        return self.decision.state.phase
+
+    @property
+    def t(self) -> int:
+        """Decisions taken in this episode."""
+        return self.decision.state.t
+
+    @property
+    def clamped(self) -> int:
+        """Decisions of this episode whose action was clamped."""
+        return self.decision.state.clamped
+
+    @property
+    def ik_failures(self) -> int:
+        """Decisions of this episode whose IK failed (the arm held)."""
+        return self.decision.state.ik_failures
+
     def _observe(self) -> np.ndarray:
-        tcp = self.kin.tcp_position(self.scene.joint_positions())
-        return observation(tcp, 1 if self.vacuum else -1, progress(self.phase), self.scene.object_position(), self.scene.goal)
+        tcp = self.decision.tcp(self.scene.joint_positions())
+        return self.decision.observe(tcp, 1 if self.vacuum else -1, self.scene.object_position(), self.scene.goal)
 
     def expert_action(self) -> np.ndarray:
         """The scripted expert's action for the current observation."""
@@ -189,13 +187,13 @@ class PickPlaceEnv(gym.Env):
 
     def snapshot(self) -> EnvSnapshot:
         """Capture the full state (physics, suction, trajectory, task, RNGs); `discard` it when done."""
-        return EnvSnapshot(self.scene.snapshot(), self.streamer.snapshot(), self.phase, self.t, self.vacuum, self._obs.copy(), self.clamped)
+        return EnvSnapshot(self.scene.snapshot(), self.decision.snapshot(), self.vacuum, self._obs.copy())
 
     def restore(self, snap: EnvSnapshot) -> np.ndarray:
         """Return to a snapshot; the same actions from here reproduce the same observations."""
         self.scene.restore(snap.scene)
-        self.streamer.restore(snap.streamer)
-        self.phase, self.t, self.vacuum, self.clamped = snap.phase, snap.t, snap.vacuum, snap.clamped
+        self.decision.restore(snap.decision)
+        self.vacuum = snap.vacuum
         self._obs = snap.obs.copy()
         return self._obs.copy()
 

@@ -96,20 +96,29 @@ class HmdPoseStream(ObjectPoseSource):
         self._proc = ctx.Process(target=_hmd_worker, args=(child, str(calibration_path) if calibration_path else None, object_size, noise_seed, hmd_overrides or {}),
                                  name="hmd", daemon=True)
         self._proc.start()
-        if not self._conn.poll(start_timeout):
-            self._proc.kill()
-            raise RuntimeError(f"HMD process did not start within {start_timeout} s")
-        kind, info = self._conn.recv()
-        if kind != "ready":
-            raise RuntimeError(f"HMD process failed to start: {info}")
-        self.calibration = info
+        self.calibration = self._wait_ready(start_timeout)
         self._latest: tuple[np.ndarray, float] | None = None
         self._generation = 0
         self.frames = self.misses = 0
+        self._lost: str | None = None  # why the HMD process can give no more estimates
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="hmd-stream", daemon=True)
         self._thread.start()
+
+    def _wait_ready(self, timeout: float) -> dict:
+        """The worker's start-up report; RuntimeError if it fails, dies or stays silent for `timeout` s."""
+        end = time.monotonic() + timeout
+        while not self._conn.poll(0.1):
+            if not self._proc.is_alive():
+                raise RuntimeError(f"HMD process exited during start-up (exit code {self._proc.exitcode})")
+            if time.monotonic() > end:
+                self._proc.kill()
+                raise RuntimeError(f"HMD process did not start within {timeout} s")
+        kind, info = self._conn.recv()
+        if kind != "ready":
+            raise RuntimeError(f"HMD process failed to start: {info}")
+        return info
 
     def _run(self) -> None:
         while not self._stop.is_set():
@@ -119,8 +128,11 @@ class HmdPoseStream(ObjectPoseSource):
             try:
                 self._conn.send((pos.tolist(), orn.tolist()))
                 kind, value = self._conn.recv()
-            except (EOFError, OSError):
-                log.warning("HMD process went away")
+            except Exception as exc:  # EOF, a broken pipe, a garbled message: no more estimates, say so
+                self._proc.join(timeout=1.0)
+                with self._lock:
+                    self._lost = f"the HMD process went away (exit code {self._proc.exitcode}; {type(exc).__name__})"
+                log.warning("%s: no more object poses from the HMD", self._lost)
                 return
             with self._lock:
                 self.frames += 1
@@ -136,15 +148,29 @@ class HmdPoseStream(ObjectPoseSource):
             self._latest = None
 
     def wait_fresh(self, timeout: float = 10.0) -> None:
+        """Wait for an estimate made after the last `invalidate`; PoseUnavailable after `timeout` s, or at
+        once if the HMD process is gone."""
         end = time.monotonic() + timeout
         while time.monotonic() < end:
             with self._lock:
                 if self._latest is not None:
                     return
+            self._raise_if_lost()
             time.sleep(0.02)
         raise PoseUnavailable(f"no HMD estimate of the object within {timeout} s")
 
+    def _raise_if_lost(self) -> None:
+        with self._lock:
+            lost = self._lost
+        if lost is None and not self._proc.is_alive():
+            lost = f"the HMD process is not running (exit code {self._proc.exitcode})"
+        if lost is not None:
+            raise PoseUnavailable(lost)
+
     def object_position(self) -> np.ndarray:
+        """The latest estimate; PoseUnavailable if there is none yet, it is older than `max_age`, or the HMD
+        process is gone (at once: the deploy runtime then decides how long the last pose may serve)."""
+        self._raise_if_lost()
         with self._lock:
             latest = self._latest
         if latest is None:

@@ -28,6 +28,7 @@ from mrguide.deploy.runtime import EpisodeReport
 from mrguide.deploy.safety import SafetyConfig
 from mrguide.drivers.config import CobotBusConfig
 from mrguide.output_files import write_files_atomically
+from mrguide.task import Outcome, placed_at_goal
 from mrguide.twin.dry_run import SimulatedCell, dry_run, episode_layouts
 from mrguide.twin.env import EnvConfig, PickPlaceEnv
 from mrguide.twin.hmd_stream import HmdPoseStream
@@ -36,8 +37,9 @@ from mrguide.twin.plant import TwinObjectPose
 log = logging.getLogger(__name__)
 
 LABELS = {"sim": "simulation,\nexact poses", "real_exact": "'real' robot,\nexact poses", "real_hmd": "'real' robot,\nHMD poses"}
-#: Failure causes as reported (safety stops and aborted episodes count as "safety_stop").
-CAUSES = ("no_grasp", "dropped", "misplaced", "knocked_off", "timeout", "safety_stop")
+#: Failure causes as reported: the task model's failures, and "safety_stop" for every episode the deploy
+#: runtime's supervisor ended (safety stops, aborted episodes, a lost object pose).
+CAUSES = tuple(o.value for o in Outcome if o.from_task and o is not Outcome.SUCCESS) + (Outcome.SAFETY_STOP.value,)
 
 
 @dataclass
@@ -70,7 +72,7 @@ def wilson_interval(successes: int, n: int, z: float = float(stats.norm.ppf(0.97
 
 
 def _cause(outcome: str) -> str:
-    return outcome if outcome in ("success", *CAUSES[:-1]) else "safety_stop"
+    return outcome if Outcome(outcome).from_task else Outcome.SAFETY_STOP.value
 
 
 def run_sim(policy: ExportedPolicy, env_cfg: EnvConfig, seed: int, episodes: int) -> list[str]:
@@ -120,11 +122,11 @@ def run_real(policy_path: Path, real_cfg: EnvConfig, bus_cfg: CobotBusConfig, se
 
     def judge(report: EpisodeReport) -> None:
         outcome = _cause(report.outcome)
-        obj = cells[0].plant.object_position()
-        goal = goals[report.index]
-        placed = np.linalg.norm(obj[:2] - goal[:2]) < task.place_tolerance and abs(obj[2] - goal[2]) < 0.01
-        if outcome in ("success", "misplaced"):  # released at the goal pose: the ground truth decides
-            outcome = "success" if placed else "misplaced"
+        if outcome in (Outcome.SUCCESS, Outcome.MISPLACED):
+            # released at the goal pose: the task model's placement rule decides, on the ground truth of the
+            # twin that played the robot (the runtime judged on its pose source or the tracked TCP)
+            placed = placed_at_goal(task, cells[0].plant.object_position(), goals[report.index])
+            outcome = (Outcome.SUCCESS if placed else Outcome.MISPLACED).value
         outcomes.append(outcome)
         if on_episode:
             on_episode(outcome)

@@ -2,9 +2,7 @@
 
 from __future__ import annotations
 
-import subprocess
-import sys
-from pathlib import Path
+import re
 
 import numpy as np
 import pybullet as pb
@@ -82,20 +80,36 @@ def test_from_calibration_checks_dictionary(hl2):
         MarkerPoseSource.from_calibration(lambda: None, MarkerDetector(DETECTOR), hl2, record, 0)
 
 
-def test_annotation_pose_source(client, cell):
+def test_annotation_pose_source_maps_hmd_points_to_the_base_frame():
+    """Against numbers worked out by hand, not against the inverse of the same transform: the HMD world is
+    turned 90 deg about z and shifted by (1, 2, 3) m in the base frame, so its x axis is the base's y."""
+    T = make_T(rotation_from_rpy_deg(0, 0, 90), [1.0, 2.0, 3.0])
+    point = HmdAnnotationPoseSource(lambda: np.array([0.5, 0.0, 0.1]), T)
+    assert np.allclose(point.object_position(), [1.0, 2.5, 3.1])
+    pose = make_T(rotation_from_rpy_deg(30, 0, 0), [0.0, -0.2, 0.0])  # a pose: its position is used
+    assert np.allclose(HmdAnnotationPoseSource(lambda: pose, T).object_position(), [1.2, 2.0, 3.0])
+
+
+def test_annotation_pose_source_of_a_twin_body(client, cell):
+    """The simulated annotator (twin) through the source: exact without noise, the noise passed through."""
     cube, _ = cell
     exact = HmdAnnotationPoseSource(annotations_of_body(client, cube, T_BASE_HMD, 0.0, np.random.default_rng(0)), T_BASE_HMD)
     assert np.allclose(exact.object_position(), [0.5, -0.05, CUBE / 2], atol=1e-9)
     noisy = HmdAnnotationPoseSource(annotations_of_body(client, cube, T_BASE_HMD, 0.004, np.random.default_rng(0)), T_BASE_HMD)
     errs = np.array([noisy.object_position() - [0.5, -0.05, CUBE / 2] for _ in range(500)])
     assert np.std(errs, axis=0) == pytest.approx([0.004] * 3, rel=0.15)
-    with pytest.raises(PoseUnavailable, match="no object annotation"):
-        HmdAnnotationPoseSource(lambda: None, T_BASE_HMD).object_position()
 
 
-def test_calibration_package_imports_neither_pybullet_nor_torch():
-    code = ("import sys, pkgutil, importlib, mrguide.calibration as c\n"
-            "for m in pkgutil.iter_modules(c.__path__): importlib.import_module('mrguide.calibration.' + m.name)\n"
-            "bad = [m for m in ('pybullet', 'torch') if m in sys.modules]\n"
-            "assert not bad, bad\n")
-    subprocess.run([sys.executable, "-c", code], check=True, cwd=Path(__file__).parents[2])
+@pytest.mark.parametrize("annotation, words", [
+    (None, "no object annotation"),
+    (np.array([0.1, np.nan, 0.0]), "not a finite point"),
+    (np.zeros((3, 3)), "shape (3, 3)"),
+])
+def test_annotation_pose_source_without_a_usable_annotation_is_unavailable(annotation, words):
+    source = HmdAnnotationPoseSource(lambda: annotation, T_BASE_HMD)
+    with pytest.raises(PoseUnavailable, match=re.escape(words)):
+        source.object_position()
+
+
+# The check that the calibration package imports neither PyBullet nor torch, also inside functions, is in
+# tests/test_robot_pc_imports.py (with the deploy and driver packages).

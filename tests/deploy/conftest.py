@@ -36,9 +36,13 @@ class Expert:
 
 @pytest.fixture()
 def run_dry(tmp_path):
-    """dry_run with the expert; returns (summary, run log path, the cell the run used)."""
+    """dry_run with the expert; returns (summary, run log path, the cell the run used).
 
-    def run(episodes=1, seed=0, hook=None, env_cfg=None, safety=None, on_cell=None, max_recoveries=0):
+    `pose(cell)` may give the object pose source (default: the exact pose from the twin); `runtime_cfg`
+    sets the runtime (RuntimeConfig)."""
+
+    def run(episodes=1, seed=0, hook=None, env_cfg=None, safety=None, on_cell=None, max_recoveries=0, pose=None,
+            runtime_cfg=None):
         cfg = env_cfg or EnvConfig()
         cells = []
 
@@ -48,14 +52,14 @@ def run_dry(tmp_path):
             cells.append(cell)
             if on_cell:
                 on_cell(cell)
-            return TwinObjectPose(cell.plant)
+            return pose(cell) if pose else TwinObjectPose(cell.plant)
 
         log = tmp_path / f"run-{seed}.jsonl"
         with RunLog(log, {"test": "dry run"}) as run_log:
             summary = dry_run(None, cfg, bus_config(), episodes, seed, run_log, safety,
                               pose_factory=pose_factory,
                               policy=Expert(cfg, (lambda o, p, a: hook(o, p, a, cells[0])) if hook else None),
-                              max_recoveries=max_recoveries)
+                              max_recoveries=max_recoveries, runtime_cfg=runtime_cfg)
         return summary, log, cells[0]
 
     return run

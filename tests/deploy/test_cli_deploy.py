@@ -1,8 +1,11 @@
-"""`mrguide deploy` refuses a bad policy before any drive is enabled, and a real bus without confirmation."""
+"""`mrguide deploy`: a bad policy refused before any drive is enabled, a real bus without confirmation, the
+virtual interface without --dry-run; the real-robot path end to end over a virtual channel, and Ctrl-C."""
 
 import numpy as np
+import pytest
 
 from mrguide.cli import main
+from mrguide.deploy.runlog import read_log
 from mrguide.drivers.cobot import Cobot
 
 
@@ -32,4 +35,123 @@ def test_real_bus_needs_confirmation(tmp_path, monkeypatch, capsys):
     cfg.write_text('[deploy]\nbus_config = "bus.toml"\n')
     assert main(["deploy", "--policy", str(pol), "--config", str(cfg), "--quiet"]) == 2
     assert "--enable-drives" in capsys.readouterr().err
+    assert connected == []
+
+
+# -- the real-robot path, driven over a virtual channel ------------------------------------------------------
+# `deploy` refuses the virtual interface without --dry-run (users must configure their real bus); the tests
+# open that path with the `ALLOW_VIRTUAL_REAL_BUS` seam and put simulated devices (first-order plant, no
+# PyBullet) on the channel in place of the robot.
+
+HORIZON = 4
+#: A constant action away from the workspace centre, vacuum off: tanh of these biases.
+BIASES = np.array([0.8, 0.6, 0.3, -1.0])
+
+
+def _robot_cell_files(tmp_path, policy_file):
+    """Bus description (virtual channel of its own, the shared-PC supervision times), deploy config, policy."""
+    from mrguide.config import to_dict
+    from mrguide.task import TaskConfig
+
+    channel = f"deploy-real-{tmp_path.name}"
+    (tmp_path / "bus.toml").write_text(f'[bus]\ninterface = "virtual"\nchannel = "{channel}"\n'
+                                       "[timing]\nheartbeat_period = 0.15\nheartbeat_timeout_factor = 3.0\n"
+                                       "max_missed_feedback = 25\n")
+    cfg = tmp_path / "cfg.toml"
+    cfg.write_text(f'[deploy]\nbus_config = "bus.toml"\nepisodes = 2\n[task]\nhorizon = {HORIZON}\n')
+    policy = policy_file(tmp_path / "p.npz", task=to_dict(TaskConfig(horizon=HORIZON)), arrays={"b0": BIASES})
+    return cfg, policy
+
+
+@pytest.fixture
+def robot_on_virtual_bus(tmp_path, policy_file, monkeypatch):
+    """(config, policy, simulated devices, prompts): the seam opened, the operator's Enter pressed."""
+    import mrguide.cli as cli
+    from mrguide.drivers.config import load_cobot_bus_config
+    from mrguide.drivers.mock import FirstOrderPlant, SimulatedCobot
+    from mrguide.robot import load_robot
+
+    cfg, policy = _robot_cell_files(tmp_path, policy_file)
+    monkeypatch.setattr(cli, "ALLOW_VIRTUAL_REAL_BUS", True)
+    prompts = []
+    monkeypatch.setattr("builtins.input", lambda prompt="": prompts.append(prompt) or "")
+    robot = load_robot()
+    sim = SimulatedCobot(load_cobot_bus_config(tmp_path / "bus.toml", robot), FirstOrderPlant(robot.q_home))
+    sim.start()
+    try:
+        yield cfg, policy, sim, prompts
+    finally:
+        sim.stop()
+
+
+def test_real_bus_path_runs_the_policy_on_the_robot(robot_on_virtual_bus, tmp_path, capsys):
+    from mrguide.drivers.mock.drive_sim import SWITCH_ON_DISABLED
+    from mrguide.robot import load_robot
+
+    cfg, policy, sim, prompts = robot_on_virtual_bus
+    log = tmp_path / "log.jsonl"
+    assert main(["deploy", "--policy", str(policy), "--config", str(cfg), "--enable-drives", "--log", str(log),
+                 "--quiet"]) == 0, capsys.readouterr().err
+    assert "episodes: 2" in capsys.readouterr().out
+    assert len(prompts) == 2 and all("place the object at" in p for p in prompts)
+    records = read_log(log)
+    header = records[0]
+    assert header["kind"] == "run" and header["dry_run"] is False and header["bus"].startswith("virtual:deploy-real-")
+    ends = [r for r in records if r["kind"] == "episode_end"]
+    assert [e["episode"] for e in ends] == [0, 1] and all(e["outcome"] == "no_grasp" for e in ends)
+    steps = [r for r in records if r["kind"] == "decision" and "setpoints" in r]
+    assert len(steps) == 2 * HORIZON
+    spec = load_robot()
+    target = spec.workspace.to_cartesian(np.tanh(BIASES[:3]))
+    assert all(np.allclose(r["target"], target) for r in steps)
+    # the simulated drives followed the streamed setpoints away from home, and were disabled at the end
+    last = np.array(steps[-1]["setpoints"][-1]) - spec.q_home
+    moved = sim.plant.joint_positions() - spec.q_home  # where the arm came to rest after braking
+    assert np.max(np.abs(last)) > 0.05
+    assert np.all(np.abs(moved) >= np.abs(last) - 1e-3) and np.all(np.sign(moved[np.abs(last) > 0.01]) ==
+                                                                 np.sign(last[np.abs(last) > 0.01]))
+    assert all(d.state == SWITCH_ON_DISABLED for d in sim.drives)
+
+
+def test_ctrl_c_quick_stops_exits_130_and_closes_the_log(robot_on_virtual_bus, tmp_path, monkeypatch, capsys):
+    from mrguide.deploy.policy import ExportedPolicy
+    from mrguide.deploy.runlog import RunLog
+
+    cfg, policy, sim, _ = robot_on_virtual_bus
+    calls, closed = [], []
+    real_call, real_close = ExportedPolicy.__call__, RunLog.close
+
+    def interrupted(self, obs):
+        calls.append(1)
+        if len(calls) == 3:
+            raise KeyboardInterrupt  # the operator presses Ctrl-C during the third decision
+        return real_call(self, obs)
+
+    def close(self):
+        real_close(self)
+        closed.append(self._fh.closed)
+
+    monkeypatch.setattr(ExportedPolicy, "__call__", interrupted)
+    monkeypatch.setattr(RunLog, "close", close)
+    log = tmp_path / "log.jsonl"
+    code = main(["deploy", "--policy", str(policy), "--config", str(cfg), "--enable-drives", "--log", str(log), "--quiet"])
+    assert code == 130
+    assert capsys.readouterr().err.strip().endswith("mrguide deploy: interrupted")
+    assert closed == [True]
+    text = log.read_text()
+    assert text.endswith("\n")  # every record whole: nothing torn, nothing lost in a buffer
+    records = read_log(log)
+    safety = [(r["event"], r["reaction"]) for r in records if r["kind"] == "safety"]
+    assert safety == [("interrupt", "quick_stop")]
+    ends = [r for r in records if r["kind"] == "episode_end"]
+    assert len(ends) == 1 and ends[0]["outcome"] == "safety_stop" and ends[0]["events"] == {"interrupt": 1}
+    assert not any(r["kind"] == "episode_start" and r["episode"] == 1 for r in records)
+
+
+def test_virtual_interface_without_dry_run_is_refused_for_users(tmp_path, policy_file, run_cli, monkeypatch):
+    connected = []
+    monkeypatch.setattr(Cobot, "connect", lambda self: connected.append(1))
+    cfg, policy = _robot_cell_files(tmp_path, policy_file)
+    run_cli(["deploy", "--policy", policy, "--config", cfg, "--enable-drives", "--quiet"]).assert_refused(
+        "virtual interface", "--dry-run")
     assert connected == []

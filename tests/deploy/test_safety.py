@@ -3,9 +3,13 @@
 import time
 
 import numpy as np
+import pytest
 
 from mrguide.deploy.runlog import read_log
-from mrguide.robot import RobotConfig, Workspace
+from mrguide.deploy.runtime import RuntimeConfig
+from mrguide.motion.trajectory import JointSetpoint, JointStreamer
+from mrguide.pose_source import PoseUnavailable
+from mrguide.robot import RobotConfig, Workspace, load_robot
 from mrguide.twin.env import EnvConfig
 
 
@@ -95,3 +99,165 @@ def test_recovery_fails_while_the_cause_persists(run_dry):
     summary, log, _ = run_dry(episodes=3, hook=silence_in_transport, max_recoveries=3)
     assert [e.outcome for e in summary.episodes] == ["safety_stop"]
     assert summary.recoveries == 0 and "recovery failed" in summary.stopped and "node 5" in summary.stopped
+
+
+def decisions(log):
+    return [r for r in read_log(log) if r["kind"] == "decision" and "obs" in r]
+
+
+def test_action_outside_the_box_is_clamped_counted_and_logged(run_dry):
+    ws = load_robot().workspace
+    pushed = []
+
+    def push_out_in_approach(obs, phase, a, cell):
+        if phase == 0 and len(pushed) < 2:
+            pushed.append(True)
+            return np.array([1.7, -3.0, a[2], -1.0])  # x and y outside [-1, 1]
+        return a
+
+    summary, log, _ = run_dry(hook=push_out_in_approach)
+    assert events(log)[:2] == [("workspace", "clamp")] * 2
+    assert summary.episodes[0].events["workspace"] == 2 and summary.events()["workspace"] == 2
+    clamped = [r for r in decisions(log) if abs(r["action"][0]) > 1]
+    assert len(clamped) == 2
+    for r in clamped:  # the target went to the box's edges, nowhere beyond
+        assert r["target"][0] == pytest.approx(ws.hi[0]) and r["target"][1] == pytest.approx(ws.lo[1])
+    assert summary.episodes[0].outcome == "success" and summary.stopped is None  # the episode went on
+
+
+def _count_stops(cell, stops):
+    """Record every quick stop the runtime commands on `cell`'s cobot."""
+    if not stops:
+        stop = cell.cobot.stop
+        cell.cobot.stop = lambda: (stops.append(True), stop())[1]
+        stops.append(False)
+
+
+def test_following_error_quick_stops_the_run(run_dry):
+    """Drive 4 reports its position 0.2 rad off (a slipped encoder): only the runtime's following-error
+    monitor can see it (the drive's own check sees the true joint)."""
+    stops = []
+
+    def slip_in_lift(obs, phase, a, cell):
+        _count_stops(cell, stops)
+        if phase == 2:
+            cell.sim.faults.set_position_error(4, 0.2)
+        return a
+
+    summary, log, cell = run_dry(hook=slip_in_lift)
+    ev = events(log)
+    assert ev[-1] == ("following_error", "quick_stop"), ev
+    assert summary.stopped is not None and "following_error" in summary.stopped
+    assert summary.episodes[0].outcome == "safety_stop"
+    assert stops.count(True) >= 1
+
+
+def test_setpoint_beyond_a_joint_limit_quick_stops_before_it_is_sent(run_dry, monkeypatch):
+    """A trajectory generator gone wrong: one setpoint 0.01 rad beyond joint 1's upper limit. The supervisor
+    quick-stops the run and the setpoint never reaches the driver."""
+    spec = load_robot()
+    step = JointStreamer.step
+    armed, sent = [], []
+
+    def faulty_step(self):
+        sp = step(self)
+        if armed:
+            q = sp.q.copy()
+            q[0] = spec.q_upper[0] + 0.01
+            return JointSetpoint(q, sp.dq, sp.ddq, sp.finished)
+        return sp
+
+    stops = []
+
+    def arm_in_grasp(obs, phase, a, cell):
+        _count_stops(cell, stops)
+        if phase == 1 and not armed:
+            armed.append(True)
+            stream = cell.cobot.stream
+            cell.cobot.stream = lambda q, timeout=None: (sent.append(np.array(q)), stream(q, timeout))[1]
+        return a
+
+    monkeypatch.setattr(JointStreamer, "step", faulty_step)
+    summary, log, cell = run_dry(hook=arm_in_grasp)
+    ev = events(log)
+    assert ev[-1] == ("joint_limit", "quick_stop"), ev
+    assert summary.stopped is not None and "joint_limit" in summary.stopped
+    assert summary.episodes[0].outcome == "safety_stop"
+    assert stops.count(True) >= 1
+    assert sent == [] or np.all(np.array(sent)[:, 0] <= spec.q_upper[0])
+
+
+class _PoseGoesAway:
+    """The exact pose until `fail()`, then PoseUnavailable (a marker out of view, a dead HMD process)."""
+
+    def __init__(self, plant):
+        self.plant, self.failing, self.given = plant, False, []
+
+    def object_position(self):
+        if self.failing:
+            raise PoseUnavailable("tracking lost (test)")
+        self.given.append(self.plant.object_position())
+        return self.given[-1]
+
+
+def test_missing_pose_uses_the_last_one_a_few_times_then_stops_the_episode(run_dry):
+    sources = []
+
+    def make_source(cell):
+        sources.append(_PoseGoesAway(cell.plant))
+        return sources[-1]
+
+    def lose_in_grasp(obs, phase, a, cell):
+        if phase == 1:
+            sources[0].failing = True
+        return a
+
+    summary, log, cell = run_dry(hook=lose_in_grasp, pose=make_source, runtime_cfg=RuntimeConfig(max_pose_misses=3))
+    ev = events(log)
+    assert ev == [("pose_unavailable", "last_known")] * 3 + [("pose_lost", "abort")], ev
+    assert summary.episodes[0].outcome == "pose_lost" and summary.stopped is None  # the episode ended, cleanly
+    last = sources[0].given[-1]
+    blind = decisions(log)[-3:]  # the decisions made on the last pose
+    assert all(np.allclose(r["obs"][5:8], last, atol=1e-6) for r in blind)
+    ends = [r for r in read_log(log) if r["kind"] == "episode_end"]
+    assert ends[-1]["outcome"] == "pose_lost" and ends[-1]["events"] == {"pose_unavailable": 3, "pose_lost": 1}
+    assert cell.cobot.status().fault is None  # held (braked to rest), not quick-stopped
+
+
+class _FrozenPose:
+    """The pose at the start of the episode, forever (a tracker that lags far behind a carried object)."""
+
+    def __init__(self, plant):
+        self.plant, self.first = plant, None
+
+    def object_position(self):
+        if self.first is None:
+            self.first = self.plant.object_position()
+        return self.first.copy()
+
+
+@pytest.mark.parametrize("track", [True, False])
+def test_carried_object_is_placed_under_the_cup(run_dry, track):
+    """While the vacuum generator reports a part after the grasp, the object is where the cup is (forward
+    kinematics), not where a lagging pose source says; without the tracking the pose source is used."""
+    frozen = []
+
+    def make_source(cell):
+        frozen.append(_FrozenPose(cell.plant))
+        return frozen[-1]
+
+    summary, log, _ = run_dry(pose=make_source, runtime_cfg=RuntimeConfig(track_carried_object=track))
+    h = EnvConfig().task.object_height
+    records = decisions(log)
+    # the object position of a decision is found in the phase the previous decision left (the logged phase
+    # is the one after this decision's task step)
+    carried = [r for prev, r in zip(records, records[1:]) if prev["phase"] in (2, 3) and r["part"]]
+    assert len(carried) >= 5
+    for r in carried:
+        under_cup = np.array(r["obs"][0:3]) - [0.0, 0.0, 0.5 * h]
+        if track:
+            assert np.allclose(r["obs"][5:8], under_cup, atol=1e-6)
+        else:
+            assert np.allclose(r["obs"][5:8], frozen[0].first, atol=1e-6)
+    if track:
+        assert summary.episodes[0].outcome == "success", summary.text()

@@ -52,15 +52,15 @@ def cobot(make_config, robot) -> Iterator[Cobot]:
 def test_stop_and_stream_return_while_the_control_thread_hangs_holding_the_lock(cobot, monkeypatch, wait_until):
     q = cobot.setpoint
     held, release = threading.Event(), threading.Event()
-    check_feedback = cobot._check_feedback
+    cycle = cobot._loop.cycle
 
-    def hang_holding_the_lock() -> None:
-        with cobot._lock:
+    def hang_holding_the_lock(tick) -> None:
+        with cobot._core.lock:
             held.set()
             release.wait()
-        check_feedback()
+        cycle(tick)
 
-    monkeypatch.setattr(cobot, "_check_feedback", hang_holding_the_lock)
+    monkeypatch.setattr(cobot._loop, "cycle", hang_holding_the_lock)
     assert held.wait(1.0), "the control thread never took the lock"
     try:
         finished, error, took = _call_with_deadline(cobot.stop)

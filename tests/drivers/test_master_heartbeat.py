@@ -15,7 +15,7 @@ import canopen
 import numpy as np
 import pytest
 
-from mrguide.drivers import Cobot
+from mrguide.drivers import Cobot, DeviceFaultError
 from mrguide.drivers.config import MasterConfig, eds_path
 from mrguide.drivers.heartbeat import CONSUMER_HEARTBEAT, HEARTBEAT_ERROR, consumer_heartbeat_entry
 from mrguide.drivers.mock import FirstOrderPlant, SimulatedCobot
@@ -52,8 +52,8 @@ def test_hung_control_thread_disables_the_drives_and_keeps_the_vacuum(rig, tap_o
         cobot.stream(q)
     assert rig.wait_until(lambda: sim.vacuum.commands()[0])
     release = threading.Event()
-    cycle = cobot._cycle
-    cobot._cycle = lambda tick: release.wait()  # the control thread hangs: no SYNC, no heartbeat
+    cycle = cobot._loop.cycle
+    cobot._loop.cycle = lambda tick: release.wait()  # the control thread hangs: no SYNC, no heartbeat
     hung_at = time.monotonic()
     try:
         assert rig.wait_until(lambda: all(d.state == SWITCH_ON_DISABLED for d in sim.drives)
@@ -63,11 +63,17 @@ def test_hung_control_thread_disables_the_drives_and_keeps_the_vacuum(rig, tap_o
         assert reacted_after <= rig.config.timing.heartbeat_timeout + HB + 0.1
         assert rig.wait_until(lambda: all(HEARTBEAT_ERROR in _emcy_codes(tap, n) for n in rig.config.node_ids))
         assert sim.vacuum.commands() == (True, False)  # the held part stays held
+        # the master's receive thread (alive meanwhile) has taken the EMCYs and posted them as faults
+        assert rig.wait_until(lambda: cobot.stats().emcy_received >= len(rig.config.node_ids))
     finally:
-        cobot._cycle = cycle
+        cobot._loop.cycle = cycle
         release.set()
     assert rig.wait_until(lambda: cobot.status().fault is not None)
-    assert "0x8130" in str(cobot.status().fault) or "OPERATIONAL" in str(cobot.status().fault)
+    # the first fault latched once the thread is back: a device's heartbeat-consumer EMCY (0x8130), not just
+    # anything (a lost node, a drive that left OPERATION ENABLED come after it)
+    fault = cobot.status().fault
+    assert isinstance(fault, DeviceFaultError) and fault.emcy_code == HEARTBEAT_ERROR, repr(fault)
+    assert fault.node_id in rig.config.node_ids and "EMCY 0x8130" in str(fault)
     cobot.disconnect()  # recovery: reconnect boots the devices again (NMT reset communication)
     cobot.connect()
     cobot.enable()

@@ -29,7 +29,7 @@ def test_disconnect_after_a_heartbeat_with_an_undefined_nmt_state(make_rig, tap_
     rig = make_rig()
     rig.cobot.enable()
     tap = tap_on(rig.config.bus.channel)
-    bus = rig.cobot._network.bus
+    bus = rig.cobot._core.network.bus
     rig.sim.faults.silence(5, heartbeat_only=True)  # no real heartbeat overwrites the undefined state below
     sender = can.Bus(interface="virtual", channel=rig.config.bus.channel)
     try:
@@ -44,7 +44,7 @@ def test_disconnect_after_a_heartbeat_with_an_undefined_nmt_state(make_rig, tap_
 def test_every_node_gets_its_nmt_command_and_the_bus_closes_when_steps_fail(make_rig, tap_on, monkeypatch):
     rig = make_rig()
     tap = tap_on(rig.config.bus.channel)
-    network = rig.cobot._network
+    network = rig.cobot._core.network
     bus = network.bus
     send = network.send_message
 
@@ -54,7 +54,7 @@ def test_every_node_gets_its_nmt_command_and_the_bus_closes_when_steps_fail(make
             raise can.CanError("transmit buffer full")
         send(can_id, data, remote)
 
-    receiver = rig.cobot._receiver
+    receiver = rig.cobot._core.receiver
     stop_receiver = receiver.stop
 
     def stop_then_raise():

@@ -1,0 +1,107 @@
+"""The runtime depends on `CobotInterface` alone: it runs an episode on a plain-Python cobot (no CAN, no
+`Cobot`, no bus config), and its module does not import the concrete driver."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mrguide.deploy.runlog import RunLog, read_log
+from mrguide.deploy.runtime import Runtime, RuntimeConfig
+from mrguide.deploy.session import FixedObjectPose
+from mrguide.drivers.cobot_state import DriverStats, JointState, VacuumState
+from mrguide.drivers.errors import DriverError
+from mrguide.drivers.interface import CobotInterface
+from mrguide.robot import load_robot
+from mrguide.task import TaskConfig, oracle_action
+
+
+class IdealCobot:
+    """An arm that is exactly where it was told to be, with a vacuum gripper that never grips."""
+
+    period = 0.004
+    setpoint_queue_depth = 4
+
+    def __init__(self, q):
+        self.q, self.vacuum, self.streamed, self.observers = np.array(q, float), False, [], []
+
+    @property
+    def setpoint(self):
+        return self.q.copy()
+
+    def enable(self, timeout=None):
+        pass
+
+    def stream(self, q, timeout=None):
+        self.q = np.array(q, float)
+        self.streamed.append(self.q)
+
+    def set_vacuum(self, on, blow_off=False):
+        self.vacuum = bool(on)
+
+    def stop(self):
+        pass
+
+    def reset_faults(self, timeout=None):
+        pass
+
+    def joint_state(self):
+        return JointState(self.q.copy(), np.zeros_like(self.q), ("OPERATION ENABLED",) * len(self.q), 0, 0.0)
+
+    def vacuum_state(self):
+        return VacuumState(0.0, False, False, self.vacuum, False, 0.0)
+
+    def stats(self):
+        return DriverStats(*([0] * 2), *([0.0] * 3), *([0] * 11))
+
+    def add_cycle_observer(self, observer):
+        self.observers.append(observer)
+
+    def remove_cycle_observer(self, observer):
+        self.observers.remove(observer)
+
+
+def test_runtime_runs_on_any_cobot_interface(tmp_path):
+    spec, task = load_robot(), TaskConfig(horizon=8)
+    cobot = IdealCobot(spec.q_home)
+    assert isinstance(cobot, CobotInterface)
+    policy = lambda obs: oracle_action(obs, task, spec.workspace.to_normalized)  # noqa: E731
+    with RunLog(tmp_path / "log.jsonl", {"test": "interface"}) as log:
+        with Runtime(cobot, policy, FixedObjectPose((0.5, -0.075, 0.025)), spec, task, log, RuntimeConfig()) as rt:
+            report = rt.run_episode(np.array([0.5, 0.21, 0.025]), 0)
+    assert report.outcome == "no_grasp" and report.decisions == task.horizon  # the cup never seals here
+    assert len(cobot.streamed) >= task.horizon * 25
+    first_phase = [r for r in read_log(tmp_path / "log.jsonl") if r["kind"] == "decision" and r.get("phase") == 1]
+    assert first_phase  # the approach was reached by streaming through the interface
+
+
+def test_runtime_module_does_not_import_the_concrete_cobot():
+    tree = ast.parse((Path(__file__).parents[2] / "mrguide" / "deploy" / "runtime.py").read_text())
+    modules = {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)}
+    modules |= {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
+    assert "mrguide.drivers.interface" in modules and "mrguide.drivers.cobot" not in modules
+
+
+def test_a_driver_fault_outside_the_streaming_ends_the_episode_as_a_safety_stop(tmp_path):
+    spec, task = load_robot(), TaskConfig(horizon=8)
+    cobot = IdealCobot(spec.q_home)
+    reads = []
+    joint_state = cobot.joint_state
+
+    def failing_joint_state():
+        reads.append(1)
+        if len(reads) == 3:
+            raise DriverError("the control thread has held the driver lock for 0.5 s: it is hung (test)")
+        return joint_state()
+
+    cobot.joint_state = failing_joint_state
+    policy = lambda obs: oracle_action(obs, task, spec.workspace.to_normalized)  # noqa: E731
+    with RunLog(tmp_path / "log.jsonl", {"test": "interface"}) as log:
+        with Runtime(cobot, policy, FixedObjectPose((0.5, -0.075, 0.025)), spec, task, log, RuntimeConfig()) as rt:
+            with pytest.raises(DriverError, match="hung"):
+                rt.run_episode(np.array([0.5, 0.21, 0.025]), 0)
+    ends = [r for r in read_log(tmp_path / "log.jsonl") if r["kind"] == "episode_end"]
+    assert [e["outcome"] for e in ends] == ["safety_stop"] and ends[0]["decisions"] == 2

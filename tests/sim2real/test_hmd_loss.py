@@ -1,0 +1,76 @@
+"""A dead HMD pose process fails closed: the runtime uses the last pose for a few decisions, then stops the
+episode cleanly (counted and logged), and the run ends with a reason instead of a traceback or going on."""
+
+import multiprocessing as mp
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mrguide.deploy.runlog import read_log
+from mrguide.drivers.config import BusConfig, CobotBusConfig
+from mrguide.pose_source import PoseUnavailable
+from mrguide.robot import load_robot
+from mrguide.task import oracle_action, phase_from_progress
+from mrguide.twin import sim2real as s2r
+from mrguide.twin.env import EnvConfig
+from mrguide.twin.hmd_stream import HmdPoseStream
+from mrguide.twin.plant import TwinPlant
+from mrguide.twin.scene import Scene
+
+REAL = Path(__file__).parents[2] / "configs" / "real_cell.toml"
+
+
+def _kill_hmd() -> int:
+    killed = 0
+    for child in mp.active_children():
+        if child.name == "hmd":
+            child.kill()
+            child.join(5)
+            killed += 1
+    return killed
+
+
+def test_dead_hmd_process_is_unavailable_at_once():
+    cfg = EnvConfig.load(REAL)
+    scene = Scene(load_robot(cfg.robot), cfg.twin, cfg.task.object_height)
+    stream = HmdPoseStream(TwinPlant(scene), REAL, cfg.task.object_height)
+    try:
+        stream.wait_fresh()
+        assert np.linalg.norm(stream.object_position() - scene.object_position()) < 0.02
+        assert _kill_hmd() == 1
+        t0 = time.monotonic()
+        with pytest.raises(PoseUnavailable, match="HMD process"):
+            stream.object_position()  # not only once the last estimate is max_age (3 s) old
+        stream.invalidate()
+        with pytest.raises(PoseUnavailable, match="HMD process"):
+            stream.wait_fresh(timeout=10.0)  # not after waiting the 10 s out
+        assert time.monotonic() - t0 < 1.0
+    finally:
+        stream.close()
+        scene.close()
+
+
+def test_hmd_dying_mid_episode_stops_the_episode_after_the_last_pose_served_a_few_decisions(tmp_path):
+    cfg = EnvConfig.load(REAL)
+    ws = load_robot(cfg.robot).workspace
+    killed = []
+
+    def expert_then_kill(obs):
+        if phase_from_progress(obs[4]) == 1 and not killed:
+            killed.append(_kill_hmd())
+        return oracle_action(obs, cfg.task, ws.to_normalized)
+
+    log = tmp_path / "log.jsonl"
+    out = s2r.run_real(None, cfg, CobotBusConfig(bus=BusConfig(channel="s2r-hmd-loss")), seed=0, episodes=2,
+                       log_path=log, hmd_config=REAL, safety=None, policy=expert_then_kill, use_hmd=True)
+    assert killed == [1]
+    assert out == ["safety_stop", "safety_stop"]  # the first stopped without a pose, the second could not start
+    records = read_log(log)
+    safety = [(r["event"], r["reaction"]) for r in records if r["kind"] == "safety"]
+    assert safety == [("pose_unavailable", "last_known")] * 3 + [("pose_lost", "abort")], safety
+    ends = [r for r in records if r["kind"] == "episode_end"]
+    assert [e["outcome"] for e in ends] == ["pose_lost"]
+    stopped = [r for r in records if r["kind"] == "run_stopped"]
+    assert len(stopped) == 1 and "no object pose" in stopped[0]["reason"] and "HMD process" in stopped[0]["reason"]
