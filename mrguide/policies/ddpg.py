@@ -181,14 +181,7 @@ class DDPG:
         act = torch.as_tensor(batch.act)
         rew = torch.as_tensor(batch.rew)
         next_obs = torch.as_tensor(batch.next_obs)
-        done = torch.as_tensor(batch.done)
-        with torch.no_grad():
-            next_act = self.actor_target(next_obs)
-            if self.cfg.target_noise > 0:
-                eps = (torch.randn_like(next_act) * self.cfg.target_noise).clamp(-self.cfg.target_noise_clip, self.cfg.target_noise_clip)
-                next_act = (next_act + eps).clamp(-1.0, 1.0)
-            next_q = self.critic_target(next_obs, next_act).min(0).values  # min over the pair: clipped double-Q
-            target_q = rew + self.cfg.gamma * (1.0 - done) * next_q
+        target_q = self.td_target(rew, next_obs, torch.as_tensor(batch.done))
         q = self.critic(obs, act)
         critic_loss = nn.functional.mse_loss(q, target_q.expand_as(q)) * q.shape[0]  # sum of the members' losses
         self.critic_opt.zero_grad()
@@ -205,6 +198,17 @@ class DDPG:
         with torch.no_grad():  # the hot path: no autograd records, one tensor-to-Python conversion per update
             q1 = q[0]
             return dict(zip(names, torch.stack([critic_loss, q1.mean(), q1.max(), *actor_stats]).tolist()))
+
+    @torch.no_grad()
+    def td_target(self, rew: torch.Tensor, next_obs: torch.Tensor, done: torch.Tensor) -> torch.Tensor:
+        """r + γ (1 − done) min_i Q'_i(s', μ'(s')): no bootstrap past a terminal state (done = terminated,
+        not truncated), the minimum over the target critics (one critic: plain DDPG)."""
+        next_act = self.actor_target(next_obs)
+        if self.cfg.target_noise > 0:
+            eps = (torch.randn_like(next_act) * self.cfg.target_noise).clamp(-self.cfg.target_noise_clip, self.cfg.target_noise_clip)
+            next_act = (next_act + eps).clamp(-1.0, 1.0)
+        next_q = self.critic_target(next_obs, next_act).min(0).values
+        return rew + self.cfg.gamma * (1.0 - done) * next_q
 
     def _actor_step(self, obs: torch.Tensor, act: torch.Tensor, expert_mask: np.ndarray) -> list[torch.Tensor]:
         """Deterministic policy gradient on the first critic, plus behaviour cloning on expert samples.

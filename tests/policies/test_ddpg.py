@@ -19,6 +19,10 @@ def batches(n, size=32):
     return [rb.sample(size, 0.5, rng) for _ in range(n)]
 
 
+def make(**cfg) -> DDPG:
+    return DDPG(np.zeros(11), np.ones(11), 4, DDPGConfig(hidden=(16, 16), **cfg), seed=0)
+
+
 def params(net):
     return [p.detach().clone() for p in net.parameters()]
 
@@ -126,3 +130,22 @@ def test_actor_statistics_only_on_actor_steps():
     keys = [set(agent.update(b)) for b in batches(4)]
     assert keys[0] == keys[2] == {"critic_loss", "q_mean", "q_max"}
     assert keys[1] == keys[3] == {"critic_loss", "q_mean", "q_max", "actor_loss", "actor_q", "bc_loss"}
+
+
+def test_td_target_takes_the_minimum_of_the_two_target_critics_and_stops_at_terminals():
+    agent = make(clipped_double_q=True)
+    rng = np.random.default_rng(0)
+    next_obs = torch.as_tensor(rng.uniform(-1, 1, (64, 11)), dtype=torch.float32)
+    rew = torch.as_tensor(rng.normal(size=64), dtype=torch.float32)
+    done = torch.as_tensor((np.arange(64) % 2).astype(np.float32))
+    with torch.no_grad():
+        q_pair = agent.critic_target(next_obs, agent.actor_target(next_obs))
+    assert not torch.allclose(q_pair[0], q_pair[1])  # two different target critics
+    target = agent.td_target(rew, next_obs, done)
+    expected = rew + agent.cfg.gamma * (1 - done) * torch.minimum(q_pair[0], q_pair[1])
+    assert torch.allclose(target, expected)
+    assert torch.equal(target[done == 1], rew[done == 1])  # terminated: no bootstrap
+    plain = make(clipped_double_q=False)
+    with torch.no_grad():
+        q1 = plain.critic_target(next_obs, plain.actor_target(next_obs))[0]
+    assert torch.allclose(plain.td_target(rew, next_obs, torch.zeros(64)), rew + plain.cfg.gamma * q1)

@@ -125,15 +125,77 @@ def test_corrupt_and_mismatched_checkpoints_refused(tmp_path):
 
 
 @pytest.mark.slow
-def test_guided_training_reaches_80_percent_eval_success_within_5000_steps(tmp_path):
-    """The issue's convergence check for one seed, with the default configuration and 20k-step schedule."""
+def test_guided_training_converges_within_5000_steps_by_the_experiments_rule(tmp_path):
+    """Seed 0 with the default configuration and 20k-step schedule: the 20-episode evaluation window reaches
+    80 % by 5,000 steps and stays there through 7,000 (the learning-curves rule on the evaluations so far)."""
+    from mrguide.experiments.stats import convergence
+
     tc, dc, gc, ec = load_train_config(None)
     tr = Trainer(tc, dc, gc, ec, tmp_path / "slow")
     try:
-        tr.run(stop_at=5_000)
+        tr.run(stop_at=7_000)
         with (tmp_path / "slow" / "eval.csv").open() as fh:
-            evals = [float(r["success_rate"]) for r in csv.DictReader(fh) if int(r["step"]) <= 5_000]
-        assert len(evals) >= 4
-        assert max(evals) >= 0.8, evals
+            rows = list(csv.DictReader(fh))
+        conv = convergence([int(r["step"]) for r in rows], [float(r["success_rate"]) for r in rows], tc.eval_episodes)
+        assert conv.step is not None and conv.step <= 5_100, rows  # the 5k evaluation runs just after 5,000 steps
     finally:
         tr.close()
+
+
+class _MustNotBeAsked:
+    def annotate(self, obs, previous=None):
+        raise AssertionError("a baseline asked the expert")
+
+
+def test_a_baseline_never_calls_the_expert(tmp_path):
+    tc, dc, gc, ec = load_train_config(None)
+    tc = dataclasses.replace(tc, total_steps=400, learning_starts=64, batch_size=32, eval_every=10_000, checkpoint_every=10_000)
+    tr = Trainer(tc, dataclasses.replace(dc, hidden=(16, 16)), dataclasses.replace(gc, enabled=False), ec, tmp_path / "b",
+                 lambda env: _MustNotBeAsked())
+    try:
+        tr.run(stop_at=400)
+        assert tr.step >= 400 and tr.interventions == 0 and tr.replay.expert.size == 0 and tr.cache.asked == 0
+    finally:
+        tr.close()
+
+
+def _rows(path):
+    with path.open() as fh:
+        return list(csv.DictReader(fh))
+
+
+@pytest.mark.parametrize("mode", ["replay", "takeover"])
+def test_replay_restarts_the_episode_takeover_continues_it(tmp_path, mode):
+    tc, dc, gc, ec = load_train_config(None)
+    tc = dataclasses.replace(tc, total_steps=500, learning_starts=64, batch_size=32, eval_every=10_000, checkpoint_every=10_000)
+    tr = Trainer(tc, dataclasses.replace(dc, hidden=(16, 16)), dataclasses.replace(gc, mode=mode, intake_steps=500), ec,
+                 tmp_path / mode)
+    restored, restore = [], tr.env.restore
+    tr.env.restore = lambda snap: restored.append(snap) or restore(snap)
+    try:
+        tr.run(stop_at=500)
+    finally:
+        tr.close()
+    rows = _rows(tmp_path / mode / "metrics.csv")
+    pairs = [(rows[i + 1], rows[i]) for i in range(len(rows) - 1) if rows[i]["kind"] == "expert" and rows[i + 1]["triggered"] == "1"]
+    complete = [(a, e) for a, e in pairs if e["outcome"]]  # demonstrations that ran to their end
+    assert complete and tr.interventions >= len(complete)
+    if mode == "takeover":  # the expert finishes the agent's episode from where it is: together at most one horizon
+        assert not restored and all(int(a["length"]) + int(e["length"]) <= ec.task.horizon for a, e in complete)
+    else:  # every demonstration starts from its episode's first state
+        assert len(restored) == tr.interventions
+
+
+def test_terminal_transitions_stop_bootstrapping_truncated_ones_do_not(tmp_path):
+    tr = make(tmp_path, "t")
+    try:
+        tr.run(stop_at=600)
+        rows = _rows(tmp_path / "t" / "metrics.csv")
+        pool = tr.replay.agent.state()
+    finally:
+        tr.close()
+    outcomes = {r["outcome"] for r in rows if r["kind"] == "agent"}
+    assert "no_grasp" in outcomes  # truncated by the horizon
+    done = pool["done"][: tr.replay.agent.size].ravel()
+    terminal = sum(r["outcome"] in ("success", "dropped", "misplaced", "knocked_off") for r in rows if r["kind"] == "agent")
+    assert done.sum() == terminal  # exactly the terminated agent episodes end in done = 1; truncated ones in 0
