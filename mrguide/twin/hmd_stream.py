@@ -123,7 +123,13 @@ class HmdPoseStream(ObjectPoseSource):
     def _run(self) -> None:
         while not self._stop.is_set():
             gen = self._generation
-            pos, orn = self.plant.object_pose()
+            try:
+                pos, orn = self.plant.object_pose()
+            except Exception as exc:  # the twin playing the robot was closed under us (end of a run) or failed
+                with self._lock:
+                    self._lost = f"the twin that plays the robot is gone ({type(exc).__name__}: {exc})"
+                log.debug("HMD stream stops: %s", self._lost)
+                return
             t = time.monotonic()
             try:
                 self._conn.send((pos.tolist(), orn.tolist()))
