@@ -34,10 +34,10 @@ def bench_inference(n: int = 20000) -> tuple[float, str]:
     from mrguide.policies.train import obs_scaling
     from mrguide.task import TaskConfig
 
-    ws = load_robot().workspace
+    spec = load_robot()
     with tempfile.TemporaryDirectory() as tmp:
         cfg = DDPGConfig()
-        path = export_actor(DDPG(*obs_scaling(ws), 4, cfg).actor, Path(tmp) / "p.npz", ws, TaskConfig(), 0.1)
+        path = export_actor(DDPG(*obs_scaling(spec.workspace), 4, cfg).actor, Path(tmp) / "p.npz", spec, TaskConfig(), 0.1)
         pol = ExportedPolicy.load(path)
     obs = np.zeros(11, np.float32)
     times = []

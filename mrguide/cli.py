@@ -64,19 +64,19 @@ def cmd_deploy(args: argparse.Namespace) -> int:
     from mrguide.deploy.runlog import RunLog
     from mrguide.deploy.safety import SafetyConfig
     from mrguide.deploy.session import DeployConfig
-    from mrguide.robot import RobotConfig, load_robot
+    from mrguide.robot import load_robot, load_robot_config
     from mrguide.task import TaskConfig
 
     dcfg = load_section(DeployConfig, args.config, "deploy")
     safety = load_optional_section(SafetyConfig, args.config, "safety")
     episodes = args.episodes if args.episodes is not None else dcfg.episodes
     seed = args.seed if args.seed is not None else dcfg.seed
-    spec = load_robot(load_section(RobotConfig, args.config, "robot"))
+    spec = load_robot(load_robot_config(args.config))
     task = load_section(TaskConfig, args.config, "task")
     bus = _bus_config(args.config, dcfg.bus_config, spec)
     if args.dry_run and bus.bus.interface != "virtual":
         raise ConfigError(f"--dry-run needs the virtual CAN interface; the bus config names {bus.bus.interface!r}")
-    policy = ExportedPolicy.load(args.policy, spec.workspace, task)
+    policy = ExportedPolicy.load(args.policy, spec, task)
     if args.dry_run:
         from mrguide.twin.env import EnvConfig  # imports PyBullet: after the checks that need none
 

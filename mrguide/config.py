@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import tomllib
+import types
 import typing
 from pathlib import Path
 from typing import Any, TypeVar
@@ -67,6 +68,9 @@ def _number_problem(cls: Any, data: Any, prefix: str) -> str | None:
                     return problem
         return None
     args = typing.get_args(cls)
+    if typing.get_origin(cls) in (typing.Union, types.UnionType):  # `X | None`: an override left unset
+        present = [a for a in args if a is not type(None)]
+        return _number_problem(present[0], data, prefix) if len(present) == 1 and data is not None else None
     if typing.get_origin(cls) is tuple and args and isinstance(data, (list, tuple)):
         items = [args[0]] * len(data) if len(args) == 2 and args[1] is Ellipsis else list(args)
         for i, (item_type, value) in enumerate(zip(items, data)):

@@ -1,41 +1,51 @@
-"""Robot spec shared by the twin and the deploy stack: URDF, tool frame, limits, home pose, workspace.
+"""Robot spec shared by the twin and the deploy stack, loaded from one arm file.
 
-The arm is the UR5 of `example-robot-data`; its URDF is resolved from the installed package, never
-copied into this repository. A suction cup sits at a fixed offset along the flange (`tool0`) z-axis;
-the tool centre point (TCP) is the cup's lip, and the policy always commands it pointing down.
+An arm file (`mrguide/arms/<name>.toml`, or any file given as `[robot] file`) holds everything about the
+arm: its URDF (from the installed example-robot-data, or a file), joint names, base and flange frames,
+the suction-cup (TCP) offset along the flange z-axis, joint limits, home configuration, the workspace box
+and the joint <-> CAN node map. The twin, the IK, the bus and the policy export all read the `RobotSpec`
+built from it. The TCP is the cup's lip, and the policy always commands it pointing down.
 """
 
 from __future__ import annotations
 
-import importlib.metadata
+import dataclasses
+import functools
+import hashlib
+import importlib.resources
+import json
+import re
 import xml.etree.ElementTree as ET
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from mrguide.config import ConfigError
-from mrguide.errors import InputError
+from mrguide.config import ConfigError, from_dict, load_section, load_toml, to_dict
+from mrguide.urdf import UrdfError, example_robot_data, kinematic_chain
 
-#: URDF files of the arms we know, relative to the installed example-robot-data package.
-KNOWN_ROBOTS: dict[str, str] = {
-    "ur5": "cmeel.prefix/share/example-robot-data/robots/ur_description/urdf/ur5_robot.urdf",
-}
+#: The arm of a run config without `[robot] name` or `file`.
+DEFAULT_ARM = "ur5"
 
 #: Orientation of the TCP frame in the base frame: z down, x along -y_base (the UR5 home yaw).
 R_TOOL_DOWN = np.array([[0.0, -1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
 
+#: Arm-file values a run config's [robot] may override.
+OVERRIDABLE = ("tool_offset", "q_lower", "q_upper", "v_max", "a_max", "j_max", "q_home", "workspace")
+LIMIT_KEYS = ("q_lower", "q_upper", "v_max", "a_max", "j_max", "q_home")
 
-class RobotSpecError(InputError):
-    """Unknown robot, missing URDF or inconsistent limits."""
+
+class RobotSpecError(ConfigError):
+    """Unknown robot, unreadable arm file or URDF, or inconsistent arm values; names the file and key."""
 
 
 @dataclass(frozen=True)
 class Workspace:
     """Axis-aligned box in the robot base frame that the normalized action [-1, 1]^3 maps onto (m)."""
 
-    low: tuple[float, float, float] = (0.30, -0.20, 0.045)
-    high: tuple[float, float, float] = (0.65, 0.40, 0.35)
+    low: tuple[float, float, float]
+    high: tuple[float, float, float]
 
     def __post_init__(self) -> None:
         if not np.all(np.asarray(self.high) > np.asarray(self.low)):
@@ -69,24 +79,75 @@ class Workspace:
 
 
 @dataclass(frozen=True)
-class RobotConfig:
-    """Configurable part of the robot spec ([robot] in a TOML config)."""
+class UrdfSource:
+    """[urdf] of an arm file: a URDF of example-robot-data (relative to its robots/ directory) or a file."""
 
-    name: str = "ur5"
-    #: Suction cup length along the flange z-axis (m): flange to cup lip.
-    tool_offset: float = 0.10
-    #: Joint limits used by IK, trajectories and safety (rad); tighter than the URDF's ±2π.
-    q_lower: tuple[float, ...] = (-2.6, -3.0, -2.8, -3.8, -2.8, -3.2)
-    q_upper: tuple[float, ...] = (2.6, -0.1, 2.8, 0.6, -0.3, 3.2)
-    #: Joint velocity limits (rad/s), below the UR5 URDF's 3.15/3.2.
-    v_max: tuple[float, ...] = (1.5, 1.5, 1.5, 2.0, 2.0, 2.0)
-    #: Joint acceleration limits (rad/s^2).
-    a_max: tuple[float, ...] = (6.0, 6.0, 6.0, 8.0, 8.0, 8.0)
-    #: Joint jerk limits (rad/s^3).
-    j_max: tuple[float, ...] = (60.0, 60.0, 60.0, 80.0, 80.0, 80.0)
-    #: Home configuration: TCP above the middle of the table, pointing down.
-    q_home: tuple[float, ...] = (0.0, -1.5707963, 1.5707963, -1.5707963, -1.5707963, 0.0)
-    workspace: Workspace = field(default_factory=Workspace)
+    example_robot_data: str = ""
+    #: URDF path, relative to the arm file (or absolute).
+    file: str = ""
+    #: Directory the URDF's package:// URIs resolve against, relative to the arm file; default: the URDF's.
+    package_dir: str = ""
+
+    def __post_init__(self) -> None:
+        if bool(self.example_robot_data) == bool(self.file):
+            raise ConfigError("urdf: give exactly one of example_robot_data and file")
+        if self.package_dir and not self.file:
+            raise ConfigError("urdf.package_dir: only with urdf.file (example-robot-data knows its own)")
+
+
+@dataclass(frozen=True)
+class ArmConfig:
+    """An arm file: the arm, its tool, limits, home, workspace and drive node map (see mrguide/arms/ur5.toml)."""
+
+    name: str
+    urdf: UrdfSource
+    joints: tuple[str, ...]
+    base_frame: str
+    flange_frame: str
+    #: Suction cup length along the flange z-axis (m): flange to cup lip (the TCP).
+    tool_offset: float
+    #: Joint limits used by IK, trajectories and safety (rad, rad/s, rad/s^2, rad/s^3), in joint order.
+    q_lower: tuple[float, ...]
+    q_upper: tuple[float, ...]
+    v_max: tuple[float, ...]
+    a_max: tuple[float, ...]
+    j_max: tuple[float, ...]
+    q_home: tuple[float, ...]
+    workspace: Workspace
+    #: Joint name -> CANopen node ID of its drive.
+    can_nodes: dict[str, int]
+
+
+@dataclass(frozen=True)
+class RobotConfig:
+    """[robot] of a run config: the arm file (`name` of a shipped arm or a `file`) and overrides of its values."""
+
+    #: A shipped arm, mrguide/arms/<name>.toml ("" = DEFAULT_ARM).
+    name: str = ""
+    #: Or an arm file; relative paths are relative to the run config's directory (`load_robot_config`).
+    file: str = ""
+    tool_offset: float | None = None
+    q_lower: tuple[float, ...] | None = None
+    q_upper: tuple[float, ...] | None = None
+    v_max: tuple[float, ...] | None = None
+    a_max: tuple[float, ...] | None = None
+    j_max: tuple[float, ...] | None = None
+    q_home: tuple[float, ...] | None = None
+    #: Replaces the arm file's workspace box (both corners).
+    workspace: Workspace | None = None
+
+    def __post_init__(self) -> None:
+        if self.name and self.file:
+            raise ConfigError("robot: give name or file, not both")
+
+    def overrides(self) -> dict[str, Any]:
+        """The arm-file values this config replaces, as TOML-like values."""
+        out = {}
+        for key in OVERRIDABLE:
+            value = getattr(self, key)
+            if value is not None:
+                out[key] = to_dict(value) if key == "workspace" else list(value) if isinstance(value, tuple) else value
+        return out
 
 
 @dataclass(frozen=True)
@@ -109,6 +170,12 @@ class RobotSpec:
     j_max: np.ndarray
     q_home: np.ndarray
     workspace: Workspace
+    #: CANopen node ID of each joint's drive, in joint order.
+    node_ids: tuple[int, ...]
+    #: The arm file it was loaded from.
+    arm_file: Path
+    #: Digest of what a policy depends on: joints, frames, TCP offset, workspace box, URDF chain.
+    fingerprint: str
 
     @property
     def dof(self) -> int:
@@ -119,61 +186,118 @@ class RobotSpec:
         return bool(np.all(np.isfinite(q)) and np.all(q >= self.q_lower - tol) and np.all(q <= self.q_upper + tol))
 
 
-UR5_JOINTS = (
-    "shoulder_pan_joint",
-    "shoulder_lift_joint",
-    "elbow_joint",
-    "wrist_1_joint",
-    "wrist_2_joint",
-    "wrist_3_joint",
-)
+def shipped_arms() -> dict[str, Path]:
+    """Arm name -> arm file of the arms shipped with mrguide (package data, found from any directory)."""
+    root = importlib.resources.files("mrguide").joinpath("arms")
+    return {Path(str(p)).stem: Path(str(p)) for p in root.iterdir() if str(p).endswith(".toml")}
 
 
-def resolve_urdf(name: str) -> tuple[Path, Path]:
-    """(URDF path, package dir) of a known robot from the installed example-robot-data."""
-    if name not in KNOWN_ROBOTS:
-        raise RobotSpecError(f"unknown robot {name!r}; known robots: {', '.join(sorted(KNOWN_ROBOTS))}")
-    try:
-        dist = importlib.metadata.distribution("example-robot-data")
-    except importlib.metadata.PackageNotFoundError as exc:
-        raise RobotSpecError("package example-robot-data is not installed; `pip install example-robot-data`") from exc
-    urdf = Path(str(dist.locate_file(KNOWN_ROBOTS[name])))
-    if not urdf.is_file():
-        raise RobotSpecError(f"URDF of robot {name!r} not found at {urdf} (example-robot-data {dist.version})")
-    package_dir = urdf.parents[4]  # .../share, against which package://example-robot-data/... resolves
-    return urdf, package_dir
+def arm_file(cfg: RobotConfig) -> Path:
+    """The arm file `cfg` selects."""
+    if cfg.file:
+        path = Path(cfg.file)
+        if not path.is_file():
+            raise RobotSpecError(f"robot.file: arm file not found: {path}")
+        return path
+    name, arms = cfg.name or DEFAULT_ARM, shipped_arms()
+    if not re.fullmatch(r"[A-Za-z0-9_.-]+", name) or name not in arms:
+        raise RobotSpecError(f"unknown robot {name!r}; known robots: {', '.join(sorted(arms))} (or [robot] file = ...)")
+    return arms[name]
+
+
+def load_robot_config(path: str | Path | None) -> RobotConfig:
+    """[robot] of run config `path`, with a relative `file` made relative to the config's directory."""
+    cfg = load_section(RobotConfig, path, "robot")
+    if path is not None and cfg.file and not Path(cfg.file).is_absolute():
+        cfg = dataclasses.replace(cfg, file=str(Path(path).parent / cfg.file))
+    return cfg
 
 
 def load_robot(config: RobotConfig | None = None) -> RobotSpec:
-    """Build the robot spec from its config, checking limits for consistency."""
+    """Build the robot spec from its arm file and the config's overrides, checking them for consistency."""
     cfg = config or RobotConfig()
-    urdf, package_dir = resolve_urdf(cfg.name)
-    arrays = {k: np.asarray(getattr(cfg, k), dtype=float) for k in ("q_lower", "q_upper", "v_max", "a_max", "j_max", "q_home")}
+    path = arm_file(cfg)
+    overrides = cfg.overrides()
+    where = f"{path}" + (f" with [robot] overrides of {', '.join(overrides)}" if overrides else "")
+    try:
+        arm = from_dict(ArmConfig, {**_read_arm(path), **overrides}, where=where)
+    except RobotSpecError:
+        raise
+    except ConfigError as exc:
+        raise RobotSpecError(str(exc)) from exc
+    return _build(arm, path, where)
+
+
+def _read_arm(path: Path) -> dict[str, Any]:
+    stat = path.stat()
+    try:
+        return dict(_read_toml(path.resolve(), stat.st_mtime_ns, stat.st_size))
+    except ConfigError as exc:
+        raise RobotSpecError(str(exc)) from exc
+
+
+@functools.lru_cache(maxsize=32)
+def _read_toml(path: Path, _mtime: int, _size: int) -> dict[str, Any]:
+    return load_toml(path)
+
+
+def _build(arm: ArmConfig, path: Path, where: str) -> RobotSpec:
+    """The spec of a parsed arm file: URDF resolved, every array and the node map checked."""
+    arrays = _limit_arrays(arm, where)
+    if not 0 <= arm.tool_offset <= 2.0:
+        raise RobotSpecError(f"{where}: tool_offset = {arm.tool_offset}: expected [0, 2] m")
+    try:
+        urdf, package_dir = _resolve_urdf(arm.urdf, path.parent)
+        chain = kinematic_chain(urdf, arm.base_frame, arm.flange_frame)
+    except UrdfError as exc:
+        raise RobotSpecError(f"{where}: {exc}") from exc
+    movable = tuple(j.name for j in chain if j.movable)
+    if movable != arm.joints:
+        raise RobotSpecError(f"{where}: joints {list(arm.joints)} differ from the URDF's movable joints from "
+                             f"{arm.base_frame} to {arm.flange_frame}: {list(movable)}")
+    if sorted(arm.can_nodes) != sorted(arm.joints):
+        raise RobotSpecError(f"{where}: can_nodes names {sorted(arm.can_nodes)}, expected one node per joint {list(arm.joints)}")
+    nodes = tuple(arm.can_nodes[j] for j in arm.joints)
+    if any(not 1 <= n <= 127 for n in nodes) or len(set(nodes)) != len(nodes):
+        raise RobotSpecError(f"{where}: can_nodes {dict(arm.can_nodes)}: node IDs must be distinct, in 1..127")
+    T = np.eye(4)
+    T[2, 3] = arm.tool_offset
+    payload = {"joints": arm.joints, "base_frame": arm.base_frame, "flange_frame": arm.flange_frame,
+               "tool_offset": round(arm.tool_offset, 9), "workspace": to_dict(arm.workspace),
+               "chain": [dataclasses.astuple(j) for j in chain]}
+    fingerprint = hashlib.sha256(json.dumps(payload, sort_keys=True).encode()).hexdigest()[:16]
+    return RobotSpec(name=arm.name, urdf_path=urdf, package_dir=package_dir, joint_names=arm.joints,
+                     base_frame=arm.base_frame, flange_frame=arm.flange_frame, T_flange_tcp=T, workspace=arm.workspace,
+                     node_ids=nodes, arm_file=path, fingerprint=fingerprint, **arrays)
+
+
+def _limit_arrays(arm: ArmConfig, where: str) -> dict[str, np.ndarray]:
+    """Limits and home as arrays, one finite value per joint, positive rates, home within the limits."""
+    arrays = {k: np.asarray(getattr(arm, k), dtype=float) for k in LIMIT_KEYS}
     for key, arr in arrays.items():
-        if arr.shape != (len(UR5_JOINTS),) or not np.all(np.isfinite(arr)):
-            raise RobotSpecError(f"robot.{key}: expected {len(UR5_JOINTS)} finite values, got {getattr(cfg, key)}")
+        if arr.shape != (len(arm.joints),) or not np.all(np.isfinite(arr)):
+            raise RobotSpecError(f"{where}: {key}: expected {len(arm.joints)} finite values, got {list(getattr(arm, key))}")
     if np.any(arrays["q_upper"] <= arrays["q_lower"]):
-        raise RobotSpecError("robot: q_upper must exceed q_lower for every joint")
+        raise RobotSpecError(f"{where}: q_upper must exceed q_lower for every joint")
     for key in ("v_max", "a_max", "j_max"):
         if np.any(arrays[key] <= 0):
-            raise RobotSpecError(f"robot.{key}: limits must be positive")
+            raise RobotSpecError(f"{where}: {key}: limits must be positive")
     if np.any(arrays["q_home"] < arrays["q_lower"]) or np.any(arrays["q_home"] > arrays["q_upper"]):
-        raise RobotSpecError("robot.q_home lies outside the joint limits")
-    if cfg.tool_offset < 0:
-        raise RobotSpecError("robot.tool_offset must be >= 0")
-    T = np.eye(4)
-    T[2, 3] = cfg.tool_offset
-    return RobotSpec(
-        name=cfg.name,
-        urdf_path=urdf,
-        package_dir=package_dir,
-        joint_names=UR5_JOINTS,
-        base_frame="base_link",
-        flange_frame="tool0",
-        T_flange_tcp=T,
-        workspace=cfg.workspace,
-        **arrays,
-    )
+        raise RobotSpecError(f"{where}: q_home lies outside the joint limits")
+    return arrays
+
+
+def _resolve_urdf(source: UrdfSource, base: Path) -> tuple[Path, Path]:
+    """(URDF path, package dir) of an arm file's [urdf]; relative paths are relative to the arm file."""
+    if source.example_robot_data:
+        return example_robot_data(source.example_robot_data)
+    urdf = base / source.file
+    if not urdf.is_file():
+        raise UrdfError(f"urdf.file: {urdf} not found")
+    package_dir = base / source.package_dir if source.package_dir else urdf.parent
+    if not package_dir.is_dir():
+        raise UrdfError(f"urdf.package_dir: {package_dir} is not a directory")
+    return urdf, package_dir
 
 
 def urdf_with_tool(spec: RobotSpec, mesh_root: str, cup_radius: float) -> str:

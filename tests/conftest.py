@@ -59,12 +59,12 @@ def policy_file():
     keys in `drop` removed, or `metadata` replacing it whole, and `arrays` replacing layer arrays."""
     from mrguide.config import to_dict
     from mrguide.deploy.policy import FORMAT, FORMAT_VERSION
-    from mrguide.robot import Workspace
+    from mrguide.robot import load_robot
     from mrguide.task import ACT_DIM, ACT_LAYOUT, OBS_DIM, OBS_LAYOUT, TaskConfig
 
     good = {"format": FORMAT, "format_version": FORMAT_VERSION, "obs_layout": list(OBS_LAYOUT),
             "act_layout": list(ACT_LAYOUT), "activations": ["tanh"],
-            "workspace": {"low": list(Workspace().low), "high": list(Workspace().high)},
+            "workspace": {"low": list(load_robot().workspace.low), "high": list(load_robot().workspace.high)},
             "task": to_dict(TaskConfig()), "decision_period": 0.1}
 
     def write(path: Path, metadata: Any = None, arrays: dict | None = None, drop: tuple = (), **changes: Any) -> Path:

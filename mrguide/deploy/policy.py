@@ -2,7 +2,8 @@
 
 The file is written by `mrguide.policies.export` and read here; loading checks the format, the
 observation/action layout, the layer shapes, finiteness, (when given) that the workspace box and task
-parameters match the robot's configuration, and probes the policy on observations spanning its
+parameters match the configuration and that the policy was exported for the configured arm (name and
+fingerprint, `mrguide.robot.RobotSpec`), and probes the policy on observations spanning its
 workspace (every phase, both gripper states): finite weights can still overflow to a NaN/inf action.
 So a wrong file is refused before any drive is enabled.
 """
@@ -11,6 +12,7 @@ from __future__ import annotations
 
 import itertools
 import json
+import logging
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -20,7 +22,7 @@ import numpy as np
 
 from mrguide.config import ConfigError, to_dict
 from mrguide.errors import InputError
-from mrguide.robot import Workspace
+from mrguide.robot import RobotSpec, Workspace
 from mrguide.task import ACT_DIM, ACT_LAYOUT, N_PHASES, OBS_DIM, OBS_LAYOUT, PHASES, TaskConfig, progress
 
 FORMAT = "mrguide-policy"
@@ -28,6 +30,10 @@ FORMAT_VERSION = 1
 #: Longest decision period (s) a policy file may declare (the paper's policy acts every 0.1 s).
 MAX_DECISION_PERIOD = 10.0
 ACTIVATIONS = {"relu": lambda x: np.maximum(x, 0.0), "tanh": np.tanh}
+#: The arm of policy files that record none (exported before arm identities): the only arm there was then.
+LEGACY_ARM = "ur5"
+
+log = logging.getLogger(__name__)
 
 
 class PolicyFileError(InputError):
@@ -59,8 +65,8 @@ class ExportedPolicy:
         return x.astype(np.float32)
 
     @classmethod
-    def load(cls, path: str | Path, workspace: Workspace | None = None, task: TaskConfig | None = None) -> "ExportedPolicy":
-        """Read and validate a policy file; with `workspace`/`task`, also require them to match."""
+    def load(cls, path: str | Path, robot: RobotSpec | None = None, task: TaskConfig | None = None) -> "ExportedPolicy":
+        """Read and validate a policy file; with `robot`/`task`, also require its arm, workspace and task to match."""
         path = Path(path)
         if not path.is_file():
             raise PolicyFileError(f"policy file not found: {path}")
@@ -83,9 +89,11 @@ class ExportedPolicy:
         if width != ACT_DIM:
             raise PolicyFileError(f"{path}: output width {width}, expected {ACT_DIM}")
         trained = _trained_workspace(path, meta)
-        if workspace is not None:
-            if not (np.allclose(trained.lo, workspace.lo) and np.allclose(trained.hi, workspace.hi)):
-                raise PolicyFileError(f"{path}: trained for workspace {meta['workspace']}, the robot is configured for low={workspace.low} high={workspace.high}")
+        if robot is not None:
+            ws = robot.workspace
+            if not (np.allclose(trained.lo, ws.lo) and np.allclose(trained.hi, ws.hi)):
+                raise PolicyFileError(f"{path}: trained for workspace {meta['workspace']}, the robot is configured for low={ws.low} high={ws.high}")
+            check_arm(path, meta, robot)
         if task is not None:
             theirs, ours = meta["task"], to_dict(task)
             diff = sorted(k for k in set(theirs) | set(ours) if theirs.get(k) != ours.get(k))
@@ -107,6 +115,27 @@ def check_decision_period(policy: ExportedPolicy, path: str | Path, control_peri
     if ratio < 1 - 1e-9 or abs(ratio - round(ratio)) > 1e-6:
         raise PolicyFileError(f"{path}: decision period {period} s is not a whole number of control periods "
                               f"({control_period} s)")
+
+
+def check_arm(path: str | Path, meta: dict[str, Any], robot: RobotSpec) -> None:
+    """PolicyFileError unless the policy file's metadata names `robot`'s arm with its fingerprint. A file that
+    names no arm (exported before they were recorded) is taken for LEGACY_ARM, with a warning."""
+    arm = meta.get("robot")
+    if arm is None:
+        if robot.name != LEGACY_ARM:
+            raise PolicyFileError(f"{path}: records no arm (exported before arms were recorded, so for the {LEGACY_ARM}); "
+                                  f"the configuration drives {robot.name!r}: train and export a policy for this arm")
+        log.warning("%s: records no arm; taken for the %s it was trained on. Re-export it to record the arm", path, LEGACY_ARM)
+        return
+    if not isinstance(arm, dict) or not isinstance(arm.get("name"), str) or not isinstance(arm.get("fingerprint"), str):
+        raise PolicyFileError(f"{path}: metadata robot {arm!r} is not an object with a name and a fingerprint")
+    if arm["name"] != robot.name:
+        raise PolicyFileError(f"{path}: exported for arm {arm['name']!r}, the configuration drives arm {robot.name!r} "
+                              f"({robot.arm_file}); a policy runs only on the arm it was trained for")
+    if arm["fingerprint"] != robot.fingerprint:
+        raise PolicyFileError(f"{path}: exported for arm {arm['name']!r} with fingerprint {arm['fingerprint']}, the configured "
+                              f"{robot.name!r} has {robot.fingerprint}: its joints, frames, TCP offset, workspace box or URDF "
+                              "kinematics differ from the training arm's")
 
 
 def _metadata(path: Path, arrays: dict[str, np.ndarray]) -> dict[str, Any]:

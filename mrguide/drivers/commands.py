@@ -24,7 +24,7 @@ from mrguide.drivers.mock.first_order_plant import FirstOrderPlant
 from mrguide.drivers.mock.sim_cobot import SimulatedCobot, shared_pc_config
 from mrguide.drivers.monitor import monitor
 from mrguide.drivers.selftest import run_selftest
-from mrguide.robot import load_robot
+from mrguide.robot import RobotConfig, RobotSpec, load_robot
 
 logger = logging.getLogger(__name__)
 
@@ -62,10 +62,19 @@ def _add_config(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--config", type=Path, default=None,
                         help="bus description TOML, e.g. configs/cobot_bus.toml (default: built-in defaults, "
                              "virtual bus)")
+    parser.add_argument("--robot", default="",
+                        help="the arm whose drives are on the bus: a shipped arm's name (ur5, ur10) or an arm file "
+                             "(.toml); it gives the node IDs, the number of drives and the limits (default: ur5)")
+
+
+def _robot(args: argparse.Namespace) -> RobotSpec:
+    """The arm named by --robot: a shipped arm's name, or a path to an arm file."""
+    text = args.robot
+    return load_robot(RobotConfig(file=text) if text.endswith(".toml") or "/" in text else RobotConfig(name=text))
 
 
 def _selftest_command(args: argparse.Namespace) -> int:
-    robot = load_robot()
+    robot = _robot(args)
     config = load_cobot_bus_config(args.config, robot)
     if config.bus.interface != "virtual" and not args.allow_motion:
         raise ConfigError(f"bus interface {config.bus.interface!r} is a real bus: the selftest moves every "
@@ -74,11 +83,11 @@ def _selftest_command(args: argparse.Namespace) -> int:
 
 
 def _monitor_command(args: argparse.Namespace) -> int:
-    robot = load_robot()
+    robot = _robot(args)
     config = load_cobot_bus_config(args.config, robot)
     if args.simulate and config.bus.interface != "virtual":
         raise ConfigError("--simulate needs the virtual bus: simulated devices must not join a real bus")
-    demo = _SimulatedDemo(config) if args.simulate else None
+    demo = _SimulatedDemo(config, robot) if args.simulate else None
     try:
         counts = monitor(config, robot.joint_names, args.duration, print, demo.start if demo else None)
     finally:
@@ -93,9 +102,9 @@ def _monitor_command(args: argparse.Namespace) -> int:
 class _SimulatedDemo:
     """Simulated cobot plus a master that boots it and streams a slow sine on every joint."""
 
-    def __init__(self, config: CobotBusConfig) -> None:
+    def __init__(self, config: CobotBusConfig, robot: RobotSpec) -> None:
         self._config = config = shared_pc_config(config)
-        self._robot = load_robot()
+        self._robot = robot
         self._sim = SimulatedCobot(config, FirstOrderPlant(self._robot.q_home))
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._master, name="mrguide-bus-demo", daemon=True)

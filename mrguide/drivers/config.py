@@ -1,7 +1,8 @@
 """Bus description of the cobot: CAN interface, control timing, node IDs, EDS files, unit conversions.
 
-Loaded from a TOML file (`configs/cobot_bus.toml`) into frozen dataclasses with defaults. Joint limits
-are not repeated here: they come from `mrguide.robot.load_robot()`; `[limits]` may only tighten them.
+Loaded from a TOML file (`configs/cobot_bus.toml`) into frozen dataclasses with defaults. What belongs to
+the arm is not repeated here: the number of drives, the joint <-> node-ID map and the joint limits come from
+the arm file (`mrguide.robot.load_robot()`); `[limits]` may only tighten the limits.
 No value in this file comes from the paper (it says nothing about the bus); values marked "assumed"
 are engineering choices, not datasheet figures.
 """
@@ -18,7 +19,7 @@ import numpy as np
 from mrguide.config import ConfigError, check_number, from_dict, load_toml
 from mrguide.drivers.bus_options import check_bus_options
 from mrguide.drivers.eds_check import DRIVE_OBJECTS, VACUUM_OBJECTS, VELOCITY_TPDO_OBJECTS, check_eds
-from mrguide.robot import RobotSpec
+from mrguide.robot import RobotSpec, load_robot
 
 #: Directory of the EDS files shipped with the package (also read by the simulated devices).
 EDS_DIR = Path(__file__).resolve().parent / "eds"
@@ -136,7 +137,7 @@ class TimingConfig:
 
 @dataclass(frozen=True)
 class JointDriveConfig:
-    """One joint's drive ([[joints]], in joint order): node ID and counts <-> radians conversion."""
+    """One joint's drive ([[joints]], in joint order): node ID (from the arm file) and counts <-> radians."""
 
     node_id: int
     #: Motor encoder counts per motor revolution (assumed 17-bit single-turn encoder).
@@ -159,8 +160,8 @@ class JointDriveConfig:
 
 
 def _default_joints() -> tuple[JointDriveConfig, ...]:
-    # Node IDs 3..8 as on a Schunk LWA4P arm (DESIGN.md, "Reference hardware").
-    return tuple(JointDriveConfig(node_id=n) for n in range(3, 9))
+    """One drive with default conversions per joint of the default arm, at its node IDs."""
+    return tuple(JointDriveConfig(node_id=n) for n in load_robot().node_ids)
 
 
 @dataclass(frozen=True)
@@ -265,14 +266,27 @@ class JointLimits:
 
 
 def load_cobot_bus_config(path: str | Path | None, robot: RobotSpec | None = None) -> CobotBusConfig:
-    """Load a bus description from TOML; None gives the defaults (virtual bus). With `robot`, also check that
-    it fits the robot (`resolve_limits`: one drive per joint, limits), naming the file."""
-    config = CobotBusConfig() if path is None else from_dict(CobotBusConfig, load_toml(path), where=str(path))
-    if robot is not None:
-        try:
-            resolve_limits(config, robot)
-        except ConfigError as exc:
-            raise ConfigError(f"{path or 'default bus config'}: {exc}") from exc
+    """Load a bus description from TOML for `robot` (default: the default arm); None gives the defaults (virtual
+    bus). Each joint's drive gets the node ID of the arm file's map; the config is checked against the arm
+    (`resolve_limits`: one drive per joint, limits). Errors name the file."""
+    robot = robot or load_robot()
+    where = str(path) if path is not None else "default bus config"
+    data = {} if path is None else load_toml(path)
+    entries = data.get("joints", [{}] * robot.dof)
+    if not isinstance(entries, list) or not all(isinstance(e, dict) for e in entries):
+        raise ConfigError(f"{where}: joints must be [[joints]] tables, one per joint of the arm")
+    for i, entry in enumerate(entries):
+        if "node_id" in entry:
+            raise ConfigError(f"{where}: joints[{i}].node_id: node IDs come from the arm file's can_nodes "
+                              f"({robot.arm_file}), not from the bus config")
+    if len(entries) != robot.dof:
+        raise ConfigError(f"{where}: joints: {len(entries)} drives configured, robot {robot.name} has {robot.dof} joints")
+    data = {**data, "joints": [{"node_id": n, **e} for n, e in zip(robot.node_ids, entries)]}
+    config = from_dict(CobotBusConfig, data, where=where)
+    try:
+        resolve_limits(config, robot)
+    except ConfigError as exc:
+        raise ConfigError(f"{where}: {exc}") from exc
     return config
 
 

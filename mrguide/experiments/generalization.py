@@ -53,7 +53,7 @@ class GeneralizationConfig:
 
 
 def runs(cfg: GeneralizationConfig, base_config: str | None) -> list[TrainRun]:
-    box = {"robot.workspace.low": list(cfg.workspace_low), "robot.workspace.high": list(cfg.workspace_high)}
+    box = {"robot.workspace": {"low": list(cfg.workspace_low), "high": list(cfg.workspace_high)}}
     return [TrainRun(f"guided/seed{s}", s, cfg.steps, True, base_config, {**cfg.overrides, **box}) for s in range(cfg.seeds)]
 
 
@@ -102,7 +102,7 @@ def evaluate(run: TrainRun, root: str, cfg: GeneralizationConfig) -> str:
         return str(out / "goals.csv")
     _, _, _, env_cfg = configs(run)
     env = PickPlaceEnv(env_cfg)
-    policy = ExportedPolicy.load(out / "policy.npz", env.workspace, env.task_cfg)
+    policy = ExportedPolicy.load(out / "policy.npz", env.robot_spec, env.task_cfg)
     rows = []
     try:
         for i, (x, y, d) in enumerate(goal_targets(cfg, run)):

@@ -14,14 +14,16 @@ from mrguide import __version__
 from mrguide.config import to_dict
 from mrguide.deploy.policy import FORMAT, FORMAT_VERSION
 from mrguide.policies.ddpg import Actor
-from mrguide.robot import Workspace
+from mrguide.robot import RobotSpec
 from mrguide.task import ACT_LAYOUT, OBS_LAYOUT, TaskConfig
 
 
 def export_actor(
-    actor: Actor, path: str | Path, workspace: Workspace, task: TaskConfig, decision_period: float, extra: dict[str, Any] | None = None
+    actor: Actor, path: str | Path, robot: RobotSpec, task: TaskConfig, decision_period: float, extra: dict[str, Any] | None = None
 ) -> Path:
-    """Write the actor's linear layers and metadata to `path` (npz), atomically."""
+    """Write the actor's linear layers and metadata to `path` (npz), atomically. The metadata names the arm
+    (`robot`: name, fingerprint, joints), which `ExportedPolicy.load` requires of the configured arm."""
+    workspace = robot.workspace
     linears = [m for m in actor.net if isinstance(m, nn.Linear)]
     acts = ["relu"] * (len(linears) - 1) + ["tanh"]
     meta = {
@@ -31,6 +33,7 @@ def export_actor(
         "act_layout": list(ACT_LAYOUT),
         "activations": acts,
         "workspace": {"low": list(workspace.low), "high": list(workspace.high)},
+        "robot": {"name": robot.name, "fingerprint": robot.fingerprint, "joints": list(robot.joint_names)},
         "task": to_dict(task),
         "decision_period": decision_period,
         "versions": {"mrguide": __version__, "torch": torch.__version__, "numpy": np.__version__},

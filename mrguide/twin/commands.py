@@ -74,7 +74,7 @@ def cmd_sim2real(args: argparse.Namespace) -> int:
     the output directory."""
     from mrguide.calibration.config import load_calibration_config
     from mrguide.config import load_optional_section, load_section
-    from mrguide.deploy.policy import ExportedPolicy, check_decision_period
+    from mrguide.deploy.policy import ExportedPolicy, check_arm, check_decision_period
     from mrguide.deploy.safety import SafetyConfig
     from mrguide.deploy.session import DeployConfig
     from mrguide.drivers.config import load_cobot_bus_config
@@ -89,11 +89,13 @@ def cmd_sim2real(args: argparse.Namespace) -> int:
     real_path = Path(args.real_config)
     real_cfg = EnvConfig.load(real_path)
     dcfg = load_section(DeployConfig, real_path, "deploy")
-    bus = load_cobot_bus_config(real_path.parent / dcfg.bus_config if dcfg.bus_config else None, load_robot(real_cfg.robot))
+    real_robot = load_robot(real_cfg.robot)
+    bus = load_cobot_bus_config(real_path.parent / dcfg.bus_config if dcfg.bus_config else None, real_robot)
     safety = load_optional_section(SafetyConfig, real_path, "safety")
     hmd = load_calibration_config(real_path).hmd
     load_section(TwinCalibrationConfig, real_path, "calibration_twin")
-    policy = ExportedPolicy.load(args.policy, load_robot(train_cfg.robot).workspace, train_cfg.task)
+    policy = ExportedPolicy.load(args.policy, load_robot(train_cfg.robot), train_cfg.task)
+    check_arm(args.policy, policy.metadata, real_robot)  # the "real" cell's arm must be the training arm
     check_decision_period(policy, args.policy, train_cfg.twin.control_period, train_cfg.twin.decision_period)
     check_decision_period(policy, args.policy, bus.timing.control_period, real_cfg.twin.decision_period)
     _check_sweeps(args.sweep, real_cfg, hmd)

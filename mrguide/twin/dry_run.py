@@ -100,7 +100,7 @@ def dry_run(
     """
     spec = load_robot(env_cfg.robot)
     if policy is None:
-        policy = ExportedPolicy.load(policy_path, spec.workspace, env_cfg.task)
+        policy = ExportedPolicy.load(policy_path, spec, env_cfg.task)
     if isinstance(policy, ExportedPolicy):
         check_decision_period(policy, policy_path, bus_cfg.timing.control_period, env_cfg.twin.decision_period)
     layouts = episode_layouts(env_cfg, episodes, seed)

@@ -18,7 +18,7 @@ import numpy as np
 
 from mrguide.config import load_section
 from mrguide.deploy.decision import ActionError, DecisionState, DecisionStep
-from mrguide.robot import RobotConfig, RobotSpec, load_robot
+from mrguide.robot import RobotConfig, RobotSpec, load_robot, load_robot_config
 from mrguide.task import ACT_DIM, OBS_DIM, Outcome, TaskConfig, oracle_action
 from mrguide.twin.config import Region, TwinConfig
 from mrguide.twin.scene import Scene, SceneSnapshot
@@ -40,7 +40,7 @@ class EnvConfig:
     @classmethod
     def load(cls, path: str | Path | None) -> "EnvConfig":
         return cls(
-            robot=load_section(RobotConfig, path, "robot"),
+            robot=load_robot_config(path),
             twin=load_section(TwinConfig, path, "twin"),
             task=load_section(TaskConfig, path, "task"),
         )

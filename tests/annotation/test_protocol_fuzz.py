@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 
 from mrguide.annotation.broker import AnnotationBroker
 from mrguide.annotation.protocol import ProtocolError, parse_answer, parse_message
-from mrguide.robot import Workspace
+from mrguide.robot import load_robot
 
 JSON = st.recursive(
     st.none() | st.booleans() | st.integers() | st.floats(allow_nan=True, allow_infinity=True) | st.text(max_size=20),
@@ -28,8 +28,8 @@ def test_parser_refuses_with_protocol_error_only(text):
     try:
         msg = parse_message(text)
         if msg["type"] == "answer":
-            target, vacuum = parse_answer(msg, Workspace())
-            assert all(lo <= v <= hi for v, lo, hi in zip(target, Workspace().lo, Workspace().hi))
+            target, vacuum = parse_answer(msg, load_robot().workspace)
+            assert all(lo <= v <= hi for v, lo, hi in zip(target, load_robot().workspace.lo, load_robot().workspace.hi))
             assert isinstance(vacuum, bool)
     except ProtocolError as exc:
         assert str(exc)
@@ -38,7 +38,7 @@ def test_parser_refuses_with_protocol_error_only(text):
 @settings(max_examples=300, deadline=None)
 @given(st.lists(st.one_of(MESSAGES.map(json.dumps), st.text(max_size=50)), max_size=10))
 def test_broker_never_raises_and_nothing_is_answered_without_a_request(messages):
-    broker = AnnotationBroker(Workspace())
+    broker = AnnotationBroker(load_robot().workspace)
     sent: list[dict] = []
     client = broker.attach(sent.append)
     for text in messages:

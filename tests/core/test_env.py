@@ -111,17 +111,6 @@ def test_object_off_the_table_ends_the_episode(env):
     assert not terminated and not truncated and info["outcome"] is None
 
 
-def test_unknown_robot_is_one_clear_message():
-    with pytest.raises(RobotSpecError, match="unknown robot 'kuka'.*known robots: ur5"):
-        load_robot(RobotConfig(name="kuka"))
-
-
-def test_missing_urdf_is_one_clear_message(monkeypatch):
-    monkeypatch.setitem(__import__("mrguide.robot").robot.KNOWN_ROBOTS, "ur5", "no/such/file.urdf")
-    with pytest.raises(RobotSpecError, match="URDF of robot 'ur5' not found"):
-        load_robot()
-
-
 def test_render_gives_an_image():
     e = PickPlaceEnv(render_mode="rgb_array")
     try:

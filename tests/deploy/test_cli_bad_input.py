@@ -29,7 +29,7 @@ def cell(tmp_path):
     """Config files for the tests: a virtual bus of its own, a real bus, a bus with five drives, a file in the way."""
     (tmp_path / "bus.toml").write_text(f'[bus]\nchannel = "deploy-bad-input-{tmp_path.name}"\n')
     (tmp_path / "real_bus.toml").write_text('[bus]\ninterface = "socketcan"\nchannel = "mrguide-no-if"\n')
-    (tmp_path / "five.toml").write_text("".join(f"[[joints]]\nnode_id = {n}\n" for n in range(3, 8)))
+    (tmp_path / "five.toml").write_text("[[joints]]\n" * 5)
     (tmp_path / "afile").write_text("in the way")
     return tmp_path
 

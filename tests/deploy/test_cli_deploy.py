@@ -23,12 +23,13 @@ def test_real_bus_needs_confirmation(tmp_path, monkeypatch, capsys):
     from mrguide.policies.ddpg import DDPG, DDPGConfig
     from mrguide.policies.export import export_actor
     from mrguide.policies.train import obs_scaling
-    from mrguide.robot import Workspace
+    from mrguide.robot import load_robot
     from mrguide.task import TaskConfig
 
     connected = []
     monkeypatch.setattr(Cobot, "connect", lambda self: connected.append(1))
-    pol = export_actor(DDPG(*obs_scaling(Workspace()), 4, DDPGConfig()).actor, tmp_path / "p.npz", Workspace(), TaskConfig(), 0.1)
+    pol = export_actor(DDPG(*obs_scaling(load_robot().workspace), 4, DDPGConfig()).actor, tmp_path / "p.npz", load_robot(),
+                       TaskConfig(), 0.1)
     bus = tmp_path / "bus.toml"
     bus.write_text('[bus]\ninterface = "socketcan"\nchannel = "can0"\n')
     cfg = tmp_path / "cfg.toml"

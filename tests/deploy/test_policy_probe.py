@@ -16,7 +16,7 @@ from mrguide.cli import main
 from mrguide.config import to_dict
 from mrguide.deploy.policy import FORMAT, FORMAT_VERSION, ExportedPolicy, PolicyFileError
 from mrguide.drivers.cobot import Cobot
-from mrguide.robot import Workspace
+from mrguide.robot import load_robot
 from mrguide.task import ACT_LAYOUT, OBS_DIM, OBS_LAYOUT, TaskConfig
 
 HUGE = 1e200
@@ -26,7 +26,7 @@ G, PHI = 3, 4  # observation indices of the gripper state and the task progress
 def _write_policy(path: Path, layers: list[tuple[np.ndarray, np.ndarray]]) -> Path:
     meta = {"format": FORMAT, "format_version": FORMAT_VERSION, "obs_layout": list(OBS_LAYOUT),
             "act_layout": list(ACT_LAYOUT), "activations": ["relu"] * (len(layers) - 1) + ["tanh"],
-            "workspace": {"low": list(Workspace().low), "high": list(Workspace().high)},
+            "workspace": {"low": list(load_robot().workspace.low), "high": list(load_robot().workspace.high)},
             "task": to_dict(TaskConfig()), "decision_period": 0.1}
     arrays = {"metadata": np.array(json.dumps(meta))}
     for i, (W, b) in enumerate(layers):
@@ -49,7 +49,7 @@ def _overflowing_policy(path: Path, trigger: int, threshold: float) -> Path:
 def test_policy_with_non_finite_output_somewhere_in_the_workspace_is_refused(tmp_path, trigger, threshold, where):
     path = _overflowing_policy(tmp_path / "overflow.npz", trigger, threshold)
     with pytest.raises(PolicyFileError) as info:
-        ExportedPolicy.load(path, Workspace(), TaskConfig())
+        ExportedPolicy.load(path, load_robot(), TaskConfig())
     message = str(info.value)
     assert str(path) in message and "non-finite" in message and where in message
 
@@ -58,7 +58,7 @@ def test_a_finite_policy_passes_the_probe(tmp_path):
     rng = np.random.default_rng(0)
     path = _write_policy(tmp_path / "ok.npz", [(rng.normal(size=(16, OBS_DIM)), rng.normal(size=16)),
                                                (rng.normal(size=(4, 16)), rng.normal(size=4))])
-    policy = ExportedPolicy.load(path, Workspace(), TaskConfig())
+    policy = ExportedPolicy.load(path, load_robot(), TaskConfig())
     assert np.all(np.isfinite(policy(np.zeros(OBS_DIM))))
 
 

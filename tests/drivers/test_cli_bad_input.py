@@ -11,7 +11,7 @@ import pytest
 from mrguide.drivers.config import EDS_DIR
 from mrguide.drivers.mock import sim_cobot
 
-SIX_JOINTS = "".join(f"[[joints]]\nnode_id = {n}\n" for n in range(3, 9))
+SIX_JOINTS = "[[joints]]\n" * 6
 DRIVE_EDS = (EDS_DIR / "cia402_drive.eds").read_text()
 CORRUPT_EDS = "[FileInfo]\nFileName=x\n[1000\nfoo"
 
@@ -36,7 +36,7 @@ def _eds(tmp_path, name: str, text: str | bytes) -> str:
 CASES = [
     # (id, TOML of the bus description given the tmp dir, words in the one stderr line)
     ("five joints", lambda d: SIX_JOINTS.rsplit("[[joints]]", 1)[0], ["bus.toml", "joints: 5 drives configured", "6 joints"]),
-    ("seven joints", lambda d: SIX_JOINTS + "[[joints]]\nnode_id = 9\n", ["bus.toml", "7 drives"]),
+    ("seven joints", lambda d: SIX_JOINTS + "[[joints]]\n", ["bus.toml", "7 drives"]),
     ("not an EDS", lambda d: f'[drives]\neds = "{_eds(d, "x.eds", "garbage")}"\n',
      ["drives.eds", "x.eds", "not a readable EDS file"]),
     ("corrupt EDS", lambda d: f'[drives]\neds = "{_eds(d, "x.eds", CORRUPT_EDS)}"\n',
@@ -59,7 +59,7 @@ CASES = [
     ("boot timeout nan", lambda d: "[timing]\nboot_timeout = nan\n", ["bus.toml", "timing.boot_timeout = nan"]),
     ("enable timeout inf", lambda d: "[timing]\nenable_timeout = inf\n", ["timing.enable_timeout = inf"]),
     ("unknown key", lambda d: "[timing]\nboot_timout = 3.0\n", ["bus.toml", "boot_timout"]),
-    ("gear ratio 0", lambda d: "[[joints]]\nnode_id = 3\ngear_ratio = 0\n", ["joints (node 3).gear_ratio = 0"]),
+    ("gear ratio 0", lambda d: "[[joints]]\ngear_ratio = 0\n" + "[[joints]]\n" * 5, ["joints (node 3).gear_ratio = 0"]),
 ]
 
 

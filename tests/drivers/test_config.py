@@ -41,13 +41,15 @@ def test_repo_toml_matches_defaults_and_robot_limits(robot):
     ("[timing]\nheartbeat_timeout_factor = 2.0\n", ["timing.heartbeat_timeout_factor", "2.5", "lost heartbeat"]),
     ('[drives]\neds = "nope.eds"\n', ["drives.eds", "nope.eds"]),
     ("[drives]\nquick_stop_option = 3\n", ["quick_stop_option"]),
-    ("[[joints]]\nnode_id = 3\ndirection = 2\n", ["direction"]),
+    ("[[joints]]\ndirection = 2\n" + "[[joints]]\n" * 5, ["joints (node 3).direction"]),
+    ("[[joints]]\nnode_id = 3\n" * 6, ["joints[0].node_id", "can_nodes", "ur5.toml"]),
+    ("[[joints]]\n" * 5, ["joints: 5 drives configured", "ur5 has 6 joints"]),
     ('[timing]\nboot_timeout = "long"\n', ["timing.boot_timeout", "'long'"]),
     ("[timing]\nboot_timeout = nan\n", ["timing.boot_timeout", "nan"]),
     ("[timing]\nenable_timeout = inf\n", ["timing.enable_timeout", "inf"]),
     ("[bus]\noptions = { recieve_own_messages = true }\n", ["bus.options", "recieve_own_messages", "virtual"]),
     ("[bus]\noptions = { rx_queue_size = nan }\n", ["bus.options: 'rx_queue_size' = nan"]),
-    ("[[joints]]\nnode_id = 3\ngear_ratio = 0.0\n", ["joints (node 3).gear_ratio"]),
+    ("[[joints]]\n" + "[[joints]]\ngear_ratio = 0.0\n" + "[[joints]]\n" * 4, ["joints (node 4).gear_ratio"]),
 ])
 def test_bad_values_name_the_key_and_the_file(tmp_path, toml, words):
     path = tmp_path / "bus.toml"
@@ -112,3 +114,31 @@ def test_timing_values_that_arm_safety_must_be_finite_and_in_range(tmp_path, sec
         load_cobot_bus_config(path)
     message = str(info.value)
     assert str(path) in message and f"{section}.{key}" in message
+
+
+def test_default_bus_config_describes_the_default_arm():
+    """The repo's bus config and the default kinematics are the same arm: one drive per UR5 joint at the node
+    of the arm file's map, and the comment after each [[joints]] names that joint and node in order."""
+    import re
+
+    from mrguide.robot import load_robot
+
+    arm = load_robot()
+    assert arm.name == "ur5"
+    config = load_cobot_bus_config(REPO_TOML, arm)
+    assert tuple(j.node_id for j in config.joints) == arm.node_ids
+    assert len(config.joints) == arm.dof
+    comments = re.findall(r"^\[\[joints\]\]\s*#\s*(\w+), node (\d+)$", REPO_TOML.read_text(), re.MULTILINE)
+    assert [(name, int(node)) for name, node in comments] == list(zip(arm.joint_names, arm.node_ids))
+
+
+def test_bus_drives_take_the_node_ids_of_the_arm_file(tmp_path):
+    from mrguide.robot import RobotConfig, load_robot, shipped_arms
+
+    text = shipped_arms()["ur10"].read_text()
+    arm_file = tmp_path / "ur10-other-nodes.toml"
+    arm_file.write_text(text.replace("shoulder_pan_joint = 3", "shoulder_pan_joint = 20"))
+    arm = load_robot(RobotConfig(file=str(arm_file)))
+    config = load_cobot_bus_config(REPO_TOML, arm)
+    assert [j.node_id for j in config.joints] == [20, 4, 5, 6, 7, 8]
+    np.testing.assert_array_equal(resolve_limits(config, arm).q_upper, arm.q_upper)  # the UR10's elbow: 3.1

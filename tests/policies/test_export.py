@@ -10,21 +10,22 @@ from mrguide.deploy.policy import ExportedPolicy, PolicyFileError
 from mrguide.policies.ddpg import DDPG, DDPGConfig
 from mrguide.policies.export import export_actor
 from mrguide.policies.train import obs_scaling
-from mrguide.robot import Workspace
+from mrguide.robot import RobotConfig, Workspace, load_robot
 from mrguide.task import TaskConfig
 
 
 @pytest.fixture()
 def exported(tmp_path):
-    ws = Workspace()
+    spec = load_robot()
+    ws = spec.workspace
     agent = DDPG(*obs_scaling(ws), 4, DDPGConfig(), seed=3)
-    path = export_actor(agent.actor, tmp_path / "policy.npz", ws, TaskConfig(), 0.1, {"trained": {"steps": 0}})
+    path = export_actor(agent.actor, tmp_path / "policy.npz", spec, TaskConfig(), 0.1, {"trained": {"steps": 0}})
     return agent, path, ws
 
 
 def test_numpy_matches_torch(exported):
     agent, path, ws = exported
-    pol = ExportedPolicy.load(path, ws, TaskConfig())
+    pol = ExportedPolicy.load(path, load_robot(), TaskConfig())
     rng = np.random.default_rng(0)
     obs = np.concatenate([rng.uniform(ws.lo, ws.hi, (500, 3)), rng.choice([-1, 1], (500, 1)), rng.uniform(0, 1, (500, 1)),
                           rng.uniform(ws.lo, ws.hi, (500, 3)), rng.uniform(ws.lo, ws.hi, (500, 3))], axis=1).astype(np.float32)
@@ -69,9 +70,9 @@ def test_wrong_metadata_refused(exported, tmp_path):
     with pytest.raises(PolicyFileError, match="format"):
         ExportedPolicy.load(bad)
     with pytest.raises(PolicyFileError, match="workspace"):
-        ExportedPolicy.load(path, Workspace(low=(0.3, -0.2, 0.1), high=(0.65, 0.4, 0.35)))
+        ExportedPolicy.load(path, load_robot(RobotConfig(workspace=Workspace(low=(0.3, -0.2, 0.1), high=(0.65, 0.4, 0.35)))))
     with pytest.raises(PolicyFileError, match="epsilon"):
-        ExportedPolicy.load(path, ws, TaskConfig(epsilon=0.03))
+        ExportedPolicy.load(path, load_robot(), TaskConfig(epsilon=0.03))
 
 
 def test_unreadable_file_refused(tmp_path):

@@ -11,7 +11,7 @@ from mrguide.policies.guidance import (
     bounded_projection,
     expert_ratio,
 )
-from mrguide.robot import Workspace
+from mrguide.robot import Workspace, load_robot
 from mrguide.task import TaskConfig, observation, phase_target
 
 WIDE = Workspace((-5.0, -5.0, -5.0), (5.0, 5.0, 5.0))  # no clamping: noise statistics as drawn
@@ -143,7 +143,7 @@ def test_simulated_annotator_noise_and_outliers():
 
 
 def test_simulated_annotator_marks_inside_the_workspace_box_only():
-    ws = Workspace()
+    ws = load_robot().workspace
     marks = SimulatedAnnotator(TaskConfig(), AnnotatorNoise(sigma=0.1), ws, seed=3)
     targets = np.array([marks.annotate(_obs(1)).target for _ in range(500)])
     assert np.all(targets >= ws.lo) and np.all(targets <= ws.hi)
@@ -195,7 +195,7 @@ def _guided(source, tmp_path, reask_after):
 
     task = TaskConfig()
     cache = AnnotationCache(0.005, tmp_path / "ann.jsonl")
-    return GuidedExpert(source, NominalReference(task), cache, 0.05, task, Workspace().to_normalized, reask_after), cache
+    return GuidedExpert(source, NominalReference(task), cache, 0.05, task, load_robot().workspace.to_normalized, reask_after), cache
 
 
 def test_a_waypoint_not_reached_is_asked_again_and_supersedes_the_first(tmp_path):
@@ -238,7 +238,7 @@ def test_action_noise_perturbs_every_action_afresh_after_the_projection(tmp_path
     from mrguide.policies.guidance import NominalReference
     from mrguide.policies.guided_expert import GuidedExpert
 
-    task, ws = TaskConfig(), Workspace()
+    task, ws = TaskConfig(), load_robot().workspace
     exact = Annotation(np.array([0.5, -0.1, 0.13]), -1.0)
 
     class Exact:
