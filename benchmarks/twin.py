@@ -1,11 +1,14 @@
 """Twin benchmark: env decisions/s, sim-to-wall factor, oracle success, IK and Ruckig timing.
 
-Run: python benchmarks/twin.py [--episodes N]. Prints a table; the last line is one JSON object.
+Run: python benchmarks/twin.py [--episodes N] [--config C]. The arm is the config's ([robot], default UR5;
+e.g. --config configs/ur10.toml). Oracle episodes use env seeds 0..N-1. Prints a table; the last line is
+one JSON object.
 """
 
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import os
 import platform
@@ -13,15 +16,15 @@ import time
 
 import numpy as np
 
-from mrguide.motion.kinematics import Kinematics
+from mrguide.motion.kinematics import IKError, Kinematics
 from mrguide.motion.trajectory import JointStreamer
-from mrguide.robot import load_robot
-from mrguide.twin.env import PickPlaceEnv
+from mrguide.robot import RobotSpec, load_robot
+from mrguide.twin.env import EnvConfig, PickPlaceEnv
 from mrguide.twin.rollout import run_episodes
 
 
-def bench_env(episodes: int) -> dict:
-    env = PickPlaceEnv()
+def bench_env(episodes: int, cfg: EnvConfig) -> dict:
+    env = PickPlaceEnv(cfg)
     try:
         run_episodes(env, lambda o: env.expert_action(), range(3))  # warm-up
         s = run_episodes(env, lambda o: env.expert_action(), range(episodes))
@@ -36,8 +39,7 @@ def bench_env(episodes: int) -> dict:
     }
 
 
-def bench_ik(n: int = 3000) -> dict:
-    spec = load_robot()
+def bench_ik(spec: RobotSpec, n: int = 3000) -> dict:
     kin = Kinematics(spec)
     ws = spec.workspace
     rng = np.random.default_rng(0)
@@ -53,8 +55,27 @@ def bench_ik(n: int = 3000) -> dict:
     return {"ik_median_ms": float(np.median(ms)), "ik_p99_ms": float(np.percentile(ms, 99))}
 
 
-def bench_ruckig(n: int = 20000) -> dict:
-    spec = load_robot()
+def bench_ik_round_trips(spec: RobotSpec, n: int = 500, grid: int = 7) -> dict:
+    """FK -> IK (seeded at home) -> FK on random configurations near home: worst TCP error; and IK failures on a
+    grid x grid x grid lattice of the workspace box with the TCP pointing down."""
+    kin = Kinematics(spec)
+    rng = np.random.default_rng(2)
+    worst = 0.0
+    for _ in range(n):
+        q = np.clip(spec.q_home + rng.normal(0, 0.3, spec.dof), spec.q_lower, spec.q_upper)
+        T = kin.fk(q)
+        worst = max(worst, float(np.linalg.norm(kin.fk(kin.ik(T[:3, 3], spec.q_home, T[:3, :3]))[:3, 3] - T[:3, 3])))
+    ws, failures = spec.workspace, 0
+    for p in itertools.product(*[np.linspace(lo, hi, grid) for lo, hi in zip(ws.lo, ws.hi)]):
+        try:
+            kin.ik(np.array(p), spec.q_home)
+        except IKError:
+            failures += 1
+    return {"ik_round_trip_max_mm": worst * 1e3, "ik_round_trips": n, "box_ik_failures": failures,
+            "box_points": grid ** 3}
+
+
+def bench_ruckig(spec: RobotSpec, n: int = 20000) -> dict:
     s = JointStreamer(spec, 0.004)
     rng = np.random.default_rng(1)
     times = []
@@ -71,17 +92,24 @@ def bench_ruckig(n: int = 20000) -> dict:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--episodes", type=int, default=200)
+    ap.add_argument("--config", default=None, help="run config TOML ([robot], [twin], [task]); default: built-in (UR5)")
     args = ap.parse_args()
     if hasattr(os, "sched_setaffinity"):
         os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})  # one core
-    res = {**bench_env(args.episodes), **bench_ik(), **bench_ruckig()}
-    print(f"machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}, pinned to one core")
+    cfg = EnvConfig.load(args.config)
+    spec = load_robot(cfg.robot)
+    res = {"robot": spec.name, **bench_env(args.episodes, cfg), **bench_ik(spec), **bench_ik_round_trips(spec),
+           **bench_ruckig(spec)}
+    print(f"machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}, pinned to one core;"
+          f" arm {spec.name}")
     rows = [
         ("env decisions/s (0.1 s decision, 4 ms control)", f"{res['decisions_per_s']:.0f}", ">= 200"),
         ("simulated / wall time", f"{res['sim_to_wall']:.1f}x", ""),
         (f"oracle success ({res['episodes']} seeded episodes)", f"{res['oracle_success']:.1%}", ">= 98 %"),
         ("IK solve median (warm start)", f"{res['ik_median_ms']:.3f} ms", "<= 0.3 ms"),
         ("IK solve p99", f"{res['ik_p99_ms']:.3f} ms", ""),
+        (f"IK round trip, worst of {res['ik_round_trips']}", f"{res['ik_round_trip_max_mm']:.4f} mm", "<= 1 mm"),
+        ("workspace lattice points out of IK reach", f"{res['box_ik_failures']} of {res['box_points']}", "0"),
         ("Ruckig cycle median / p99", f"{res['ruckig_cycle_us']:.1f} / {res['ruckig_cycle_p99_us']:.1f} us", ""),
     ]
     for name, val, target in rows:

@@ -18,6 +18,7 @@ import io
 import math
 import typing
 
+import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -30,7 +31,7 @@ from mrguide.deploy.safety import SafetyConfig
 from mrguide.deploy.session import DeployConfig
 from mrguide.drivers.config import (BusConfig, CobotBusConfig, DriveConfig, JointDriveConfig, LimitOverrides,
                                     MasterConfig, TimingConfig, VacuumConfig, resolve_limits)
-from mrguide.robot import load_robot
+from mrguide.robot import ArmConfig, RobotConfig, UrdfSource, Workspace, load_robot
 from mrguide.twin.camera import CameraConfig, Intrinsics
 from mrguide.twin.markers import TwinCalibrationConfig
 
@@ -121,7 +122,8 @@ def _all_numbers_finite(obj: typing.Any, where: str = "") -> None:
 
 CONFIGS = [SafetyConfig, DeployConfig, BusConfig, TimingConfig, JointDriveConfig, DriveConfig, VacuumConfig,
            MasterConfig, LimitOverrides, CobotBusConfig, DetectorConfig, BoardConfig, MarkerPlacement, TargetsConfig,
-           RegistrationConfig, HmdNoiseConfig, CalibrationConfig, TwinCalibrationConfig, Intrinsics, CameraConfig]
+           RegistrationConfig, HmdNoiseConfig, CalibrationConfig, TwinCalibrationConfig, Intrinsics, CameraConfig,
+           RobotConfig, ArmConfig, UrdfSource, Workspace]
 ROBOT = load_robot()
 
 
@@ -139,6 +141,10 @@ def test_from_dict_returns_a_finite_config_or_raises_config_error(cls):
         if cls is CobotBusConfig:  # what `load_cobot_bus_config(path, robot)` adds
             with contextlib.suppress(ConfigError):
                 resolve_limits(config, ROBOT)
+        if cls is RobotConfig:  # the arm file with these overrides: a spec, or one RobotSpecError (a ConfigError)
+            with contextlib.suppress(ConfigError):
+                spec = load_robot(config)
+                assert spec.within_limits(spec.q_home) and np.all(np.isfinite(spec.workspace.lo))
 
     check()
 

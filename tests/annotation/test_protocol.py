@@ -236,3 +236,26 @@ def test_a_flood_of_bad_messages_does_not_stall_the_trainer(served):
             return fut.result(5)
 
     assert isinstance(run(scenario()), LiveAnswer)
+
+
+def test_the_page_gets_the_configured_arm(broker, tmp_path):
+    """The URDF endpoint and the hello serve the arm the trainer runs: the UR10 when it is configured."""
+    from mrguide.annotation.server import AnnotationServer
+    from mrguide.robot import RobotConfig, load_robot
+
+    (tmp_path / "index.html").write_text("<!doctype html><title>stub</title>")
+    server = AnnotationServer(broker, load_robot(RobotConfig(name="ur10")), port=0, web_dir=tmp_path)
+    server.start()
+
+    async def scenario():
+        async with aiohttp.ClientSession() as http:
+            text = await (await http.get(server.url.split("?")[0] + "robot/robot.urdf")).text()
+            assert '<robot name="ur10"' in text and 'name="tcp"' in text
+            mesh = re.search(r'filename="(/robot/pkg/[^"]+\.dae)"', text).group(1)
+            assert "/ur10/" in mesh and (await http.get(server.url.split("?")[0].rstrip("/") + mesh)).status == 200
+
+    try:
+        run(scenario())
+    finally:
+        broker.close()
+        server.stop()
