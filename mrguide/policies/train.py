@@ -21,7 +21,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 import torch
@@ -36,7 +36,7 @@ from mrguide.policies.guidance import (GuidanceConfig, NominalReference, Referen
                                        ThresholdTrigger, expert_ratio)
 from mrguide.policies.guided_expert import GuidedExpert, make_expert_source
 from mrguide.policies.replay import TaggedReplay
-from mrguide.robot import Workspace
+from mrguide.robot import RobotSpec, Workspace
 from mrguide.task import ACT_DIM, OBS_DIM
 from mrguide.twin.env import EnvConfig, PickPlaceEnv
 
@@ -85,6 +85,13 @@ def obs_scaling(ws: Workspace) -> tuple[np.ndarray, np.ndarray]:
     offset = np.concatenate([centre, [0.0, 0.5], centre, centre])
     scale = np.concatenate([1 / half, [1.0, 2.0], 1 / half, 1 / half])
     return offset, scale
+
+
+def _arm_record(spec: RobotSpec) -> dict[str, Any]:
+    """The arm a run trains, resolved from its arm file and overrides, in the form checkpoints recorded before
+    arm files (the [robot] values then), so a UR5 run checkpointed before them still resumes."""
+    values = {k: tuple(float(v) for v in getattr(spec, k)) for k in ("q_lower", "q_upper", "v_max", "a_max", "j_max", "q_home")}
+    return {"name": spec.name, "tool_offset": float(spec.T_flange_tcp[2, 3]), **values, "workspace": to_dict(spec.workspace)}
 
 
 EVAL_SEED_BASE = 1_000_000  # evaluation env seeds start here (training seeds come from the run's RNG)
@@ -316,7 +323,8 @@ class Trainer:
     def _fingerprint(self) -> dict:
         return {
             "train": {k: v for k, v in to_dict(self.cfg).items() if k not in ("total_steps", "checkpoint_every", "eval_every")},
-            "ddpg": to_dict(self.ddpg_cfg), "guidance": to_dict(self.guidance), "env": to_dict(self.env_cfg),
+            "ddpg": to_dict(self.ddpg_cfg), "guidance": to_dict(self.guidance),
+            "env": {**to_dict(self.env_cfg), "robot": _arm_record(self.env.robot_spec)},
         }
 
     def save_checkpoint(self) -> Path:
