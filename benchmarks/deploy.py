@@ -1,13 +1,15 @@
 """Deploy benchmark: decision latency, policy inference time and control-cycle jitter during a dry run.
 
-Run: python benchmarks/deploy.py [--episodes N]. The dry run drives the scripted expert through the whole
-stack (IK, Ruckig, CANopen over the virtual bus, simulated drives, twin); inference is timed on an
-exported actor of the default size. Prints a table; the last line is one JSON object.
+Run: python benchmarks/deploy.py [--episodes N] [--robot ur10]. The dry run drives the scripted expert through
+the whole stack (IK, Ruckig, CANopen over the virtual bus, simulated drives, the "real" twin of
+configs/real_cell.toml with the chosen arm, default the UR5); inference is timed on an exported actor of the
+default size. Prints a table; the last line is one JSON object.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import platform
@@ -20,8 +22,8 @@ import numpy as np
 from mrguide.cli_args import positive_int
 from mrguide.deploy.policy import ExportedPolicy
 from mrguide.deploy.runlog import RunLog
-from mrguide.drivers.config import CobotBusConfig
-from mrguide.robot import load_robot
+from mrguide.drivers.config import load_cobot_bus_config
+from mrguide.robot import RobotConfig, load_robot
 from mrguide.task import oracle_action
 from mrguide.twin.dry_run import dry_run
 from mrguide.twin.env import EnvConfig
@@ -51,16 +53,21 @@ def bench_inference(n: int = 20000) -> tuple[float, str]:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--episodes", type=positive_int, default=10)
+    ap.add_argument("--robot", default="", help="a shipped arm (ur5, ur10) in place of the real cell's (the UR5)")
     args = ap.parse_args()
     cfg = EnvConfig.load(Path(__file__).parents[1] / "configs" / "real_cell.toml")
-    ws = load_robot().workspace
+    if args.robot:
+        cfg = dataclasses.replace(cfg, robot=RobotConfig(name=args.robot))
+    spec = load_robot(cfg.robot)
+    ws = spec.workspace
     with tempfile.TemporaryDirectory() as tmp:
         with RunLog(Path(tmp) / "log.jsonl", {"benchmark": "deploy"}) as run_log:
-            summary = dry_run(None, cfg, CobotBusConfig(), args.episodes, 0, run_log,
+            summary = dry_run(None, cfg, load_cobot_bus_config(None, spec), args.episodes, 0, run_log,
                               policy=lambda obs: oracle_action(obs, cfg.task, ws.to_normalized))
     lat = summary.latency_ms()
     inference_ms, hidden = bench_inference()
     res = {
+        "robot": spec.name,
         "decision_latency_p50_ms": float(np.percentile(lat, 50)),
         "decision_latency_p99_ms": float(np.percentile(lat, 99)),
         "policy_inference_ms": inference_ms,
@@ -69,7 +76,7 @@ def main() -> None:
         "dry_run_success": summary.successes / max(len(summary.episodes), 1),
         "episodes": len(summary.episodes),
     }
-    print(f"machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}")
+    print(f"machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}; arm {spec.name}")
     for name, key, target in (
         ("decision latency p50 (state read -> first setpoint)", "decision_latency_p50_ms", ""),
         ("decision latency p99", "decision_latency_p99_ms", "<= 5 ms"),
