@@ -51,3 +51,20 @@ def test_bad_config_or_bus_gives_one_clear_line_and_nonzero_exit(tmp_path, capsy
     assert len(err.splitlines()) == 1
     for word in words:
         assert word in err
+
+
+def test_monitor_names_the_drives_by_the_arm_files_node_map(tmp_path, capsys):
+    from mrguide.robot import shipped_arms
+
+    arm = tmp_path / "arm.toml"
+    arm.write_text(shipped_arms()["ur10"].read_text().replace("wrist_3_joint = 8", "wrist_3_joint = 30"))
+    config = _toml(tmp_path, '[bus]\nchannel = "cli-monitor-arm"\n')
+    assert _run(["bus", "monitor", "--config", config, "--robot", str(arm), "--duration", "0.6", "--simulate"]) == 0
+    out = capsys.readouterr().out
+    assert "node 30 (wrist_3_joint)" in out and "node 8 " not in out
+
+
+def test_unknown_arm_is_one_clear_line(tmp_path, capsys):
+    assert _run(["bus", "selftest", "--robot", "ur7"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == "mrguide bus selftest: unknown robot 'ur7'; known robots: ur10, ur5 (or [robot] file = ...)"
