@@ -197,7 +197,7 @@ def build_parser() -> argparse.ArgumentParser:
     from mrguide.drivers.commands import add_bus_commands
 
     add_bus_commands(sub)
-    from mrguide.twin.commands import add_sim2real_command
+    from mrguide.experiments.commands import add_sim2real_command
 
     add_sim2real_command(sub)
 

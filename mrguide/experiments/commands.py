@@ -1,5 +1,5 @@
 """`mrguide experiment {learning-curves, long-baseline, noise-robustness, generalization, report}`: the paper's
-experiments on Ray.
+experiments on Ray; and `mrguide sim2real`, the three sim-to-real conditions (Fig. 8) for one policy.
 
 Each experiment reads `[experiment]` of a TOML file under configs/experiments/, trains what is not done
 yet (one Ray task per run), then writes its report (CSV, markdown, PNG) from the run directories.
@@ -10,17 +10,27 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import math
 import sys
+import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from collections.abc import Callable
 from typing import Any
+
+from tqdm import tqdm
 
 from mrguide.cli_args import positive_int
 from mrguide.config import ConfigError, load_section
 from mrguide.experiments.runs import configs
 
 CONFIG_DIR = Path(__file__).resolve().parents[2] / "configs" / "experiments"
+#: The three sim-to-real conditions (run by mrguide.experiments.sim2real; named here to check them without PyBullet).
+CONDITIONS = ("sim", "real_exact", "real_hmd")
+GAP_PARAMS = ("object_mass", "object_friction", "suction_break_force", "actuator_latency", "actuator_lag", "joint_noise", "vacuum_noise")
+#: Swept parameters that take whole numbers (control periods).
+INTEGER_PARAMS = ("actuator_latency",)
+HMD_PARAMS = ("tracking_noise_m", "tracking_noise_deg", "calibration_error_m", "calibration_error_deg")
 
 
 @dataclass(frozen=True)
@@ -137,3 +147,126 @@ def _write_report(exp: Experiment, cfg: Any, base: str | None, out: Path) -> int
     print(files["summary.md"].decode())
     print(f"report and figures in {out}")
     return 0
+
+
+def add_sim2real_command(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("sim2real", help="the three sim-to-real conditions of the paper (Fig. 8) for one policy")
+    p.add_argument("--policy", required=True)
+    p.add_argument("--config", default=None, help="TOML of the training twin (condition 1); default: built-in defaults")
+    p.add_argument("--real-config", default="configs/real_cell.toml",
+                   help="TOML of the 'real' cell: [twin.reality_gap], [deploy] bus_config, [calibration.hmd] (conditions 2, 3)")
+    p.add_argument("--seeds", type=positive_int, default=3)
+    p.add_argument("--episodes", type=positive_int, default=10, help="episodes per seed and condition")
+    p.add_argument("--conditions", type=conditions_arg, default=list(CONDITIONS),
+                   help=f"comma-separated, from {', '.join(CONDITIONS)} (default: all)")
+    p.add_argument("--sweep", type=sweep_arg, action="append", default=[], metavar="PARAM=v1,v2,...",
+                   help=f"instead of the three conditions, success vs one parameter; reality gap ({', '.join(GAP_PARAMS)}) "
+                        f"runs condition 2, HMD ({', '.join(HMD_PARAMS)}) condition 3; repeatable")
+    p.add_argument("--no-recovery", action="store_true",
+                   help="a safety stop ends the seed's run (its remaining episodes fail); default: fault reset, "
+                        "the stopped episode fails, the next one runs")
+    p.add_argument("--out", default="runs/sim2real")
+    p.add_argument("--quiet", action="store_true")
+    p.set_defaults(func=cmd_sim2real)
+
+
+def conditions_arg(text: str) -> list[str]:
+    """argparse type of --conditions: a comma-separated, non-empty list of known conditions, each once."""
+    conditions = [c.strip() for c in text.split(",") if c.strip()]
+    unknown = [c for c in conditions if c not in CONDITIONS]
+    if not conditions or unknown or len(set(conditions)) != len(conditions):
+        raise argparse.ArgumentTypeError(f"expected distinct conditions from {', '.join(CONDITIONS)}, got {text!r}")
+    return conditions
+
+
+def sweep_arg(text: str) -> tuple[str, list[float]]:
+    """argparse type of --sweep: PARAM=v1,v2,... with a known parameter and finite numbers (whole numbers for
+    actuator_latency). Ranges are checked against the configuration (`_check_sweeps`)."""
+    name, _, values = text.partition("=")
+    if name not in GAP_PARAMS + HMD_PARAMS or not values:
+        raise argparse.ArgumentTypeError(
+            f"expected PARAM=v1,v2,... with PARAM one of {', '.join(GAP_PARAMS + HMD_PARAMS)}, got {text!r}")
+    try:
+        numbers = [float(v) for v in values.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: values must be numbers") from None
+    if not all(math.isfinite(v) for v in numbers):
+        raise argparse.ArgumentTypeError(f"{text!r}: values must be finite")
+    if name in INTEGER_PARAMS:
+        if any(v != int(v) for v in numbers):
+            raise argparse.ArgumentTypeError(f"{text!r}: {name} takes whole numbers")
+        numbers = [int(v) for v in numbers]
+    return name, numbers
+
+
+def cmd_sim2real(args: argparse.Namespace) -> int:
+    """Every input is checked before the first episode: configs, bus, policy (against both twins), swept values,
+    the output directory."""
+    from mrguide.calibration.config import load_calibration_config
+    from mrguide.config import load_optional_section, load_section
+    from mrguide.deploy.policy import ExportedPolicy, check_decision_period
+    from mrguide.deploy.safety import SafetyConfig
+    from mrguide.deploy.session import DeployConfig
+    from mrguide.drivers.config import load_cobot_bus_config
+    from mrguide.experiments import sim2real as s2r
+    from mrguide.output_files import check_output_dir
+    from mrguide.robot import load_robot
+    from mrguide.twin.env import EnvConfig
+    from mrguide.twin.markers import TwinCalibrationConfig
+
+    out = check_output_dir(args.out, "--out")
+    train_cfg = EnvConfig.load(args.config)
+    real_path = Path(args.real_config)
+    real_cfg = EnvConfig.load(real_path)
+    dcfg = load_section(DeployConfig, real_path, "deploy")
+    bus = load_cobot_bus_config(real_path.parent / dcfg.bus_config if dcfg.bus_config else None, load_robot(real_cfg.robot))
+    safety = load_optional_section(SafetyConfig, real_path, "safety")
+    hmd = load_calibration_config(real_path).hmd
+    load_section(TwinCalibrationConfig, real_path, "calibration_twin")
+    policy = ExportedPolicy.load(args.policy, load_robot(train_cfg.robot).workspace, train_cfg.task)
+    check_decision_period(policy, args.policy, train_cfg.twin.control_period, train_cfg.twin.decision_period)
+    check_decision_period(policy, args.policy, bus.timing.control_period, real_cfg.twin.decision_period)
+    _check_sweeps(args.sweep, real_cfg, hmd)
+    runs = [(c, None, None) for c in args.conditions] if not args.sweep else [
+        ("real_hmd" if name in HMD_PARAMS else "real_exact", name, v) for name, values in args.sweep for v in values]
+    out.mkdir(parents=True, exist_ok=True)
+    total = len(runs) * args.seeds * args.episodes
+    with tqdm(total=total, desc="sim2real", unit="ep", disable=args.quiet) as bar:
+        results = []
+        for cond, name, value in runs:
+            bar.set_description(f"sim2real {cond}" + (f" {name}={value}" if name else ""))
+            res = s2r.ConditionResult(cond if name is None else f"{cond} {name}={value}", {})
+            for seed in range(args.seeds):
+                if cond == "sim":
+                    res.outcomes[seed] = s2r.run_sim(policy, train_cfg, seed, args.episodes)
+                    bar.update(args.episodes)
+                    continue
+                cfg = s2r.replace_gap(real_cfg, **{name: value}) if name in GAP_PARAMS else real_cfg
+                res.outcomes[seed] = s2r.run_real(
+                    Path(args.policy), cfg, bus, seed, args.episodes,
+                    out / f"log-{cond}-{name or 'default'}-{value}-seed{seed}-{time.strftime('%H%M%S')}.jsonl",
+                    real_path, safety, on_episode=lambda o: bar.update(1), use_hmd=cond == "real_hmd",
+                    hmd_overrides={name: value} if name in HMD_PARAMS else None, recover=not args.no_recovery)
+            results.append(res)
+    md = s2r.write_report(results, out, s2r.gap_description(real_cfg, real_path))
+    print(md.read_text())
+    print(f"figure and CSV in {out}")
+    return 0
+
+
+def _check_sweeps(sweeps: list[tuple[str, list[float]]], real_cfg, hmd) -> None:
+    """ConfigError (from the config dataclasses' own range checks) for a swept value out of its range."""
+    from dataclasses import replace
+
+    from mrguide.config import ConfigError
+    from mrguide.experiments import sim2real as s2r
+
+    for name, values in sweeps:
+        for value in values:
+            try:
+                if name in GAP_PARAMS:
+                    s2r.replace_gap(real_cfg, **{name: value})
+                else:
+                    replace(hmd, **{name: value})
+            except ConfigError as exc:
+                raise ConfigError(f"--sweep {name}={value}: {exc}") from exc

@@ -1,4 +1,4 @@
-"""`mrguide sim2real`: the paper's three sim-to-real conditions (Fig. 8) for one exported policy.
+"""Sim-to-real evaluation (`mrguide sim2real`, `mrguide experiment sim2real`): the paper's three sim-to-real conditions (Fig. 8) for one exported policy.
 
 1. sim: the training twin with ground-truth object poses, the policy stepped directly (ideal execution);
 2. real_exact: the full deploy stack over the virtual CAN bus to simulated drives whose plant is a
@@ -19,7 +19,6 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
-from scipy import stats
 
 from mrguide.config import to_dict
 from mrguide.deploy.policy import ExportedPolicy
@@ -27,6 +26,7 @@ from mrguide.deploy.runlog import RunLog
 from mrguide.deploy.runtime import EpisodeReport
 from mrguide.deploy.safety import SafetyConfig
 from mrguide.drivers.config import CobotBusConfig
+from mrguide.experiments.stats import wilson
 from mrguide.output_files import write_files_atomically
 from mrguide.task import Outcome, placed_at_goal
 from mrguide.twin.dry_run import SimulatedCell, dry_run, episode_layouts
@@ -54,21 +54,11 @@ class ConditionResult:
         """Pooled success rate with its 95 % Wilson interval, the spread over seeds, failures by cause."""
         pooled = Counter(o for v in self.outcomes.values() for o in v)
         total = sum(pooled.values())
-        lo, hi = wilson_interval(pooled.get("success", 0), total)
+        lo, hi = wilson(pooled.get("success", 0), total)
         rates = self.rates()
         return {"condition": self.condition, "seeds": len(rates), "episodes": total,
                 "success_rate": pooled.get("success", 0) / max(total, 1), "ci95_low": lo, "ci95_high": hi,
                 "seed_std": float(rates.std(ddof=1)) if len(rates) > 1 else 0.0, **{c: pooled.get(c, 0) for c in CAUSES}}
-
-
-def wilson_interval(successes: int, n: int, z: float = float(stats.norm.ppf(0.975))) -> tuple[float, float]:
-    """95 % Wilson score interval of a success proportion."""
-    if n == 0:
-        return 0.0, 1.0
-    p = successes / n
-    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
-    half = z * np.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
-    return float(max(0.0, centre - half)), float(min(1.0, centre + half))
 
 
 def _cause(outcome: str) -> str:
