@@ -43,13 +43,16 @@ class Experiment:
     default_out: str
     runs: Callable[[Any, str | None], list]
     report: Callable[[Any, str | None, Path, int], dict[str, bytes]]
-    evaluate: Callable[..., None] | None = None
+    #: Ray tasks evaluating each trained run (run, root, cfg) → the file that marks it evaluated
+    evaluate: Callable[..., str] | None = None
+    evaluated: Callable[[Any, Path], Path] | None = None  # (run, root) → that file
 
 
 def _experiments() -> dict[str, Experiment]:
     from mrguide.experiments import generalization as gen
     from mrguide.experiments import learning_curves as lc
     from mrguide.experiments import noise_robustness as nr
+    from mrguide.experiments import sim2real_runs as s2r
 
     return {
         "learning-curves": Experiment(lc.CurvesConfig, "learning_curves.toml", "runs/learning-curves", lc.runs,
@@ -59,20 +62,22 @@ def _experiments() -> dict[str, Experiment]:
         "noise-robustness": Experiment(nr.NoiseConfig, "noise_robustness.toml", "runs/noise-robustness", nr.runs,
                                        lambda c, b, r, e: nr.noise_report(c, nr.records(c, b, r, e))),
         "generalization": Experiment(gen.GeneralizationConfig, "generalization.toml", "runs/generalization", gen.runs,
-                                     lambda c, b, r, e: gen.generalization_report(c, r, gen.runs(c, b)), _evaluate_goals),
+                                     lambda c, b, r, e: gen.generalization_report(c, r, gen.runs(c, b)), gen.evaluate,
+                                     lambda run, root: run.directory(root) / "goals.csv"),
+        "sim2real": Experiment(s2r.Sim2RealConfig, "sim2real.toml", "runs/sim2real-experiment", s2r.runs,
+                               lambda c, b, r, e: s2r.sim2real_report(c, r, s2r.runs(c, b)), s2r.evaluate, s2r.outcomes_path),
     }
 
 
-def _evaluate_goals(cfg: Any, base: str | None, out: Path, workers: int, address: str | None, show_progress: bool) -> None:
-    """Fig. 6: every trained run on the goal grid (one Ray task per run; a run with its goals.csv is skipped)."""
-    from mrguide.experiments import generalization as gen
+def _evaluate(exp: Experiment, cfg: Any, base: str | None, out: Path, workers: int, address: str | None, show_progress: bool) -> None:
+    """Every trained run not evaluated yet, one Ray task each (Fig. 6: the goal grid; sim-to-real: three conditions)."""
     from mrguide.experiments.execution import map_tasks
 
-    todo = [r for r in gen.runs(cfg, base) if not (r.directory(out) / "goals.csv").exists()]
-    map_tasks(gen.evaluate, [(r, str(out), cfg) for r in todo], workers, address, "goal grid", show_progress)
+    todo = [r for r in exp.runs(cfg, base) if not exp.evaluated(r, out).exists()]
+    map_tasks(exp.evaluate, [(r, str(out), cfg) for r in todo], workers, address, "evaluation", show_progress)
 
 
-NAMES = ("learning-curves", "long-baseline", "noise-robustness", "generalization")
+NAMES = ("learning-curves", "long-baseline", "noise-robustness", "generalization", "sim2real")
 
 
 def add_experiment_command(sub: argparse._SubParsersAction) -> None:
@@ -108,6 +113,11 @@ def _setup(args: argparse.Namespace) -> tuple[Experiment, Any, str | None, Path]
         if not base_path.is_file():
             raise ConfigError(f"{path} [experiment]: config = {cfg.config!r}: no such file {base_path}")
         base = str(base_path)
+    if getattr(cfg, "real_config", ""):
+        real = (path.parent / cfg.real_config).resolve()
+        if not real.is_file():
+            raise ConfigError(f"{path} [experiment]: real_config = {cfg.real_config!r}: no such file {real}")
+        cfg = dataclasses.replace(cfg, real_config=str(real))
     out = Path(args.out or exp.default_out)
     for run in exp.runs(cfg, base):  # every run's configuration is checked before anything starts
         configs(run, f"{path} [experiment]")
@@ -122,7 +132,7 @@ def cmd_experiment(args: argparse.Namespace) -> int:
     try:
         run_all(specs, out, args.workers, args.address, show_progress=not args.quiet)
         if exp.evaluate is not None:
-            exp.evaluate(cfg, base, out, args.workers, args.address, not args.quiet)
+            _evaluate(exp, cfg, base, out, args.workers, args.address, not args.quiet)
     except ExperimentError as exc:
         print(f"mrguide experiment {args.name}: {exc}", file=sys.stderr)
         return 1
@@ -132,7 +142,7 @@ def cmd_experiment(args: argparse.Namespace) -> int:
 def cmd_report(args: argparse.Namespace) -> int:
     exp, cfg, base, out = _setup(args)
     missing = [r.name for r in exp.runs(cfg, base) if not (r.directory(out) / "done").exists()
-               or (exp.evaluate is not None and not (r.directory(out) / "goals.csv").exists())]
+               or (exp.evaluated is not None and not exp.evaluated(r, out).exists())]
     if missing:
         raise ConfigError(f"{out}: {len(missing)} runs are not finished (e.g. {missing[0]}); run the experiment to finish them")
     return _write_report(exp, cfg, base, out)
@@ -202,30 +212,15 @@ def sweep_arg(text: str) -> tuple[str, list[float]]:
 def cmd_sim2real(args: argparse.Namespace) -> int:
     """Every input is checked before the first episode: configs, bus, policy (against both twins), swept values,
     the output directory."""
-    from mrguide.calibration.config import load_calibration_config
-    from mrguide.config import load_optional_section, load_section
-    from mrguide.deploy.policy import ExportedPolicy, check_decision_period
-    from mrguide.deploy.safety import SafetyConfig
-    from mrguide.deploy.session import DeployConfig
-    from mrguide.drivers.config import load_cobot_bus_config
     from mrguide.experiments import sim2real as s2r
     from mrguide.output_files import check_output_dir
-    from mrguide.robot import load_robot
     from mrguide.twin.env import EnvConfig
-    from mrguide.twin.markers import TwinCalibrationConfig
 
     out = check_output_dir(args.out, "--out")
     train_cfg = EnvConfig.load(args.config)
-    real_path = Path(args.real_config)
-    real_cfg = EnvConfig.load(real_path)
-    dcfg = load_section(DeployConfig, real_path, "deploy")
-    bus = load_cobot_bus_config(real_path.parent / dcfg.bus_config if dcfg.bus_config else None, load_robot(real_cfg.robot))
-    safety = load_optional_section(SafetyConfig, real_path, "safety")
-    hmd = load_calibration_config(real_path).hmd
-    load_section(TwinCalibrationConfig, real_path, "calibration_twin")
-    policy = ExportedPolicy.load(args.policy, load_robot(train_cfg.robot).workspace, train_cfg.task)
-    check_decision_period(policy, args.policy, train_cfg.twin.control_period, train_cfg.twin.decision_period)
-    check_decision_period(policy, args.policy, bus.timing.control_period, real_cfg.twin.decision_period)
+    cell = s2r.load_real_cell(args.real_config)
+    real_cfg, real_path, bus, hmd = cell.env, cell.path, cell.bus, cell.hmd
+    policy = s2r.load_policy(args.policy, train_cfg, cell)
     _check_sweeps(args.sweep, real_cfg, hmd)
     runs = [(c, None, None) for c in args.conditions] if not args.sweep else [
         ("real_hmd" if name in HMD_PARAMS else "real_exact", name, v) for name, values in args.sweep for v in values]
@@ -245,7 +240,7 @@ def cmd_sim2real(args: argparse.Namespace) -> int:
                 res.outcomes[seed] = s2r.run_real(
                     Path(args.policy), cfg, bus, seed, args.episodes,
                     out / f"log-{cond}-{name or 'default'}-{value}-seed{seed}-{time.strftime('%H%M%S')}.jsonl",
-                    real_path, safety, on_episode=lambda o: bar.update(1), use_hmd=cond == "real_hmd",
+                    real_path, cell.safety, on_episode=lambda o: bar.update(1), use_hmd=cond == "real_hmd",
                     hmd_overrides={name: value} if name in HMD_PARAMS else None, recover=not args.no_recovery)
             results.append(res)
     md = s2r.write_report(results, out, s2r.gap_description(real_cfg, real_path))
