@@ -29,7 +29,7 @@ import torch
 from mrguide import __version__
 from mrguide.config import check_number, load_section, to_dict
 from mrguide.policies.annotations import AnnotationCache
-from mrguide.policies.checkpoint import CheckpointError, read_checkpoint, write_checkpoint
+from mrguide.policies.checkpoint import CheckpointError, read_checkpoint, with_defaults, write_checkpoint
 from mrguide.policies.ddpg import DDPG, DDPGConfig
 from mrguide.policies.experts import ExpertSource
 from mrguide.policies.guidance import (GuidanceConfig, NominalReference, ReferencePose, RunningMedianReference,
@@ -85,6 +85,12 @@ def obs_scaling(ws: Workspace) -> tuple[np.ndarray, np.ndarray]:
     offset = np.concatenate([centre, [0.0, 0.5], centre, centre])
     scale = np.concatenate([1 / half, [1.0, 2.0], 1 / half, 1 / half])
     return offset, scale
+
+
+def _fingerprint(tc: TrainConfig, dc: DDPGConfig, gc: GuidanceConfig, ec: EnvConfig) -> dict:
+    """The configuration a checkpoint must match to be resumed (the run's length and cadences may change)."""
+    return {"train": {k: v for k, v in to_dict(tc).items() if k not in ("total_steps", "checkpoint_every", "eval_every")},
+            "ddpg": to_dict(dc), "guidance": to_dict(gc), "env": to_dict(ec)}
 
 
 EVAL_SEED_BASE = 1_000_000  # evaluation env seeds start here (training seeds come from the run's RNG)
@@ -314,10 +320,7 @@ class Trainer:
 
     # -- checkpoints -----------------------------------------------------------------------------
     def _fingerprint(self) -> dict:
-        return {
-            "train": {k: v for k, v in to_dict(self.cfg).items() if k not in ("total_steps", "checkpoint_every", "eval_every")},
-            "ddpg": to_dict(self.ddpg_cfg), "guidance": to_dict(self.guidance), "env": to_dict(self.env_cfg),
-        }
+        return _fingerprint(self.cfg, self.ddpg_cfg, self.guidance, self.env_cfg)
 
     def save_checkpoint(self) -> Path:
         """Everything to resume: networks, optimizers, both pools, RNG states, counters. Written atomically."""
@@ -340,8 +343,9 @@ class Trainer:
         """Resume from a checkpoint; a corrupt or mismatched file raises CheckpointError."""
         path = Path(path) if path else self.out / "checkpoint.pt"
         state = read_checkpoint(path)
-        if state["config"] != self._fingerprint():
-            diff = [k for k in state["config"] if state["config"][k] != self._fingerprint().get(k)]
+        stored = with_defaults(state["config"], _fingerprint(TrainConfig(), DDPGConfig(), GuidanceConfig(), EnvConfig()))
+        if stored != self._fingerprint():
+            diff = [k for k in stored if stored[k] != self._fingerprint().get(k)]
             raise CheckpointError(f"{path}: written with a different configuration (sections differ: {', '.join(diff)})")
         try:
             self.agent.load_state_dict(state["agent"])
