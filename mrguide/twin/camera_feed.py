@@ -12,6 +12,7 @@ perfect registration.
 from __future__ import annotations
 
 import multiprocessing as mp
+import os
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -28,6 +29,8 @@ from mrguide.twin.scene import TABLE_CENTER, TABLE_HALF_EXTENTS
 
 #: How long a dry run waits for the camera to see the object after it was placed (s).
 PLACED_TIMEOUT_S = 30.0
+#: The render process yields the CPU to the control loop (it uses a core of its own while it renders).
+RENDER_NICENESS = 10
 #: How long the render process may take to start (s).
 START_TIMEOUT_S = 120.0
 
@@ -71,6 +74,7 @@ def render_marked_object(T_base_cam: np.ndarray, camera: CameraModel, poses: Seq
 def _feed_worker(conn, T_base_cam: np.ndarray, camera: dict, object_size: float, dictionary: str, marker_id: int,
                  marker_size_m: float) -> None:
     """Runs in the render process: answer each object pose with the camera's image of it."""
+    os.nice(RENDER_NICENESS)
     try:
         client = pb.connect(pb.DIRECT)
         cube, marker = marked_object_scene(client, object_size, dictionary, marker_id, marker_size_m)
@@ -86,11 +90,14 @@ def _feed_worker(conn, T_base_cam: np.ndarray, camera: dict, object_size: float,
 
 
 class TwinCameraFeed:
-    """A `FrameSource` whose frames are rendered in a process of its own from the twin's object pose."""
+    """A `FrameSource` whose frames are rendered in a process of its own from the twin's object pose.
 
-    def __init__(self, object_pose: Callable[[], tuple[np.ndarray, np.ndarray]], T_base_cam: np.ndarray,
-                 camera: CameraModel, object_size: float, dictionary: str, marker_id: int, marker_size_m: float):
-        self.object_pose = object_pose
+    The process starts here, before the simulated cell runs (starting it beside a running control loop stalled
+    the loop); `object_pose` (the twin playing the robot) is set when there is one."""
+
+    def __init__(self, T_base_cam: np.ndarray, camera: CameraModel, object_size: float, dictionary: str,
+                 marker_id: int, marker_size_m: float):
+        self.object_pose: Callable[[], tuple[np.ndarray, np.ndarray]] | None = None
         ctx = mp.get_context("spawn")
         self._conn, child = ctx.Pipe()
         self._proc = ctx.Process(target=_feed_worker, name="twin-camera", daemon=True, args=(
@@ -112,7 +119,7 @@ class TwinCameraFeed:
         the render process is gone."""
         t = time.monotonic()
         try:
-            pos, orn = self.object_pose()
+            pos, orn = self.object_pose()  # type: ignore[misc]
             self._conn.send((np.asarray(pos).tolist(), np.asarray(orn).tolist()))
             return Frame(self._conn.recv(), t)
         except Exception:  # the twin closed under us (end of the run) or the process died: no more frames
@@ -132,16 +139,18 @@ class TwinCameraPoses:
     """The `camera` pose source of a dry run: `__call__` is dry_run's pose_factory, `refresh` its on_placed."""
 
     def __init__(self, cfg: CameraSourceConfig, base_dir: Path, object_size: float):
-        self.cfg, self.object_size = cfg, object_size
-        self.pipeline = load_marker_pipeline(cfg, base_dir)  # bad files refused before the cell starts
+        self.cfg = cfg
+        self.pipeline = p = load_marker_pipeline(cfg, base_dir)  # bad files refused before the cell starts
+        self.feed = TwinCameraFeed(p.T_base_hmd, p.camera, object_size, p.detector.cfg.dictionary, p.marker_id,
+                                   p.detector.marker_size_m)
         self.sources: list[CameraPoseSource] = []
 
     def __call__(self, cell) -> CameraPoseSource:
-        p = self.pipeline
-        feed = TwinCameraFeed(cell.plant.object_pose, p.T_base_hmd, p.camera, self.object_size,
-                              p.detector.cfg.dictionary, p.marker_id, p.detector.marker_size_m)
-        self.sources.append(CameraPoseSource(feed, p, self.cfg.max_pose_age_s))
-        return self.sources[-1]
+        if self.sources:
+            raise RuntimeError("TwinCameraPoses serves one simulated cell")
+        self.feed.object_pose = cell.plant.object_pose
+        self.sources.append(CameraPoseSource(self.feed, self.pipeline, self.cfg.max_pose_age_s))
+        return self.sources[0]
 
     def refresh(self) -> None:
         """The object was just placed: wait for a pose captured after that (PoseUnavailable if none comes)."""
@@ -156,3 +165,4 @@ class TwinCameraPoses:
     def close(self) -> None:
         for s in self.sources:
             s.close()
+        self.feed.close()

@@ -40,11 +40,11 @@ class Expert:
 def run_dry(tmp_path):
     """dry_run with the expert; returns (summary, run log path, the cell the run used).
 
-    `pose(cell)` may give the object pose source (default: the exact pose from the twin); `runtime_cfg`
-    sets the runtime (RuntimeConfig)."""
+    `pose(cell)` may give the object pose source (default: the exact pose from the twin), `on_placed` runs
+    after the object was placed; `runtime_cfg` sets the runtime (RuntimeConfig)."""
 
     def run(episodes=1, seed=0, hook=None, env_cfg=None, safety=None, on_cell=None, max_recoveries=0, pose=None,
-            runtime_cfg=None):
+            runtime_cfg=None, on_placed=None):
         cfg = env_cfg or EnvConfig()
         cells = []
 
@@ -61,7 +61,7 @@ def run_dry(tmp_path):
             summary = dry_run(None, cfg, bus_config(), episodes, seed, run_log, safety,
                               pose_factory=pose_factory,
                               policy=Expert(cfg, (lambda o, p, a: hook(o, p, a, cells[0])) if hook else None),
-                              max_recoveries=max_recoveries, runtime_cfg=runtime_cfg)
+                              max_recoveries=max_recoveries, runtime_cfg=runtime_cfg, on_placed=on_placed)
         return summary, log, cells[0]
 
     return run
