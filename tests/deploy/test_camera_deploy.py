@@ -93,7 +93,7 @@ def test_camera_check_on_a_folder_prints_the_rate_and_writes_the_overlay(tmp_pat
     import cv2
 
     overlay = tmp_path / "check.png"
-    result = run_cli(["camera", "check", "--config", camera_cfg(camera="frame_rate = 20.0"), "--frames", 3,
+    result = run_cli(["camera", "check", "--config", camera_cfg(camera="frame_rate = 0.0"), "--frames", 3,
                       "--overlay", overlay])
     assert result.code == 0, result.err
     assert "3 frames, 3 poses (100% detected)" in result.out and "latency median" in result.out, result.out
@@ -139,3 +139,17 @@ def test_camera_check_refuses_an_empty_folder_and_an_overlay_it_cannot_write(tmp
     run_cli(["camera", "check", "--config", path, "--overlay", tmp_path / "o.png"]).assert_refused(
         "camera check", "the folder holds no images")
     run_cli(["camera", "check", "--config", path, "--overlay", tmp_path / "o.xyz"]).assert_refused("--overlay", ".xyz")
+
+
+def test_the_example_camera_config_loads():
+    from pathlib import Path
+
+    from mrguide.config import load_section
+    from mrguide.deploy.camera import load_marker_pipeline
+    from mrguide.deploy.session import DeployConfig
+
+    path = Path(__file__).parents[2] / "configs" / "camera_cell.toml"
+    cfg = load_section(DeployConfig, path, "deploy")
+    assert cfg.pose_source == "camera" and cfg.camera.source == 0
+    pipeline = load_marker_pipeline(cfg.camera, path.parent)
+    assert (pipeline.camera.width, pipeline.camera.height) == (1280, 720)
