@@ -106,15 +106,11 @@ def cmd_deploy(args: argparse.Namespace) -> int:
                 summary = _deploy_dry(args, policy, env_cfg, bus, episodes, seed, run_log, safety, dcfg, tick, camera)
             else:
                 summary = _deploy_real(policy, bus, spec, task, dcfg, safety, episodes, run_log, tick, camera)
-            camera_stats = camera.stats() if camera else None
-            if camera_stats:
-                run_log.write("camera", **camera_stats.as_dict())
+            camera_stats = _log_camera(camera, run_log)
     finally:
         if camera:
             camera.close()
-    print(summary.text())
-    if camera_stats:
-        print(camera_stats.text())
+    print(summary.text() + (f"\n{camera_stats.text()}" if camera_stats else ""))
     print(f"run log: {log_path}")
     return 0 if summary.stopped is None else 1
 
@@ -140,6 +136,14 @@ def _camera(args: argparse.Namespace, dcfg, task):
     from mrguide.deploy.camera import open_camera_source
 
     return open_camera_source(dcfg.camera, base)
+
+
+def _log_camera(camera, run_log):
+    """The camera's statistics, also written to the run log (None without a camera)."""
+    stats = camera.stats() if camera else None
+    if stats:
+        run_log.write("camera", **stats.as_dict())
+    return stats
 
 
 def _deploy_dry(args, policy, env_cfg, bus, episodes, seed, run_log, safety, dcfg, tick, camera):
