@@ -89,34 +89,73 @@ def cmd_deploy(args: argparse.Namespace) -> int:
         if not args.enable_drives:
             raise InputError(f"this will enable the drives on {bus.bus.interface}:{bus.bus.channel} and move the arm. "
                               "Clear the cell, keep the E-stop at hand, and re-run with --enable-drives to confirm.")
-    if args.log:
-        log_path, where = Path(args.log), "--log"
-    else:
-        log_path = Path(dcfg.log_dir) / f"deploy-{time.strftime('%Y%m%d-%H%M%S')}.jsonl"
-        where = f"{args.config or 'default'} [deploy] log_dir:"
+    log_path, where = _log_path(args, dcfg)
     header = {"command": "deploy", "dry_run": args.dry_run, "policy": str(args.policy), "config": args.config,
               "bus": f"{bus.bus.interface}:{bus.bus.channel}", "episodes": episodes, "seed": seed if args.dry_run else None,
-              "decision_period": policy.decision_period, "started": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
-    with RunLog(log_path, header, where) as run_log, \
-            tqdm(total=episodes, desc="deploy" + (" (dry run)" if args.dry_run else ""), unit="ep", disable=args.quiet) as bar:
-        def tick(report) -> None:
-            bar.update(1)
-            bar.set_postfix(last=report.outcome, decisions=report.decisions)
+              "decision_period": policy.decision_period, "pose_source": dcfg.pose_source,
+              "started": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
+    camera = _camera(args, dcfg, task)
+    try:
+        with RunLog(log_path, header, where) as run_log, \
+                tqdm(total=episodes, desc="deploy" + (" (dry run)" if args.dry_run else ""), unit="ep", disable=args.quiet) as bar:
+            def tick(report) -> None:
+                bar.update(1)
+                bar.set_postfix(last=report.outcome, decisions=report.decisions)
 
-        if args.dry_run:
-            from mrguide.deploy.runtime import RuntimeConfig
-            from mrguide.twin.dry_run import dry_run
-
-            summary = dry_run(args.policy, env_cfg, bus, episodes, seed, run_log, safety, after_episode=tick, policy=policy,
-                              runtime_cfg=RuntimeConfig(max_pose_misses=dcfg.max_pose_misses))
-        else:
-            summary = _deploy_real(policy, bus, spec, task, dcfg, safety, episodes, run_log, tick)
-    print(summary.text())
+            if args.dry_run:
+                summary = _deploy_dry(args, policy, env_cfg, bus, episodes, seed, run_log, safety, dcfg, tick, camera)
+            else:
+                summary = _deploy_real(policy, bus, spec, task, dcfg, safety, episodes, run_log, tick, camera)
+            camera_stats = _log_camera(camera, run_log)
+    finally:
+        if camera:
+            camera.close()
+    print(summary.text() + (f"\n{camera_stats.text()}" if camera_stats else ""))
     print(f"run log: {log_path}")
     return 0 if summary.stopped is None else 1
 
 
-def _deploy_real(policy, bus, spec, task, dcfg, safety, episodes, run_log, tick):
+def _log_path(args: argparse.Namespace, dcfg) -> tuple[Path, str]:
+    """The run log's path and how to name its origin in an error."""
+    if args.log:
+        return Path(args.log), "--log"
+    return (Path(dcfg.log_dir) / f"deploy-{time.strftime('%Y%m%d-%H%M%S')}.jsonl",
+            f"{args.config or 'default'} [deploy] log_dir:")
+
+
+def _camera(args: argparse.Namespace, dcfg, task):
+    """With `pose_source = "camera"`: the camera source (a dry run: the twin-rendered one), opened before the run
+    log so that bad files or a camera that does not open are refused first; otherwise None."""
+    if dcfg.pose_source != "camera":
+        return None
+    base = Path(args.config).parent if args.config else Path.cwd()
+    if args.dry_run:
+        from mrguide.twin.camera_feed import TwinCameraPoses
+
+        return TwinCameraPoses(dcfg.camera, base, task.object_height)
+    from mrguide.deploy.camera import open_camera_source
+
+    return open_camera_source(dcfg.camera, base)
+
+
+def _log_camera(camera, run_log):
+    """The camera's statistics, also written to the run log (None without a camera)."""
+    stats = camera.stats() if camera else None
+    if stats:
+        run_log.write("camera", **stats.as_dict())
+    return stats
+
+
+def _deploy_dry(args, policy, env_cfg, bus, episodes, seed, run_log, safety, dcfg, tick, camera):
+    from mrguide.deploy.runtime import RuntimeConfig
+    from mrguide.twin.dry_run import dry_run
+
+    return dry_run(args.policy, env_cfg, bus, episodes, seed, run_log, safety, after_episode=tick, policy=policy,
+                   runtime_cfg=RuntimeConfig(max_pose_misses=dcfg.max_pose_misses), pose_factory=camera,
+                   on_placed=camera.refresh if camera else None)
+
+
+def _deploy_real(policy, bus, spec, task, dcfg, safety, episodes, run_log, tick, camera):
     from mrguide.deploy.runtime import Runtime, RuntimeConfig
     from mrguide.deploy.session import FixedObjectPose, run_session
     from mrguide.drivers.cobot import Cobot
@@ -124,12 +163,20 @@ def _deploy_real(policy, bus, spec, task, dcfg, safety, episodes, run_log, tick)
 
     rcfg = RuntimeConfig(decision_period=policy.decision_period, max_pose_misses=dcfg.max_pose_misses)
     goals = [dcfg.goals[i % len(dcfg.goals)] for i in range(episodes)]
+
+    def place(i: int) -> None:
+        if camera is None:
+            input(f"episode {i}: place the object at {dcfg.object_position} and press Enter ")
+            return
+        input(f"episode {i}: place the object in view of the camera and press Enter ")
+        camera.wait_for_pose(after=time.monotonic(), timeout=dcfg.camera.max_pose_age_s + 5.0)
+
     freeze_heap()
     with Cobot(bus, spec) as cobot:
         cobot.enable()
-        with Runtime(cobot, policy, FixedObjectPose(dcfg.object_position), spec, task, run_log, rcfg, safety) as rt:
-            return run_session(rt, goals, before_episode=lambda i: input(
-                f"episode {i}: place the object at {dcfg.object_position} and press Enter "), after_episode=tick)
+        pose = camera or FixedObjectPose(dcfg.object_position)
+        with Runtime(cobot, policy, pose, spec, task, run_log, rcfg, safety) as rt:
+            return run_session(rt, goals, before_episode=place, after_episode=tick)
 
 
 def cmd_main(args: argparse.Namespace) -> int:
@@ -194,10 +241,13 @@ def build_parser() -> argparse.ArgumentParser:
     from mrguide.policies.commands import add_train_command
 
     add_calibrate_command(sub)
+    from mrguide.deploy.camera_check import add_camera_command
+
+    add_camera_command(sub)
     from mrguide.drivers.commands import add_bus_commands
 
     add_bus_commands(sub)
-    from mrguide.twin.commands import add_sim2real_command
+    from mrguide.experiments.commands import add_sim2real_command
 
     add_sim2real_command(sub)
 

@@ -3,15 +3,16 @@
 from __future__ import annotations
 
 import logging
+from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
 
 from mrguide.calibration.calibration_file import CalibrationRecord
 from mrguide.calibration.camera_model import CameraModel
-from mrguide.calibration.detection import MarkerDetector, canonical_dictionary_name
-from mrguide.calibration.errors import CalibrationError
-from mrguide.calibration.hmd import FrameProvider
+from mrguide.calibration.detection import Detections, MarkerDetector, canonical_dictionary_name
+from mrguide.calibration.errors import CalibrationError, NotEnoughMarkersError
+from mrguide.calibration.hmd import FrameProvider, HmdFrame
 from mrguide.calibration.pose import PoseEstimate, estimate_marker_pose
 from mrguide.calibration.se3 import apply, invert
 from mrguide.pose_source import PoseUnavailable
@@ -19,15 +20,27 @@ from mrguide.pose_source import PoseUnavailable
 log = logging.getLogger(__name__)
 
 
+@dataclass(frozen=True)
+class MarkerObservation:
+    """What one frame showed: the detections, the object marker's pose (camera frame) and the object position
+    (base frame), or why there is none."""
+
+    detections: Detections
+    pose: PoseEstimate | None
+    position: np.ndarray | None
+    problem: str = ""
+
+
 class MarkerPoseSource:
     """The object position from a marker on the object, seen by the HMD camera.
 
     position = T_base_hmd @ T_hmd_cam @ T_cam_marker @ offset_marker_to_object, with T_hmd_cam from the
-    frame's head tracking and T_base_hmd from the calibration. The marker's expected normal in the base
+    frame's head tracking and T_base_hmd from the calibration (for a fixed camera T_hmd_cam = I). `frames` may be
+    None when the caller hands frames to `observe` itself. The marker's expected normal in the base
     frame (`normal_hint_base`, up for a marker on top of the object) settles IPPE's two-fold ambiguity.
     """
 
-    def __init__(self, frames: FrameProvider, detector: MarkerDetector, camera: CameraModel, T_base_hmd: np.ndarray,
+    def __init__(self, frames: FrameProvider | None, detector: MarkerDetector, camera: CameraModel, T_base_hmd: np.ndarray,
                  marker_id: int, offset_marker_to_object: np.ndarray | tuple[float, float, float] = (0.0, 0.0, 0.0),
                  normal_hint_base: np.ndarray | tuple[float, float, float] | None = (0.0, 0.0, 1.0)):
         self.frames, self.detector, self.camera = frames, detector, camera
@@ -49,20 +62,33 @@ class MarkerPoseSource:
             )
         return cls(frames, detector, camera, calibration.T_base_hmd, marker_id, offset_marker_to_object)
 
-    def object_position(self) -> np.ndarray:
-        frame = self.frames()
-        self.camera.check_image(frame.image, "HMD frame")
-        corners = self.detector.detect(frame.image, "HMD frame", self.camera).corners_of(self.marker_id)
+    def observe(self, frame: HmdFrame) -> MarkerObservation:
+        """Detect the marker in one frame and map its pose to the object position in the base frame."""
+        self.camera.check_image(frame.image, "camera frame")
+        detections = self.detector.detect(frame.image, "camera frame", self.camera)
+        corners = detections.corners_of(self.marker_id)
         if corners is None:
-            raise PoseUnavailable(f"marker {self.marker_id} not visible")
+            return MarkerObservation(detections, None, None, f"marker {self.marker_id} not visible")
         T_base_cam = self.T_base_hmd @ frame.T_hmd_cam
         hint = None if self.normal_hint_base is None else invert(T_base_cam)[:3, :3] @ self.normal_hint_base
-        pose = estimate_marker_pose(corners, self.detector.marker_size_m, self.camera,
-                                    self.detector.cfg.ambiguity_ratio, hint)
+        try:
+            pose = estimate_marker_pose(corners, self.detector.marker_size_m, self.camera,
+                                        self.detector.cfg.ambiguity_ratio, hint)
+        except NotEnoughMarkersError as exc:  # no PnP solution shows the marker's front
+            return MarkerObservation(detections, None, None, f"marker {self.marker_id}: {exc}")
         if pose.ambiguous:
-            raise PoseUnavailable(f"marker {self.marker_id}: pose ambiguous (two IPPE solutions fit equally)")
+            return MarkerObservation(detections, pose, None,
+                                     f"marker {self.marker_id}: pose ambiguous (two IPPE solutions fit equally)")
         self.last_pose = pose
-        return apply(T_base_cam @ pose.T_cam_target, self.offset)
+        return MarkerObservation(detections, pose, apply(T_base_cam @ pose.T_cam_target, self.offset))
+
+    def object_position(self) -> np.ndarray:
+        if self.frames is None:
+            raise TypeError("MarkerPoseSource without a frame provider: call observe(frame)")
+        seen = self.observe(self.frames())
+        if seen.position is None:
+            raise PoseUnavailable(seen.problem)
+        return seen.position
 
 
 class HmdAnnotationPoseSource:

@@ -40,14 +40,28 @@ class PolicyFileError(InputError):
     """A policy file that cannot be used here; the message says why."""
 
 
+@dataclass(frozen=True)
+class OffsetHead:
+    """The "tcp_offset" output head: target = TCP + max_offset · y (m), normalized to the trained box."""
+
+    max_offset: float
+    centre: np.ndarray
+    half: np.ndarray
+
+    def __call__(self, obs: np.ndarray, y: np.ndarray) -> np.ndarray:
+        pos = np.clip((obs[:, :3] + self.max_offset * y[:, :3] - self.centre) / self.half, -1.0, 1.0)
+        return np.column_stack([pos, y[:, 3:]])
+
+
 @dataclass
 class ExportedPolicy:
-    """An MLP actor: obs (11,) → action (4,) in [-1, 1]."""
+    """An MLP actor: obs (11,) → action (4,) in [-1, 1]; with `head`, the MLP's output is a TCP offset."""
 
     weights: list[np.ndarray]
     biases: list[np.ndarray]
     activations: list[str]
     metadata: dict[str, Any]
+    head: OffsetHead | None = None
 
     @property
     def decision_period(self) -> float:
@@ -59,9 +73,12 @@ class ExportedPolicy:
 
     def batch(self, obs: np.ndarray) -> np.ndarray:
         """Actions (n, 4) for observations (n, 11)."""
-        x = np.asarray(obs, dtype=np.float64)
+        obs = np.asarray(obs, dtype=np.float64)
+        x = obs
         for W, b, act in zip(self.weights, self.biases, self.activations):
             x = ACTIVATIONS[act](x @ W.T + b)
+        if self.head is not None:
+            x = self.head(obs, x)
         return x.astype(np.float32)
 
     @classmethod
@@ -99,7 +116,7 @@ class ExportedPolicy:
             diff = sorted(k for k in set(theirs) | set(ours) if theirs.get(k) != ours.get(k))
             if diff:
                 raise PolicyFileError(f"{path}: task parameters differ from the configuration: {', '.join(diff)}")
-        policy = cls(weights, biases, acts, meta)
+        policy = cls(weights, biases, acts, meta, _head(path, meta, trained))
         _refuse_non_finite_output(path, policy, trained)
         return policy
 
@@ -162,6 +179,18 @@ def _metadata(path: Path, arrays: dict[str, np.ndarray]) -> dict[str, Any]:
         raise PolicyFileError(f"{path}: metadata task {meta['task']!r} is not an object of task parameters")
     meta.setdefault("task", {})
     return meta
+
+
+def _head(path: Path, meta: dict[str, Any], trained: Workspace) -> OffsetHead | None:
+    """The output head the metadata declares: none (absolute targets; also files without the field) or tcp_offset."""
+    head = meta.get("head", {"kind": "absolute"})
+    kind = head.get("kind") if isinstance(head, dict) else None
+    if kind == "absolute":
+        return None
+    offset = head.get("max_offset") if kind == "tcp_offset" else None
+    if isinstance(offset, bool) or not isinstance(offset, (int, float)) or not 0 < offset < 100:
+        raise PolicyFileError(f"{path}: metadata head {head!r} not understood (absolute, or tcp_offset with a max_offset in m)")
+    return OffsetHead(float(offset), 0.5 * (trained.lo + trained.hi), 0.5 * (trained.hi - trained.lo))
 
 
 def _layer_array(path: Path, arrays: dict[str, np.ndarray], name: str) -> np.ndarray:

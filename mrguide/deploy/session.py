@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from mrguide.config import ConfigError, check_number
+from mrguide.deploy.camera import CameraSourceConfig
 from mrguide.deploy.runtime import EpisodeReport, RunStopped, Runtime, RuntimeConfig
 from mrguide.drivers.errors import DriverError
 from mrguide.pose_source import ObjectPoseSource, PoseUnavailable
@@ -21,6 +22,7 @@ log = logging.getLogger(__name__)
 MAX_EPISODES = 100_000
 #: Farthest a goal or object may be from the robot base on any axis (m): beyond the reach of any cobot.
 MAX_REACH_M = 5.0
+POSE_SOURCES = ("fixed", "camera")
 
 
 @dataclass(frozen=True)
@@ -38,8 +40,16 @@ class DeployConfig:
     #: Decisions in a row that may use the last object pose when the pose source has none; one more ends
     #: the episode (`pose_lost`). In [0, 1000].
     max_pose_misses: int = RuntimeConfig.max_pose_misses
+    #: Where the object pose comes from: "fixed" (`object_position`) or "camera" (`[deploy.camera]`; in a dry
+    #: run the camera's frames are rendered by the twin).
+    pose_source: str = "fixed"
+    camera: CameraSourceConfig = field(default_factory=CameraSourceConfig)
 
     def __post_init__(self) -> None:
+        if self.pose_source not in POSE_SOURCES:
+            raise ConfigError(f"deploy.pose_source = {self.pose_source!r}: expected one of {', '.join(POSE_SOURCES)}")
+        if self.pose_source == "camera" and not self.camera.calibration:
+            raise ConfigError('deploy.camera.calibration: pose_source = "camera" needs the camera\'s calibration file')
         check_number("deploy.episodes", self.episodes, 1, MAX_EPISODES, integer=True)
         check_number("deploy.seed", self.seed, 0, 2**32 - 1, integer=True)
         check_number("deploy.max_pose_misses", self.max_pose_misses, 0, 1000, integer=True)

@@ -1,5 +1,5 @@
 """`mrguide experiment {learning-curves, long-baseline, noise-robustness, generalization, report}`: the paper's
-experiments on Ray.
+experiments on Ray; and `mrguide sim2real`, the three sim-to-real conditions (Fig. 8) for one policy.
 
 Each experiment reads `[experiment]` of a TOML file under configs/experiments/, trains what is not done
 yet (one Ray task per run), then writes its report (CSV, markdown, PNG) from the run directories.
@@ -10,17 +10,27 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import math
 import sys
+import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from collections.abc import Callable
 from typing import Any
+
+from tqdm import tqdm
 
 from mrguide.cli_args import positive_int
 from mrguide.config import ConfigError, load_section
 from mrguide.experiments.runs import configs
 
 CONFIG_DIR = Path(__file__).resolve().parents[2] / "configs" / "experiments"
+#: The three sim-to-real conditions (run by mrguide.experiments.sim2real; named here to check them without PyBullet).
+CONDITIONS = ("sim", "real_exact", "real_hmd")
+GAP_PARAMS = ("object_mass", "object_friction", "suction_break_force", "actuator_latency", "actuator_lag", "joint_noise", "vacuum_noise")
+#: Swept parameters that take whole numbers (control periods).
+INTEGER_PARAMS = ("actuator_latency",)
+HMD_PARAMS = ("tracking_noise_m", "tracking_noise_deg", "calibration_error_m", "calibration_error_deg")
 
 
 @dataclass(frozen=True)
@@ -33,13 +43,16 @@ class Experiment:
     default_out: str
     runs: Callable[[Any, str | None], list]
     report: Callable[[Any, str | None, Path, int], dict[str, bytes]]
-    evaluate: Callable[..., None] | None = None
+    #: Ray tasks evaluating each trained run (run, root, cfg) → the file that marks it evaluated
+    evaluate: Callable[..., str] | None = None
+    evaluated: Callable[[Any, Path], Path] | None = None  # (run, root) → that file
 
 
 def _experiments() -> dict[str, Experiment]:
     from mrguide.experiments import generalization as gen
     from mrguide.experiments import learning_curves as lc
     from mrguide.experiments import noise_robustness as nr
+    from mrguide.experiments import sim2real_runs as s2r
 
     return {
         "learning-curves": Experiment(lc.CurvesConfig, "learning_curves.toml", "runs/learning-curves", lc.runs,
@@ -49,20 +62,22 @@ def _experiments() -> dict[str, Experiment]:
         "noise-robustness": Experiment(nr.NoiseConfig, "noise_robustness.toml", "runs/noise-robustness", nr.runs,
                                        lambda c, b, r, e: nr.noise_report(c, nr.records(c, b, r, e))),
         "generalization": Experiment(gen.GeneralizationConfig, "generalization.toml", "runs/generalization", gen.runs,
-                                     lambda c, b, r, e: gen.generalization_report(c, r, gen.runs(c, b)), _evaluate_goals),
+                                     lambda c, b, r, e: gen.generalization_report(c, r, gen.runs(c, b)), gen.evaluate,
+                                     lambda run, root: run.directory(root) / "goals.csv"),
+        "sim2real": Experiment(s2r.Sim2RealConfig, "sim2real.toml", "runs/sim2real-experiment", s2r.runs,
+                               lambda c, b, r, e: s2r.sim2real_report(c, r, s2r.runs(c, b)), s2r.evaluate, s2r.outcomes_path),
     }
 
 
-def _evaluate_goals(cfg: Any, base: str | None, out: Path, workers: int, address: str | None, show_progress: bool) -> None:
-    """Fig. 6: every trained run on the goal grid (one Ray task per run; a run with its goals.csv is skipped)."""
-    from mrguide.experiments import generalization as gen
+def _evaluate(exp: Experiment, cfg: Any, base: str | None, out: Path, workers: int, address: str | None, show_progress: bool) -> None:
+    """Every trained run not evaluated yet, one Ray task each (Fig. 6: the goal grid; sim-to-real: three conditions)."""
     from mrguide.experiments.execution import map_tasks
 
-    todo = [r for r in gen.runs(cfg, base) if not (r.directory(out) / "goals.csv").exists()]
-    map_tasks(gen.evaluate, [(r, str(out), cfg) for r in todo], workers, address, "goal grid", show_progress)
+    todo = [r for r in exp.runs(cfg, base) if not exp.evaluated(r, out).exists()]
+    map_tasks(exp.evaluate, [(r, str(out), cfg) for r in todo], workers, address, "evaluation", show_progress)
 
 
-NAMES = ("learning-curves", "long-baseline", "noise-robustness", "generalization")
+NAMES = ("learning-curves", "long-baseline", "noise-robustness", "generalization", "sim2real")
 
 
 def add_experiment_command(sub: argparse._SubParsersAction) -> None:
@@ -98,6 +113,11 @@ def _setup(args: argparse.Namespace) -> tuple[Experiment, Any, str | None, Path]
         if not base_path.is_file():
             raise ConfigError(f"{path} [experiment]: config = {cfg.config!r}: no such file {base_path}")
         base = str(base_path)
+    if getattr(cfg, "real_config", ""):
+        real = (path.parent / cfg.real_config).resolve()
+        if not real.is_file():
+            raise ConfigError(f"{path} [experiment]: real_config = {cfg.real_config!r}: no such file {real}")
+        cfg = dataclasses.replace(cfg, real_config=str(real))
     out = Path(args.out or exp.default_out)
     for run in exp.runs(cfg, base):  # every run's configuration is checked before anything starts
         configs(run, f"{path} [experiment]")
@@ -112,7 +132,7 @@ def cmd_experiment(args: argparse.Namespace) -> int:
     try:
         run_all(specs, out, args.workers, args.address, show_progress=not args.quiet)
         if exp.evaluate is not None:
-            exp.evaluate(cfg, base, out, args.workers, args.address, not args.quiet)
+            _evaluate(exp, cfg, base, out, args.workers, args.address, not args.quiet)
     except ExperimentError as exc:
         print(f"mrguide experiment {args.name}: {exc}", file=sys.stderr)
         return 1
@@ -122,7 +142,7 @@ def cmd_experiment(args: argparse.Namespace) -> int:
 def cmd_report(args: argparse.Namespace) -> int:
     exp, cfg, base, out = _setup(args)
     missing = [r.name for r in exp.runs(cfg, base) if not (r.directory(out) / "done").exists()
-               or (exp.evaluate is not None and not (r.directory(out) / "goals.csv").exists())]
+               or (exp.evaluated is not None and not exp.evaluated(r, out).exists())]
     if missing:
         raise ConfigError(f"{out}: {len(missing)} runs are not finished (e.g. {missing[0]}); run the experiment to finish them")
     return _write_report(exp, cfg, base, out)
@@ -137,3 +157,111 @@ def _write_report(exp: Experiment, cfg: Any, base: str | None, out: Path) -> int
     print(files["summary.md"].decode())
     print(f"report and figures in {out}")
     return 0
+
+
+def add_sim2real_command(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("sim2real", help="the three sim-to-real conditions of the paper (Fig. 8) for one policy")
+    p.add_argument("--policy", required=True)
+    p.add_argument("--config", default=None, help="TOML of the training twin (condition 1); default: built-in defaults")
+    p.add_argument("--real-config", default="configs/real_cell.toml",
+                   help="TOML of the 'real' cell: [twin.reality_gap], [deploy] bus_config, [calibration.hmd] (conditions 2, 3)")
+    p.add_argument("--seeds", type=positive_int, default=3)
+    p.add_argument("--episodes", type=positive_int, default=10, help="episodes per seed and condition")
+    p.add_argument("--conditions", type=conditions_arg, default=list(CONDITIONS),
+                   help=f"comma-separated, from {', '.join(CONDITIONS)} (default: all)")
+    p.add_argument("--sweep", type=sweep_arg, action="append", default=[], metavar="PARAM=v1,v2,...",
+                   help=f"instead of the three conditions, success vs one parameter; reality gap ({', '.join(GAP_PARAMS)}) "
+                        f"runs condition 2, HMD ({', '.join(HMD_PARAMS)}) condition 3; repeatable")
+    p.add_argument("--no-recovery", action="store_true",
+                   help="a safety stop ends the seed's run (its remaining episodes fail); default: fault reset, "
+                        "the stopped episode fails, the next one runs")
+    p.add_argument("--out", default="runs/sim2real")
+    p.add_argument("--quiet", action="store_true")
+    p.set_defaults(func=cmd_sim2real)
+
+
+def conditions_arg(text: str) -> list[str]:
+    """argparse type of --conditions: a comma-separated, non-empty list of known conditions, each once."""
+    conditions = [c.strip() for c in text.split(",") if c.strip()]
+    unknown = [c for c in conditions if c not in CONDITIONS]
+    if not conditions or unknown or len(set(conditions)) != len(conditions):
+        raise argparse.ArgumentTypeError(f"expected distinct conditions from {', '.join(CONDITIONS)}, got {text!r}")
+    return conditions
+
+
+def sweep_arg(text: str) -> tuple[str, list[float]]:
+    """argparse type of --sweep: PARAM=v1,v2,... with a known parameter and finite numbers (whole numbers for
+    actuator_latency). Ranges are checked against the configuration (`_check_sweeps`)."""
+    name, _, values = text.partition("=")
+    if name not in GAP_PARAMS + HMD_PARAMS or not values:
+        raise argparse.ArgumentTypeError(
+            f"expected PARAM=v1,v2,... with PARAM one of {', '.join(GAP_PARAMS + HMD_PARAMS)}, got {text!r}")
+    try:
+        numbers = [float(v) for v in values.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: values must be numbers") from None
+    if not all(math.isfinite(v) for v in numbers):
+        raise argparse.ArgumentTypeError(f"{text!r}: values must be finite")
+    if name in INTEGER_PARAMS:
+        if any(v != int(v) for v in numbers):
+            raise argparse.ArgumentTypeError(f"{text!r}: {name} takes whole numbers")
+        numbers = [int(v) for v in numbers]
+    return name, numbers
+
+
+def cmd_sim2real(args: argparse.Namespace) -> int:
+    """Every input is checked before the first episode: configs, bus, policy (against both twins), swept values,
+    the output directory."""
+    from mrguide.experiments import sim2real as s2r
+    from mrguide.output_files import check_output_dir
+    from mrguide.twin.env import EnvConfig
+
+    out = check_output_dir(args.out, "--out")
+    train_cfg = EnvConfig.load(args.config)
+    cell = s2r.load_real_cell(args.real_config)
+    real_cfg, real_path, bus, hmd = cell.env, cell.path, cell.bus, cell.hmd
+    policy = s2r.load_policy(args.policy, train_cfg, cell)
+    _check_sweeps(args.sweep, real_cfg, hmd)
+    runs = [(c, None, None) for c in args.conditions] if not args.sweep else [
+        ("real_hmd" if name in HMD_PARAMS else "real_exact", name, v) for name, values in args.sweep for v in values]
+    out.mkdir(parents=True, exist_ok=True)
+    total = len(runs) * args.seeds * args.episodes
+    with tqdm(total=total, desc="sim2real", unit="ep", disable=args.quiet) as bar:
+        results = []
+        for cond, name, value in runs:
+            bar.set_description(f"sim2real {cond}" + (f" {name}={value}" if name else ""))
+            res = s2r.ConditionResult(cond if name is None else f"{cond} {name}={value}", {})
+            for seed in range(args.seeds):
+                if cond == "sim":
+                    res.outcomes[seed] = s2r.run_sim(policy, train_cfg, seed, args.episodes)
+                    bar.update(args.episodes)
+                    continue
+                cfg = s2r.replace_gap(real_cfg, **{name: value}) if name in GAP_PARAMS else real_cfg
+                res.outcomes[seed] = s2r.run_real(
+                    Path(args.policy), cfg, bus, seed, args.episodes,
+                    out / f"log-{cond}-{name or 'default'}-{value}-seed{seed}-{time.strftime('%H%M%S')}.jsonl",
+                    real_path, cell.safety, on_episode=lambda o: bar.update(1), use_hmd=cond == "real_hmd",
+                    hmd_overrides={name: value} if name in HMD_PARAMS else None, recover=not args.no_recovery)
+            results.append(res)
+    md = s2r.write_report(results, out, s2r.gap_description(real_cfg, real_path))
+    print(md.read_text())
+    print(f"figure and CSV in {out}")
+    return 0
+
+
+def _check_sweeps(sweeps: list[tuple[str, list[float]]], real_cfg, hmd) -> None:
+    """ConfigError (from the config dataclasses' own range checks) for a swept value out of its range."""
+    from dataclasses import replace
+
+    from mrguide.config import ConfigError
+    from mrguide.experiments import sim2real as s2r
+
+    for name, values in sweeps:
+        for value in values:
+            try:
+                if name in GAP_PARAMS:
+                    s2r.replace_gap(real_cfg, **{name: value})
+                else:
+                    replace(hmd, **{name: value})
+            except ConfigError as exc:
+                raise ConfigError(f"--sweep {name}={value}: {exc}") from exc

@@ -37,7 +37,7 @@ class NoiseConfig:
     seeds: int = 10  # paper: 10
     steps: int = 20_000  # "within the training horizon": 20k
     sigmas: tuple[float, ...] = (0.0, 0.01, 0.02, 0.03, 0.05, 0.07, 0.1)  # m (issue 16)
-    reading: str = "executed"
+    reading: str = "stored"  # ours: the paper's "perturbing expert actions" as the replay buffer stores them
     config: str = ""  # base training config (TOML), relative to the experiment file; "" = defaults
     overrides: dict[str, Any] = field(default_factory=dict)
 

@@ -67,3 +67,11 @@ def read_checkpoint(path: Path) -> dict[str, Any]:
     if missing:
         raise CheckpointError(f"{path}: incomplete checkpoint: no {', '.join(missing)}")
     return state
+
+
+def with_defaults(stored: Any, defaults: Any) -> Any:
+    """`stored` (a checkpoint's configuration) with every key it lacks taken from `defaults`, at any depth: a
+    setting added after the checkpoint was written counts as its default, so older runs still resume."""
+    if not isinstance(stored, dict) or not isinstance(defaults, dict):
+        return stored
+    return {**defaults, **{k: with_defaults(v, defaults.get(k)) for k, v in stored.items()}}

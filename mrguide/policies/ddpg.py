@@ -16,6 +16,9 @@ from torch import nn
 
 from mrguide.config import ConfigError, check_number
 from mrguide.policies.replay import Batch
+from mrguide.robot import Workspace
+
+ACTOR_HEADS = ("absolute", "tcp_offset")
 
 
 @dataclass(frozen=True)
@@ -41,6 +44,12 @@ class DDPGConfig:
     target_noise_clip: float = 0.5
     #: Actor and target networks are updated every `policy_delay` critic updates (TD3); 1 = DDPG.
     policy_delay: int = 1
+    #: How the actor produces the target position. "absolute" (the paper's, default): the MLP sees the
+    #: observation and outputs the normalized target. "tcp_offset" (ours): the MLP sees positions relative
+    #: to the TCP (and the goal relative to the object) and outputs an offset of at most `max_offset` per
+    #: axis that is added to the TCP, so the policy is equivariant to moving the whole scene in x and y.
+    actor_head: str = "absolute"
+    max_offset: float = 0.5  # m, per axis, for actor_head = "tcp_offset"
 
     def __post_init__(self) -> None:
         if not self.hidden or any(isinstance(h, bool) or not isinstance(h, int) or not 1 <= h <= 4096 for h in self.hidden):
@@ -55,6 +64,17 @@ class DDPGConfig:
         check_number("ddpg.target_noise", self.target_noise, 0.0, 2.0)
         check_number("ddpg.target_noise_clip", self.target_noise_clip, 0.0, 2.0)
         check_number("ddpg.policy_delay", self.policy_delay, 1, 100, integer=True)
+        if self.actor_head not in ACTOR_HEADS:
+            raise ConfigError(f"ddpg.actor_head = {self.actor_head!r}: expected one of {', '.join(ACTOR_HEADS)}")
+        check_number("ddpg.max_offset", self.max_offset, 0.01, 10.0, " m")
+
+
+def obs_scaling(ws: Workspace) -> tuple[np.ndarray, np.ndarray]:
+    """(offset, scale) mapping the observation's positions to the workspace's [-1, 1], g as is, φ to [-1, 1]."""
+    centre, half = 0.5 * (ws.lo + ws.hi), 0.5 * (ws.hi - ws.lo)
+    offset = np.concatenate([centre, [0.0, 0.5], centre, centre])
+    scale = np.concatenate([1 / half, [1.0, 2.0], 1 / half, 1 / half])
+    return offset, scale
 
 
 def mlp(sizes: list[int], out_act: type[nn.Module] | None = None) -> nn.Sequential:
@@ -81,16 +101,36 @@ class ObsScaler(nn.Module):
         return (obs - self.offset) * self.scale
 
 
-class Actor(nn.Module):
-    """μ_θ(s) ∈ [-1, 1]^act_dim."""
+def relative_features() -> np.ndarray:
+    """The fixed map (11 × 11) from the scaled observation to the tcp_offset actor's input: TCP height, g, φ,
+    object − TCP, goal − TCP (xyz each) and goal − object (xy). Differences of scaled positions are scaled
+    differences (the offsets cancel); no absolute x or y is left."""
+    rows = [np.eye(11)[k] for k in (2, 3, 4)]
+    for a, b, axes in ((5, 0, 3), (8, 0, 3), (8, 5, 2)):
+        for i in range(axes):
+            rows.append(np.eye(11)[a + i] - np.eye(11)[b + i])
+    return np.array(rows)
 
-    def __init__(self, scaler: ObsScaler, act_dim: int, hidden: tuple[int, ...]):
+
+class Actor(nn.Module):
+    """μ_θ(s) ∈ [-1, 1]^act_dim, with the "absolute" or the "tcp_offset" head (see DDPGConfig.actor_head)."""
+
+    def __init__(self, scaler: ObsScaler, act_dim: int, hidden: tuple[int, ...], head: str = "absolute", max_offset: float = 0.5):
         super().__init__()
         self.scaler = scaler
+        self.head, self.max_offset = head, max_offset
+        if head == "tcp_offset":
+            self.register_buffer("features", torch.as_tensor(relative_features(), dtype=torch.float32))
         self.net = mlp([len(scaler.offset), *hidden, act_dim], nn.Tanh)
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
-        return self.net(self.scaler(obs))
+        x = self.scaler(obs)
+        if self.head == "absolute":
+            return self.net(x)
+        y = self.net(x @ self.features.T)
+        target = obs[..., :3] + self.max_offset * y[..., :3]  # m
+        normalized = (target - self.scaler.offset[:3]) * self.scaler.scale[:3]  # the workspace's [-1, 1] box
+        return torch.cat([normalized.clamp(-1.0, 1.0), y[..., 3:]], dim=-1)
 
 
 class CriticEnsemble(nn.Module):
@@ -136,9 +176,9 @@ class DDPG:
             return ObsScaler(obs_offset, obs_scale)
 
         n_critics = 2 if cfg.clipped_double_q else 1
-        self.actor = Actor(scaler(), act_dim, cfg.hidden)
+        self.actor = Actor(scaler(), act_dim, cfg.hidden, cfg.actor_head, cfg.max_offset)
         self.critic = CriticEnsemble(scaler(), act_dim, cfg.hidden, n_critics)
-        self.actor_target = Actor(scaler(), act_dim, cfg.hidden)
+        self.actor_target = Actor(scaler(), act_dim, cfg.hidden, cfg.actor_head, cfg.max_offset)
         self.critic_target = CriticEnsemble(scaler(), act_dim, cfg.hidden, n_critics)
         self.actor_target.load_state_dict(self.actor.state_dict())
         self.critic_target.load_state_dict(self.critic.state_dict())

@@ -36,6 +36,7 @@ def export_actor(
         "robot": {"name": robot.name, "fingerprint": robot.fingerprint, "joints": list(robot.joint_names)},
         "task": to_dict(task),
         "decision_period": decision_period,
+        "head": {"kind": actor.head, "max_offset": actor.max_offset} if actor.head != "absolute" else {"kind": "absolute"},
         "versions": {"mrguide": __version__, "torch": torch.__version__, "numpy": np.__version__},
         **(extra or {}),
     }
@@ -43,6 +44,8 @@ def export_actor(
     for i, lin in enumerate(linears):
         W = lin.weight.detach().cpu().numpy().astype(np.float64)
         b = lin.bias.detach().cpu().numpy().astype(np.float64)
+        if i == 0 and actor.head != "absolute":  # fold the relative-feature map in: W (F x) = (W F) x
+            W = W @ actor.features.detach().cpu().numpy().astype(np.float64)
         if i == 0:  # fold the input scaling in: W (x − o) s + b = (W s) x + (b − W (o s))
             o, sc = (t.detach().cpu().numpy().astype(np.float64) for t in (actor.scaler.offset, actor.scaler.scale))
             W, b = W * sc, b - W @ (o * sc)

@@ -71,7 +71,8 @@ class GuidedExpert:
         clean = annotation_action(obs, target, ann.grip, self.task, self.to_normalized)
         if self.action_noise == 0:
             return ExpertStep(clean, clean)
-        noisy = annotation_action(obs, target + self.rng.normal(0.0, self.action_noise, 3), ann.grip, self.task, self.to_normalized)
+        noisy = clean.copy()  # the motion is perturbed; the vacuum command stays the annotation's (decided on the clean waypoint)
+        noisy[:3] = np.clip(self.to_normalized(target + self.rng.normal(0.0, self.action_noise, 3)), -1.0, 1.0)
         return ExpertStep(noisy, noisy) if self.noise_on == "executed" else ExpertStep(clean, noisy)
 
     def _ask(self, obs: np.ndarray, previous) -> Annotation | None:

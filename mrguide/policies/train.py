@@ -29,14 +29,25 @@ import torch
 from mrguide import __version__
 from mrguide.config import check_number, load_section, to_dict
 from mrguide.policies.annotations import AnnotationCache
-from mrguide.policies.checkpoint import CheckpointError, read_checkpoint, write_checkpoint
-from mrguide.policies.ddpg import DDPG, DDPGConfig
+from mrguide.policies.checkpoint import (
+    CheckpointError,
+    read_checkpoint,
+    with_defaults,
+    write_checkpoint,
+)
+from mrguide.policies.ddpg import DDPG, DDPGConfig, obs_scaling
 from mrguide.policies.experts import ExpertSource
-from mrguide.policies.guidance import (GuidanceConfig, NominalReference, ReferencePose, RunningMedianReference,
-                                       ThresholdTrigger, expert_ratio)
+from mrguide.policies.guidance import (
+    GuidanceConfig,
+    NominalReference,
+    ReferencePose,
+    RunningMedianReference,
+    ThresholdTrigger,
+    expert_ratio,
+)
 from mrguide.policies.guided_expert import GuidedExpert, make_expert_source
 from mrguide.policies.replay import TaggedReplay
-from mrguide.robot import RobotSpec, Workspace
+from mrguide.robot import RobotSpec
 from mrguide.task import ACT_DIM, OBS_DIM
 from mrguide.twin.env import EnvConfig, PickPlaceEnv
 
@@ -79,19 +90,17 @@ def load_train_config(path: str | Path | None) -> tuple[TrainConfig, DDPGConfig,
     )
 
 
-def obs_scaling(ws: Workspace) -> tuple[np.ndarray, np.ndarray]:
-    """(offset, scale) mapping the observation's positions to the workspace's [-1, 1], g as is, φ to [-1, 1]."""
-    centre, half = 0.5 * (ws.lo + ws.hi), 0.5 * (ws.hi - ws.lo)
-    offset = np.concatenate([centre, [0.0, 0.5], centre, centre])
-    scale = np.concatenate([1 / half, [1.0, 2.0], 1 / half, 1 / half])
-    return offset, scale
-
-
 def _arm_record(spec: RobotSpec) -> dict[str, Any]:
     """The arm a run trains, resolved from its arm file and overrides, in the form checkpoints recorded before
     arm files (the [robot] values then), so a UR5 run checkpointed before them still resumes."""
     values = {k: tuple(float(v) for v in getattr(spec, k)) for k in ("q_lower", "q_upper", "v_max", "a_max", "j_max", "q_home")}
     return {"name": spec.name, "tool_offset": float(spec.T_flange_tcp[2, 3]), **values, "workspace": to_dict(spec.workspace)}
+
+
+def _fingerprint(tc: TrainConfig, dc: DDPGConfig, gc: GuidanceConfig, ec: EnvConfig, arm: dict[str, Any]) -> dict:
+    """The configuration a checkpoint must match to be resumed (the run's length and cadences may change)."""
+    return {"train": {k: v for k, v in to_dict(tc).items() if k not in ("total_steps", "checkpoint_every", "eval_every")},
+            "ddpg": to_dict(dc), "guidance": to_dict(gc), "env": {**to_dict(ec), "robot": arm}}
 
 
 EVAL_SEED_BASE = 1_000_000  # evaluation env seeds start here (training seeds come from the run's RNG)
@@ -321,11 +330,7 @@ class Trainer:
 
     # -- checkpoints -----------------------------------------------------------------------------
     def _fingerprint(self) -> dict:
-        return {
-            "train": {k: v for k, v in to_dict(self.cfg).items() if k not in ("total_steps", "checkpoint_every", "eval_every")},
-            "ddpg": to_dict(self.ddpg_cfg), "guidance": to_dict(self.guidance),
-            "env": {**to_dict(self.env_cfg), "robot": _arm_record(self.env.robot_spec)},
-        }
+        return _fingerprint(self.cfg, self.ddpg_cfg, self.guidance, self.env_cfg, _arm_record(self.env.robot_spec))
 
     def save_checkpoint(self) -> Path:
         """Everything to resume: networks, optimizers, both pools, RNG states, counters. Written atomically."""
@@ -348,8 +353,10 @@ class Trainer:
         """Resume from a checkpoint; a corrupt or mismatched file raises CheckpointError."""
         path = Path(path) if path else self.out / "checkpoint.pt"
         state = read_checkpoint(path)
-        if state["config"] != self._fingerprint():
-            diff = [k for k in state["config"] if state["config"][k] != self._fingerprint().get(k)]
+        defaults = _fingerprint(TrainConfig(), DDPGConfig(), GuidanceConfig(), EnvConfig(), _arm_record(self.env.robot_spec))
+        stored = with_defaults(state["config"], defaults)
+        if stored != self._fingerprint():
+            diff = [k for k in stored if stored[k] != self._fingerprint().get(k)]
             raise CheckpointError(f"{path}: written with a different configuration (sections differ: {', '.join(diff)})")
         try:
             self.agent.load_state_dict(state["agent"])

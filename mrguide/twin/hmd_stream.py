@@ -37,29 +37,17 @@ def _hmd_worker(conn, calibration_path: str | None, object_size: float, noise_se
     from mrguide.calibration.config import load_calibration_config
     from mrguide.config import load_section
     from mrguide.twin.camera import look_at
-    from mrguide.twin.markers import (
-        MarkerOnBody,
-        TwinCalibrationConfig,
-        TwinHmd,
-        calibrate_twin_hmd,
-        hmd_marker_pose_source,
-        marker_on_cube_top,
-    )
-    from mrguide.twin.scene import TABLE_CENTER, TABLE_HALF_EXTENTS
+    from mrguide.twin.camera_feed import marked_object_scene
+    from mrguide.twin.markers import TwinCalibrationConfig, TwinHmd, calibrate_twin_hmd, hmd_marker_pose_source
 
     try:
         cfg = load_calibration_config(calibration_path)
         cfg = replace(cfg, hmd=replace(cfg.hmd, seed=noise_seed, **hmd_overrides))
         twin_cfg = load_section(TwinCalibrationConfig, calibration_path, "calibration_twin") if calibration_path else TwinCalibrationConfig()
         client = pb.connect(pb.DIRECT)
-        vis = pb.createVisualShape(pb.GEOM_BOX, halfExtents=TABLE_HALF_EXTENTS, rgbaColor=(0.75, 0.72, 0.66, 1), physicsClientId=client)
-        pb.createMultiBody(0, -1, vis, TABLE_CENTER, physicsClientId=client)
-        h = object_size / 2
-        cube_vis = pb.createVisualShape(pb.GEOM_BOX, halfExtents=(h, h, h), rgbaColor=(0.85, 0.1, 0.1, 1), physicsClientId=client)
-        cube = pb.createMultiBody(0, -1, cube_vis, (0.5, -0.1, h), physicsClientId=client)
-        T_obj_marker = marker_on_cube_top(object_size)
-        marker = MarkerOnBody(client, cube, T_obj_marker, cfg.detector.dictionary, OBJECT_MARKER_ID,
-                              cfg.detector.marker_size_m, quiet_zone_m=0.005)
+        cube, marker = marked_object_scene(client, object_size, cfg.detector.dictionary, OBJECT_MARKER_ID,
+                                           cfg.detector.marker_size_m)
+        T_obj_marker = marker.T_body_marker
         hmd = TwinHmd(client, twin_cfg.T_base_hmd, look_at(np.array(WATCH_EYE), np.array(WATCH_TARGET), np.array([0.0, 0.0, 1.0])),
                       twin_cfg.intrinsics, twin_cfg.supersample, attached=[marker])
         run = calibrate_twin_hmd(hmd, cfg, twin_cfg.views, twin_cfg.look_at, cfg.hmd)

@@ -4,7 +4,6 @@ import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
 
-from mrguide.robot import RobotConfig, RobotSpecError, load_robot
 from mrguide.twin.env import ActionError, PickPlaceEnv
 
 

@@ -22,7 +22,7 @@ def test_bad_policy_refused_before_enable(tmp_path, monkeypatch, capsys):
 def test_real_bus_needs_confirmation(tmp_path, monkeypatch, capsys):
     from mrguide.policies.ddpg import DDPG, DDPGConfig
     from mrguide.policies.export import export_actor
-    from mrguide.policies.train import obs_scaling
+    from mrguide.policies.ddpg import obs_scaling
     from mrguide.robot import load_robot
     from mrguide.task import TaskConfig
 

@@ -9,7 +9,7 @@ import torch
 from mrguide.deploy.policy import ExportedPolicy, PolicyFileError
 from mrguide.policies.ddpg import DDPG, DDPGConfig
 from mrguide.policies.export import export_actor
-from mrguide.policies.train import obs_scaling
+from mrguide.policies.ddpg import obs_scaling
 from mrguide.robot import RobotConfig, Workspace, load_robot
 from mrguide.task import TaskConfig
 
@@ -82,3 +82,56 @@ def test_unreadable_file_refused(tmp_path):
         ExportedPolicy.load(p)
     with pytest.raises(PolicyFileError, match="not found"):
         ExportedPolicy.load(tmp_path / "missing.npz")
+
+
+def _random_obs(ws: Workspace, n: int, seed: int = 0) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    return np.concatenate([rng.uniform(ws.lo, ws.hi, (n, 3)), rng.choice([-1, 1], (n, 1)), rng.uniform(0, 1, (n, 1)),
+                           rng.uniform(ws.lo, ws.hi, (n, 3)), rng.uniform(ws.lo, ws.hi, (n, 3))], axis=1).astype(np.float32)
+
+
+def test_tcp_offset_head_exports_and_runs_the_same_in_numpy(tmp_path):
+    spec = load_robot()
+    ws = spec.workspace
+    agent = DDPG(*obs_scaling(ws), 4, DDPGConfig(actor_head="tcp_offset", max_offset=0.3), seed=3)
+    with torch.no_grad():  # weights large enough that some targets leave the box and are clipped
+        for p in agent.actor.net.parameters():
+            p.mul_(3.0)
+    path = export_actor(agent.actor, tmp_path / "policy.npz", spec, TaskConfig(), 0.1)
+    pol = ExportedPolicy.load(path, spec, TaskConfig())
+    assert pol.metadata["head"] == {"kind": "tcp_offset", "max_offset": 0.3}
+    obs = _random_obs(ws, 500)
+    with torch.no_grad():
+        ref = agent.actor(torch.as_tensor(obs)).numpy()
+    got = pol.batch(obs)
+    assert np.max(np.abs(got - ref)) < 1e-5 and np.any(np.abs(got[:, :3]) == 1.0) and np.any(np.abs(got[:, :3]) < 0.9)
+
+
+def test_tcp_offset_policy_moves_with_the_scene_in_x_and_y():
+    """Shift TCP, object and goal together: the target shifts with them; the absolute head does not."""
+    ws = Workspace(low=(-1.0, -1.0, 0.045), high=(2.0, 2.0, 0.35))  # large enough that nothing is clipped
+    obs = _random_obs(load_robot().workspace, 200)
+    shifted = obs.copy()
+    for k in (0, 5, 8):
+        shifted[:, k] += 0.4
+        shifted[:, k + 1] -= 0.3
+    moved = {}
+    for head in ("tcp_offset", "absolute"):
+        agent = DDPG(*obs_scaling(ws), 4, DDPGConfig(actor_head=head, max_offset=0.3), seed=1)
+        with torch.no_grad():
+            a, b = (ws.to_cartesian(agent.actor(torch.as_tensor(o)).numpy()[:, :3]) for o in (obs, shifted))
+        moved[head] = b - a
+    assert np.allclose(moved["tcp_offset"], [0.4, -0.3, 0.0], atol=1e-5)
+    assert not np.allclose(moved["absolute"], [0.4, -0.3, 0.0], atol=1e-2)
+
+
+def test_unknown_head_refused(exported, tmp_path):
+    _, path, _ = exported
+
+    def head(arrays):
+        meta = json.loads(str(arrays["metadata"]))
+        meta["head"] = {"kind": "tcp_offset", "max_offset": "far"}
+        arrays["metadata"] = np.array(json.dumps(meta))
+
+    with pytest.raises(PolicyFileError, match="head"):
+        ExportedPolicy.load(_rewrite(path, tmp_path / "bad.npz", head), load_robot(), TaskConfig())

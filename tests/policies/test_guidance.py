@@ -261,3 +261,27 @@ def test_action_noise_perturbs_every_action_afresh_after_the_projection(tmp_path
     assert np.array_equal(steps(0.03)[0], noisy) and not np.array_equal(steps(0.03, seed=1)[0], noisy)
     executed, labels = steps(0.03, on="stored")  # "stored": clean execution, noisy labels (same draws)
     assert np.allclose(executed, clean) and np.array_equal(labels, noisy)
+
+
+def test_action_noise_never_changes_the_vacuum_command(tmp_path):
+    """Release at the place pose: the clean waypoint is reached, so the clean command opens the vacuum.
+
+    The noise moves the motion target only; a release decided on the perturbed target (‖tcp − noisy‖
+    > ε/2 for most draws at σ = 1 cm) kept the vacuum on at the goal, and no policy learned to let go.
+    """
+    from mrguide.policies.guidance import NominalReference
+    from mrguide.policies.guided_expert import GuidedExpert
+
+    task, ws = TaskConfig(), load_robot().workspace
+    obs = _obs(4, tcp=(0.5, 0.2, 0.05))  # the TCP at the nominal place pose, which is also the mark
+    place = obs[0:3].copy()
+
+    class AtPlace:
+        def annotate(self, obs, previous=None):
+            return Annotation(place, -1.0)
+
+    for on in ("executed", "stored"):
+        expert = GuidedExpert(AtPlace(), NominalReference(task), AnnotationCache(0.005), 0.05, task, ws.to_normalized, 0, 0.01, on, 0)
+        steps = [expert.action(obs) for _ in range(200)]
+        assert all(s.executed[3] == -1.0 and s.stored[3] == -1.0 for s in steps)
+        assert len({tuple(s.stored[:3]) for s in steps}) == 200  # the motion is still perturbed afresh

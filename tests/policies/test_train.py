@@ -199,3 +199,27 @@ def test_terminal_transitions_stop_bootstrapping_truncated_ones_do_not(tmp_path)
     done = pool["done"][: tr.replay.agent.size].ravel()
     terminal = sum(r["outcome"] in ("success", "dropped", "misplaced", "knocked_off") for r in rows if r["kind"] == "agent")
     assert done.sum() == terminal  # exactly the terminated agent episodes end in done = 1; truncated ones in 0
+
+
+def test_a_checkpoint_from_before_a_new_setting_resumes_with_its_default(tmp_path):
+    """A key the checkpoint lacks (the setting was added later) counts as its default; any other value is refused."""
+    from mrguide.policies.checkpoint import read_checkpoint, write_checkpoint
+
+    tr = make(tmp_path, "old")
+    tr.run(stop_at=100)
+    tr.close()
+    path = tmp_path / "old" / "checkpoint.pt"
+    state = read_checkpoint(path)
+    del state["config"]["ddpg"]["actor_head"]  # as written before ddpg.actor_head existed
+    del state["config"]["env"]["task"]["epsilon"]
+    write_checkpoint(path, state)
+    same = make(tmp_path, "old")
+    same.load_checkpoint()
+    assert same.step == tr.step
+    same.close()
+    base = make(tmp_path, "old")
+    base.close()
+    other = Trainer(base.cfg, dataclasses.replace(base.ddpg_cfg, actor_head="tcp_offset"), base.guidance, base.env_cfg, tmp_path / "old")
+    with pytest.raises(CheckpointError, match=r"different configuration \(sections differ: ddpg\)"):
+        other.load_checkpoint()
+    other.close()

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from mrguide.twin import sim2real as s2r
+from mrguide.experiments import sim2real as s2r
 
 REAL = Path(__file__).parents[2] / "configs" / "real_cell.toml"
 

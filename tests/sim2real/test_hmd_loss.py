@@ -10,10 +10,10 @@ import pytest
 
 from mrguide.deploy.runlog import read_log
 from mrguide.drivers.config import BusConfig, CobotBusConfig
+from mrguide.experiments import sim2real as s2r
 from mrguide.pose_source import PoseUnavailable
 from mrguide.robot import load_robot
 from mrguide.task import oracle_action, phase_from_progress
-from mrguide.twin import sim2real as s2r
 from mrguide.twin.env import EnvConfig
 from mrguide.twin.hmd_stream import HmdPoseStream
 from mrguide.twin.plant import TwinPlant

@@ -6,9 +6,9 @@ import numpy as np
 
 from mrguide.cli import main
 from mrguide.drivers.config import BusConfig, CobotBusConfig
+from mrguide.experiments import sim2real as s2r
 from mrguide.robot import load_robot
 from mrguide.task import oracle_action
-from mrguide.twin import sim2real as s2r
 from mrguide.twin.env import EnvConfig
 from mrguide.twin.hmd_stream import HmdPoseStream
 

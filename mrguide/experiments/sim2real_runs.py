@@ -1,0 +1,98 @@
+"""Sim-to-real as an experiment (paper Fig. 8): train guided seeds, then run each exported policy under the
+three conditions (`mrguide.experiments.sim2real`) for several evaluation seeds.
+
+Every trained run gets its own `sim2real/` directory with `outcomes.csv` (one row per episode) and the
+deploy run logs of conditions 2 and 3; a run whose `outcomes.csv` exists is not evaluated again. The
+report pools every training seed's episodes per condition; the spread is over training seeds.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from mrguide.config import ConfigError, check_number
+from mrguide.experiments import report
+from mrguide.experiments.runs import TrainRun, configs
+
+CONDITIONS = ("sim", "real_exact", "real_hmd")
+OUTCOME_FIELDS = ["condition", "eval_seed", "episode", "outcome"]
+
+
+@dataclass(frozen=True)
+class Sim2RealConfig:
+    """[experiment] of configs/experiments/sim2real.toml."""
+
+    seeds: int = 3  # training seeds (guided)
+    steps: int = 20_000
+    eval_seeds: int = 3  # evaluation seeds per policy and condition (object and goal layouts)
+    episodes: int = 10  # per evaluation seed and condition
+    conditions: tuple[str, ...] = CONDITIONS
+    real_config: str = "../real_cell.toml"  # the 'real' cell, relative to the experiment file (made absolute on load)
+    config: str = ""  # base training config (TOML), relative to the experiment file; "" = defaults
+    overrides: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        check_number("experiment.seeds", self.seeds, 1, 1000, integer=True)
+        check_number("experiment.steps", self.steps, 1, 10**8, integer=True)
+        check_number("experiment.eval_seeds", self.eval_seeds, 1, 1000, integer=True)
+        check_number("experiment.episodes", self.episodes, 1, 10_000, integer=True)
+        unknown = [c for c in self.conditions if c not in CONDITIONS]
+        if not self.conditions or unknown or len(set(self.conditions)) != len(self.conditions):
+            raise ConfigError(f"experiment.conditions = {list(self.conditions)}: expected distinct names from {', '.join(CONDITIONS)}")
+        if not self.real_config:
+            raise ConfigError("experiment.real_config: give the TOML of the 'real' cell")
+
+
+def runs(cfg: Sim2RealConfig, base_config: str | None) -> list[TrainRun]:
+    return [TrainRun(f"guided/seed{s}", s, cfg.steps, True, base_config, dict(cfg.overrides)) for s in range(cfg.seeds)]
+
+
+def outcomes_path(run: TrainRun, root: Path) -> Path:
+    return run.directory(root) / "sim2real" / "outcomes.csv"
+
+
+def evaluate(run: TrainRun, root: str, cfg: Sim2RealConfig) -> str:
+    """One Ray task: the run's exported policy under every condition and evaluation seed; writes outcomes.csv."""
+    from mrguide.experiments import sim2real as s2r
+
+    path = outcomes_path(run, Path(root))
+    if path.exists():
+        return str(path)
+    train_cfg = configs(run)[3]
+    cell = s2r.load_real_cell(cfg.real_config)
+    policy_file = run.directory(Path(root)) / "policy.npz"
+    policy = s2r.load_policy(policy_file, train_cfg, cell)
+    rows = []
+    for cond in cfg.conditions:
+        for seed in range(cfg.eval_seeds):
+            if cond == "sim":
+                outcomes = s2r.run_sim(policy, train_cfg, seed, cfg.episodes)
+            else:
+                outcomes = s2r.run_real(policy_file, cell.env, cell.bus, seed, cfg.episodes, path.parent / f"log-{cond}-seed{seed}.jsonl",
+                                        cell.path, cell.safety, use_hmd=cond == "real_hmd")
+            rows += [{"condition": cond, "eval_seed": seed, "episode": i, "outcome": o} for i, o in enumerate(outcomes)]
+    report.write_report(path.parent, {path.name: report.csv_bytes(rows, OUTCOME_FIELDS)})
+    return str(path)
+
+
+def sim2real_report(cfg: Sim2RealConfig, root: Path, run_list: list[TrainRun]) -> dict[str, bytes]:
+    """summary.csv / summary.md / fig8_sim2real.png pooled over training seeds, and every episode in outcomes.csv."""
+    from mrguide.experiments import sim2real as s2r
+
+    all_rows, results = [], []
+    for cond in cfg.conditions:
+        res = s2r.ConditionResult(cond, {})
+        for run in run_list:
+            rows = [r for r in report.read_csv(outcomes_path(run, root)) if r["condition"] == cond]
+            res.outcomes[run.seed] = [r["outcome"] for r in rows]
+            all_rows += [{"train_seed": run.seed, **r} for r in rows]
+        results.append(res)
+    files = s2r.report_files(results, s2r.gap_description(s2r.load_real_cell(cfg.real_config).env, Path(cfg.real_config)))
+    intro = (f"Sim-to-real: {cfg.seeds} guided training seeds × {cfg.steps} steps, each policy under every condition for "
+             f"{cfg.eval_seeds} evaluation seeds × {cfg.episodes} episodes; success pooled over all episodes (95 % Wilson "
+             "interval), spread = std over training seeds. Targets (ours): sim ≥ 98 %, real_exact ≥ 95 %, real_hmd ≥ 90 %.\n\n")
+    return {"summary.csv": files["sim2real.csv"], "summary.md": intro.encode() + files["sim2real.md"],
+            "fig8_sim2real.png": files["fig8_sim2real.png"],
+            "outcomes.csv": report.csv_bytes(all_rows, ["train_seed", *OUTCOME_FIELDS])}

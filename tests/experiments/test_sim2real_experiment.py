@@ -1,0 +1,47 @@
+"""`mrguide experiment sim2real`: train, evaluate each policy under the conditions, report; resumable."""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import pytest
+
+from mrguide.cli import main
+from mrguide.config import ConfigError
+from mrguide.experiments.sim2real_runs import Sim2RealConfig
+
+REAL_CELL = Path(__file__).resolve().parents[2] / "configs" / "real_cell.toml"
+
+
+def test_tiny_sim2real_experiment_on_local_ray_evaluates_each_run_once(tiny_experiment, capsys):
+    write, out = tiny_experiment
+    cfg = write("s2r", f"seeds = 1\nsteps = 150\neval_seeds = 1\nepisodes = 1\nconditions = [\"sim\", \"real_exact\"]\n"
+                       f"real_config = \"{REAL_CELL}\"\n")
+    assert main(["experiment", "sim2real", "--config", str(cfg), "--out", str(out), "--workers", "1", "--quiet"]) == 0
+    outcomes = out / "guided" / "seed0" / "sim2real" / "outcomes.csv"
+    with outcomes.open() as fh:
+        rows = list(csv.DictReader(fh))
+    assert [(r["condition"], r["eval_seed"], r["episode"]) for r in rows] == [("sim", "0", "0"), ("real_exact", "0", "0")]
+    assert all(r["outcome"] for r in rows)
+    assert list((outcomes.parent).glob("log-real_exact-seed0.jsonl"))  # the deploy run log of condition 2
+    summary = (out / "summary.csv").read_text().splitlines()
+    assert summary[0].startswith("condition,seeds,episodes,success_rate,ci95_low,ci95_high") and len(summary) == 3
+    assert (out / "fig8_sim2real.png").stat().st_size > 10_000
+    stamp = outcomes.stat().st_mtime_ns
+    capsys.readouterr()
+    assert main(["experiment", "sim2real", "--config", str(cfg), "--out", str(out), "--workers", "1", "--quiet"]) == 0
+    assert outcomes.stat().st_mtime_ns == stamp  # evaluated once: the second call only reports
+    assert main(["experiment", "report", "sim2real", "--config", str(cfg), "--out", str(out)]) == 0
+    assert "real_exact" in capsys.readouterr().out
+
+
+def test_bad_sim2real_experiment_configs_are_refused(tiny_experiment, capsys):
+    with pytest.raises(ConfigError, match="conditions"):
+        Sim2RealConfig(conditions=("sim", "real"))
+    with pytest.raises(ConfigError, match="eval_seeds"):
+        Sim2RealConfig(eval_seeds=0)
+    write, out = tiny_experiment
+    cfg = write("s2r", "seeds = 1\nsteps = 150\nreal_config = \"no_such_cell.toml\"\n")
+    assert main(["experiment", "sim2real", "--config", str(cfg), "--out", str(out)]) == 2
+    assert "no_such_cell.toml" in capsys.readouterr().err and not out.exists()
