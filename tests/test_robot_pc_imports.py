@@ -73,11 +73,12 @@ def test_deploy_on_the_real_bus_path(tmp_path, policy_file):
     result = _run_blocked(f'''
         import builtins
         import mrguide.cli as cli
+        import mrguide.deploy.commands as deploy_commands
         from mrguide.drivers.config import load_cobot_bus_config
         from mrguide.drivers.mock import FirstOrderPlant, SimulatedCobot
         from mrguide.robot import load_robot
 
-        cli.ALLOW_VIRTUAL_REAL_BUS = True
+        deploy_commands.ALLOW_VIRTUAL_REAL_BUS = True
         builtins.input = lambda prompt="": ""
         robot = load_robot()
         sim = SimulatedCobot(load_cobot_bus_config({str(tmp_path / "bus.toml")!r}, robot), FirstOrderPlant(robot.q_home))

@@ -149,18 +149,7 @@ def _record_from_json(data: dict[str, Any], path: Path) -> CalibrationRecord:
     method = need("method", str)
     if method not in METHODS:
         raise CalibrationFileError(f"{path}: unknown method {method!r} (one of {METHODS})")
-    camera = _optional_table(data, "camera", path)
-    if camera is not None:
-        try:
-            camera_from_dict(camera, f"{path}: 'camera'")
-        except CalibrationError as exc:
-            raise CalibrationFileError(str(exc)) from exc
-    board = _optional_table(data, "board", path)
-    if board is not None:
-        try:
-            from_dict(BoardConfig, board, where=f"{path}: 'board'")
-        except ConfigError as exc:
-            raise CalibrationFileError(str(exc)) from exc
+    camera, board = _camera_and_board(data, path)
     return CalibrationRecord(
         T_base_hmd=T,
         dictionary=dictionary,
@@ -175,6 +164,23 @@ def _record_from_json(data: dict[str, Any], path: Path) -> CalibrationRecord:
         board=board,
         extra=_optional_table(data, "extra", path) or {},
     )
+
+
+def _camera_and_board(data: dict[str, Any], path: Path) -> tuple[dict[str, Any] | None, dict[str, Any] | None]:
+    """The optional 'camera' (intrinsics) and 'board' tables, each checked as its loader would."""
+    camera = _optional_table(data, "camera", path)
+    if camera is not None:
+        try:
+            camera_from_dict(camera, f"{path}: 'camera'")
+        except CalibrationError as exc:
+            raise CalibrationFileError(str(exc)) from exc
+    board = _optional_table(data, "board", path)
+    if board is not None:
+        try:
+            from_dict(BoardConfig, board, where=f"{path}: 'board'")
+        except ConfigError as exc:
+            raise CalibrationFileError(str(exc)) from exc
+    return camera, board
 
 
 def _optional_table(data: dict[str, Any], key: str, path: Path) -> dict[str, Any] | None:

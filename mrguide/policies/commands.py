@@ -83,22 +83,11 @@ def cmd_train(args: argparse.Namespace, live: LivePlugin | None = None) -> int:
             summary_writer_class()
         except ImportError as exc:
             return _refuse(f"--tensorboard needs the tensorboard package (pip install 'mrguide[tensorboard]'): {exc}")
-    tc, dc, gc, ec = load_train_config(args.config)
-    if args.steps is not None:
-        tc = dataclasses.replace(tc, total_steps=args.steps)
-    if args.seed is not None:
-        tc = dataclasses.replace(tc, seed=args.seed)
-    if args.no_guidance:
-        gc = dataclasses.replace(gc, enabled=False)
-    if args.expert:
-        gc = dataclasses.replace(gc, source=args.expert)
+    tc, dc, gc, ec = _train_configs(args, load_train_config(args.config))
     out = Path(args.out)
-    if not args.resume and (out / "checkpoint.pt").exists():
-        return _refuse(f"{out} already holds a run; use --resume or another --out")
-    leftovers = [n for n in ("metrics.csv", "eval.csv", "annotations.jsonl") if not args.resume and (out / n).exists()]
-    if leftovers:
-        return _refuse(f"{out} holds {', '.join(leftovers)} of a run that never checkpointed: use another --out, or move "
-                       "them away (a recorded annotations.jsonl replays with guidance.source = 'file')")
+    refusal = _output_refusal(out, args.resume)
+    if refusal:
+        return _refuse(refusal)
     bar = tqdm(total=min(tc.total_steps, args.stop_after or tc.total_steps), desc="train", unit="step", disable=args.quiet)
     session = None
     if gc.enabled and gc.source == "live":
@@ -129,11 +118,7 @@ def cmd_train(args: argparse.Namespace, live: LivePlugin | None = None) -> int:
         with _stop_on_sigint(tr, session, bar):
             _run(tr, args.stop_after, bar, session)
         if tr.stop_requested.is_set():
-            tr.save_checkpoint()
-            bar.close()
-            print(f"interrupted at step {tr.step}: checkpoint {out / 'checkpoint.pt'} written; "
-                  f"`mrguide train --out {out} --resume` continues", file=sys.stderr)
-            return 130
+            return _interrupted(tr, out, bar)
         bar.close()
         _finish(tr, tc, gc, out)
         if tb is not None:
@@ -148,6 +133,42 @@ def cmd_train(args: argparse.Namespace, live: LivePlugin | None = None) -> int:
         if session:
             session.close()
     return 0
+
+
+def _interrupted(tr, out: Path, bar: tqdm) -> int:
+    """Ctrl-C: checkpoint where training stopped, say how to continue, exit status 130."""
+    tr.save_checkpoint()
+    bar.close()
+    print(f"interrupted at step {tr.step}: checkpoint {out / 'checkpoint.pt'} written; "
+          f"`mrguide train --out {out} --resume` continues", file=sys.stderr)
+    return 130
+
+
+def _train_configs(args: argparse.Namespace, configs: tuple) -> tuple:
+    """The loaded (train, ddpg, guidance, env) configs with the command line's --steps, --seed, --no-guidance, --expert."""
+    tc, dc, gc, ec = configs
+    if args.steps is not None:
+        tc = dataclasses.replace(tc, total_steps=args.steps)
+    if args.seed is not None:
+        tc = dataclasses.replace(tc, seed=args.seed)
+    if args.no_guidance:
+        gc = dataclasses.replace(gc, enabled=False)
+    if args.expert:
+        gc = dataclasses.replace(gc, source=args.expert)
+    return tc, dc, gc, ec
+
+
+def _output_refusal(out: Path, resume: bool) -> str | None:
+    """Why `out` cannot take a new run (a checkpoint, or files of a run that never checkpointed), or None."""
+    if resume:
+        return None
+    if (out / "checkpoint.pt").exists():
+        return f"{out} already holds a run; use --resume or another --out"
+    leftovers = [n for n in ("metrics.csv", "eval.csv", "annotations.jsonl") if (out / n).exists()]
+    if leftovers:
+        return (f"{out} holds {', '.join(leftovers)} of a run that never checkpointed: use another --out, or move "
+                "them away (a recorded annotations.jsonl replays with guidance.source = 'file')")
+    return None
 
 
 def _run(tr, stop_after: int | None, bar: tqdm, session: LiveSessionLike | None) -> None:

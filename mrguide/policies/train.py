@@ -29,22 +29,11 @@ import torch
 from mrguide import __version__
 from mrguide.config import check_number, load_section, to_dict
 from mrguide.policies.annotations import AnnotationCache
-from mrguide.policies.checkpoint import (
-    CheckpointError,
-    read_checkpoint,
-    with_defaults,
-    write_checkpoint,
-)
+from mrguide.policies.checkpoint import CheckpointError, read_checkpoint, with_defaults, write_checkpoint
 from mrguide.policies.ddpg import DDPG, DDPGConfig, obs_scaling
 from mrguide.policies.experts import ExpertSource
-from mrguide.policies.guidance import (
-    GuidanceConfig,
-    NominalReference,
-    ReferencePose,
-    RunningMedianReference,
-    ThresholdTrigger,
-    expert_ratio,
-)
+from mrguide.policies.guidance import (GuidanceConfig, NominalReference, ReferencePose, RunningMedianReference,
+                                       ThresholdTrigger, expert_ratio)
 from mrguide.policies.guided_expert import GuidedExpert, make_expert_source
 from mrguide.policies.replay import TaggedReplay
 from mrguide.robot import RobotSpec

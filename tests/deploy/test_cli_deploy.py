@@ -67,13 +67,13 @@ def _robot_cell_files(tmp_path, policy_file):
 @pytest.fixture
 def robot_on_virtual_bus(tmp_path, policy_file, monkeypatch):
     """(config, policy, simulated devices, prompts): the seam opened, the operator's Enter pressed."""
-    import mrguide.cli as cli
+    import mrguide.deploy.commands as deploy_commands
     from mrguide.drivers.config import load_cobot_bus_config
     from mrguide.drivers.mock import FirstOrderPlant, SimulatedCobot
     from mrguide.robot import load_robot
 
     cfg, policy = _robot_cell_files(tmp_path, policy_file)
-    monkeypatch.setattr(cli, "ALLOW_VIRTUAL_REAL_BUS", True)
+    monkeypatch.setattr(deploy_commands, "ALLOW_VIRTUAL_REAL_BUS", True)
     prompts = []
     monkeypatch.setattr("builtins.input", lambda prompt="": prompts.append(prompt) or "")
     robot = load_robot()

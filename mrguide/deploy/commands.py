@@ -1,0 +1,168 @@
+"""`mrguide deploy`: an exported policy on the cobot over the real bus, or (`--dry-run`) over the virtual bus
+to simulated drives on a twin. The dry run itself belongs to the twin, which hands it in as a
+`DryRunBackend` (deploy does not import the twin)."""
+
+from __future__ import annotations
+
+import argparse
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any, Protocol
+
+from tqdm import tqdm
+
+from mrguide.cli_args import nonnegative_int, positive_int
+from mrguide.errors import InputError
+
+#: Test seam: lets tests drive the real-robot path of `deploy` (--enable-drives) over a python-can virtual
+#: channel with simulated devices on it. Users always get the refusal of the virtual interface; only a test
+#: sets this.
+ALLOW_VIRTUAL_REAL_BUS = False
+
+
+class DryRunBackend(Protocol):
+    """What `deploy --dry-run` needs from the twin: its decision period, twin-rendered camera poses, the run."""
+
+    decision_period: float
+
+    def camera(self, camera_cfg: Any, base: Path, object_height: float) -> Any: ...
+
+    def run(self, policy_path: str, policy: Any, bus: Any, episodes: int, seed: int, run_log: Any, safety: Any,
+            max_pose_misses: int, tick: Any, camera: Any) -> Any: ...
+
+
+def add_deploy_command(sub: argparse._SubParsersAction, dry_run_factory: Callable[[str | None], DryRunBackend]) -> None:
+    """Register `mrguide deploy`; `dry_run_factory(config_path)` builds the twin's DryRunBackend."""
+    sp = sub.add_parser("deploy", help="run an exported policy on the cobot, or --dry-run it against the simulated bus")
+    sp.add_argument("--policy", required=True, help="exported policy file (.npz) from `mrguide train`")
+    sp.add_argument("--config", help="TOML config ([deploy], [safety], [robot], [task]; [twin] for dry runs)")
+    sp.add_argument("--dry-run", action="store_true", help="virtual CAN bus + simulated drives on a twin with reality gap")
+    sp.add_argument("--enable-drives", action="store_true", help="confirm enabling the real drives (real bus only)")
+    sp.add_argument("--episodes", type=positive_int, help="default: [deploy] episodes")
+    sp.add_argument("--seed", type=nonnegative_int, help="dry run: object/goal layouts; default: [deploy] seed")
+    sp.add_argument("--log", help="run log path (JSONL); default under [deploy] log_dir")
+    sp.add_argument("--quiet", action="store_true")
+    sp.set_defaults(func=cmd_deploy, dry_run_factory=dry_run_factory)
+
+
+def _bus_config(config_path: str | None, bus_config: str, robot):
+    """The bus description named by [deploy] bus_config (relative to the config file), checked against `robot`."""
+    from mrguide.drivers.config import load_cobot_bus_config
+
+    if not bus_config:
+        return load_cobot_bus_config(None, robot)
+    base = Path(config_path).parent if config_path else Path.cwd()
+    return load_cobot_bus_config(base / bus_config, robot)
+
+
+def cmd_deploy(args: argparse.Namespace) -> int:
+    """Run an exported policy on the cobot (real bus), or dry-run it against the simulated cell.
+
+    Every input (configs, bus description, policy, run log location) is checked before anything is
+    connected or enabled; the run log's header is on disk before the first frame is sent."""
+    from mrguide.config import ConfigError, load_optional_section, load_section
+    from mrguide.deploy.policy import ExportedPolicy, check_decision_period
+    from mrguide.deploy.runlog import RunLog
+    from mrguide.deploy.safety import SafetyConfig
+    from mrguide.deploy.session import DeployConfig
+    from mrguide.robot import load_robot, load_robot_config
+    from mrguide.task import TaskConfig
+
+    dcfg = load_section(DeployConfig, args.config, "deploy")
+    safety = load_optional_section(SafetyConfig, args.config, "safety")
+    episodes = args.episodes if args.episodes is not None else dcfg.episodes
+    seed = args.seed if args.seed is not None else dcfg.seed
+    spec = load_robot(load_robot_config(args.config))
+    task = load_section(TaskConfig, args.config, "task")
+    bus = _bus_config(args.config, dcfg.bus_config, spec)
+    if args.dry_run and bus.bus.interface != "virtual":
+        raise ConfigError(f"--dry-run needs the virtual CAN interface; the bus config names {bus.bus.interface!r}")
+    policy = ExportedPolicy.load(args.policy, spec, task)
+    if args.dry_run:
+        dry: DryRunBackend = args.dry_run_factory(args.config)
+        check_decision_period(policy, args.policy, bus.timing.control_period, dry.decision_period)
+    else:
+        check_decision_period(policy, args.policy, bus.timing.control_period)
+        if bus.bus.interface == "virtual" and not ALLOW_VIRTUAL_REAL_BUS:
+            raise ConfigError("the bus config names the virtual interface; use --dry-run, or configure the real bus")
+        if not args.enable_drives:
+            raise InputError(f"this will enable the drives on {bus.bus.interface}:{bus.bus.channel} and move the arm. "
+                              "Clear the cell, keep the E-stop at hand, and re-run with --enable-drives to confirm.")
+    log_path, where = _log_path(args, dcfg)
+    header = {"command": "deploy", "dry_run": args.dry_run, "policy": str(args.policy), "config": args.config,
+              "bus": f"{bus.bus.interface}:{bus.bus.channel}", "episodes": episodes, "seed": seed if args.dry_run else None,
+              "decision_period": policy.decision_period, "pose_source": dcfg.pose_source,
+              "started": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
+    camera = _camera(args, dcfg, task, dry if args.dry_run else None)
+    try:
+        with RunLog(log_path, header, where) as run_log, \
+                tqdm(total=episodes, desc="deploy" + (" (dry run)" if args.dry_run else ""), unit="ep", disable=args.quiet) as bar:
+            def tick(report) -> None:
+                bar.update(1)
+                bar.set_postfix(last=report.outcome, decisions=report.decisions)
+
+            if args.dry_run:
+                summary = dry.run(args.policy, policy, bus, episodes, seed, run_log, safety, dcfg.max_pose_misses, tick, camera)
+            else:
+                summary = _deploy_real(policy, bus, spec, task, dcfg, safety, episodes, run_log, tick, camera)
+            camera_stats = _log_camera(camera, run_log)
+    finally:
+        if camera:
+            camera.close()
+    print(summary.text() + (f"\n{camera_stats.text()}" if camera_stats else ""))
+    print(f"run log: {log_path}")
+    return 0 if summary.stopped is None else 1
+
+
+def _log_path(args: argparse.Namespace, dcfg) -> tuple[Path, str]:
+    """The run log's path and how to name its origin in an error."""
+    if args.log:
+        return Path(args.log), "--log"
+    return (Path(dcfg.log_dir) / f"deploy-{time.strftime('%Y%m%d-%H%M%S')}.jsonl",
+            f"{args.config or 'default'} [deploy] log_dir:")
+
+
+def _camera(args: argparse.Namespace, dcfg, task, dry: "DryRunBackend | None"):
+    """With `pose_source = "camera"`: the camera source (a dry run: the twin-rendered one), opened before the run
+    log so that bad files or a camera that does not open are refused first; otherwise None."""
+    if dcfg.pose_source != "camera":
+        return None
+    base = Path(args.config).parent if args.config else Path.cwd()
+    if dry is not None:
+        return dry.camera(dcfg.camera, base, task.object_height)
+    from mrguide.deploy.camera import open_camera_source
+
+    return open_camera_source(dcfg.camera, base)
+
+
+def _log_camera(camera, run_log):
+    """The camera's statistics, also written to the run log (None without a camera)."""
+    stats = camera.stats() if camera else None
+    if stats:
+        run_log.write("camera", **stats.as_dict())
+    return stats
+
+
+def _deploy_real(policy, bus, spec, task, dcfg, safety, episodes, run_log, tick, camera):
+    from mrguide.deploy.runtime import Runtime, RuntimeConfig
+    from mrguide.deploy.session import FixedObjectPose, run_session
+    from mrguide.drivers.cobot import Cobot
+    from mrguide.drivers.realtime import freeze_heap
+
+    rcfg = RuntimeConfig(decision_period=policy.decision_period, max_pose_misses=dcfg.max_pose_misses)
+    goals = [dcfg.goals[i % len(dcfg.goals)] for i in range(episodes)]
+
+    def place(i: int) -> None:
+        if camera is None:
+            input(f"episode {i}: place the object at {dcfg.object_position} and press Enter ")
+            return
+        input(f"episode {i}: place the object in view of the camera and press Enter ")
+        camera.wait_for_pose(after=time.monotonic(), timeout=dcfg.camera.max_pose_age_s + 5.0)
+
+    freeze_heap()
+    with Cobot(bus, spec) as cobot:
+        cobot.enable()
+        pose = camera or FixedObjectPose(dcfg.object_position)
+        with Runtime(cobot, policy, pose, spec, task, run_log, rcfg, safety) as rt:
+            return run_session(rt, goals, before_episode=place, after_episode=tick)

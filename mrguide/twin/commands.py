@@ -1,0 +1,70 @@
+"""The twin's commands: `mrguide expert` (the scripted expert in the twin), and the dry-run backend that
+`mrguide deploy --dry-run` runs (the deploy command itself lives in `mrguide.deploy.commands`)."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+from tqdm import tqdm
+
+from mrguide.cli_args import nonnegative_int, positive_int
+
+
+def add_expert_command(sub: argparse._SubParsersAction) -> None:
+    sp = sub.add_parser("expert", help="run the scripted expert in the twin")
+    sp.add_argument("--config", help="TOML config ([robot], [twin], [task])")
+    sp.add_argument("--episodes", type=positive_int, default=50)
+    sp.add_argument("--seed", type=nonnegative_int, default=0, help="first seed; episode i uses seed + i")
+    sp.add_argument("--quiet", action="store_true", help="no progress bar")
+    sp.set_defaults(func=cmd_expert)
+
+
+def cmd_expert(args: argparse.Namespace) -> int:
+    """Run the scripted expert in the twin and report success rate and timing."""
+    from mrguide.twin.env import EnvConfig, PickPlaceEnv
+    from mrguide.twin.rollout import run_episodes
+
+    env = PickPlaceEnv(EnvConfig.load(args.config))
+    try:
+        with tqdm(total=args.episodes, desc="scripted expert", unit="ep", disable=args.quiet) as bar:
+            def tick(res):
+                bar.update(1)
+                bar.set_postfix(last=res.outcome)
+
+            summary = run_episodes(env, lambda obs: env.expert_action(), range(args.seed, args.seed + args.episodes), tick)
+    finally:
+        env.close()
+    sim_s = summary.decisions * env.twin_cfg.decision_period
+    print(f"scripted expert: {summary.success_rate:.1%} success over {len(summary.episodes)} episodes "
+          f"(seeds {args.seed}..{args.seed + args.episodes - 1}); outcomes {dict(summary.outcomes())}")
+    print(f"timing: {summary.decisions} decisions in {summary.wall_s:.1f} s wall = "
+          f"{summary.decisions / summary.wall_s:.0f} decisions/s, {sim_s / summary.wall_s:.1f}x real time")
+    return 0
+
+
+class TwinDryRun:
+    """`deploy --dry-run` on the twin of `config` (its [twin] decision period, reality gap, camera rendering)."""
+
+    def __init__(self, config: str | None):
+        from mrguide.twin.env import (
+            EnvConfig,  # imports PyBullet: only once deploy's own checks have passed
+        )
+
+        self.env_cfg = EnvConfig.load(config)
+        self.decision_period = self.env_cfg.twin.decision_period
+
+    def camera(self, camera_cfg: Any, base: Path, object_height: float) -> Any:
+        from mrguide.twin.camera_feed import TwinCameraPoses
+
+        return TwinCameraPoses(camera_cfg, base, object_height)
+
+    def run(self, policy_path: str, policy: Any, bus: Any, episodes: int, seed: int, run_log: Any, safety: Any,
+            max_pose_misses: int, tick: Any, camera: Any) -> Any:
+        from mrguide.deploy.runtime import RuntimeConfig
+        from mrguide.twin.dry_run import dry_run
+
+        return dry_run(policy_path, self.env_cfg, bus, episodes, seed, run_log, safety, after_episode=tick, policy=policy,
+                       runtime_cfg=RuntimeConfig(max_pose_misses=max_pose_misses), pose_factory=camera,
+                       on_placed=camera.refresh if camera else None)
