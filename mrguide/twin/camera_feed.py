@@ -24,6 +24,7 @@ from mrguide.calibration.camera_model import CameraModel
 from mrguide.deploy.camera import CameraPoseSource, CameraSourceConfig, CameraStats, load_marker_pipeline
 from mrguide.deploy.frames import Frame
 from mrguide.twin.camera import Camera, Intrinsics
+from mrguide.twin.hmd_stream import stop_render_process
 from mrguide.twin.markers import MarkerOnBody, marker_on_cube_top
 from mrguide.twin.scene import TABLE_CENTER, TABLE_HALF_EXTENTS
 
@@ -126,13 +127,7 @@ class TwinCameraFeed:
             return None
 
     def close(self) -> None:
-        try:
-            self._conn.send(None)
-        except (BrokenPipeError, OSError):
-            pass
-        self._proc.join(timeout=5)
-        if self._proc.is_alive():
-            self._proc.kill()
+        stop_render_process(self._conn, self._proc)
 
 
 class TwinCameraPoses:

@@ -72,6 +72,17 @@ def _hmd_worker(conn, calibration_path: str | None, object_size: float, noise_se
             conn.send(("none", str(exc)))
 
 
+def stop_render_process(conn, proc) -> None:
+    """Ask a render process to end (None on its pipe), wait 5 s, then kill it."""
+    try:
+        conn.send(None)
+    except (BrokenPipeError, OSError):
+        pass
+    proc.join(timeout=5)
+    if proc.is_alive():
+        proc.kill()
+
+
 class HmdPoseStream(ObjectPoseSource):
     """Latest object position from the HMD process; stale or missing estimates raise PoseUnavailable."""
 
@@ -178,10 +189,4 @@ class HmdPoseStream(ObjectPoseSource):
     def close(self) -> None:
         self._stop.set()
         self._thread.join(timeout=10)
-        try:
-            self._conn.send(None)
-        except (BrokenPipeError, OSError):
-            pass
-        self._proc.join(timeout=5)
-        if self._proc.is_alive():
-            self._proc.kill()
+        stop_render_process(self._conn, self._proc)
