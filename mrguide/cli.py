@@ -15,8 +15,11 @@ from mrguide.errors import InputError
 
 def cmd_main(args: argparse.Namespace) -> int:
     """The Quick-start main job: train a guided policy briefly (or reuse it) → dry-run deploy → sim-to-real."""
+    from mrguide.shipped_configs import shipped_config
+
     t0 = time.perf_counter()
     out = Path(args.out)
+    real_config = str(args.real_config or shipped_config("real_cell.toml"))  # checked before training starts
     policy = out / "train" / "policy.npz"
     if policy.exists():
         print(f"[1/3] using the policy trained before: {policy} (delete {out} to train again)")
@@ -28,10 +31,10 @@ def cmd_main(args: argparse.Namespace) -> int:
         if rc:
             return rc
     print("\n[2/3] dry run: deploying it over the virtual CAN bus to simulated drives on a twin with reality gap")
-    rc = main(["deploy", "--policy", str(policy), "--config", args.real_config, "--dry-run", "--episodes", str(args.deploy_episodes),
+    rc = main(["deploy", "--policy", str(policy), "--config", real_config, "--dry-run", "--episodes", str(args.deploy_episodes),
                "--log", str(out / "deploy.jsonl")] + (["--quiet"] if args.quiet else []))
     print(f"\n[3/3] sim-to-real evaluation: {args.seeds} seeds x {args.episodes} episodes per condition")
-    rc2 = main(["sim2real", "--policy", str(policy), "--real-config", args.real_config, "--seeds", str(args.seeds),
+    rc2 = main(["sim2real", "--policy", str(policy), "--real-config", real_config, "--seeds", str(args.seeds),
                 "--episodes", str(args.episodes), "--out", str(out / "sim2real")] + (["--quiet"] if args.quiet else []))
     print(f"main job finished in {time.perf_counter() - t0:.0f} s")
     return rc or rc2
@@ -49,7 +52,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--seeds", type=positive_int, default=2, help="sim-to-real seeds")
     sp.add_argument("--episodes", type=positive_int, default=5, help="sim-to-real episodes per seed and condition")
     sp.add_argument("--seed", type=nonnegative_int, default=0, help="training seed")
-    sp.add_argument("--real-config", default=str(Path(__file__).resolve().parents[1] / "configs" / "real_cell.toml"))
+    sp.add_argument("--real-config", help="the 'real' cell (TOML); default: the shipped configs/real_cell.toml")
     sp.add_argument("--quiet", action="store_true", help="no progress bars")
     sp.set_defaults(func=cmd_main)
 

@@ -23,8 +23,8 @@ from tqdm import tqdm
 from mrguide.cli_args import positive_int
 from mrguide.config import ConfigError, load_section
 from mrguide.experiments.runs import configs
+from mrguide.shipped_configs import shipped_config
 
-CONFIG_DIR = Path(__file__).resolve().parents[2] / "configs" / "experiments"
 #: The three sim-to-real conditions (run by mrguide.experiments.sim2real; named here to check them without PyBullet).
 CONDITIONS = ("sim", "real_exact", "real_hmd")
 GAP_PARAMS = ("object_mass", "object_friction", "suction_break_force", "actuator_latency", "actuator_lag", "joint_noise", "vacuum_noise")
@@ -85,7 +85,7 @@ def add_experiment_command(sub: argparse._SubParsersAction) -> None:
     esub = p.add_subparsers(dest="experiment", required=True)
     for name in NAMES:
         e = esub.add_parser(name, help=f"{name}: train what is not done yet, then report")
-        e.add_argument("--config", help=f"experiment TOML ([experiment]); default configs/experiments/<{name}>.toml")
+        e.add_argument("--config", help=f"experiment TOML ([experiment]); default the shipped configs/experiments/<{name}>.toml")
         e.add_argument("--out", help="experiment directory (one subdirectory per run); default runs/<name>")
         e.add_argument("--seeds", type=positive_int, help="override experiment.seeds")
         e.add_argument("--steps", type=positive_int, help="override experiment.steps")
@@ -104,7 +104,7 @@ def add_experiment_command(sub: argparse._SubParsersAction) -> None:
 
 def _setup(args: argparse.Namespace) -> tuple[Experiment, Any, str | None, Path]:
     exp = _experiments()[args.name]
-    path = Path(args.config) if args.config else CONFIG_DIR / exp.default_config
+    path = Path(args.config) if args.config else shipped_config("experiments", exp.default_config)
     cfg = load_section(exp.config_cls, path, "experiment")
     cfg = dataclasses.replace(cfg, **{k: getattr(args, k) for k in ("seeds", "steps") if getattr(args, k) is not None})
     base = None
@@ -163,7 +163,7 @@ def add_sim2real_command(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("sim2real", help="the three sim-to-real conditions of the paper (Fig. 8) for one policy")
     p.add_argument("--policy", required=True)
     p.add_argument("--config", default=None, help="TOML of the training twin (condition 1); default: built-in defaults")
-    p.add_argument("--real-config", default="configs/real_cell.toml",
+    p.add_argument("--real-config", default=None,
                    help="TOML of the 'real' cell: [twin.reality_gap], [deploy] bus_config, [calibration.hmd] (conditions 2, 3)")
     p.add_argument("--seeds", type=positive_int, default=3)
     p.add_argument("--episodes", type=positive_int, default=10, help="episodes per seed and condition")
@@ -218,7 +218,7 @@ def cmd_sim2real(args: argparse.Namespace) -> int:
 
     out = check_output_dir(args.out, "--out")
     train_cfg = EnvConfig.load(args.config)
-    cell = s2r.load_real_cell(args.real_config)
+    cell = s2r.load_real_cell(args.real_config or shipped_config("real_cell.toml"))
     real_cfg, real_path, bus, hmd = cell.env, cell.path, cell.bus, cell.hmd
     policy = s2r.load_policy(args.policy, train_cfg, cell)
     _check_sweeps(args.sweep, real_cfg, hmd)
