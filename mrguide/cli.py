@@ -57,7 +57,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.set_defaults(func=cmd_main)
 
     from mrguide.deploy.commands import add_deploy_command
-    from mrguide.twin.commands import TwinDryRun, add_expert_command
+    from mrguide.twin.commands import TwinDryRun, add_expert_command, run_twin_calibration
 
     add_expert_command(sub)
     add_deploy_command(sub, TwinDryRun)
@@ -66,7 +66,7 @@ def build_parser() -> argparse.ArgumentParser:
     from mrguide.experiments.commands import add_experiment_command
     from mrguide.policies.commands import add_train_command
 
-    add_calibrate_command(sub)
+    add_calibrate_command(sub, run_twin_calibration)
     from mrguide.deploy.camera_check import add_camera_command
 
     add_camera_command(sub)

@@ -142,14 +142,9 @@ def test_calibrate_from_images(tmp_path):
 ROBOT_PC_PACKAGES = ("deploy", "drivers", "motion", "calibration")
 FORBIDDEN = ("torch", "pybullet", "pybullet_data", "pybullet_utils", "mrguide.twin", "mrguide.policies",
              "mrguide.annotation", "mrguide.experiments")
-#: Known exceptions (file, function, module), each with the reason it is still there.
-KNOWN = {
-    # `mrguide calibrate --twin` renders the targets with the twin; its command code still lives in
-    # calibration/commands.py (issue 15, item 7 moves it beside the twin). `calibrate --images` needs neither.
-    ("calibration/commands.py", "_run_twin", "pybullet"),
-    ("calibration/commands.py", "_run_twin", "mrguide.twin.markers"),
-    ("calibration/commands.py", "_run_twin", "mrguide.twin.camera"),
-}
+#: Known exceptions (file, function, module), each with the reason it is still there: none (the twin hands
+#: `calibrate --twin` and `deploy --dry-run` their twin code).
+KNOWN: set[tuple[str, str, str]] = set()
 
 
 def _imports(path: Path) -> list[tuple[str, str]]:
@@ -175,8 +170,8 @@ def _forbidden(module: str) -> bool:
 
 
 def test_the_scan_sees_function_local_imports():
-    """The scan on a known function-local import (the one the old module-import check missed)."""
-    assert ("_run_twin", "pybullet") in _imports(ROOT / "mrguide" / "calibration" / "commands.py")
+    """The scan on a known function-local import (the kind the old module-import check missed)."""
+    assert ("run_twin_calibration", "pybullet") in _imports(ROOT / "mrguide" / "twin" / "commands.py")
 
 
 def test_no_robot_pc_module_imports_torch_pybullet_the_twin_or_the_policies():

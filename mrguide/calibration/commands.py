@@ -6,6 +6,7 @@ import argparse
 import json
 import logging
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 import cv2
@@ -18,7 +19,6 @@ from mrguide.calibration.errors import CalibrationError
 from mrguide.calibration.overlay import can_write_image, encode_image, mosaic
 from mrguide.calibration.procedure import CalibrationRun, calibrate_frames
 from mrguide.calibration.se3 import apply, invert, is_rigid, rotation_angle_deg
-from mrguide.config import load_section
 from mrguide.output_files import check_output_file, write_files_atomically
 
 log = logging.getLogger(__name__)
@@ -26,8 +26,11 @@ log = logging.getLogger(__name__)
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
 
 
-def add_calibrate_command(subparsers: argparse._SubParsersAction) -> None:
-    """Add `calibrate` to the top-level parser; its handler returns the exit code."""
+def add_calibrate_command(subparsers: argparse._SubParsersAction,
+                          twin_calibration: Callable[[Path | None, CalibrationConfig], tuple[CalibrationRun, np.ndarray]]) -> None:
+    """Add `calibrate` to the top-level parser; its handler returns the exit code. `twin_calibration(config,
+    cfg)` renders the targets with the twin's HMD and calibrates (handed in by the twin: calibration does not
+    import it) and returns the run and the true T_base_hmd."""
     p = subparsers.add_parser(
         "calibrate",
         help="register the HMD/camera frame to the robot base with ArUco markers",
@@ -45,7 +48,7 @@ def add_calibrate_command(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--config", type=Path, help="TOML with [calibration] (and [calibration_twin] for --twin)")
     p.add_argument("--out", type=Path, default=Path("out/calibration.json"), help="calibration file to write")
     p.add_argument("--overlay", type=Path, default=Path("out/calibration_overlay.png"), help="overlay PNG to write")
-    p.set_defaults(func=run_calibrate)
+    p.set_defaults(func=run_calibrate, twin_calibration=twin_calibration)
 
 
 def run_calibrate(args: argparse.Namespace) -> int:
@@ -53,7 +56,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
     _check_outputs(args.out, args.overlay)
     cfg = load_calibration_config(args.config)
     if args.twin:
-        run, truth = _run_twin(args, cfg)
+        run, truth = args.twin_calibration(args.config, cfg)
     else:
         if args.intrinsics is None:
             raise CalibrationError("--images needs --intrinsics FILE (the camera matrix of the images' camera mode)")
@@ -116,26 +119,6 @@ def _load_poses(path: Path, names: list[str]) -> dict[str, np.ndarray]:
             raise CalibrationError(f"{path}: pose of {name} is not a rigid 4x4 transform")
         poses[name] = T
     return poses
-
-
-def _run_twin(args: argparse.Namespace, cfg: CalibrationConfig) -> tuple[CalibrationRun, np.ndarray]:
-    import pybullet as pb
-
-    from mrguide.twin.markers import TwinCalibrationConfig, TwinHmd, calibrate_twin_hmd
-    from mrguide.twin.camera import look_at
-
-    twin = load_section(TwinCalibrationConfig, args.config, "calibration_twin")
-    client = pb.connect(pb.DIRECT)
-    try:
-        table = pb.createVisualShape(pb.GEOM_BOX, halfExtents=[0.55, 0.6, 0.02], rgbaColor=[0.75, 0.72, 0.66, 1],
-                                     physicsClientId=client)
-        pb.createMultiBody(0, -1, table, [0.45, 0.1, -0.02], physicsClientId=client)
-        first = look_at(np.array(twin.views[0]), np.array(twin.look_at), np.array([0.0, 0.0, 1.0]))
-        hmd = TwinHmd(client, twin.T_base_hmd, first, twin.intrinsics, twin.supersample)
-        run = calibrate_twin_hmd(hmd, cfg, twin.views, twin.look_at, cfg.hmd)
-    finally:
-        pb.disconnect(client)
-    return run, twin.T_base_hmd
 
 
 def _report(run: CalibrationRun, truth: np.ndarray | None) -> None:

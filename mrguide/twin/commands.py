@@ -7,6 +7,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 from tqdm import tqdm
 
 from mrguide.cli_args import nonnegative_int, positive_int
@@ -68,3 +69,26 @@ class TwinDryRun:
         return dry_run(policy_path, self.env_cfg, bus, episodes, seed, run_log, safety, after_episode=tick, policy=policy,
                        runtime_cfg=RuntimeConfig(max_pose_misses=max_pose_misses), pose_factory=camera,
                        on_placed=camera.refresh if camera else None)
+
+
+def run_twin_calibration(config: Path | None, cfg: Any) -> tuple[Any, np.ndarray]:
+    """`mrguide calibrate --twin`: the targets rendered by a simulated HMD in a bare twin scene, calibrated as images
+    would be; returns the calibration run and the true T_base_hmd of [calibration_twin]."""
+    import pybullet as pb
+
+    from mrguide.config import load_section
+    from mrguide.twin.camera import look_at
+    from mrguide.twin.markers import TwinCalibrationConfig, TwinHmd, calibrate_twin_hmd
+
+    twin = load_section(TwinCalibrationConfig, config, "calibration_twin")
+    client = pb.connect(pb.DIRECT)
+    try:
+        table = pb.createVisualShape(pb.GEOM_BOX, halfExtents=[0.55, 0.6, 0.02], rgbaColor=[0.75, 0.72, 0.66, 1],
+                                     physicsClientId=client)
+        pb.createMultiBody(0, -1, table, [0.45, 0.1, -0.02], physicsClientId=client)
+        first = look_at(np.array(twin.views[0]), np.array(twin.look_at), np.array([0.0, 0.0, 1.0]))
+        hmd = TwinHmd(client, twin.T_base_hmd, first, twin.intrinsics, twin.supersample)
+        run = calibrate_twin_hmd(hmd, cfg, twin.views, twin.look_at, cfg.hmd)
+    finally:
+        pb.disconnect(client)
+    return run, twin.T_base_hmd

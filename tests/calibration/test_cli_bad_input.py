@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from mrguide.calibration import commands
+from mrguide.twin import commands as twin_commands
 from mrguide.calibration.calibration_file import CalibrationRecord
 from mrguide.calibration.procedure import CalibrationRun
 
@@ -100,7 +101,7 @@ def test_a_failed_write_leaves_neither_file(files, run_cli, monkeypatch):
     """The overlay's write fails after the calibration file's: neither is left, nor any temporary file."""
     record = CalibrationRecord(np.eye(4), "DICT_4X4_50", 0.04, "board", 0.001, 0.002, 1, 80)
     run = CalibrationRun(record, None, (), (np.zeros((72, 128, 3), np.uint8),))
-    monkeypatch.setattr(commands, "_run_twin", lambda args, cfg: (run, None))
+    monkeypatch.setattr(twin_commands, "run_twin_calibration", lambda config, cfg: (run, None))
     monkeypatch.setattr(commands, "_report", lambda run, truth: None)
     real_fsync, calls = os.fsync, []
 
