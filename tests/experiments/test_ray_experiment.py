@@ -49,7 +49,10 @@ def test_tiny_learning_curves_on_local_ray_then_report_again(tiny_experiment, ca
 
 def test_a_killed_experiment_resumes_from_checkpoints(tiny_experiment):
     write, out = tiny_experiment
-    cfg = write("lb", "seeds = 2\nsteps = 600\nvariants = [\"baseline\"]\n")
+    # long enough that neither run can finish before the other has checkpointed, even when a loaded machine
+    # starts the second Ray worker seconds after the first (600 steps raced that once)
+    total = 4000
+    cfg = write("lb", f"seeds = 2\nsteps = {total}\nvariants = [\"baseline\"]\n")
     cmd = [sys.executable, "-m", "mrguide.cli", "experiment", "long-baseline", "--config", str(cfg), "--out", str(out),
            "--workers", "2", "--quiet"]
     env = {**os.environ, "PYTHONPATH": str(REPO)}
@@ -72,6 +75,6 @@ def test_a_killed_experiment_resumes_from_checkpoints(tiny_experiment):
     assert res.returncode == 0, res.stderr
     for run, step, before in zip(runs, checkpointed, kept):
         steps = steps_of(run)
-        assert steps[-1] == 600 and steps == sorted(set(steps))  # no row twice, no step going back
-        assert 0 < step < 600 and before and rows_up_to(run, step) == before  # resumed, not trained again
-    assert "| baseline | 2 | 600 |" in res.stdout
+        assert steps[-1] == total and steps == sorted(set(steps))  # no row twice, no step going back
+        assert 0 < step < total and before and rows_up_to(run, step) == before  # resumed, not trained again
+    assert f"| baseline | 2 | {total} |" in res.stdout
