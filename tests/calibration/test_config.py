@@ -1,7 +1,8 @@
-"""The shipped calibration config matches the code defaults; bad values are named."""
+"""The shipped calibration config documents every key and loads; bad values are named."""
 
 from __future__ import annotations
 
+import dataclasses
 import re
 from pathlib import Path
 
@@ -14,9 +15,34 @@ from mrguide.twin.markers import TwinCalibrationConfig
 CONFIG = Path(__file__).parents[2] / "configs" / "calibration.toml"
 
 
-def test_shipped_config_is_the_defaults():
-    assert load_calibration_config(CONFIG) == CalibrationConfig()
-    assert load_section(TwinCalibrationConfig, CONFIG, "calibration_twin") == TwinCalibrationConfig()
+def _fields(cls: type, prefix: str) -> set[str]:
+    """Dotted names of every setting of a config dataclass, nested tables included."""
+    out = set()
+    for f in dataclasses.fields(cls):
+        default = f.default_factory() if f.default_factory is not dataclasses.MISSING else f.default
+        out |= _fields(type(default), f"{prefix}{f.name}.") if dataclasses.is_dataclass(default) else {prefix + f.name}
+    return out
+
+
+def _documented(text: str) -> set[str]:
+    """Dotted names the file sets, or shows as a commented-out example (`# key = ...`) in its table."""
+    keys, table = set(), ""
+    for line in text.splitlines():
+        line = line.strip()
+        if m := re.match(r"^\[([\w.]+)\]", line):
+            table = m.group(1) + "."
+        elif m := re.match(r"^#?\s*(\w+)\s*=", line):
+            keys.add(table + m.group(1))
+    return keys
+
+
+def test_shipped_config_documents_every_setting_and_loads():
+    """A setting added to the code but not to the shipped file (the reference users copy) fails here."""
+    documented = _documented(CONFIG.read_text())
+    assert _fields(CalibrationConfig, "calibration.") - documented == set()
+    assert _fields(TwinCalibrationConfig, "calibration_twin.") - documented == set()
+    load_calibration_config(CONFIG)
+    load_section(TwinCalibrationConfig, CONFIG, "calibration_twin")
 
 
 @pytest.mark.parametrize("body, message", [
