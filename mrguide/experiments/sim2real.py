@@ -135,18 +135,15 @@ def run_real(policy_path: Path, real_cfg: EnvConfig, bus_cfg: CobotBusConfig, se
     episode; with `recover` the drives are fault-reset and the next episode runs (as an operator would
     after acknowledging), otherwise the remaining episodes of the seed count as safety stops too."""
     cells: list[SimulatedCell] = []
-    streams: list[HmdPoseStream] = []
     outcomes: list[str] = []
     goals = [g for _, g in episode_layouts(real_cfg, episodes, seed)]
     task = real_cfg.task
+    # the HMD process calibrates (seconds of rendering) before the simulated cell's control loop starts
+    streams = [HmdPoseStream(None, hmd_config, task.object_height, noise_seed=seed, hmd_overrides=hmd_overrides)] if use_hmd else []
 
     def pose_factory(cell: SimulatedCell):
         cells.append(cell)
-        if not use_hmd:
-            return TwinObjectPose(cell.plant)
-        stream = HmdPoseStream(cell.plant, hmd_config, task.object_height, noise_seed=seed, hmd_overrides=hmd_overrides)
-        streams.append(stream)
-        return stream
+        return streams[0].attach(cell.plant) if use_hmd else TwinObjectPose(cell.plant)
 
     def refresh() -> None:  # a person moved the object: wait until the HMD has seen it again
         for s in streams:

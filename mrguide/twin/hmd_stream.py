@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import logging
 import multiprocessing as mp
+import os
 import threading
 import time
 from dataclasses import replace
@@ -33,6 +34,10 @@ OBJECT_MARKER_ID = 0
 def _hmd_worker(conn, calibration_path: str | None, object_size: float, noise_seed: int, hmd_overrides: dict) -> None:
     """Runs in the HMD process: calibrate, then answer each true object pose with the HMD's estimate."""
     import pybullet as pb
+
+    from mrguide.twin.camera_feed import RENDER_NICENESS
+
+    os.nice(RENDER_NICENESS)  # the simulated drives and the deploy loop share this machine: they go first
 
     from mrguide.calibration.config import load_calibration_config
     from mrguide.config import load_section
@@ -86,8 +91,12 @@ def stop_render_process(conn, proc) -> None:
 class HmdPoseStream(ObjectPoseSource):
     """Latest object position from the HMD process; stale or missing estimates raise PoseUnavailable."""
 
-    def __init__(self, plant: TwinPlant, calibration_path: str | Path | None, object_size: float,
+    def __init__(self, plant: TwinPlant | None, calibration_path: str | Path | None, object_size: float,
                  noise_seed: int = 0, hmd_overrides: dict | None = None, max_age: float = 3.0, start_timeout: float = 180.0):
+        """Start the HMD process and wait until it has calibrated; with `plant`, start streaming at once.
+
+        Without one, `attach` starts it later: start the process before a simulated cell's control loop runs,
+        since its calibration renders for seconds and would take the CPU from the 4 ms loop."""
         self.plant = plant
         self.max_age = max_age
         ctx = mp.get_context("spawn")
@@ -103,7 +112,16 @@ class HmdPoseStream(ObjectPoseSource):
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="hmd-stream", daemon=True)
+        if plant is not None:
+            self._thread.start()
+
+    def attach(self, plant: TwinPlant) -> "HmdPoseStream":
+        """Stream the object of `plant` (once; the process was started and calibrated without it)."""
+        if self.plant is not None:
+            raise RuntimeError("the HMD stream already follows a twin")
+        self.plant = plant
         self._thread.start()
+        return self
 
     def _wait_ready(self, timeout: float) -> dict:
         """The worker's start-up report; RuntimeError if it fails, dies or stays silent for `timeout` s."""
@@ -188,5 +206,6 @@ class HmdPoseStream(ObjectPoseSource):
 
     def close(self) -> None:
         self._stop.set()
-        self._thread.join(timeout=10)
+        if self._thread.is_alive():
+            self._thread.join(timeout=10)
         stop_render_process(self._conn, self._proc)
