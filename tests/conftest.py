@@ -74,3 +74,28 @@ def policy_file():
         return path
 
     return write
+
+
+def render_calibration_images(client: int, tmp_path: Path) -> Path:
+    """Twin renders of the default board from the first three default views, as a person would take them with the
+    HMD: PNGs in tmp_path/images, with the intrinsics (k.json) and head poses (poses.json) beside them."""
+    import cv2
+
+    from mrguide.calibration.config import CalibrationConfig
+    from mrguide.twin.camera import look_at
+    from mrguide.twin.markers import TwinCalibrationConfig, TwinHmd, add_targets
+
+    twin = TwinCalibrationConfig()
+    add_targets(client, CalibrationConfig())
+    hmd = TwinHmd(client, twin.T_base_hmd, np.eye(4))
+    folder = tmp_path / "images"
+    folder.mkdir()
+    poses = {}
+    for i, eye in enumerate(twin.views[:3]):
+        hmd.move_to(look_at(np.array(eye), np.array(twin.look_at), np.array([0, 0, 1.0])))
+        frame = hmd.frame()
+        cv2.imwrite(str(folder / f"view{i}.png"), cv2.cvtColor(frame.image, cv2.COLOR_RGB2BGR))
+        poses[f"view{i}.png"] = frame.T_hmd_cam.tolist()
+    (tmp_path / "poses.json").write_text(json.dumps(poses))
+    (tmp_path / "k.json").write_text(json.dumps(hmd.camera_model.to_dict()))
+    return folder

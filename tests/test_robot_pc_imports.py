@@ -106,28 +106,13 @@ def test_bus_commands(tmp_path, argv, words):
 
 
 def test_calibrate_from_images(tmp_path):
-    import cv2
     import pybullet as pb
 
-    from mrguide.calibration.config import CalibrationConfig
-    from mrguide.twin.camera import look_at
-    from mrguide.twin.markers import TwinCalibrationConfig, TwinHmd, add_targets
+    from tests.conftest import render_calibration_images
 
-    twin = TwinCalibrationConfig()
     client = pb.connect(pb.DIRECT)
     try:  # the images a person would take with the HMD, made here by the twin
-        add_targets(client, CalibrationConfig())
-        hmd = TwinHmd(client, twin.T_base_hmd, np.eye(4))
-        folder = tmp_path / "images"
-        folder.mkdir()
-        poses = {}
-        for i, eye in enumerate(twin.views[:3]):
-            hmd.move_to(look_at(np.array(eye), np.array(twin.look_at), np.array([0, 0, 1.0])))
-            frame = hmd.frame()
-            cv2.imwrite(str(folder / f"view{i}.png"), cv2.cvtColor(frame.image, cv2.COLOR_RGB2BGR))
-            poses[f"view{i}.png"] = frame.T_hmd_cam.tolist()
-        (tmp_path / "poses.json").write_text(json.dumps(poses))
-        (tmp_path / "k.json").write_text(json.dumps(hmd.camera_model.to_dict()))
+        folder = render_calibration_images(client, tmp_path)
     finally:
         pb.disconnect(client)
     argv = ["calibrate", "--images", str(folder), "--intrinsics", str(tmp_path / "k.json"), "--poses",

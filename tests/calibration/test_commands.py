@@ -11,9 +11,8 @@ import pytest
 from mrguide.calibration.calibration_file import load_calibration
 from mrguide.cli import main
 from mrguide.calibration.se3 import invert, rotation_angle_deg
-from mrguide.twin.camera import look_at
-from mrguide.twin.markers import TwinCalibrationConfig, TwinHmd, add_targets
-from mrguide.calibration.config import CalibrationConfig
+from mrguide.twin.markers import TwinCalibrationConfig
+from tests.conftest import render_calibration_images
 
 TWIN = TwinCalibrationConfig()
 
@@ -25,19 +24,7 @@ def _run(argv: list[str]) -> int:
 @pytest.fixture
 def image_folder(client, tmp_path):
     """Twin renders of the default board from the default views, saved as PNGs, with intrinsics and poses files."""
-    add_targets(client, CalibrationConfig())
-    hmd = TwinHmd(client, TWIN.T_base_hmd, np.eye(4))
-    folder = tmp_path / "images"
-    folder.mkdir()
-    poses = {}
-    for i, eye in enumerate(TWIN.views[:3]):
-        hmd.move_to(look_at(np.array(eye), np.array(TWIN.look_at), np.array([0, 0, 1.0])))
-        frame = hmd.frame()
-        cv2.imwrite(str(folder / f"view{i}.png"), cv2.cvtColor(frame.image, cv2.COLOR_RGB2BGR))
-        poses[f"view{i}.png"] = frame.T_hmd_cam.tolist()
-    (tmp_path / "poses.json").write_text(json.dumps(poses))
-    (tmp_path / "k.json").write_text(json.dumps(hmd.camera_model.to_dict()))
-    return folder
+    return render_calibration_images(client, tmp_path)
 
 
 def test_twin_mode_writes_file_and_overlay(tmp_path, capsys):
