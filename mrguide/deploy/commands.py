@@ -29,7 +29,7 @@ class DryRunBackend(Protocol):
     def camera(self, camera_cfg: Any, base: Path, object_height: float) -> Any: ...
 
     def run(self, policy_path: str, policy: Any, bus: Any, episodes: int, seed: int, run_log: Any, safety: Any,
-            max_pose_misses: int, tick: Any, camera: Any) -> Any: ...
+            runtime: Any, tick: Any, camera: Any) -> Any: ...
 
 
 def add_deploy_command(sub: argparse._SubParsersAction, dry_run_factory: Callable[[str | None], DryRunBackend]) -> None:
@@ -103,7 +103,7 @@ def cmd_deploy(args: argparse.Namespace) -> int:
                 bar.set_postfix(last=report.outcome, decisions=report.decisions)
 
             if args.dry_run:
-                summary = dry.run(args.policy, policy, bus, episodes, seed, run_log, safety, dcfg.max_pose_misses, tick, camera)
+                summary = dry.run(args.policy, policy, bus, episodes, seed, run_log, safety, dcfg.runtime, tick, camera)
             else:
                 summary = _deploy_real(policy, bus, spec, task, dcfg, safety, episodes, run_log, tick, camera)
             camera_stats = _log_camera(camera, run_log)
@@ -145,12 +145,11 @@ def _log_camera(camera, run_log):
 
 
 def _deploy_real(policy, bus, spec, task, dcfg, safety, episodes, run_log, tick, camera):
-    from mrguide.deploy.runtime import Runtime, RuntimeConfig
+    from mrguide.deploy.runtime import Runtime
     from mrguide.deploy.session import FixedObjectPose, run_session
     from mrguide.drivers.cobot import Cobot
     from mrguide.drivers.realtime import freeze_heap
 
-    rcfg = RuntimeConfig(decision_period=policy.decision_period, max_pose_misses=dcfg.max_pose_misses)
     goals = [dcfg.goals[i % len(dcfg.goals)] for i in range(episodes)]
 
     def place(i: int) -> None:
@@ -164,5 +163,5 @@ def _deploy_real(policy, bus, spec, task, dcfg, safety, episodes, run_log, tick,
     with Cobot(bus, spec) as cobot:
         cobot.enable()
         pose = camera or FixedObjectPose(dcfg.object_position)
-        with Runtime(cobot, policy, pose, spec, task, run_log, rcfg, safety) as rt:
+        with Runtime(cobot, policy, pose, spec, task, run_log, policy.decision_period, dcfg.runtime, safety) as rt:
             return run_session(rt, goals, before_episode=place, after_episode=tick)

@@ -42,9 +42,9 @@ class RunStopped(RuntimeError):
 
 @dataclass(frozen=True)
 class RuntimeConfig:
-    """Timing of the runtime ([deploy] in a TOML config)."""
+    """How the runtime treats the arm and the object pose ([deploy.runtime] in a TOML config). The decision
+    period is not set here: it is the one the policy was trained with (its metadata)."""
 
-    decision_period: float = 0.1  # s; must be the period the policy was trained with
     home_tolerance: float = 0.01  # rad; the arm counts as home within this
     #: While the vacuum generator reports a part after the grasp, the object hangs under the cup: take its
     #: position from the TCP (forward kinematics) instead of the pose source, which may lag (an HMD does).
@@ -54,7 +54,8 @@ class RuntimeConfig:
     max_pose_misses: int = 3
 
     def __post_init__(self) -> None:
-        check_number("deploy.max_pose_misses", self.max_pose_misses, 0, 1000, integer=True)
+        check_number("deploy.runtime.home_tolerance", self.home_tolerance, 1e-4, 0.5, " rad")
+        check_number("deploy.runtime.max_pose_misses", self.max_pose_misses, 0, 1000, integer=True)
 
 
 @dataclass
@@ -99,15 +100,16 @@ class Runtime:
         spec: RobotSpec,
         task: TaskConfig,
         run_log: RunLog,
+        decision_period: float,
         config: RuntimeConfig | None = None,
         safety: SafetyConfig | None = None,
     ):
         self.cobot, self.policy, self.pose, self.spec, self.task, self.log = cobot, policy, pose, spec, task, run_log
         self.cfg = config or RuntimeConfig()
         period = cobot.period
-        ratio = self.cfg.decision_period / period
+        ratio = decision_period / period
         if abs(ratio - round(ratio)) > 1e-6 or ratio < 1:
-            raise ValueError(f"decision period {self.cfg.decision_period} s is not a multiple of the control period {period} s")
+            raise ValueError(f"decision period {decision_period} s is not a multiple of the control period {period} s")
         self.cycles = int(round(ratio))
         self.decision = DecisionStep(spec, task, period)
         self.kin, self.streamer = self.decision.kin, self.decision.streamer

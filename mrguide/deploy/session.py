@@ -37,13 +37,12 @@ class DeployConfig:
     object_position: tuple[float, float, float] = (0.50, -0.075, 0.025)
     #: Goals (object centre, m), used in turn.
     goals: tuple[tuple[float, float, float], ...] = ((0.50, 0.21, 0.025),)
-    #: Decisions in a row that may use the last object pose when the pose source has none; one more ends
-    #: the episode (`pose_lost`). In [0, 1000].
-    max_pose_misses: int = RuntimeConfig.max_pose_misses
     #: Where the object pose comes from: "fixed" (`object_position`) or "camera" (`[deploy.camera]`; in a dry
     #: run the camera's frames are rendered by the twin).
     pose_source: str = "fixed"
     camera: CameraSourceConfig = field(default_factory=CameraSourceConfig)
+    #: Home tolerance, carried-object tracking, missing poses ([deploy.runtime]).
+    runtime: RuntimeConfig = field(default_factory=RuntimeConfig)
 
     def __post_init__(self) -> None:
         if self.pose_source not in POSE_SOURCES:
@@ -52,7 +51,6 @@ class DeployConfig:
             raise ConfigError('deploy.camera.calibration: pose_source = "camera" needs the camera\'s calibration file')
         check_number("deploy.episodes", self.episodes, 1, MAX_EPISODES, integer=True)
         check_number("deploy.seed", self.seed, 0, 2**32 - 1, integer=True)
-        check_number("deploy.max_pose_misses", self.max_pose_misses, 0, 1000, integer=True)
         if not self.log_dir:
             raise ConfigError("deploy.log_dir must not be empty")
         if not self.goals:

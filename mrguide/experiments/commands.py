@@ -105,7 +105,7 @@ def add_experiment_command(sub: argparse._SubParsersAction) -> None:
 def _setup(args: argparse.Namespace) -> tuple[Experiment, Any, str | None, Path]:
     exp = _experiments()[args.name]
     path = Path(args.config) if args.config else shipped_config("experiments", exp.default_config)
-    cfg = load_section(exp.config_cls, path, "experiment")
+    cfg = load_section(exp.config_cls, path, "experiment", known=("experiment",))
     cfg = dataclasses.replace(cfg, **{k: getattr(args, k) for k in ("seeds", "steps") if getattr(args, k) is not None})
     base = None
     if cfg.config:

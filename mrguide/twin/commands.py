@@ -62,12 +62,11 @@ class TwinDryRun:
         return TwinCameraPoses(camera_cfg, base, object_height)
 
     def run(self, policy_path: str, policy: Any, bus: Any, episodes: int, seed: int, run_log: Any, safety: Any,
-            max_pose_misses: int, tick: Any, camera: Any) -> Any:
-        from mrguide.deploy.runtime import RuntimeConfig
+            runtime: Any, tick: Any, camera: Any) -> Any:
         from mrguide.twin.dry_run import dry_run
 
         return dry_run(policy_path, self.env_cfg, bus, episodes, seed, run_log, safety, after_episode=tick, policy=policy,
-                       runtime_cfg=RuntimeConfig(max_pose_misses=max_pose_misses), pose_factory=camera,
+                       runtime_cfg=runtime, pose_factory=camera,
                        on_placed=camera.refresh if camera else None)
 
 

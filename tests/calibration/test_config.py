@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import re
 from pathlib import Path
 
@@ -11,36 +10,16 @@ import pytest
 from mrguide.calibration.config import CalibrationConfig, load_calibration_config
 from mrguide.config import ConfigError, load_section
 from mrguide.twin.markers import TwinCalibrationConfig
+from tests.config_keys import undocumented
 
 CONFIG = Path(__file__).parents[2] / "configs" / "calibration.toml"
 
 
-def _fields(cls: type, prefix: str) -> set[str]:
-    """Dotted names of every setting of a config dataclass, nested tables included."""
-    out = set()
-    for f in dataclasses.fields(cls):
-        default = f.default_factory() if f.default_factory is not dataclasses.MISSING else f.default
-        out |= _fields(type(default), f"{prefix}{f.name}.") if dataclasses.is_dataclass(default) else {prefix + f.name}
-    return out
-
-
-def _documented(text: str) -> set[str]:
-    """Dotted names the file sets, or shows as a commented-out example (`# key = ...`) in its table."""
-    keys, table = set(), ""
-    for line in text.splitlines():
-        line = line.strip()
-        if m := re.match(r"^\[([\w.]+)\]", line):
-            table = m.group(1) + "."
-        elif m := re.match(r"^#?\s*(\w+)\s*=", line):
-            keys.add(table + m.group(1))
-    return keys
-
-
 def test_shipped_config_documents_every_setting_and_loads():
     """A setting added to the code but not to the shipped file (the reference users copy) fails here."""
-    documented = _documented(CONFIG.read_text())
-    assert _fields(CalibrationConfig, "calibration.") - documented == set()
-    assert _fields(TwinCalibrationConfig, "calibration_twin.") - documented == set()
+    text = CONFIG.read_text()
+    assert undocumented(CalibrationConfig, "calibration.", text) == set()
+    assert undocumented(TwinCalibrationConfig, "calibration_twin.", text) == set()
     load_calibration_config(CONFIG)
     load_section(TwinCalibrationConfig, CONFIG, "calibration_twin")
 

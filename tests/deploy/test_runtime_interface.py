@@ -70,7 +70,7 @@ def test_runtime_runs_on_any_cobot_interface(tmp_path):
     assert isinstance(cobot, CobotInterface)
     policy = lambda obs: oracle_action(obs, task, spec.workspace.to_normalized)  # noqa: E731
     with RunLog(tmp_path / "log.jsonl", {"test": "interface"}) as log:
-        with Runtime(cobot, policy, FixedObjectPose((0.5, -0.075, 0.025)), spec, task, log, RuntimeConfig()) as rt:
+        with Runtime(cobot, policy, FixedObjectPose((0.5, -0.075, 0.025)), spec, task, log, 0.1, RuntimeConfig()) as rt:
             report = rt.run_episode(np.array([0.5, 0.21, 0.025]), 0)
     assert report.outcome == "no_grasp" and report.decisions == task.horizon  # the cup never seals here
     assert len(cobot.streamed) >= task.horizon * 25
@@ -100,7 +100,7 @@ def test_a_driver_fault_outside_the_streaming_ends_the_episode_as_a_safety_stop(
     cobot.joint_state = failing_joint_state
     policy = lambda obs: oracle_action(obs, task, spec.workspace.to_normalized)  # noqa: E731
     with RunLog(tmp_path / "log.jsonl", {"test": "interface"}) as log:
-        with Runtime(cobot, policy, FixedObjectPose((0.5, -0.075, 0.025)), spec, task, log, RuntimeConfig()) as rt:
+        with Runtime(cobot, policy, FixedObjectPose((0.5, -0.075, 0.025)), spec, task, log, 0.1, RuntimeConfig()) as rt:
             with pytest.raises(DriverError, match="hung"):
                 rt.run_episode(np.array([0.5, 0.21, 0.025]), 0)
     ends = [r for r in read_log(tmp_path / "log.jsonl") if r["kind"] == "episode_end"]
