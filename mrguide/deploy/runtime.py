@@ -25,6 +25,7 @@ from mrguide.deploy.safety import Event, Reaction, SafetyConfig, Supervisor, Wat
 from mrguide.drivers.cobot_state import CycleSample, JointState, VacuumState
 from mrguide.drivers.errors import DriverError
 from mrguide.drivers.interface import CobotInterface
+from mrguide.motion.trajectory import TrajectoryError
 from mrguide.pose_source import ObjectPoseSource, PoseUnavailable
 from mrguide.robot import RobotSpec
 from mrguide.task import Outcome, TaskConfig
@@ -144,7 +145,10 @@ class Runtime:
     # -- streaming ----------------------------------------------------------------------------------
     def _stream_cycle(self) -> tuple[np.ndarray, np.ndarray, bool]:
         """One control period of the current trajectory, checked and handed to the driver."""
-        sp = self.streamer.step()
+        try:
+            sp = self.streamer.step()
+        except TrajectoryError as exc:
+            self._quick_stop(Event.TRAJECTORY, str(exc))
         problem = self.supervisor.check_setpoint(sp.q, sp.dq, sp.ddq)
         if problem:
             self._quick_stop(Event.JOINT_LIMIT, problem)

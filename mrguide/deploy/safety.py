@@ -48,6 +48,7 @@ class Event(str, enum.Enum):
     POSE_UNAVAILABLE = "pose_unavailable"  # no object pose this decision (the last one is used)
     POSE_LOST = "pose_lost"  # no object pose for more decisions in a row than allowed
     JOINT_LIMIT = "joint_limit"  # a setpoint outside position/velocity/acceleration limits
+    TRAJECTORY = "trajectory"  # the trajectory generator cannot plan the next setpoint
     FOLLOWING_ERROR = "following_error"  # measured joints too far from the commanded ones
     DRIVE_FAULT = "drive_fault"  # EMCY, heartbeat loss, lost feedback, bus error (latched by the driver)
     VACUUM_LOST = "vacuum_lost"  # part lost during lift or transport (a drop)
@@ -64,6 +65,7 @@ REACTIONS: dict[Event, Reaction] = {
     Event.POSE_UNAVAILABLE: Reaction.LAST_KNOWN,
     Event.POSE_LOST: Reaction.ABORT,
     Event.JOINT_LIMIT: Reaction.QUICK_STOP,
+    Event.TRAJECTORY: Reaction.QUICK_STOP,
     Event.FOLLOWING_ERROR: Reaction.QUICK_STOP,
     Event.DRIVE_FAULT: Reaction.QUICK_STOP,
     Event.VACUUM_LOST: Reaction.ABORT,

@@ -5,13 +5,17 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from ruckig import ControlInterface, InputParameter, OutputParameter, Result, Ruckig
+from ruckig import ControlInterface, InputParameter, OutputParameter, Result, Ruckig, RuckigError
 
 from mrguide.robot import RobotSpec
 
 
 class TrajectoryError(RuntimeError):
     """Ruckig rejected the input (target outside the position limits, non-finite values, ...)."""
+
+
+#: Jerk limits of the retry after Ruckig fails on a numerical edge case (scaled by this, i.e. lowered).
+EDGE_CASE_JERK_SCALE = 1.0 - 1e-9
 
 
 @dataclass
@@ -72,6 +76,24 @@ class JointStreamer:
         self._inp.target_velocity = [0.0] * self.spec.dof
         self._inp.target_acceleration = [0.0] * self.spec.dof
 
+    def _update(self) -> Result:
+        """Ruckig's update. Ruckig 0.19 throws on some exact inputs lying on a boundary between its profile
+        types (from rest, -0.1200000000000001 -> 0 rad at 1.5 rad/s, 6 rad/s^2, 60 rad/s^3 throws "error in
+        step 1"); such a plan is retried once with the jerk limits lowered by 1e-9, which moves the boundary.
+        Any other failure raises TrajectoryError."""
+        try:
+            return self._otg.update(self._inp, self._out)
+        except RuckigError:
+            jerk = list(self._inp.max_jerk)
+            self._inp.max_jerk = [j * EDGE_CASE_JERK_SCALE for j in jerk]
+            try:
+                return self._otg.update(self._inp, self._out)
+            except RuckigError as exc:
+                raise TrajectoryError(f"Ruckig cannot plan from {np.round(self._inp.current_position, 4).tolist()} "
+                                      f"to {np.round(self._inp.target_position, 4).tolist()}: {exc}") from exc
+            finally:
+                self._inp.max_jerk = jerk
+
     def state(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Current commanded (q, dq, ddq)."""
         i = self._inp
@@ -91,8 +113,8 @@ class JointStreamer:
             self.brake()
 
     def step(self) -> JointSetpoint:
-        """Advance one control period and return the new setpoint."""
-        result = self._otg.update(self._inp, self._out)
+        """Advance one control period and return the new setpoint; TrajectoryError if Ruckig cannot plan it."""
+        result = self._update()
         if result not in (Result.Working, Result.Finished):
             raise TrajectoryError(f"Ruckig failed with {result}")
         out = self._out

@@ -63,3 +63,31 @@ def test_brake_stops_within_limits_without_returning():
         assert np.all(sp.dq * prev.dq >= -1e-9)
         prev = sp
     assert np.allclose(sp.dq, 0.0, atol=1e-9)
+
+
+def test_ruckig_edge_case_from_rest_is_planned():
+    """Ruckig 0.19 throws on a move that lies exactly on a boundary between its profile types (0.12 rad from rest
+    at 1.5 rad/s, 6 rad/s^2, 60 rad/s^3: the dry run's start layouts are such offsets). It is retried, and the
+    arm arrives within the limits."""
+    spec = load_robot()
+    streamer = JointStreamer(spec)
+    start = spec.q_home + np.array([-0.12, 0.11037556, 0.12, -0.16, 0.0, -0.16])
+    start[0] = -0.1200000000000001
+    streamer.reset(start)
+    streamer.set_target(spec.q_home)
+    for _ in range(2000):
+        sp = streamer.step()
+        assert np.all(np.abs(sp.dq) <= spec.v_max + 1e-9)
+        if sp.finished:
+            break
+    np.testing.assert_allclose(sp.q, spec.q_home, atol=1e-9)
+
+
+def test_a_plan_ruckig_refuses_raises_trajectory_error():
+    spec = load_robot()
+    streamer = JointStreamer(spec)
+    streamer.reset(spec.q_home)
+    streamer.set_target(spec.q_home + 0.1)
+    streamer._inp.max_jerk = [float("nan")] * spec.dof  # what no retry can plan
+    with pytest.raises(TrajectoryError, match="Ruckig"):
+        streamer.step()

@@ -7,7 +7,7 @@ import pytest
 
 from mrguide.deploy.runlog import read_log
 from mrguide.deploy.runtime import RuntimeConfig
-from mrguide.motion.trajectory import JointSetpoint, JointStreamer
+from mrguide.motion.trajectory import JointSetpoint, JointStreamer, TrajectoryError
 from mrguide.pose_source import PoseUnavailable
 from mrguide.robot import RobotConfig, Workspace, load_robot
 from mrguide.twin.env import EnvConfig
@@ -185,6 +185,30 @@ def test_setpoint_beyond_a_joint_limit_quick_stops_before_it_is_sent(run_dry, mo
     assert summary.episodes[0].outcome == "safety_stop"
     assert stops.count(True) >= 1
     assert sent == [] or np.all(np.array(sent)[:, 0] <= spec.q_upper[0])
+
+
+def test_a_trajectory_the_generator_cannot_plan_quick_stops_the_run(run_dry, monkeypatch):
+    """Ruckig refuses to plan in the transport phase: the run quick-stops and logs why, instead of crashing with
+    the drives enabled."""
+    step = JointStreamer.step
+    armed = []
+
+    def failing_step(self):
+        if armed:
+            raise TrajectoryError("Ruckig cannot plan (test)")
+        return step(self)
+
+    def arm_in_transport(obs, phase, a, cell):
+        if phase == 3:
+            armed.append(True)
+        return a
+
+    monkeypatch.setattr(JointStreamer, "step", failing_step)
+    summary, log, cell = run_dry(hook=arm_in_transport)
+    assert events(log)[-1] == ("trajectory", "quick_stop")
+    assert summary.stopped is not None and "Ruckig cannot plan (test)" in summary.stopped
+    assert summary.episodes[0].outcome == "safety_stop"
+    assert not cell.cobot.status().enabled
 
 
 class _PoseGoesAway:
