@@ -300,11 +300,13 @@ def _resolve_urdf(source: UrdfSource, base: Path) -> tuple[Path, Path]:
     return urdf, package_dir
 
 
-def urdf_with_tool(spec: RobotSpec, mesh_root: str, cup_radius: float) -> str:
+def urdf_with_tool(spec: RobotSpec, mesh_root: str, cup_radius: float, stroke: float = 0.0) -> str:
     """The arm's URDF text with `package://` URIs rooted at `mesh_root` and the suction cup added.
 
     The cup is a cylinder link `suction_cup` on the flange, as long as the flange-to-TCP offset, and a
     massless `tcp` link sits at its lip. Used by the twin (file paths) and the annotation page (URLs).
+    With `stroke` > 0 (m) the cup sits on a spring level-compensator: a prismatic joint along the tool axis
+    that lets the cup retract by up to `stroke` towards the flange (0 = fully extended); else it is rigid.
     """
     root = ET.fromstring(spec.urdf_path.read_text().replace("package://", mesh_root))
     length = float(spec.T_flange_tcp[2, 3])
@@ -316,8 +318,10 @@ def urdf_with_tool(spec: RobotSpec, mesh_root: str, cup_radius: float) -> str:
         f'<visual>{origin}<geometry>{cyl}</geometry><material name="cup"><color rgba="0.15 0.15 0.15 1"/></material></visual>'
         f'<collision>{origin}<geometry>{cyl}</geometry></collision></link>'
     ))
+    joint = ('type="fixed">' if stroke <= 0 else
+             f'type="prismatic"><axis xyz="0 0 1"/><limit lower="{-stroke}" upper="0" effort="1000" velocity="1"/>')
     root.append(ET.fromstring(
-        f'<joint name="flange_cup_joint" type="fixed"><parent link="{spec.flange_frame}"/><child link="suction_cup"/>'
+        f'<joint name="flange_cup_joint" {joint}<parent link="{spec.flange_frame}"/><child link="suction_cup"/>'
         f'<origin xyz="0 0 0" rpy="0 0 0"/></joint>'
     ))
     root.append(ET.fromstring(

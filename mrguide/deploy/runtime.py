@@ -53,10 +53,14 @@ class RuntimeConfig:
     #: Decisions in a row that may use the last object pose when the pose source has none (a marker out of
     #: view, a dead HMD process); one more ends the episode as `pose_lost` with the arm held. In [0, 1000].
     max_pose_misses: int = 3
+    #: The same before the grasp (approach and grasp phases), when the arm over the part hides its marker from
+    #: the camera or HMD while the part lies still where it was last seen. In [0, 1000].
+    max_pose_misses_before_grasp: int = 30
 
     def __post_init__(self) -> None:
         check_number("deploy.runtime.home_tolerance", self.home_tolerance, 1e-4, 0.5, " rad")
         check_number("deploy.runtime.max_pose_misses", self.max_pose_misses, 0, 1000, integer=True)
+        check_number("deploy.runtime.max_pose_misses_before_grasp", self.max_pose_misses_before_grasp, 0, 1000, integer=True)
 
 
 @dataclass
@@ -308,7 +312,8 @@ class Runtime:
 
         While the part hangs under the cup (after the grasp) it is where the TCP is; just released, where the
         cup let it go. Otherwise the pose source says; when it has no pose, the last one is used for at most
-        `max_pose_misses` decisions in a row (each counted and logged), then the episode ends."""
+        `max_pose_misses` decisions in a row (`max_pose_misses_before_grasp` before the grasp, when the arm
+        hides the part as it reaches for it), each counted and logged; then the episode ends."""
         if self.cfg.track_carried_object and self.decision.phase >= 2:
             if vac.part_gripped:
                 self._carried = tcp - np.array([0.0, 0.0, 0.5 * self.task.object_height])
@@ -321,12 +326,13 @@ class Runtime:
             if self._last_obj is None:
                 raise RunStopped(f"no object pose at the start of the episode: {exc}") from exc
             self._pose_misses += 1
-            if self._pose_misses > self.cfg.max_pose_misses:
+            allowed = self.cfg.max_pose_misses_before_grasp if self.decision.phase <= 1 else self.cfg.max_pose_misses
+            if self._pose_misses > allowed:
                 self.supervisor.report(Event.POSE_LOST, f"no object pose for {self._pose_misses} decisions in a row "
-                                                        f"(at most {self.cfg.max_pose_misses} may use the last one): {exc}")
+                                                        f"(at most {allowed} may use the last one): {exc}")
                 return None
             self.supervisor.report(Event.POSE_UNAVAILABLE, f"{exc}; using the last pose "
-                                                           f"({self._pose_misses} of at most {self.cfg.max_pose_misses})")
+                                                           f"({self._pose_misses} of at most {allowed})")
             return self._last_obj
         self._last_obj, self._pose_misses = obj, 0
         return obj

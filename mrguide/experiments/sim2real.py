@@ -30,11 +30,13 @@ from mrguide.drivers.config import CobotBusConfig
 from mrguide.experiments import report
 from mrguide.experiments.stats import wilson
 from mrguide.output_files import write_files_atomically
+from mrguide.robot import load_robot
 from mrguide.task import Outcome, placed_at_goal
 from mrguide.twin.dry_run import SimulatedCell, dry_run, episode_layouts
 from mrguide.twin.env import EnvConfig, PickPlaceEnv
 from mrguide.twin.hmd_stream import HmdPoseStream
 from mrguide.twin.plant import TwinObjectPose
+from mrguide.twin.visual_arm import ArmDrawing
 
 log = logging.getLogger(__name__)
 
@@ -61,7 +63,6 @@ def load_real_cell(path: str | Path) -> RealCell:
     from mrguide.config import load_optional_section, load_section
     from mrguide.deploy.session import DeployConfig
     from mrguide.drivers.config import load_cobot_bus_config
-    from mrguide.robot import load_robot
     from mrguide.twin.markers import TwinCalibrationConfig
 
     path = Path(path)
@@ -76,8 +77,6 @@ def load_real_cell(path: str | Path) -> RealCell:
 
 def load_policy(policy_path: str | Path, train_cfg: EnvConfig, cell: RealCell) -> ExportedPolicy:
     """The exported policy, checked against the training twin and the 'real' cell (arm, workspace, task, timing)."""
-    from mrguide.robot import load_robot
-
     policy = ExportedPolicy.load(policy_path, load_robot(train_cfg.robot), train_cfg.task)
     check_arm(policy_path, policy.metadata, load_robot(cell.env.robot))  # the "real" cell's arm must be the training arm
     check_decision_period(policy, policy_path, train_cfg.twin.control_period, train_cfg.twin.decision_period)
@@ -139,7 +138,8 @@ def run_real(policy_path: Path, real_cfg: EnvConfig, bus_cfg: CobotBusConfig, se
     goals = [g for _, g in episode_layouts(real_cfg, episodes, seed)]
     task = real_cfg.task
     # the HMD process calibrates (seconds of rendering) before the simulated cell's control loop starts
-    streams = [HmdPoseStream(None, hmd_config, task.object_height, noise_seed=seed, hmd_overrides=hmd_overrides)] if use_hmd else []
+    arm = ArmDrawing.of(load_robot(real_cfg.robot))
+    streams = [HmdPoseStream(None, hmd_config, task.object_height, arm, noise_seed=seed, hmd_overrides=hmd_overrides)] if use_hmd else []
 
     def pose_factory(cell: SimulatedCell):
         cells.append(cell)

@@ -57,9 +57,11 @@ class TwinDryRun:
         self.decision_period = self.env_cfg.twin.decision_period
 
     def camera(self, camera_cfg: Any, base: Path, object_height: float) -> Any:
+        from mrguide.robot import load_robot
         from mrguide.twin.camera_feed import TwinCameraPoses
+        from mrguide.twin.visual_arm import ArmDrawing
 
-        return TwinCameraPoses(camera_cfg, base, object_height)
+        return TwinCameraPoses(camera_cfg, base, object_height, ArmDrawing.of(load_robot(self.env_cfg.robot)))
 
     def run(self, policy_path: str, policy: Any, bus: Any, episodes: int, seed: int, run_log: Any, safety: Any,
             runtime: Any, tick: Any, camera: Any) -> Any:

@@ -65,6 +65,20 @@ class VacuumConfig:
 
 
 @dataclass(frozen=True)
+class CupConfig:
+    """The suction cup's mounting: rigid, or on a spring level-compensator that absorbs height error."""
+
+    stroke: float = 0.0  # m the cup may retract towards the flange; 0 = rigid (trained so far)
+    spring_rate: float = 1000.0  # N/m
+    preload: float = 5.0  # N pushing the cup out at full extension
+
+    def __post_init__(self) -> None:
+        check_number("twin.cup.stroke", self.stroke, 0.0, 0.05, " m")
+        check_number("twin.cup.spring_rate", self.spring_rate, 1.0, 1e6, " N/m")
+        check_number("twin.cup.preload", self.preload, 0.0, 1000.0, " N")
+
+
+@dataclass(frozen=True)
 class TwinConfig:
     """The twin of the cell ([twin] in a TOML config)."""
 
@@ -74,6 +88,7 @@ class TwinConfig:
     goal_region: Region = field(default_factory=lambda: Region((0.40, 0.12), (0.60, 0.30)))
     reality_gap: RealityGap = field(default_factory=RealityGap)
     vacuum: VacuumConfig = field(default_factory=VacuumConfig)
+    cup: CupConfig = field(default_factory=CupConfig)
     camera: CameraConfig = field(default_factory=CameraConfig)
     gui: bool = False
 

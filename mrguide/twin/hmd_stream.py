@@ -3,9 +3,10 @@ and reports the object position through its marker calibration, streamed to the 
 
 Like a real HoloLens, it runs beside the robot controller, not inside its control loop: rendering a
 1280x720 frame takes ~0.1 s and would stall the 4 ms CAN cycle if done in-process (PyBullet holds the
-GIL). The HMD process has its own PyBullet world with the table and the marked cube, which mirrors the
-true object pose from the cell; the arm is not drawn there, so occlusion by the arm is not modelled.
-At start-up the HMD is calibrated against the board exactly as `mrguide calibrate --twin` does.
+GIL). The HMD process has its own PyBullet world with the table, the marked cube and the arm, which mirror
+the true object pose and joints of the cell, so the arm hides the marker when it is in the line of sight.
+At start-up the HMD is calibrated against the board exactly as `mrguide calibrate --twin` does (before the
+arm is drawn: the wearer calibrates with the arm parked out of view).
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ import numpy as np
 
 from mrguide.pose_source import ObjectPoseSource, PoseUnavailable
 from mrguide.twin.plant import TwinPlant
+from mrguide.twin.visual_arm import ArmDrawing
 
 log = logging.getLogger(__name__)
 
@@ -31,8 +33,9 @@ WATCH_TARGET = (0.50, -0.05, 0.0)
 OBJECT_MARKER_ID = 0
 
 
-def _hmd_worker(conn, calibration_path: str | None, object_size: float, noise_seed: int, hmd_overrides: dict) -> None:
-    """Runs in the HMD process: calibrate, then answer each true object pose with the HMD's estimate."""
+def _hmd_worker(conn, calibration_path: str | None, object_size: float, noise_seed: int, hmd_overrides: dict,
+                arm: ArmDrawing) -> None:
+    """Runs in the HMD process: calibrate, then answer each true (object pose, joints) with the HMD's estimate."""
     import pybullet as pb
 
     from mrguide.twin.camera_feed import RENDER_NICENESS
@@ -44,6 +47,7 @@ def _hmd_worker(conn, calibration_path: str | None, object_size: float, noise_se
     from mrguide.twin.camera import look_at
     from mrguide.twin.camera_feed import marked_object_scene
     from mrguide.twin.markers import TwinCalibrationConfig, TwinHmd, calibrate_twin_hmd, hmd_marker_pose_source
+    from mrguide.twin.visual_arm import VisualArm
 
     try:
         cfg = load_calibration_config(calibration_path)
@@ -60,6 +64,7 @@ def _hmd_worker(conn, calibration_path: str | None, object_size: float, noise_se
         hmd.supersample = 1  # streaming: ~4x faster frames than the calibration shots
         source = hmd_marker_pose_source(hmd, run.record.T_base_hmd, cfg.detector, OBJECT_MARKER_ID,
                                         -T_obj_marker[:3, 3], noise=cfg.hmd)
+        drawn = VisualArm(client, arm)
         err = float(np.linalg.norm(run.record.T_base_hmd[:3, 3] - twin_cfg.T_base_hmd[:3, 3]))
         conn.send(("ready", {"rms_residual_m": float(run.record.rms_residual_m), "T_base_hmd_translation_error_m": err}))
     except Exception as exc:  # report start-up failures to the parent instead of dying silently
@@ -69,8 +74,9 @@ def _hmd_worker(conn, calibration_path: str | None, object_size: float, noise_se
         msg = conn.recv()
         if msg is None:
             break
-        pos, orn = msg
+        pos, orn, q = msg
         pb.resetBasePositionAndOrientation(cube, pos, orn, physicsClientId=client)
+        drawn.set(q)
         try:
             conn.send(("pose", source.object_position()))
         except PoseUnavailable as exc:
@@ -91,9 +97,10 @@ def stop_render_process(conn, proc) -> None:
 class HmdPoseStream(ObjectPoseSource):
     """Latest object position from the HMD process; stale or missing estimates raise PoseUnavailable."""
 
-    def __init__(self, plant: TwinPlant | None, calibration_path: str | Path | None, object_size: float,
+    def __init__(self, plant: TwinPlant | None, calibration_path: str | Path | None, object_size: float, arm: ArmDrawing,
                  noise_seed: int = 0, hmd_overrides: dict | None = None, max_age: float = 3.0, start_timeout: float = 180.0):
-        """Start the HMD process and wait until it has calibrated; with `plant`, start streaming at once.
+        """Start the HMD process and wait until it has calibrated; with `plant`, start streaming at once. The
+        process draws `arm` (posed as the plant's joints are).
 
         Without one, `attach` starts it later: start the process before a simulated cell's control loop runs,
         since its calibration renders for seconds and would take the CPU from the 4 ms loop."""
@@ -101,7 +108,7 @@ class HmdPoseStream(ObjectPoseSource):
         self.max_age = max_age
         ctx = mp.get_context("spawn")
         self._conn, child = ctx.Pipe()
-        self._proc = ctx.Process(target=_hmd_worker, args=(child, str(calibration_path) if calibration_path else None, object_size, noise_seed, hmd_overrides or {}),
+        self._proc = ctx.Process(target=_hmd_worker, args=(child, str(calibration_path) if calibration_path else None, object_size, noise_seed, hmd_overrides or {}, arm),
                                  name="hmd", daemon=True)
         self._proc.start()
         self.calibration = self._wait_ready(start_timeout)
@@ -141,7 +148,7 @@ class HmdPoseStream(ObjectPoseSource):
         while not self._stop.is_set():
             gen = self._generation
             try:
-                pos, orn = self.plant.object_pose()
+                pos, orn, q = self.plant.view()
             except Exception as exc:  # the twin playing the robot was closed under us (end of a run) or failed
                 with self._lock:
                     self._lost = f"the twin that plays the robot is gone ({type(exc).__name__}: {exc})"
@@ -149,7 +156,7 @@ class HmdPoseStream(ObjectPoseSource):
                 return
             t = time.monotonic()
             try:
-                self._conn.send((pos.tolist(), orn.tolist()))
+                self._conn.send((pos.tolist(), orn.tolist(), q.tolist()))
                 kind, value = self._conn.recv()
             except Exception as exc:  # EOF, a broken pipe, a garbled message: no more estimates, say so
                 self._proc.join(timeout=1.0)

@@ -87,6 +87,12 @@ class TwinPlant(Plant):
         with self.lock:
             return self.scene.object_pose()
 
+    def view(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """What a camera sees, read at one instant: object position, quaternion (x, y, z, w), true joints."""
+        with self.lock:
+            pos, orn = self.scene.object_pose()
+            return pos, orn, self.scene.joint_positions(noisy=False)
+
 
 class TwinObjectPose(ObjectPoseSource):
     """Exact object position from the environment model (sim-to-real conditions 1 and 2)."""

@@ -31,9 +31,10 @@ TABLE_CENTER = (0.45, 0.10, -0.02)
 TABLE_HALF_EXTENTS = (0.55, 0.60, 0.02)  # top face at z = 0
 
 
-def urdf_with_cup(spec: RobotSpec) -> Path:
-    """Path of a (content-addressed) URDF = the package's URDF + `suction_cup` and `tcp` links on the flange."""
-    text = urdf_with_tool(spec, f"{spec.package_dir.as_posix()}/", CUP_RADIUS)
+def urdf_with_cup(spec: RobotSpec, stroke: float = 0.0) -> Path:
+    """Path of a (content-addressed) URDF = the package's URDF + `suction_cup` and `tcp` links on the flange
+    (the cup on a level-compensator of `stroke` m if > 0)."""
+    text = urdf_with_tool(spec, f"{spec.package_dir.as_posix()}/", CUP_RADIUS, stroke)
     out = Path(tempfile.gettempdir()) / "mrguide-urdf" / f"{spec.name}-cup-{hashlib.sha1(text.encode()).hexdigest()[:12]}.urdf"
     if not out.exists():
         out.parent.mkdir(parents=True, exist_ok=True)
@@ -69,12 +70,16 @@ class Scene:
         table_col = pb.createCollisionShape(pb.GEOM_BOX, halfExtents=TABLE_HALF_EXTENTS, physicsClientId=c)
         table_vis = pb.createVisualShape(pb.GEOM_BOX, halfExtents=TABLE_HALF_EXTENTS, rgbaColor=(0.75, 0.72, 0.66, 1), physicsClientId=c)
         self.table = pb.createMultiBody(0, table_col, table_vis, TABLE_CENTER, physicsClientId=c)
-        self.robot = pb.loadURDF(str(urdf_with_cup(spec)), useFixedBase=True, physicsClientId=c)
+        self.robot = pb.loadURDF(str(urdf_with_cup(spec, cfg.cup.stroke)), useFixedBase=True, physicsClientId=c)
         links = {pb.getJointInfo(self.robot, j, physicsClientId=c)[12].decode(): j for j in range(pb.getNumJoints(self.robot, physicsClientId=c))}
         joints = {pb.getJointInfo(self.robot, j, physicsClientId=c)[1].decode(): j for j in range(pb.getNumJoints(self.robot, physicsClientId=c))}
         self.joint_ids = [joints[name] for name in spec.joint_names]
         self.tcp_link = links["tcp"]
         self.cup_link = links["suction_cup"]
+        # The level-compensator's spring: the joint's default velocity motor off, a force set every step.
+        self._compensator = joints["flange_cup_joint"] if cfg.cup.stroke > 0 else None
+        if self._compensator is not None:
+            pb.setJointMotorControl2(self.robot, self._compensator, pb.VELOCITY_CONTROL, force=0, physicsClientId=c)
         for link in (-1, 0, 1):  # the arm is bolted to the table: no contacts between its base and the top
             pb.setCollisionFilterPair(self.table, self.robot, -1, link, 0, physicsClientId=c)
         efforts = [pb.getJointInfo(self.robot, j, physicsClientId=c)[10] for j in self.joint_ids]
@@ -111,6 +116,8 @@ class Scene:
         self.suction.restore(SuctionState())
         for j, qj in zip(self.joint_ids, q):
             pb.resetJointState(self.robot, j, float(qj), 0.0, physicsClientId=c)
+        if self._compensator is not None:
+            pb.resetJointState(self.robot, self._compensator, 0.0, 0.0, physicsClientId=c)
         self._servo(np.asarray(q, float), np.zeros(self.spec.dof))
         self._applied = np.asarray(q, float).copy()
         self._pending.clear()
@@ -159,6 +166,11 @@ class Scene:
 
     def step(self) -> None:
         """Advance one control period."""
+        if self._compensator is not None:
+            cup = self.cfg.cup
+            pb.setJointMotorControl2(self.robot, self._compensator, pb.TORQUE_CONTROL,
+                                     force=cup.preload + cup.spring_rate * self.cup_compression(),
+                                     physicsClientId=self.client)
         pb.stepSimulation(physicsClientId=self.client)
         self.suction.update()
 
@@ -171,6 +183,12 @@ class Scene:
 
     def joint_velocities(self) -> np.ndarray:
         return np.array([s[1] for s in pb.getJointStates(self.robot, self.joint_ids, physicsClientId=self.client)])
+
+    def cup_compression(self) -> float:
+        """How far the cup has retracted on its level-compensator (m, 0 = fully extended; 0 for a rigid cup)."""
+        if self._compensator is None:
+            return 0.0
+        return -float(pb.getJointState(self.robot, self._compensator, physicsClientId=self.client)[0])
 
     def vacuum_level(self) -> float:
         """Vacuum level reading (kPa gauge, negative below atmosphere)."""

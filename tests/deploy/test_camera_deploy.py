@@ -10,12 +10,14 @@ from mrguide.deploy.camera import CameraSourceConfig
 from mrguide.deploy.runlog import read_log
 from mrguide.deploy.runtime import RuntimeConfig
 from mrguide.task import Outcome
-from mrguide.twin.camera_feed import TwinCameraPoses
+from mrguide.robot import load_robot
+from mrguide.twin.camera_feed import TwinCameraFeed, TwinCameraPoses
+from mrguide.twin.visual_arm import ArmDrawing
 
 
 def _poses(scene, **changes) -> TwinCameraPoses:
     cfg = CameraSourceConfig(**{"calibration": str(scene.calibration), **changes})
-    return TwinCameraPoses(cfg, scene.calibration.parent, 0.05)
+    return TwinCameraPoses(cfg, scene.calibration.parent, 0.05, ArmDrawing.of(load_robot()))
 
 
 def test_dry_run_with_the_camera_source_places_the_object(run_dry, camera_scene):
@@ -26,8 +28,32 @@ def test_dry_run_with_the_camera_source_places_the_object(run_dry, camera_scene)
     finally:
         poses.close()
     assert summary.stopped is None and summary.successes == 1, summary.text()
-    assert stats.poses >= 3 and stats.detection_rate > 0.9, stats
+    assert stats.poses >= 3, stats  # not every frame: the arm hides the marker while it reaches for the part
     assert not summary.events().get("pose_lost")
+
+
+def test_the_arm_over_the_part_hides_its_marker_from_the_camera(camera_scene):
+    """The render process draws the arm: with the cup 2 cm above the part, between it and the camera, the marker
+    is not found; with the arm at home it is, within 2 mm."""
+    from mrguide.calibration.hmd import HmdFrame
+    from mrguide.deploy.camera import load_marker_pipeline
+    from mrguide.motion.kinematics import Kinematics
+
+    spec = load_robot()
+    cfg = CameraSourceConfig(calibration=str(camera_scene.calibration))
+    pipeline = load_marker_pipeline(cfg, camera_scene.calibration.parent)
+    feed = TwinCameraFeed(pipeline.T_base_hmd, pipeline.camera, 0.05, "DICT_4X4_50", 0, 0.04, ArmDrawing.of(spec))
+    part = np.array([0.50, -0.07, 0.025])
+    over = Kinematics(spec).ik(part + [0.0, 0.0, 0.045], spec.q_home)  # cup lip 2 cm above the part's top
+    try:
+        seen = {}
+        for name, q in (("home", spec.q_home), ("over", over)):
+            feed.view = lambda q=q: (part, np.array([0.0, 0.0, 0.0, 1.0]), q)
+            seen[name] = pipeline.observe(HmdFrame(feed.read().image, np.eye(4)))
+    finally:
+        feed.close()
+    assert seen["home"].position is not None and np.linalg.norm(seen["home"].position - part) < 0.002
+    assert seen["over"].position is None and "not visible" in seen["over"].problem
 
 
 def test_camera_dying_mid_episode_ends_it_pose_lost_with_the_log_intact(run_dry, camera_scene):
@@ -42,7 +68,8 @@ def test_camera_dying_mid_episode_ends_it_pose_lost_with_the_log_intact(run_dry,
 
     try:
         summary, log, _ = run_dry(episodes=1, seed=1, pose=poses, on_placed=poses.refresh, hook=kill_camera,
-                                  runtime_cfg=RuntimeConfig(track_carried_object=False, max_pose_misses=2))
+                                  runtime_cfg=RuntimeConfig(track_carried_object=False, max_pose_misses=2,
+                                                            max_pose_misses_before_grasp=2))
         stats = poses.stats()
     finally:
         poses.close()

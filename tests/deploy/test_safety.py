@@ -236,7 +236,8 @@ def test_missing_pose_uses_the_last_one_a_few_times_then_stops_the_episode(run_d
             sources[0].failing = True
         return a
 
-    summary, log, cell = run_dry(hook=lose_in_grasp, pose=make_source, runtime_cfg=RuntimeConfig(max_pose_misses=3))
+    summary, log, cell = run_dry(hook=lose_in_grasp, pose=make_source,
+                                 runtime_cfg=RuntimeConfig(max_pose_misses_before_grasp=3))
     ev = events(log)
     assert ev == [("pose_unavailable", "last_known")] * 3 + [("pose_lost", "abort")], ev
     assert summary.episodes[0].outcome == "pose_lost" and summary.stopped is None  # the episode ended, cleanly
@@ -246,6 +247,28 @@ def test_missing_pose_uses_the_last_one_a_few_times_then_stops_the_episode(run_d
     ends = [r for r in read_log(log) if r["kind"] == "episode_end"]
     assert ends[-1]["outcome"] == "pose_lost" and ends[-1]["events"] == {"pose_unavailable": 3, "pose_lost": 1}
     assert cell.cobot.status().fault is None  # held (braked to rest), not quick-stopped
+
+
+@pytest.mark.parametrize("lost_in", [0, 1, 3])
+def test_before_the_grasp_the_last_pose_serves_longer(run_dry, lost_in):
+    """The arm reaching for the part hides its marker: before the grasp (phases 0, 1) the last pose serves up to
+    `max_pose_misses_before_grasp` decisions, and an occluded grasp succeeds; in transport (phase 3, the carried
+    part tracked by the TCP) no pose is needed; after the release the short limit applies again."""
+    sources = []
+
+    def make_source(cell):
+        sources.append(_PoseGoesAway(cell.plant))
+        return sources[-1]
+
+    def lose(obs, phase, a, cell):
+        sources[0].failing = phase == lost_in
+        return a
+
+    summary, log, _ = run_dry(hook=lose, pose=make_source,
+                              runtime_cfg=RuntimeConfig(max_pose_misses=2, max_pose_misses_before_grasp=30))
+    assert summary.episodes[0].outcome == "success", summary.text()
+    misses = summary.episodes[0].events.get("pose_unavailable", 0)
+    assert (misses > 2) if lost_in in (0, 1) else (misses == 0)
 
 
 class _FrozenPose:
