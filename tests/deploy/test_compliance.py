@@ -42,8 +42,9 @@ def _press(depth: float, compressions: list[float]):
 
 
 def test_a_press_within_the_stroke_is_absorbed_not_a_fault(run_dry):
-    """5 mm into the part (the workspace floor): without the compensator 6 of 20 such episodes ended in a drive's
-    following-error EMCY (`docs/results/compliance/`); with it the cup retracts and no safety event occurs."""
+    """5 mm into the part (the workspace floor): without the compensator some such episodes end in a drive's
+    following-error EMCY (`docs/results/compliance/press_probe.csv`); with it the cup retracts and no safety event
+    occurs."""
     compressions: list[float] = []
     summary, log, _ = run_dry(episodes=3, env_cfg=_cell(), hook=_press(0.005, compressions))
     assert [e.outcome for e in summary.episodes] == ["no_grasp"] * 3 and summary.stopped is None
