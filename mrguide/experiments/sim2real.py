@@ -235,11 +235,12 @@ def write_report(results: list[ConditionResult], out: Path, gap_text: str) -> Pa
 def gap_description(real_cfg: EnvConfig, hmd_config: Path | None) -> str:
     from mrguide.calibration.config import load_calibration_config
 
-    g = real_cfg.twin.reality_gap
+    g, cup = real_cfg.twin.reality_gap, real_cfg.twin.cup
     h = load_calibration_config(hmd_config).hmd
+    mounting = f"cup on a {cup.stroke * 1e3:.0f} mm level-compensator" if cup.stroke > 0 else "rigid cup"
     return (f"Reality gap of the 'real' twin: object {g.object_mass} kg, friction {g.object_friction}, suction break "
             f"force {g.suction_break_force} N, actuator latency {g.actuator_latency} cycles, lag {g.actuator_lag * 1e3:.0f} ms, "
-            f"joint noise {g.joint_noise} rad, vacuum noise {g.vacuum_noise} kPa. HMD: tracking noise {h.tracking_noise_m * 1e3:.1f} mm / "
+            f"joint noise {g.joint_noise} rad, vacuum noise {g.vacuum_noise} kPa, {mounting}. HMD: tracking noise {h.tracking_noise_m * 1e3:.1f} mm / "
             f"{h.tracking_noise_deg}° per frame, calibration error {h.calibration_error_m * 1e3:.1f} mm / {h.calibration_error_deg}°.")
 
 
