@@ -34,7 +34,7 @@ from mrguide.robot import load_robot
 from mrguide.task import Outcome, placed_at_goal
 from mrguide.twin.dry_run import SimulatedCell, dry_run, episode_layouts
 from mrguide.twin.env import EnvConfig, PickPlaceEnv
-from mrguide.twin.hmd_stream import HmdPoseStream
+from mrguide.twin.hmd_stream import HmdPoseStream, HmdStartError
 from mrguide.twin.plant import TwinObjectPose
 from mrguide.twin.visual_arm import ArmDrawing
 
@@ -137,9 +137,16 @@ def run_real(policy_path: Path, real_cfg: EnvConfig, bus_cfg: CobotBusConfig, se
     outcomes: list[str] = []
     goals = [g for _, g in episode_layouts(real_cfg, episodes, seed)]
     task = real_cfg.task
+    header = {"command": "sim2real", "condition": "real_hmd" if use_hmd else "real_exact", "policy": str(policy_path),
+              "seed": seed, "episodes": episodes, "hmd_overrides": hmd_overrides or {},
+              "reality_gap": to_dict(real_cfg.twin.reality_gap)}
     # the HMD process calibrates (seconds of rendering) before the simulated cell's control loop starts
     arm = ArmDrawing.of(load_robot(real_cfg.robot))
-    streams = [HmdPoseStream(None, hmd_config, task.object_height, arm, noise_seed=seed, hmd_overrides=hmd_overrides)] if use_hmd else []
+    try:
+        streams = [HmdPoseStream(None, hmd_config, task.object_height, arm, noise_seed=seed,
+                                 hmd_overrides=hmd_overrides)] if use_hmd else []
+    except HmdStartError as exc:  # e.g. too much tracking noise to calibrate: no episode can run, none is lost
+        return _unplayed(log_path, header, episodes, f"the HMD could not start: {exc}", on_episode)
 
     def pose_factory(cell: SimulatedCell):
         cells.append(cell)
@@ -161,9 +168,6 @@ def run_real(policy_path: Path, real_cfg: EnvConfig, bus_cfg: CobotBusConfig, se
         if on_episode:
             on_episode(outcome)
 
-    header = {"command": "sim2real", "condition": "real_hmd" if use_hmd else "real_exact", "policy": str(policy_path),
-              "seed": seed, "episodes": episodes, "hmd_overrides": hmd_overrides or {},
-              "reality_gap": to_dict(real_cfg.twin.reality_gap)}
     try:
         with RunLog(log_path, header) as run_log:
             summary = dry_run(policy_path, real_cfg, bus_cfg, episodes, seed, run_log, safety,
@@ -178,6 +182,20 @@ def run_real(policy_path: Path, real_cfg: EnvConfig, bus_cfg: CobotBusConfig, se
         log.warning("seed %d: %d safety stop(s) recovered from", seed, summary.recoveries)
     if summary.stopped:
         log.warning("seed %d stopped: %s", seed, summary.stopped)
+    return outcomes
+
+
+def _unplayed(log_path: Path, header: dict, episodes: int, reason: str,
+              on_episode: Callable[[str], None] | None) -> list[str]:
+    """A seed whose run could not start: its episodes count as safety stops (as a run stopped early does), and
+    the run log says why."""
+    with RunLog(log_path, header) as run_log:
+        run_log.write("run_stopped", reason=reason)
+    log.warning("seed %d not run: %s", header["seed"], reason)
+    outcomes = [Outcome.SAFETY_STOP.value] * episodes
+    for outcome in outcomes:
+        if on_episode:
+            on_episode(outcome)
     return outcomes
 
 

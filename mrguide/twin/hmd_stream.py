@@ -94,6 +94,10 @@ def stop_render_process(conn, proc) -> None:
         proc.kill()
 
 
+class HmdStartError(RuntimeError):
+    """The HMD process could not start: it failed (e.g. its marker calibration did), died or stayed silent."""
+
+
 class HmdPoseStream(ObjectPoseSource):
     """Latest object position from the HMD process; stale or missing estimates raise PoseUnavailable."""
 
@@ -131,17 +135,17 @@ class HmdPoseStream(ObjectPoseSource):
         return self
 
     def _wait_ready(self, timeout: float) -> dict:
-        """The worker's start-up report; RuntimeError if it fails, dies or stays silent for `timeout` s."""
+        """The worker's start-up report; HmdStartError if it fails, dies or stays silent for `timeout` s."""
         end = time.monotonic() + timeout
         while not self._conn.poll(0.1):
             if not self._proc.is_alive():
-                raise RuntimeError(f"HMD process exited during start-up (exit code {self._proc.exitcode})")
+                raise HmdStartError(f"HMD process exited during start-up (exit code {self._proc.exitcode})")
             if time.monotonic() > end:
                 self._proc.kill()
-                raise RuntimeError(f"HMD process did not start within {timeout} s")
+                raise HmdStartError(f"HMD process did not start within {timeout} s")
         kind, info = self._conn.recv()
         if kind != "ready":
-            raise RuntimeError(f"HMD process failed to start: {info}")
+            raise HmdStartError(f"HMD process failed to start: {info}")
         return info
 
     def _run(self) -> None:

@@ -80,3 +80,22 @@ def test_hmd_dying_in_the_grasp_finishes_the_episode_on_the_last_pose_then_stops
     assert [e["outcome"] for e in ends] == ["success"]
     stopped = [r for r in records if r["kind"] == "run_stopped"]
     assert len(stopped) == 1 and "no object pose" in stopped[0]["reason"] and "HMD process" in stopped[0]["reason"]
+
+
+def test_an_hmd_that_cannot_start_fails_its_seed_and_the_run_goes_on(tmp_path, monkeypatch):
+    """With too much head-tracking noise the HMD's marker calibration fails (2 cm: the 4 views disagree by ~2 cm):
+    that seed's episodes count as safety stops, the log says why, and nothing raises (a sweep goes on)."""
+    def cannot_start(*args, **kwargs):
+        raise s2r.HmdStartError("HMD process failed to start: CalibrationError: registration: only 0 of 4 frames agree")
+
+    monkeypatch.setattr(s2r, "HmdPoseStream", cannot_start)
+    cfg = EnvConfig.load(REAL)
+    seen = []
+    log = tmp_path / "log.jsonl"
+    out = s2r.run_real(None, cfg, CobotBusConfig(bus=BusConfig(channel="s2r-hmd-start")), seed=1, episodes=3,
+                       log_path=log, hmd_config=REAL, safety=None, on_episode=seen.append, use_hmd=True,
+                       hmd_overrides={"tracking_noise_m": 0.02})
+    assert out == seen == ["safety_stop"] * 3
+    records = read_log(log)
+    assert records[0]["hmd_overrides"] == {"tracking_noise_m": 0.02}
+    assert records[-1]["kind"] == "run_stopped" and "the HMD could not start" in records[-1]["reason"]
