@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from mrguide.deploy.runlog import RunLog, read_log
-from mrguide.deploy.runtime import Runtime, RuntimeConfig
+from mrguide.deploy.runtime import Runtime, RuntimeConfig, RunStopped
 from mrguide.deploy.session import FixedObjectPose
 from mrguide.drivers.cobot_state import DriverStats, JointState, VacuumState
 from mrguide.drivers.errors import DriverError
@@ -105,3 +105,37 @@ def test_a_driver_fault_outside_the_streaming_ends_the_episode_as_a_safety_stop(
                 rt.run_episode(np.array([0.5, 0.21, 0.025]), 0)
     ends = [r for r in read_log(tmp_path / "log.jsonl") if r["kind"] == "episode_end"]
     assert [e["outcome"] for e in ends] == ["safety_stop"] and ends[0]["decisions"] == 2
+
+
+class LaggingCobot(IdealCobot):
+    """Joints that follow the setpoints through a first-order servo lag (`lag` s), `stuck` rad short on joint 0."""
+
+    def __init__(self, q, lag, stuck=0.0):
+        super().__init__(q)
+        self.measured, self.lag, self.stuck = np.array(q, float), lag, stuck
+
+    def stream(self, q, timeout=None):
+        super().stream(q, timeout)
+        self.measured += (1.0 - np.exp(-self.period / self.lag)) * (self.q - self.measured)
+
+    def joint_state(self):
+        q = self.measured.copy()
+        q[0] -= self.stuck
+        return JointState(q, np.zeros_like(q), ("OPERATION ENABLED",) * len(q), 0, 0.0)
+
+
+@pytest.mark.parametrize("stuck, reaches", [(0.0, True), (0.02, False)])
+def test_homing_waits_for_lagging_joints_then_judges(tmp_path, stuck, reaches):
+    """With a 60 ms servo lag the joints are ~0.01 rad short when the last home setpoint is sent: homing holds home
+    until they arrive (before, the run stopped there); a joint that never arrives still stops the run."""
+    spec = load_robot()
+    cobot = LaggingCobot(spec.q_home + 0.3, lag=0.06, stuck=stuck)
+    policy = lambda obs: oracle_action(obs, TaskConfig(), spec.workspace.to_normalized)  # noqa: E731
+    with RunLog(tmp_path / "log.jsonl", {"test": "homing"}) as log:
+        with Runtime(cobot, policy, FixedObjectPose((0.5, -0.075, 0.025)), spec, TaskConfig(), log, 0.1) as rt:
+            if reaches:
+                rt.home()
+                assert np.max(np.abs(cobot.joint_state().positions - spec.q_home)) <= rt.cfg.home_tolerance
+            else:
+                with pytest.raises(RunStopped, match="did not reach home within 1 s"):
+                    rt.home()
