@@ -193,8 +193,8 @@ def _unplayed(log_path: Path, header: dict, episodes: int, reason: str,
         run_log.write("run_stopped", reason=reason)
     log.warning("seed %d not run: %s", header["seed"], reason)
     outcomes = [Outcome.SAFETY_STOP.value] * episodes
-    for outcome in outcomes:
-        if on_episode:
+    if on_episode:
+        for outcome in outcomes:
             on_episode(outcome)
     return outcomes
 

@@ -82,11 +82,6 @@ class TwinPlant(Plant):
         with self.lock:
             return self.scene.object_position()
 
-    def object_pose(self) -> tuple[np.ndarray, np.ndarray]:
-        """True object position and quaternion (x, y, z, w)."""
-        with self.lock:
-            return self.scene.object_pose()
-
     def view(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """What a camera sees, read at one instant: object position, quaternion (x, y, z, w), true joints."""
         with self.lock:

@@ -29,6 +29,7 @@ def _cell(floor: float | None = None) -> EnvConfig:
 
 def _press(depth: float, compressions: list[float]):
     """A grasp phase that drives the cup `depth` m into the part's top, vacuum off (no seal to stop it)."""
+    to_normalized = load_robot().workspace.to_normalized
 
     def hook(obs, phase, a, cell):
         with cell.plant.lock:
@@ -36,7 +37,7 @@ def _press(depth: float, compressions: list[float]):
         if phase != 1:
             return a
         target = np.asarray(obs[5:8], float) + np.array([0.0, 0.0, 0.025 - depth])
-        return np.concatenate([load_robot().workspace.to_normalized(target), [-1.0]]).astype(np.float32)
+        return np.concatenate([to_normalized(target), [-1.0]]).astype(np.float32)
 
     return hook
 
