@@ -149,3 +149,22 @@ def test_td_target_takes_the_minimum_of_the_two_target_critics_and_stops_at_term
     with torch.no_grad():
         q1 = plain.critic_target(next_obs, plain.actor_target(next_obs))[0]
     assert torch.allclose(plain.td_target(rew, next_obs, torch.zeros(64)), rew + plain.cfg.gamma * q1)
+
+
+def test_q_filter_clones_only_the_expert_actions_the_critic_rates_above_the_actor():
+    agent = DDPG(np.zeros(11), np.ones(11), 4, DDPGConfig(hidden=(16, 16), q_filter=True), seed=3)
+    for b in batches(5):
+        agent.update(b)
+    batch = one_batch(0.5)
+    before = copy.deepcopy(agent)
+    stats = agent.update(batch)
+    expert = torch.as_tensor(batch.expert)
+    obs, act = torch.as_tensor(batch.obs)[expert], torch.as_tensor(batch.act)[expert]
+    with torch.no_grad():
+        pi = before.actor(obs)  # the actor before its step, against the critic after its step
+        keep = agent.critic(obs, act)[0] > agent.critic(obs, pi)[0]
+        sq_err = ((pi - act) ** 2).sum(-1)
+    assert 0 < keep.sum() < len(keep)  # the test batch exercises both sides of the filter
+    assert stats["bc_loss"] == pytest.approx((sq_err * keep).sum().item() / len(keep), rel=1e-5)
+    assert stats["bc_loss"] < sq_err.mean().item()  # what the unfiltered term would have been
+
