@@ -53,15 +53,27 @@ class OffsetHead:
         return np.column_stack([pos, y[:, 3:]])
 
 
+@dataclass(frozen=True)
+class CarryLayer:
+    """The phase_anchor head's second first layer, used instead of layer 0 where φ > `progress` (transport and
+    release: the goal-anchored inputs instead of the object-anchored ones; both maps folded into the weights)."""
+
+    W: np.ndarray
+    b: np.ndarray
+    progress: float
+
+
 @dataclass
 class ExportedPolicy:
-    """An MLP actor: obs (11,) → action (4,) in [-1, 1]; with `head`, the MLP's output is a TCP offset."""
+    """An MLP actor: obs (11,) → action (4,) in [-1, 1]; with `head`, the MLP's output is a TCP offset, with
+    `carry` the first layer depends on the task phase."""
 
     weights: list[np.ndarray]
     biases: list[np.ndarray]
     activations: list[str]
     metadata: dict[str, Any]
     head: OffsetHead | None = None
+    carry: CarryLayer | None = None
 
     @property
     def decision_period(self) -> float:
@@ -75,8 +87,11 @@ class ExportedPolicy:
         """Actions (n, 4) for observations (n, 11)."""
         obs = np.asarray(obs, dtype=np.float64)
         x = obs
-        for W, b, act in zip(self.weights, self.biases, self.activations):
-            x = ACTIVATIONS[act](x @ W.T + b)
+        for i, (W, b, act) in enumerate(zip(self.weights, self.biases, self.activations)):
+            pre = x @ W.T + b
+            if i == 0 and self.carry is not None:
+                pre = np.where(obs[:, 4:5] > self.carry.progress, x @ self.carry.W.T + self.carry.b, pre)
+            x = ACTIVATIONS[act](pre)
         if self.head is not None:
             x = self.head(obs, x)
         return x.astype(np.float32)
@@ -116,7 +131,9 @@ class ExportedPolicy:
             diff = sorted(k for k in set(theirs) | set(ours) if theirs.get(k) != ours.get(k))
             if diff:
                 raise PolicyFileError(f"{path}: task parameters differ from the configuration: {', '.join(diff)}")
-        policy = cls(weights, biases, acts, meta, _head(path, meta, trained))
+        head = _head(path, meta, trained)
+        carry = _carry_layer(path, meta, arrays, weights[0]) if meta["head"]["kind"] == "phase_anchor" else None
+        policy = cls(weights, biases, acts, meta, head, carry)
         _refuse_non_finite_output(path, policy, trained)
         return policy
 
@@ -182,15 +199,28 @@ def _metadata(path: Path, arrays: dict[str, np.ndarray]) -> dict[str, Any]:
 
 
 def _head(path: Path, meta: dict[str, Any], trained: Workspace) -> OffsetHead | None:
-    """The output head the metadata declares: none (absolute targets; also files without the field) or tcp_offset."""
-    head = meta.get("head", {"kind": "absolute"})
+    """The output head the metadata declares: none (absolute targets; also files without the field), or the
+    TCP offset of tcp_offset and phase_anchor (the latter also with a carry_progress in (0, 1))."""
+    head = meta.setdefault("head", {"kind": "absolute"})
     kind = head.get("kind") if isinstance(head, dict) else None
     if kind == "absolute":
         return None
-    offset = head.get("max_offset") if kind == "tcp_offset" else None
-    if isinstance(offset, bool) or not isinstance(offset, (int, float)) or not 0 < offset < 100:
-        raise PolicyFileError(f"{path}: metadata head {head!r} not understood (absolute, or tcp_offset with a max_offset in m)")
+    offset = head.get("max_offset") if kind in ("tcp_offset", "phase_anchor") else None
+    switch = head.get("carry_progress") if kind == "phase_anchor" else 0.5
+    if any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in (offset, switch)) or not (0 < offset < 100 and 0 < switch < 1):
+        raise PolicyFileError(f"{path}: metadata head {head!r} not understood (absolute, tcp_offset with a max_offset "
+                              "in m, or phase_anchor with a max_offset and a carry_progress in (0, 1))")
     return OffsetHead(float(offset), 0.5 * (trained.lo + trained.hi), 0.5 * (trained.hi - trained.lo))
+
+
+def _carry_layer(path: Path, meta: dict[str, Any], arrays: dict[str, np.ndarray], W0: np.ndarray) -> CarryLayer:
+    """The phase_anchor head's W0_carry and b0_carry, shaped and checked as layer 0."""
+    W, b = _layer_array(path, arrays, "W0_carry"), _layer_array(path, arrays, "b0_carry")
+    if W.shape != W0.shape or b.shape != (W0.shape[0],):
+        raise PolicyFileError(f"{path}: carry layer has weights {W.shape} and bias {b.shape}; expected those of layer 0, {W0.shape}")
+    if not (np.all(np.isfinite(W)) and np.all(np.isfinite(b))):
+        raise PolicyFileError(f"{path}: carry layer holds NaN or inf")
+    return CarryLayer(W, b, float(meta["head"]["carry_progress"]))
 
 
 def _layer_array(path: Path, arrays: dict[str, np.ndarray], name: str) -> np.ndarray:

@@ -18,7 +18,9 @@ from mrguide.config import ConfigError, check_number
 from mrguide.policies.replay import Batch
 from mrguide.robot import Workspace
 
-ACTOR_HEADS = ("absolute", "tcp_offset")
+ACTOR_HEADS = ("absolute", "tcp_offset", "phase_anchor")
+#: φ above which the phase_anchor actor sees the goal instead of the object: transport and release (φ = 3/5, 4/5, 1).
+CARRY_PROGRESS = 0.5
 
 
 @dataclass(frozen=True)
@@ -52,6 +54,9 @@ class DDPGConfig:
     #: observation and outputs the normalized target. "tcp_offset" (ours): the MLP sees positions relative
     #: to the TCP (and the goal relative to the object) and outputs an offset of at most `max_offset` per
     #: axis that is added to the TCP, so the policy is equivariant to moving the whole scene in x and y.
+    #: "phase_anchor" (ours): the same output, but the MLP sees only the TCP height, g, φ and the position of
+    #: the phase's anchor relative to the TCP — the object in approach, grasp and lift, the goal in transport
+    #: and release — so each phase is equivariant to moving its own anchor and blind to the other one.
     actor_head: str = "absolute"
     max_offset: float = 0.5  # m, per axis, for actor_head = "tcp_offset"
 
@@ -116,22 +121,36 @@ def relative_features() -> np.ndarray:
     return np.array(rows)
 
 
+def anchor_features(anchor: int) -> np.ndarray:
+    """The fixed map (6 × 11) from the scaled observation to the phase_anchor actor's input: TCP height, g, φ
+    and anchor − TCP (xyz), the anchor's position starting at observation index `anchor` (5 object, 8 goal)."""
+    rows = [np.eye(11)[k] for k in (2, 3, 4)]
+    rows += [np.eye(11)[anchor + i] - np.eye(11)[i] for i in range(3)]
+    return np.array(rows)
+
+
 class Actor(nn.Module):
-    """μ_θ(s) ∈ [-1, 1]^act_dim, with the "absolute" or the "tcp_offset" head (see DDPGConfig.actor_head)."""
+    """μ_θ(s) ∈ [-1, 1]^act_dim, with the "absolute", "tcp_offset" or "phase_anchor" head (DDPGConfig.actor_head).
+    `features` maps the scaled observation to the MLP's input; the phase_anchor head has a second map,
+    `carry_features`, used where φ > CARRY_PROGRESS."""
 
     def __init__(self, scaler: ObsScaler, act_dim: int, hidden: tuple[int, ...], head: str = "absolute", max_offset: float = 0.5):
         super().__init__()
         self.scaler = scaler
         self.head, self.max_offset = head, max_offset
-        if head == "tcp_offset":
-            self.register_buffer("features", torch.as_tensor(relative_features(), dtype=torch.float32))
-        self.net = mlp([len(scaler.offset), *hidden, act_dim], nn.Tanh)
+        maps = {"tcp_offset": [relative_features()], "phase_anchor": [anchor_features(5), anchor_features(8)]}.get(head, [])
+        for name, f in zip(("features", "carry_features"), maps):
+            self.register_buffer(name, torch.as_tensor(f, dtype=torch.float32))
+        self.net = mlp([len(maps[0]) if maps else len(scaler.offset), *hidden, act_dim], nn.Tanh)
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
         x = self.scaler(obs)
         if self.head == "absolute":
             return self.net(x)
-        y = self.net(x @ self.features.T)
+        inputs = x @ self.features.T
+        if self.head == "phase_anchor":
+            inputs = torch.where(obs[..., 4:5] > CARRY_PROGRESS, x @ self.carry_features.T, inputs)
+        y = self.net(inputs)
         target = obs[..., :3] + self.max_offset * y[..., :3]  # m
         normalized = (target - self.scaler.offset[:3]) * self.scaler.scale[:3]  # the workspace's [-1, 1] box
         return torch.cat([normalized.clamp(-1.0, 1.0), y[..., 3:]], dim=-1)

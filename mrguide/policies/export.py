@@ -13,7 +13,7 @@ from torch import nn
 from mrguide import __version__
 from mrguide.config import to_dict
 from mrguide.deploy.policy import FORMAT, FORMAT_VERSION
-from mrguide.policies.ddpg import Actor
+from mrguide.policies.ddpg import CARRY_PROGRESS, Actor
 from mrguide.robot import RobotSpec
 from mrguide.task import ACT_LAYOUT, OBS_LAYOUT, TaskConfig
 
@@ -36,24 +36,41 @@ def export_actor(
         "robot": {"name": robot.name, "fingerprint": robot.fingerprint, "joints": list(robot.joint_names)},
         "task": to_dict(task),
         "decision_period": decision_period,
-        "head": {"kind": actor.head, "max_offset": actor.max_offset} if actor.head != "absolute" else {"kind": "absolute"},
+        "head": _head_metadata(actor),
         "versions": {"mrguide": __version__, "torch": torch.__version__, "numpy": np.__version__},
         **(extra or {}),
     }
     arrays: dict[str, np.ndarray] = {"metadata": np.array(json.dumps(meta))}
-    for i, lin in enumerate(linears):
-        W = lin.weight.detach().cpu().numpy().astype(np.float64)
-        b = lin.bias.detach().cpu().numpy().astype(np.float64)
-        if i == 0 and actor.head != "absolute":  # fold the relative-feature map in: W (F x) = (W F) x
-            W = W @ actor.features.detach().cpu().numpy().astype(np.float64)
-        if i == 0:  # fold the input scaling in: W (x − o) s + b = (W s) x + (b − W (o s))
-            o, sc = (t.detach().cpu().numpy().astype(np.float64) for t in (actor.scaler.offset, actor.scaler.scale))
-            W, b = W * sc, b - W @ (o * sc)
-        arrays[f"W{i}"] = W
-        arrays[f"b{i}"] = b
+    arrays["W0"], arrays["b0"] = _first_layer(actor, "features")
+    for i, lin in enumerate(linears[1:], start=1):
+        arrays[f"W{i}"] = lin.weight.detach().cpu().numpy().astype(np.float64)
+        arrays[f"b{i}"] = lin.bias.detach().cpu().numpy().astype(np.float64)
+    if actor.head == "phase_anchor":
+        arrays["W0_carry"], arrays["b0_carry"] = _first_layer(actor, "carry_features")
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.name + ".tmp.npz")
     np.savez(tmp, **arrays)
     tmp.replace(path)
     return path
+
+
+def _head_metadata(actor: Actor) -> dict[str, Any]:
+    head: dict[str, Any] = {"kind": actor.head}
+    if actor.head != "absolute":
+        head["max_offset"] = actor.max_offset
+    if actor.head == "phase_anchor":
+        head["carry_progress"] = CARRY_PROGRESS
+    return head
+
+
+def _first_layer(actor: Actor, feature_map: str) -> tuple[np.ndarray, np.ndarray]:
+    """Layer 0 acting on the raw observation: the feature map `feature_map` (if the head has one) and the input
+    scaling folded into the weights, W (F ((x − o) s)) + b = (W F s) x + (b − W F (o s))."""
+    lin = next(m for m in actor.net if isinstance(m, nn.Linear))
+    W = lin.weight.detach().cpu().numpy().astype(np.float64)
+    b = lin.bias.detach().cpu().numpy().astype(np.float64)
+    if actor.head != "absolute":
+        W = W @ getattr(actor, feature_map).detach().cpu().numpy().astype(np.float64)
+    o, sc = (t.detach().cpu().numpy().astype(np.float64) for t in (actor.scaler.offset, actor.scaler.scale))
+    return W * sc, b - (W * sc) @ o

@@ -135,3 +135,56 @@ def test_unknown_head_refused(exported, tmp_path):
 
     with pytest.raises(PolicyFileError, match="head"):
         ExportedPolicy.load(_rewrite(path, tmp_path / "bad.npz", head), load_robot(), TaskConfig())
+
+
+def _phase_anchor_policy(tmp_path):
+    spec = load_robot()
+    agent = DDPG(*obs_scaling(spec.workspace), 4, DDPGConfig(actor_head="phase_anchor", max_offset=0.3), seed=4)
+    with torch.no_grad():  # weights large enough that some targets leave the box and are clipped
+        for p in agent.actor.net.parameters():
+            p.mul_(3.0)
+    return agent, export_actor(agent.actor, tmp_path / "policy.npz", spec, TaskConfig(), 0.1)
+
+
+def test_phase_anchor_head_exports_and_runs_the_same_in_numpy(tmp_path):
+    agent, path = _phase_anchor_policy(tmp_path)
+    pol = ExportedPolicy.load(path, load_robot(), TaskConfig())
+    assert pol.metadata["head"] == {"kind": "phase_anchor", "max_offset": 0.3, "carry_progress": 0.5}
+    obs = _random_obs(load_robot().workspace, 500)
+    obs[:, 4] = np.random.default_rng(1).choice([0.0, 0.2, 0.4, 0.6, 0.8, 1.0], 500)  # every phase, both layers
+    with torch.no_grad():
+        ref = agent.actor(torch.as_tensor(obs)).numpy()
+    got = pol.batch(obs)
+    assert np.max(np.abs(got - ref)) < 1e-5 and np.any(np.abs(got[:, :3]) == 1.0) and np.any(np.abs(got[:, :3]) < 0.9)
+
+
+def test_phase_anchor_policy_follows_the_object_before_transport_and_the_goal_from_it():
+    """Before transport the target moves with TCP + object and ignores the goal; from transport on it moves
+    with TCP + goal and ignores the object."""
+    ws = Workspace(low=(-1.0, -1.0, 0.045), high=(2.0, 2.0, 0.35))  # large enough that nothing is clipped
+    agent = DDPG(*obs_scaling(ws), 4, DDPGConfig(actor_head="phase_anchor", max_offset=0.3), seed=1)
+    obs = _random_obs(load_robot().workspace, 200)
+
+    def target(o):
+        with torch.no_grad():
+            return ws.to_cartesian(agent.actor(torch.as_tensor(o)).numpy()[:, :3])
+
+    for phi, anchor, other in ((0.2, 5, 8), (0.6, 8, 5)):
+        obs[:, 4] = phi
+        moved, unrelated = obs.copy(), obs.copy()
+        for k in (0, anchor):
+            moved[:, k] += 0.4
+            moved[:, k + 1] -= 0.3
+        unrelated[:, other : other + 2] += 0.25
+        assert np.allclose(target(moved) - target(obs), [0.4, -0.3, 0.0], atol=1e-5)
+        assert np.allclose(target(unrelated), target(obs), atol=1e-6)
+
+
+def test_phase_anchor_file_without_its_carry_layer_refused(tmp_path):
+    _, path = _phase_anchor_policy(tmp_path)
+    bad = _rewrite(path, tmp_path / "bad.npz", lambda a: a.pop("W0_carry"))
+    with pytest.raises(PolicyFileError, match="W0_carry"):
+        ExportedPolicy.load(bad)
+    bad = _rewrite(path, tmp_path / "short.npz", lambda a: a.update(b0_carry=np.zeros(3)))
+    with pytest.raises(PolicyFileError, match="carry layer"):
+        ExportedPolicy.load(bad)
