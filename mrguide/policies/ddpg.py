@@ -58,7 +58,7 @@ class DDPGConfig:
     #: the phase's anchor relative to the TCP — the object in approach, grasp and lift, the goal in transport
     #: and release — so each phase is equivariant to moving its own anchor and blind to the other one.
     actor_head: str = "absolute"
-    max_offset: float = 0.5  # m, per axis, for actor_head = "tcp_offset"
+    max_offset: float = 0.5  # m, per axis, for the tcp_offset and phase_anchor heads
 
     def __post_init__(self) -> None:
         if not self.hidden or any(isinstance(h, bool) or not isinstance(h, int) or not 1 <= h <= 4096 for h in self.hidden):
