@@ -1,0 +1,32 @@
+"""Every shipped experiment file loads, and every run it describes has a valid training configuration
+(the check `mrguide experiment` makes before it starts anything)."""
+
+import argparse
+from pathlib import Path
+
+import pytest
+
+from mrguide.config import ConfigError
+from mrguide.experiments.commands import NAMES, _setup
+
+ROOT = Path(__file__).resolve().parents[2]
+FILES = sorted((ROOT / "configs" / "experiments").glob("*.toml"))
+
+
+def experiment_of(path: Path) -> str:
+    """The experiment a shipped file belongs to: the longest experiment name its file name starts with."""
+    return max((n for n in NAMES if path.stem.startswith(n.replace("-", "_"))), key=len)
+
+
+@pytest.mark.parametrize("path", FILES, ids=lambda p: p.name)
+def test_shipped_experiment_file_sets_up_every_run(path):
+    args = argparse.Namespace(name=experiment_of(path), config=str(path), seeds=None, steps=None, out=None)
+    _, cfg, _, _ = _setup(args)
+    assert cfg.seeds >= 1
+
+
+def test_a_file_with_an_unknown_actor_head_is_refused_before_anything_runs(tmp_path):
+    bad = tmp_path / "gen.toml"
+    bad.write_text((ROOT / "configs/experiments/generalization_phase_anchor.toml").read_text().replace('"phase_anchor"', '"phase_anchr"'))
+    with pytest.raises(ConfigError, match="phase_anchr"):
+        _setup(argparse.Namespace(name="generalization", config=str(bad), seeds=None, steps=None, out=None))
