@@ -1,7 +1,8 @@
-"""Pool the per-policy sim-to-real tables of this directory (seed*/sim2real/sim2real.csv): success per condition
-over all training seeds, 95 % Wilson interval, failure counts. Writes pooled.csv and prints it as markdown.
+"""Pool the per-policy sim-to-real tables of a directory (DIR/seed*/sim2real/sim2real.csv; default this one):
+success per condition over all training seeds, 95 % Wilson interval, failure counts. Writes DIR/pooled.csv and
+prints it as markdown.
 
-    python docs/results/sim2real-main5k-v2/pool.py
+    python docs/results/sim2real-main5k-v2/pool.py [DIR]
 """
 
 from __future__ import annotations
@@ -19,9 +20,9 @@ from mrguide.experiments.stats import wilson  # noqa: E402
 FAILURES = ("no_grasp", "dropped", "misplaced", "knocked_off", "timeout", "safety_stop")
 
 
-def main() -> None:
+def main(root: Path) -> None:
     totals: dict[str, dict[str, float]] = defaultdict(lambda: defaultdict(float))
-    for table in sorted(HERE.glob("seed*/sim2real/sim2real.csv")):
+    for table in sorted(root.glob("seed*/sim2real/sim2real.csv")):
         for row in csv.DictReader(table.open()):
             t = totals[row["condition"]]
             t["episodes"] += int(row["episodes"])
@@ -34,7 +35,7 @@ def main() -> None:
         rows.append({"condition": cond, "episodes": int(t["episodes"]), "success": int(t["success"]),
                      "rate": round(t["success"] / t["episodes"], 4), "ci_low": round(low, 4), "ci_high": round(high, 4),
                      **{k: int(t[k]) for k in FAILURES}})
-    with (HERE / "pooled.csv").open("w", newline="") as fh:
+    with (root / "pooled.csv").open("w", newline="") as fh:
         writer = csv.DictWriter(fh, fieldnames=list(rows[0]))
         writer.writeheader()
         writer.writerows(rows)
@@ -46,4 +47,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    main(Path(sys.argv[1]) if len(sys.argv) > 1 else HERE)
