@@ -66,11 +66,11 @@ def _head_metadata(actor: Actor) -> dict[str, Any]:
 
 def _first_layer(actor: Actor, feature_map: str) -> tuple[np.ndarray, np.ndarray]:
     """Layer 0 acting on the raw observation: the feature map `feature_map` (if the head has one) and the input
-    scaling folded into the weights, W (F ((x − o) s)) + b = (W F s) x + (b − W F (o s))."""
+    scaling folded into the weights, W F ((x − o) s) + b = (W F s) x + (b − W F (o s))."""
     lin = next(m for m in actor.net if isinstance(m, nn.Linear))
     W = lin.weight.detach().cpu().numpy().astype(np.float64)
     b = lin.bias.detach().cpu().numpy().astype(np.float64)
     if actor.head != "absolute":
         W = W @ getattr(actor, feature_map).detach().cpu().numpy().astype(np.float64)
     o, sc = (t.detach().cpu().numpy().astype(np.float64) for t in (actor.scaler.offset, actor.scaler.scale))
-    return W * sc, b - (W * sc) @ o
+    return W * sc, b - W @ (o * sc)
