@@ -56,6 +56,7 @@ def export_actor(
 
 
 def _head_metadata(actor: Actor) -> dict[str, Any]:
+    """The policy file's `head` entry, which `mrguide.deploy.policy` reads to apply the actor's output head."""
     head: dict[str, Any] = {"kind": actor.head}
     if actor.head != "absolute":
         head["max_offset"] = actor.max_offset
