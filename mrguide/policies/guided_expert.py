@@ -36,9 +36,10 @@ class GuidedExpert:
     """
 
     def __init__(self, source: ExpertSource, reference: ReferencePose, cache: AnnotationCache, delta: float, task: TaskConfig,
-                 to_normalized, reask_after: int = 0, action_noise: float = 0.0, noise_on: str = "executed", seed: int = 0):
+                 to_normalized, reask_after: int = 0, action_noise: float = 0.0, noise_on: str = "executed", seed: int = 0,
+                 noise_clip: bool = True):
         self.source, self.reference, self.cache = source, reference, cache
-        self.action_noise, self.noise_on = action_noise, noise_on
+        self.action_noise, self.noise_on, self.noise_clip = action_noise, noise_on, noise_clip
         self.rng = np.random.default_rng(seed + ACTION_NOISE_SEED_OFFSET)  # draws only when action_noise > 0
         self.delta = delta
         self.task = task
@@ -72,7 +73,9 @@ class GuidedExpert:
         if self.action_noise == 0:
             return ExpertStep(clean, clean)
         noisy = clean.copy()  # the motion is perturbed; the vacuum command stays the annotation's (decided on the clean waypoint)
-        noisy[:3] = np.clip(self.to_normalized(target + self.rng.normal(0.0, self.action_noise, 3)), -1.0, 1.0)
+        noisy[:3] = self.to_normalized(target + self.rng.normal(0.0, self.action_noise, 3))
+        if self.noise_clip:
+            noisy[:3] = np.clip(noisy[:3], -1.0, 1.0)
         return ExpertStep(noisy, noisy) if self.noise_on == "executed" else ExpertStep(clean, noisy)
 
     def _ask(self, obs: np.ndarray, previous) -> Annotation | None:

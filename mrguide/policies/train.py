@@ -141,7 +141,8 @@ class Trainer:
         )
         self.cache = AnnotationCache(guidance.cache_tolerance, self.out / "annotations.jsonl")
         self.expert = GuidedExpert(self.source, reference, self.cache, guidance.delta, self.env.task_cfg, self.env.workspace.to_normalized,
-                                   guidance.reask_after, guidance.action_noise, guidance.action_noise_on, cfg.seed)
+                                   guidance.reask_after, guidance.action_noise, guidance.action_noise_on, cfg.seed,
+                                   guidance.action_noise_clip)
         self.trigger = ThresholdTrigger(guidance.r_threshold)
         self.step = 0
         self.episode = 0

@@ -2,8 +2,9 @@
 
 For each run directory given (a training run with a policy.npz), plays 30 evaluation episodes in the
 training twin and prints the outcomes and, over every decision taken in the grasp phase, the distance
-(x/y, per axis) of the actor's target from the oracle's (the part's top centre). The cup seals only when
-it lands within about 13 mm of the centre per axis.
+(x/y, per axis) of the actor's target from the oracle's (the part's top centre) and the height of the
+actor's target above the oracle's (z; positive: the cup is sent to stop above the part). The cup seals only
+when it lands within about 13 mm of the centre per axis.
 
     python docs/results/noise-grasp-diag/grasp_error.py docs/results/noise-grasp-diag/sigma_*/seed* 2>/dev/null > docs/results/noise-grasp-diag/grasp_error.txt
 
@@ -34,17 +35,18 @@ def diagnose(run: Path) -> str:
         while True:
             action = policy(obs)
             if env.phase == 1:
-                errors.append(ws.to_cartesian(action[:3])[:2] - ws.to_cartesian(env.expert_action()[:3])[:2])
+                errors.append(ws.to_cartesian(action[:3]) - ws.to_cartesian(env.expert_action()[:3]))
             obs, _, term, trunc, info = env.step(action)
             if term or trunc:
                 break
         outcomes[info["outcome"]] += 1
     env.close()
-    err = np.abs(np.array(errors)) * 1000  # mm per axis
+    errors_mm = np.array(errors) * 1000
+    err, dz = np.abs(errors_mm[:, :2]), errors_mm[:, 2]  # mm per axis (x, y); z signed
     worst = err.max(axis=1)
     return (f"{run}: {dict(outcomes)}; grasp-phase decisions {len(err)}, |error| per axis median "
             f"{np.median(err):.1f} mm, p90 {np.percentile(err, 90):.1f} mm; both axes within 13 mm: "
-            f"{np.mean(worst < 13):.0%}")
+            f"{np.mean(worst < 13):.0%}; z above the oracle's median {np.median(dz):.1f} mm")
 
 
 if __name__ == "__main__":
