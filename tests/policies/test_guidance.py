@@ -285,3 +285,29 @@ def test_action_noise_never_changes_the_vacuum_command(tmp_path):
         steps = [expert.action(obs) for _ in range(200)]
         assert all(s.executed[3] == -1.0 and s.stored[3] == -1.0 for s in steps)
         assert len({tuple(s.stored[:3]) for s in steps}) == 200  # the motion is still perturbed afresh
+
+
+def test_unclipped_action_noise_keeps_the_grasp_height_label_unbiased(tmp_path):
+    """A grasp mark 5 mm above the box's floor: clipping the perturbed label to the box cuts off the noise's
+    downward half and lifts the labels' mean by about σ·φ(0) (σ = 5 cm: ~18 mm); unclipped labels average to
+    the mark (and may leave the box)."""
+    from mrguide.policies.guidance import NominalReference
+    from mrguide.policies.guided_expert import GuidedExpert
+
+    task, ws = TaskConfig(), load_robot().workspace
+    mark = np.array([0.5, -0.1, ws.lo[2] + 0.005])
+
+    class Grasp:
+        def annotate(self, obs, previous=None):
+            return Annotation(mark, 1.0)
+
+    def label_heights(clip):
+        expert = GuidedExpert(Grasp(), NominalReference(task), AnnotationCache(0.005), 0.05, task, ws.to_normalized, 0, 0.05,
+                              "stored", 0, clip)
+        obs = _obs(1, tcp=(0.5, -0.1, 0.06), obj=(0.5, -0.1, ws.lo[2] + 0.005 - 0.5 * task.object_height))
+        return ws.to_cartesian(np.array([expert.action(obs).stored[:3] for _ in range(4000)]))[:, 2]
+
+    clipped, unclipped = label_heights(True), label_heights(False)
+    assert clipped.min() >= ws.lo[2] - 1e-9 and unclipped.min() < ws.lo[2] - 0.05
+    assert clipped.mean() - mark[2] == pytest.approx(0.018, abs=0.004)
+    assert abs(unclipped.mean() - mark[2]) < 0.003
