@@ -124,7 +124,7 @@ class GuidanceConfig:
     action_noise_on: str = "executed"
     #: Clip the perturbed action to the action box [-1, 1] (the committed Fig. 7 runs). Near the box's floor —
     #: the grasp target lies 5 mm above it — clipping cuts off the downward half of the noise, so the stored
-    #: labels of the grasp height are biased upwards by about σ·φ(0) (7 mm at σ = 2 cm, 18 mm at 5 cm). False
+    #: labels of the grasp height are biased upwards (6 mm at σ = 2 cm, 18 mm at 5 cm). False
     #: stores the unclipped, zero-mean label; an executed action is clamped to the box by the environment.
     action_noise_clip: bool = True
     annotation_file: str = ""  # for source = "file"
