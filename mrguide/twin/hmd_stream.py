@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import logging
 import multiprocessing as mp
+import multiprocessing.connection
 import os
 import threading
 import time
@@ -196,7 +197,9 @@ class HmdPoseStream(ObjectPoseSource):
     def _raise_if_lost(self) -> None:
         with self._lock:
             lost = self._lost
-        if lost is None and not self._proc.is_alive():
+        # the process's sentinel, not is_alive(): is_alive() can report a dead child as alive while the
+        # reader thread is reaping it (waitpid then fails with ECHILD and the exit code is not yet stored)
+        if lost is None and mp.connection.wait([self._proc.sentinel], timeout=0):
             lost = f"the HMD process is not running (exit code {self._proc.exitcode})"
         if lost is not None:
             raise PoseUnavailable(lost)

@@ -54,6 +54,25 @@ def test_dead_hmd_process_is_unavailable_at_once():
         scene.close()
 
 
+def test_a_dead_hmd_process_is_gone_even_while_is_alive_has_not_caught_up(monkeypatch):
+    """A child reaped by another thread can read as alive for a moment (its exit code not yet stored): the
+    stream judges by the process's sentinel, so the last pose is refused at once all the same."""
+    cfg = EnvConfig.load(REAL)
+    scene = Scene(load_robot(cfg.robot), cfg.twin, cfg.task.object_height)
+    stream = HmdPoseStream(TwinPlant(scene), REAL, cfg.task.object_height, ArmDrawing.of(scene.spec))
+    try:
+        stream.wait_fresh()
+        stream._stop.set()  # the reader thread ends without noticing anything, so only the process check is left
+        stream._thread.join(timeout=10)
+        assert _kill_hmd() == 1
+        monkeypatch.setattr(stream._proc, "is_alive", lambda: True)
+        with pytest.raises(PoseUnavailable, match="HMD process is not running"):
+            stream.object_position()
+    finally:
+        stream.close()
+        scene.close()
+
+
 def test_hmd_dying_in_the_grasp_finishes_the_episode_on_the_last_pose_then_stops_the_run(tmp_path):
     """Before the grasp the part lies where it was last seen, so the last pose serves (up to
     `max_pose_misses_before_grasp` decisions, each counted); from the grasp on the carried part is tracked by the
