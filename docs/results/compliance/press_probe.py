@@ -32,13 +32,15 @@ from mrguide.twin.env import EnvConfig  # noqa: E402
 CASES = {"centred, vacuum off": (0.0, -1.0), "14 mm off-centre, vacuum on": (0.014, 1.0)}
 
 
-def pressing_expert(cfg: EnvConfig, offset: float, vacuum: float):
+def pressing_expert(cfg: EnvConfig, shift: np.ndarray, vacuum: float):
+    """The scripted expert, except that in the grasp phase it targets the part's centre + `shift` (m) with
+    the vacuum command `vacuum` (a target below the box floor is clamped to it, z = 0.045)."""
     ws = load_robot(cfg.robot).workspace
 
     def policy(obs):
         if phase_from_progress(obs[4]) != 1:
             return oracle_action(obs, cfg.task, ws.to_normalized).astype(np.float32)
-        target = np.asarray(obs[5:8], float) + np.array([offset, 0.0, 0.0])  # clamped to the floor, z = 0.045
+        target = np.asarray(obs[5:8], float) + shift
         return np.concatenate([ws.to_normalized(target), [vacuum]]).astype(np.float32)
 
     return policy
@@ -55,7 +57,7 @@ def main() -> None:
         for case, (offset, vacuum) in CASES.items():
             bus = CobotBusConfig(bus=BusConfig(interface="virtual", channel=f"press-{stroke}-{offset}"))
             with RunLog(Path("/tmp") / "press_probe.jsonl", {"probe": case}) as log:
-                summary = dry_run(None, cfg, bus, args.episodes, 0, log, None, policy=pressing_expert(cfg, offset, vacuum),
+                summary = dry_run(None, cfg, bus, args.episodes, 0, log, None, policy=pressing_expert(cfg, np.array([offset, 0.0, 0.0]), vacuum),
                                   max_recoveries=args.episodes)
             for e in summary.episodes:
                 safety = ";".join(sorted(k for k in e.events if k != "workspace"))

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import collections
+import importlib.util
 import sys
 from pathlib import Path
 
@@ -23,8 +24,6 @@ sys.path.insert(0, str(ROOT))
 from mrguide.config import load_section  # noqa: E402
 from mrguide.deploy.runlog import RunLog  # noqa: E402
 from mrguide.drivers.config import BusConfig, CobotBusConfig  # noqa: E402
-from mrguide.robot import load_robot  # noqa: E402
-from mrguide.task import oracle_action, phase_from_progress  # noqa: E402
 from mrguide.twin.config import TwinConfig  # noqa: E402
 from mrguide.twin.dry_run import dry_run  # noqa: E402
 from mrguide.twin.env import EnvConfig  # noqa: E402
@@ -32,16 +31,12 @@ from mrguide.twin.env import EnvConfig  # noqa: E402
 DEPTHS = (0.003, 0.005)  # m below the part's top: the paper's actor's median and the phase_anchor actor's
 
 
-def pressing_expert(cfg: EnvConfig, depth: float):
-    ws = load_robot(cfg.robot).workspace
-
-    def policy(obs):
-        if phase_from_progress(obs[4]) != 1:
-            return oracle_action(obs, cfg.task, ws.to_normalized).astype(np.float32)
-        target = np.asarray(obs[5:8], float) + np.array([0.0, 0.0, 0.5 * cfg.task.object_height - depth])
-        return np.concatenate([ws.to_normalized(target), [1.0]]).astype(np.float32)
-
-    return policy
+def press_probe():
+    """docs/results/compliance/press_probe.py as a module: its pressing expert is the one used here."""
+    spec = importlib.util.spec_from_file_location("press_probe", ROOT / "docs/results/compliance/press_probe.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
 
 
 def main() -> None:
@@ -49,10 +44,15 @@ def main() -> None:
     ap.add_argument("--episodes", type=int, default=20)
     args = ap.parse_args()
     cfg = EnvConfig(twin=load_section(TwinConfig, ROOT / "configs" / "real_cell.toml", "twin"))
+    expert = press_probe().pressing_expert
+
+    def shift(depth: float) -> np.ndarray:  # from the part's centre to `depth` below its top
+        return np.array([0.0, 0.0, 0.5 * cfg.task.object_height - depth])
+
     for depth in DEPTHS:
         bus = CobotBusConfig(bus=BusConfig(interface="virtual", channel=f"press-lift-{depth}"))
         with RunLog(Path("/tmp") / "press_lift_probe.jsonl", {"probe": depth}) as log:
-            summary = dry_run(None, cfg, bus, args.episodes, 0, log, None, policy=pressing_expert(cfg, depth),
+            summary = dry_run(None, cfg, bus, args.episodes, 0, log, None, policy=expert(cfg, shift(depth), 1.0),
                               max_recoveries=args.episodes)
         outcomes = collections.Counter(e.outcome for e in summary.episodes)
         print(f"grasp target {depth * 1000:.0f} mm below the part's top: {dict(outcomes)}", flush=True)
