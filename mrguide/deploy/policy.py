@@ -32,6 +32,8 @@ MAX_DECISION_PERIOD = 10.0
 ACTIVATIONS = {"relu": lambda x: np.maximum(x, 0.0), "tanh": np.tanh}
 #: The arm of policy files that record none (exported before arm identities): the only arm there was then.
 LEGACY_ARM = "ur5"
+#: Output heads with a second first layer for transport and release (W0_carry, b0_carry).
+ANCHOR_KINDS = ("phase_anchor", "anchor_offset")
 
 log = logging.getLogger(__name__)
 
@@ -42,20 +44,27 @@ class PolicyFileError(InputError):
 
 @dataclass(frozen=True)
 class OffsetHead:
-    """The "tcp_offset" output head: target = TCP + max_offset · y (m), normalized to the trained box."""
+    """The output head of tcp_offset and phase_anchor, target = TCP + max_offset · y (m), and of anchor_offset,
+    target = anchor + max_offset · y with the object as anchor up to φ = `anchor_switch` and the goal beyond;
+    normalized to the trained box."""
 
     max_offset: float
     centre: np.ndarray
     half: np.ndarray
+    anchor_switch: float | None = None
 
     def __call__(self, obs: np.ndarray, y: np.ndarray) -> np.ndarray:
-        pos = np.clip((obs[:, :3] + self.max_offset * y[:, :3] - self.centre) / self.half, -1.0, 1.0)
+        if self.anchor_switch is None:
+            base = obs[:, :3]
+        else:
+            base = np.where(obs[:, 4:5] > self.anchor_switch, obs[:, 8:11], obs[:, 5:8])
+        pos = np.clip((base + self.max_offset * y[:, :3] - self.centre) / self.half, -1.0, 1.0)
         return np.column_stack([pos, y[:, 3:]])
 
 
 @dataclass(frozen=True)
 class CarryLayer:
-    """The phase_anchor head's second first layer, used instead of layer 0 where φ > `progress` (transport and
+    """The anchor heads' second first layer, used instead of layer 0 where φ > `progress` (transport and
     release: the goal-anchored inputs instead of the object-anchored ones; both maps folded into the weights)."""
 
     W: np.ndarray
@@ -132,7 +141,7 @@ class ExportedPolicy:
             if diff:
                 raise PolicyFileError(f"{path}: task parameters differ from the configuration: {', '.join(diff)}")
         head = _head(path, meta, trained)
-        carry = _carry_layer(path, meta, arrays, weights[0]) if meta["head"]["kind"] == "phase_anchor" else None
+        carry = _carry_layer(path, meta, arrays, weights[0]) if meta["head"]["kind"] in ANCHOR_KINDS else None
         policy = cls(weights, biases, acts, meta, head, carry)
         _refuse_non_finite_output(path, policy, trained)
         return policy
@@ -199,22 +208,24 @@ def _metadata(path: Path, arrays: dict[str, np.ndarray]) -> dict[str, Any]:
 
 
 def _head(path: Path, meta: dict[str, Any], trained: Workspace) -> OffsetHead | None:
-    """The output head the metadata declares: none (absolute targets; also files without the field), or the
-    TCP offset of tcp_offset and phase_anchor (the latter also with a carry_progress in (0, 1))."""
+    """The output head the metadata declares: none (absolute targets; also files without the field), the TCP
+    offset of tcp_offset and phase_anchor, or the anchor offset of anchor_offset (the anchor kinds also with a
+    carry_progress in (0, 1))."""
     head = meta.setdefault("head", {"kind": "absolute"})
     kind = head.get("kind") if isinstance(head, dict) else None
     if kind == "absolute":
         return None
-    offset = head.get("max_offset") if kind in ("tcp_offset", "phase_anchor") else None
-    switch = head.get("carry_progress") if kind == "phase_anchor" else 0.5
+    offset = head.get("max_offset") if kind in ("tcp_offset", *ANCHOR_KINDS) else None
+    switch = head.get("carry_progress") if kind in ANCHOR_KINDS else 0.5
     if any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in (offset, switch)) or not (0 < offset < 100 and 0 < switch < 1):
         raise PolicyFileError(f"{path}: metadata head {head!r} not understood (absolute, tcp_offset with a max_offset "
-                              "in m, or phase_anchor with a max_offset and a carry_progress in (0, 1))")
-    return OffsetHead(float(offset), 0.5 * (trained.lo + trained.hi), 0.5 * (trained.hi - trained.lo))
+                              "in m, or phase_anchor or anchor_offset with a max_offset and a carry_progress in (0, 1))")
+    anchor_switch = float(switch) if kind == "anchor_offset" else None
+    return OffsetHead(float(offset), 0.5 * (trained.lo + trained.hi), 0.5 * (trained.hi - trained.lo), anchor_switch)
 
 
 def _carry_layer(path: Path, meta: dict[str, Any], arrays: dict[str, np.ndarray], W0: np.ndarray) -> CarryLayer:
-    """The phase_anchor head's W0_carry and b0_carry, shaped and checked as layer 0."""
+    """The anchor heads' W0_carry and b0_carry, shaped and checked as layer 0."""
     W, b = _layer_array(path, arrays, "W0_carry"), _layer_array(path, arrays, "b0_carry")
     if W.shape != W0.shape or b.shape != (W0.shape[0],):
         raise PolicyFileError(f"{path}: carry layer has weights {W.shape} and bias {b.shape}; expected those of layer 0, {W0.shape}")

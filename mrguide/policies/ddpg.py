@@ -15,11 +15,12 @@ import torch
 from torch import nn
 
 from mrguide.config import ConfigError, check_number
+from mrguide.deploy.policy import ANCHOR_KINDS
 from mrguide.policies.replay import Batch
 from mrguide.robot import Workspace
 
-ACTOR_HEADS = ("absolute", "tcp_offset", "phase_anchor")
-#: φ above which the phase_anchor actor sees the goal instead of the object: transport and release (φ = 3/5, 4/5, 1).
+ACTOR_HEADS = ("absolute", "tcp_offset", *ANCHOR_KINDS)
+#: φ above which the anchor actors see (and anchor_offset targets) the goal instead of the object: transport and release (φ = 3/5, 4/5, 1).
 CARRY_PROGRESS = 0.5
 
 
@@ -57,8 +58,11 @@ class DDPGConfig:
     #: "phase_anchor" (ours): the same output, but the MLP sees only the TCP height, g, φ and the position of
     #: the phase's anchor relative to the TCP — the object in approach, grasp and lift, the goal in transport
     #: and release — so each phase is equivariant to moving its own anchor and blind to the other one.
+    #: "anchor_offset" (ours): phase_anchor's input, but the offset is added to the anchor, not the TCP, so
+    #: where the TCP strays off the expert's path the target stays put unless the MLP moves it (with the TCP
+    #: as base, noisy labels on the expert's narrow path leave that feedback undetermined; Fig. 7).
     actor_head: str = "absolute"
-    max_offset: float = 0.5  # m, per axis, for the tcp_offset and phase_anchor heads
+    max_offset: float = 0.5  # m, per axis, for the tcp_offset, phase_anchor and anchor_offset heads
 
     def __post_init__(self) -> None:
         if not self.hidden or any(isinstance(h, bool) or not isinstance(h, int) or not 1 <= h <= 4096 for h in self.hidden):
@@ -130,15 +134,16 @@ def anchor_features(anchor: int) -> np.ndarray:
 
 
 class Actor(nn.Module):
-    """μ_θ(s) ∈ [-1, 1]^act_dim, with the "absolute", "tcp_offset" or "phase_anchor" head (DDPGConfig.actor_head).
-    `features` maps the scaled observation to the MLP's input; the phase_anchor head has a second map,
-    `carry_features`, used where φ > CARRY_PROGRESS."""
+    """μ_θ(s) ∈ [-1, 1]^act_dim, with one of ACTOR_HEADS (DDPGConfig.actor_head). `features` maps the scaled
+    observation to the MLP's input; the anchor heads have a second map, `carry_features`, used where
+    φ > CARRY_PROGRESS."""
 
     def __init__(self, scaler: ObsScaler, act_dim: int, hidden: tuple[int, ...], head: str = "absolute", max_offset: float = 0.5):
         super().__init__()
         self.scaler = scaler
         self.head, self.max_offset = head, max_offset
-        maps = {"tcp_offset": [relative_features()], "phase_anchor": [anchor_features(5), anchor_features(8)]}.get(head, [])
+        anchored = [anchor_features(5), anchor_features(8)]
+        maps = {"tcp_offset": [relative_features()], "phase_anchor": anchored, "anchor_offset": anchored}.get(head, [])
         for name, f in zip(("features", "carry_features"), maps):
             self.register_buffer(name, torch.as_tensor(f, dtype=torch.float32))
         self.net = mlp([len(maps[0]) if maps else len(scaler.offset), *hidden, act_dim], nn.Tanh)
@@ -148,10 +153,12 @@ class Actor(nn.Module):
         if self.head == "absolute":
             return self.net(x)
         inputs = x @ self.features.T
-        if self.head == "phase_anchor":
-            inputs = torch.where(obs[..., 4:5] > CARRY_PROGRESS, x @ self.carry_features.T, inputs)
+        carry = obs[..., 4:5] > CARRY_PROGRESS
+        if self.head in ANCHOR_KINDS:
+            inputs = torch.where(carry, x @ self.carry_features.T, inputs)
         y = self.net(inputs)
-        target = obs[..., :3] + self.max_offset * y[..., :3]  # m
+        base = torch.where(carry, obs[..., 8:11], obs[..., 5:8]) if self.head == "anchor_offset" else obs[..., :3]
+        target = base + self.max_offset * y[..., :3]  # m
         normalized = (target - self.scaler.offset[:3]) * self.scaler.scale[:3]  # the workspace's [-1, 1] box
         return torch.cat([normalized.clamp(-1.0, 1.0), y[..., 3:]], dim=-1)
 

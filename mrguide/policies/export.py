@@ -12,7 +12,7 @@ from torch import nn
 
 from mrguide import __version__
 from mrguide.config import to_dict
-from mrguide.deploy.policy import FORMAT, FORMAT_VERSION
+from mrguide.deploy.policy import ANCHOR_KINDS, FORMAT, FORMAT_VERSION
 from mrguide.policies.ddpg import CARRY_PROGRESS, Actor
 from mrguide.robot import RobotSpec
 from mrguide.task import ACT_LAYOUT, OBS_LAYOUT, TaskConfig
@@ -45,7 +45,7 @@ def export_actor(
     for i, lin in enumerate(linears[1:], start=1):
         arrays[f"W{i}"] = lin.weight.detach().cpu().numpy().astype(np.float64)
         arrays[f"b{i}"] = lin.bias.detach().cpu().numpy().astype(np.float64)
-    if actor.head == "phase_anchor":
+    if actor.head in ANCHOR_KINDS:
         arrays["W0_carry"], arrays["b0_carry"] = _first_layer(actor, "carry_features")
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -60,7 +60,7 @@ def _head_metadata(actor: Actor) -> dict[str, Any]:
     head: dict[str, Any] = {"kind": actor.head}
     if actor.head != "absolute":
         head["max_offset"] = actor.max_offset
-    if actor.head == "phase_anchor":
+    if actor.head in ANCHOR_KINDS:
         head["carry_progress"] = CARRY_PROGRESS
     return head
 

@@ -1,5 +1,6 @@
 """Export to the numpy policy file; the deploy loader matches torch and refuses bad files."""
 
+import dataclasses
 import json
 
 import numpy as np
@@ -137,19 +138,23 @@ def test_unknown_head_refused(exported, tmp_path):
         ExportedPolicy.load(_rewrite(path, tmp_path / "bad.npz", head), load_robot(), TaskConfig())
 
 
-def _phase_anchor_policy(tmp_path):
+ANCHOR_HEADS = ("phase_anchor", "anchor_offset")
+
+
+def _anchor_policy(tmp_path, head):
     spec = load_robot()
-    agent = DDPG(*obs_scaling(spec.workspace), 4, DDPGConfig(actor_head="phase_anchor", max_offset=0.3), seed=4)
+    agent = DDPG(*obs_scaling(spec.workspace), 4, DDPGConfig(actor_head=head, max_offset=0.3), seed=4)
     with torch.no_grad():  # weights large enough that some targets leave the box and are clipped
         for p in agent.actor.net.parameters():
             p.mul_(3.0)
     return agent, export_actor(agent.actor, tmp_path / "policy.npz", spec, TaskConfig(), 0.1)
 
 
-def test_phase_anchor_head_exports_and_runs_the_same_in_numpy(tmp_path):
-    agent, path = _phase_anchor_policy(tmp_path)
+@pytest.mark.parametrize("head", ANCHOR_HEADS)
+def test_anchor_heads_export_and_run_the_same_in_numpy(tmp_path, head):
+    agent, path = _anchor_policy(tmp_path, head)
     pol = ExportedPolicy.load(path, load_robot(), TaskConfig())
-    assert pol.metadata["head"] == {"kind": "phase_anchor", "max_offset": 0.3, "carry_progress": 0.5}
+    assert pol.metadata["head"] == {"kind": head, "max_offset": 0.3, "carry_progress": 0.5}
     obs = _random_obs(load_robot().workspace, 500)
     obs[:, 4] = np.random.default_rng(1).choice([0.0, 0.2, 0.4, 0.6, 0.8, 1.0], 500)  # every phase, both layers
     with torch.no_grad():
@@ -158,11 +163,12 @@ def test_phase_anchor_head_exports_and_runs_the_same_in_numpy(tmp_path):
     assert np.max(np.abs(got - ref)) < 1e-5 and np.any(np.abs(got[:, :3]) == 1.0) and np.any(np.abs(got[:, :3]) < 0.9)
 
 
-def test_phase_anchor_policy_follows_the_object_before_transport_and_the_goal_from_it():
+@pytest.mark.parametrize("head", ANCHOR_HEADS)
+def test_anchor_policies_follow_the_object_before_transport_and_the_goal_from_it(head):
     """Before transport the target moves with TCP + object and ignores the goal; from transport on it moves
     with TCP + goal and ignores the object."""
     ws = Workspace(low=(-1.0, -1.0, 0.045), high=(2.0, 2.0, 0.35))  # large enough that nothing is clipped
-    agent = DDPG(*obs_scaling(ws), 4, DDPGConfig(actor_head="phase_anchor", max_offset=0.3), seed=1)
+    agent = DDPG(*obs_scaling(ws), 4, DDPGConfig(actor_head=head, max_offset=0.3), seed=1)
     obs = _random_obs(load_robot().workspace, 200)
 
     def target(o):
@@ -180,8 +186,31 @@ def test_phase_anchor_policy_follows_the_object_before_transport_and_the_goal_fr
         assert np.allclose(target(unrelated), target(obs), atol=1e-6)
 
 
-def test_phase_anchor_file_without_its_carry_layer_refused(tmp_path):
-    _, path = _phase_anchor_policy(tmp_path)
+@pytest.mark.parametrize("head, base", [("phase_anchor", (0, 0)), ("anchor_offset", (5, 8))])
+def test_anchor_offset_adds_its_offset_to_the_anchor_and_phase_anchor_to_the_tcp(tmp_path, head, base):
+    """With a constant MLP output the target is base + max_offset · tanh(bias): the TCP for phase_anchor, the
+    object (before transport) or the goal (from transport on) for anchor_offset; torch and the numpy runner alike."""
+    ws = Workspace(low=(-1.0, -1.0, -1.0), high=(2.0, 2.0, 2.0))  # large enough that nothing is clipped
+    agent = DDPG(*obs_scaling(ws), 4, DDPGConfig(actor_head=head, max_offset=0.3), seed=2)
+    last = agent.actor.net[-2]
+    with torch.no_grad():
+        last.weight.zero_()
+        last.bias.copy_(torch.tensor([0.1, -0.2, 0.3, 0.5]))
+    spec = dataclasses.replace(load_robot(), workspace=ws)  # a file for the large box; loaded without an arm
+    pol = ExportedPolicy.load(export_actor(agent.actor, tmp_path / "policy.npz", spec, TaskConfig(), 0.1))
+    obs = _random_obs(load_robot().workspace, 300)
+    obs[:, 4] = np.random.default_rng(3).choice([0.0, 0.2, 0.4, 0.6, 0.8, 1.0], 300)
+    before = obs[:, 4] <= 0.5
+    expected = np.where(before[:, None], obs[:, base[0]: base[0] + 3], obs[:, base[1]: base[1] + 3]) + 0.3 * np.tanh([0.1, -0.2, 0.3])
+    with torch.no_grad():
+        from_torch = ws.to_cartesian(agent.actor(torch.as_tensor(obs)).numpy()[:, :3])
+    assert np.allclose(from_torch, expected, atol=1e-5)
+    assert np.allclose(ws.to_cartesian(pol.batch(obs)[:, :3]), expected, atol=1e-5)
+
+
+@pytest.mark.parametrize("head", ANCHOR_HEADS)
+def test_anchor_file_without_its_carry_layer_refused(tmp_path, head):
+    _, path = _anchor_policy(tmp_path, head)
     bad = _rewrite(path, tmp_path / "bad.npz", lambda a: a.pop("W0_carry"))
     with pytest.raises(PolicyFileError, match="W0_carry"):
         ExportedPolicy.load(bad)
