@@ -160,7 +160,12 @@ class Actor(nn.Module):
         base = torch.where(carry, obs[..., 8:11], obs[..., 5:8]) if self.head == "anchor_offset" else obs[..., :3]
         target = base + self.max_offset * y[..., :3]  # m
         normalized = (target - self.scaler.offset[:3]) * self.scaler.scale[:3]  # the workspace's [-1, 1] box
-        return torch.cat([normalized.clamp(-1.0, 1.0), y[..., 3:]], dim=-1)
+        clamped = normalized.clamp(-1.0, 1.0)
+        if self.head == "anchor_offset":
+            # straight-through: the part's centre lies below the box floor, so at the start most targets are
+            # clamped, and a plain clamp passes them no gradient (the approach height was never learned)
+            clamped = normalized + (clamped - normalized).detach()
+        return torch.cat([clamped, y[..., 3:]], dim=-1)
 
 
 class CriticEnsemble(nn.Module):

@@ -168,3 +168,26 @@ def test_q_filter_clones_only_the_expert_actions_the_critic_rates_above_the_acto
     assert stats["bc_loss"] == pytest.approx((sq_err * keep).sum().item() / len(keep), rel=1e-5)
     assert stats["bc_loss"] < sq_err.mean().item()  # what the unfiltered term would have been
 
+
+
+
+def test_a_target_clamped_below_the_box_still_learns_under_anchor_offset():
+    """The part's centre lies below the box floor, so anchor_offset starts with its targets clamped there; its
+    straight-through clamp passes the gradient, and cloning lifts the target to the label (with a plain clamp
+    the height got no gradient and stayed on the floor: the approach height was never learned)."""
+    from mrguide.policies.ddpg import obs_scaling
+    from mrguide.robot import load_robot
+
+    ws = load_robot().workspace
+    agent = DDPG(*obs_scaling(ws), 4, DDPGConfig(hidden=(16, 16), actor_head="anchor_offset"), seed=0)
+    obs = np.array([0.5, 0.1, 0.2, -1.0, 0.0, 0.47, -0.05, -0.3, 0.57, 0.16, 0.02], dtype=np.float32)  # part 30 cm below
+    label = np.concatenate([ws.to_normalized([0.47, -0.05, 0.13]), [-1.0]]).astype(np.float32)
+    o, a = torch.as_tensor(obs[None]), torch.as_tensor(label[None])
+    assert agent.actor(o)[0, 2].item() == -1.0  # clamped to the floor
+    opt = torch.optim.Adam(agent.actor.parameters(), lr=1e-2)
+    for _ in range(300):
+        loss = ((agent.actor(o) - a) ** 2).sum()
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+    assert abs(ws.to_cartesian(agent.actor(o).detach().numpy()[0, :3])[2] - 0.13) < 0.005
