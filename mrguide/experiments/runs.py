@@ -103,7 +103,7 @@ def train(run: TrainRun, root: str, on_episode: Callable[[dict], None] | None = 
             tr.load_checkpoint()
         tr.run(on_episode)
         tr.save_checkpoint()
-        export_actor(tr.agent.actor, out / "policy.npz", tr.env.robot_spec, tr.env.task_cfg, tr.env.twin_cfg.decision_period,
+        export_actor(tr.agent.policy_actor, out / "policy.npz", tr.env.robot_spec, tr.env.task_cfg, tr.env.twin_cfg.decision_period,
                      {"trained": {"steps": tr.step, "seed": run.seed, "guidance": run.guided, "run": run.name}})
         tmp = out / "done.tmp"
         tmp.write_text(json.dumps({"wall_s": round(tr.wall_s(), 1), "update_ms": round(tr.update_ms(), 3), "steps": tr.step}) + "\n")

@@ -196,7 +196,7 @@ def _finish(tr, tc, gc, out: Path) -> None:
     from mrguide.policies.export import export_actor
 
     final = tr.last_eval or tr.evaluate()
-    policy = export_actor(tr.agent.actor, out / "policy.npz", tr.env.robot_spec, tr.env.task_cfg, tr.env.twin_cfg.decision_period,
+    policy = export_actor(tr.agent.policy_actor, out / "policy.npz", tr.env.robot_spec, tr.env.task_cfg, tr.env.twin_cfg.decision_period,
                           {"trained": {"steps": tr.step, "seed": tc.seed, "guidance": gc.enabled}})
     print(f"trained {tr.step} steps in {tr.wall_s():.0f} s ({tr.step / max(tr.wall_s(), 1e-9):.0f} steps/s); "
           f"expert interventions {tr.interventions}, annotations asked {tr.cache.asked} / reused {tr.cache.reused}"

@@ -62,6 +62,10 @@ class DDPGConfig:
     #: where the TCP strays off the expert's path the target stays put unless the MLP moves it (with the TCP
     #: as base, noisy labels on the expert's narrow path leave that feedback undetermined; Fig. 7).
     actor_head: str = "absolute"
+    #: Evaluate and export the target actor — the Polyak average (τ) of the actor's weights — instead of the
+    #: online actor, which under noisy expert labels wanders from one update to the next (Fig. 7); exploration
+    #: still uses the online actor. Ours; off by default (every committed result used the online actor).
+    act_with_target: bool = False
     max_offset: float = 0.5  # m, per axis, for the tcp_offset, phase_anchor and anchor_offset heads
 
     def __post_init__(self) -> None:
@@ -227,11 +231,17 @@ class DDPG:
             for net, tgt in ((self.actor, self.actor_target), (self.critic, self.critic_target))
         ]
 
+    @property
+    def policy_actor(self) -> Actor:
+        """The actor that is evaluated and exported: the target actor with `act_with_target`, else the online one."""
+        return self.actor_target if self.cfg.act_with_target else self.actor
+
     @torch.no_grad()
     def act(self, obs: np.ndarray, rng: np.random.Generator | None = None, sigma: float | None = None) -> np.ndarray:
-        """Deterministic action, plus Gaussian noise of std `sigma` (default: the initial exploration noise)
-        when `rng` is given; clipped to [-1, 1]."""
-        a = self.actor(torch.as_tensor(obs, dtype=torch.float32).unsqueeze(0)).squeeze(0).numpy()
+        """Without `rng`, the evaluated policy's deterministic action (`policy_actor`); with it, the online
+        actor's action plus Gaussian noise of std `sigma` (default: the initial exploration noise). Clipped to [-1, 1]."""
+        actor = self.actor if rng is not None else self.policy_actor
+        a = actor(torch.as_tensor(obs, dtype=torch.float32).unsqueeze(0)).squeeze(0).numpy()
         if rng is not None:
             a = a + rng.normal(0.0, self.cfg.exploration_noise if sigma is None else sigma, a.shape)
         return np.clip(a, -1.0, 1.0).astype(np.float32)

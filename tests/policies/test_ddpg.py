@@ -191,3 +191,19 @@ def test_a_target_clamped_below_the_box_still_learns_under_anchor_offset():
         loss.backward()
         opt.step()
     assert abs(ws.to_cartesian(agent.actor(o).detach().numpy()[0, :3])[2] - 0.13) < 0.005
+
+
+@pytest.mark.parametrize("act_with_target", [False, True])
+def test_act_with_target_evaluates_the_averaged_actor_and_explores_with_the_online_one(act_with_target):
+    agent = make(act_with_target=act_with_target)
+    for b in batches(20):
+        agent.update(b)  # the online actor moves; its target follows only by τ
+    obs = np.random.default_rng(1).normal(size=(8, 11)).astype(np.float32)
+    with torch.no_grad():
+        online, target = (net(torch.as_tensor(obs)).numpy() for net in (agent.actor, agent.actor_target))
+    assert np.abs(online - target).max() > 1e-3
+    evaluated = np.array([agent.act(o) for o in obs])
+    assert np.allclose(evaluated, target if act_with_target else online, atol=1e-6)
+    assert agent.policy_actor is (agent.actor_target if act_with_target else agent.actor)
+    explored = np.array([agent.act(o, np.random.default_rng(0), sigma=0.0) for o in obs])
+    assert np.allclose(explored, online, atol=1e-6)
