@@ -123,8 +123,8 @@ class GuidanceConfig:
     #: and only the stored transition carries the perturbed one (label noise).
     action_noise_on: str = "executed"
     #: Clip the perturbed action to the action box [-1, 1] (the committed Fig. 7 runs). Near the box's floor —
-    #: the grasp target lies 5 mm above it — clipping cuts off the downward half of the noise, so the stored
-    #: labels of the grasp height are biased upwards (6 mm at σ = 2 cm, 18 mm at 5 cm). False
+    #: the grasp target lies 2 mm above it — clipping cuts off the downward half of the noise, so the stored
+    #: labels of the grasp height are biased upwards (7 mm at σ = 2 cm, 19 mm at 5 cm). False
     #: stores the unclipped, zero-mean label; an executed action is clamped to the box by the environment.
     action_noise_clip: bool = True
     annotation_file: str = ""  # for source = "file"
