@@ -3,6 +3,7 @@ policy's target relative to the scripted expert's (mm), the vacuum state and com
 is precise on the expert's states drifts once the arm strays off them.
 
     python docs/results/noise-pa-noclip-probe/trace.py docs/results/noise-pa-noclip-probe/sigma_0.020/seed1/policy.npz > docs/results/noise-pa-noclip-probe/trace_sigma_0.020_seed1.txt
+    (and policy_target.npz > trace_sigma_0.020_seed1_target.txt)
 """
 import sys
 
