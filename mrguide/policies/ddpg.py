@@ -157,8 +157,8 @@ class Actor(nn.Module):
         if self.head == "absolute":
             return self.net(x)
         inputs = x @ self.features.T
-        carry = obs[..., 4:5] > CARRY_PROGRESS
         if self.head in ANCHOR_KINDS:
+            carry = obs[..., 4:5] > CARRY_PROGRESS
             inputs = torch.where(carry, x @ self.carry_features.T, inputs)
         y = self.net(inputs)
         base = torch.where(carry, obs[..., 8:11], obs[..., 5:8]) if self.head == "anchor_offset" else obs[..., :3]

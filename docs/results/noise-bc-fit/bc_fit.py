@@ -16,7 +16,6 @@ Inputs: `expert_states.npz` here, the expert pools' states of seeds 0 and 1 of t
 docs/results/noise-robustness (from their checkpoints, not committed; the runs are re-created by
 `mrguide experiment noise-robustness --seeds 2` with sigmas = [0.0]); the noise-free expert visited them.
 """
-import collections
 import copy
 from pathlib import Path
 
@@ -26,6 +25,7 @@ import torch
 from mrguide.policies.ddpg import Actor, ObsScaler, obs_scaling
 from mrguide.task import oracle_action, phase_from_progress
 from mrguide.twin.env import PickPlaceEnv
+from mrguide.twin.rollout import run_episodes
 
 STATES = Path(__file__).resolve().parent / "expert_states.npz"
 UPDATES = 20_000  # one per training step of a 20k-step run
@@ -74,17 +74,13 @@ def grasp_error(actor: Actor, states: np.ndarray, truth: np.ndarray, ws) -> str:
 
 def closed_loop(actor: Actor, env: PickPlaceEnv) -> str:
     """The outcomes of EPISODES deterministic episodes of `actor` alone, e.g. "success 28, no_grasp 2"."""
-    outcomes: collections.Counter = collections.Counter()
-    for k in range(EPISODES):
-        obs, _ = env.reset(seed=5_000_000 + k)
-        while True:
-            with torch.no_grad():
-                action = actor(torch.as_tensor(obs, dtype=torch.float32)).numpy()
-            obs, _, term, trunc, info = env.step(action)
-            if term or trunc:
-                break
-        outcomes[info["outcome"]] += 1
-    return ", ".join(f"{k} {v}" for k, v in outcomes.most_common())
+
+    def act(obs: np.ndarray) -> np.ndarray:
+        with torch.no_grad():
+            return actor(torch.as_tensor(obs, dtype=torch.float32)).numpy()
+
+    counts = run_episodes(env, act, range(5_000_000, 5_000_000 + EPISODES)).outcomes()
+    return ", ".join(f"{k} {v}" for k, v in counts.most_common())
 
 
 def main() -> None:
@@ -106,7 +102,7 @@ def main() -> None:
                     continue
                 rng = np.random.default_rng(104_729)
                 labels = clean.copy()
-                for k, s in enumerate(train):
+                for k in range(len(train)):
                     target = ws.to_cartesian(clean[k, :3]) + rng.normal(0.0, sigma, 3)
                     labels[k, :3] = ws.to_normalized(target)
                 if clip:

@@ -4,24 +4,17 @@ episodes each in the training twin, outcomes counted. Output in online_vs_target
 
     python docs/results/noise-pa-noclip-probe/online_vs_target.py > docs/results/noise-pa-noclip-probe/online_vs_target.txt
 """
-import collections
 from pathlib import Path
 
 from mrguide.deploy.policy import ExportedPolicy
 from mrguide.twin.env import PickPlaceEnv
+from mrguide.twin.rollout import run_episodes
 
 EPISODES = 30
 
 
 def outcomes(policy: ExportedPolicy, env: PickPlaceEnv) -> str:
-    counts: collections.Counter = collections.Counter()
-    for k in range(EPISODES):
-        obs, _ = env.reset(seed=5_000_000 + k)
-        while True:
-            obs, _, term, trunc, info = env.step(policy(obs))
-            if term or trunc:
-                break
-        counts[info["outcome"]] += 1
+    counts = run_episodes(env, policy, range(5_000_000, 5_000_000 + EPISODES)).outcomes()
     return f"success {counts['success']}/{EPISODES} ({', '.join(f'{k} {v}' for k, v in counts.most_common() if k != 'success') or '-'})"
 
 
