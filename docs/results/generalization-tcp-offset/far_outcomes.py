@@ -16,7 +16,7 @@ from mrguide.experiments.runs import configs
 from mrguide.twin.env import PickPlaceEnv
 
 HERE = Path(__file__).resolve().parent
-cfg = load_section(gen.GeneralizationConfig, HERE.parents[2] / "configs/experiments/generalization_tcp_offset.toml", "experiment")
+cfg = load_section(gen.GeneralizationConfig, HERE.parents[2] / "configs/experiments/generalization_tcp_offset.toml", "experiment", known=("experiment",))
 run = gen.runs(cfg, None)[0]
 env = PickPlaceEnv(configs(run)[3])
 policy = ExportedPolicy.load(HERE / "guided/seed0/policy.npz", env.robot_spec, env.task_cfg)
