@@ -5,7 +5,7 @@ paper's actor at 20k steps), over every episode that reached the lift:
 - the TCP's height above the part's top when the policy first commanded the vacuum on in the grasp phase;
 - the largest lateral distance of a lift decision's target from the TCP;
 - how far below the part's top the grasp phase's deepest target lay;
-and for this directory each dropped episode's offset and vacuum.
+and for the first directory each dropped episode's offset, vacuum, deepest grasp target and largest lateral lift command.
 
     python docs/results/sim2real-phase-anchor/drops.py [DIR ...]
 """
@@ -48,7 +48,8 @@ def summarize(root: Path, list_drops: bool) -> None:
                 switch.append(1000 * (on[0]["obs"][2] - on[0]["obs"][7] - HALF_HEIGHT))
             lateral.append(max(1000 * np.linalg.norm(np.subtract(r["target"][:2], r["obs"][:2])) for r in lift))
             if list_drops and outcome.get(ep) == "dropped":
-                print(f"  drop: {log.relative_to(root)} episode {ep}: offset {off[-1]:.0f} mm, vacuum {vac[-1]:.0f} kPa")
+                print(f"  drop: {log.relative_to(root)} episode {ep}: offset {off[-1]:.0f} mm, vacuum {vac[-1]:.0f} kPa, "
+                      f"deepest grasp target {depth[-1]:.1f} mm, lateral lift command up to {lateral[-1]:.0f} mm")
     print(f"{root.name}: {len(vac)} lifts; vacuum at the first lift decision median {np.median(vac):.0f} kPa "
           f"(p10 {np.percentile(vac, 10):.0f}); cup offset median {np.median(off):.1f} mm (p90 {np.percentile(off, 90):.1f}); "
           f"vacuum switched on {np.median(switch):.0f} mm above the part (median); lateral lift command "
