@@ -12,7 +12,7 @@ import os
 import platform
 import tempfile
 
-from mrguide.policies.train import Trainer, load_train_config
+from mrguide.policies.train import Trainer, load_sac_config, load_train_config
 
 
 def main() -> None:
@@ -25,19 +25,19 @@ def main() -> None:
     tc, dc, gc, ec = load_train_config(args.config)
     tc = dataclasses.replace(tc, total_steps=args.steps, checkpoint_every=args.steps)
     with tempfile.TemporaryDirectory() as out:
-        tr = Trainer(tc, dc, gc, ec, out)
+        tr = Trainer(tc, dc, gc, ec, out, sac_cfg=load_sac_config(args.config))
         try:
             tr.run()
         finally:
             tr.close()
     wall = tr.wall_s()
-    res = {"steps": tr.step, "steps_per_s": tr.step / wall, "update_ms": tr.update_ms(),
+    res = {"learner": tc.learner, "steps": tr.step, "steps_per_s": tr.step / wall, "update_ms": tr.update_ms(),
            f"wall_s_{args.steps // 1000}k": wall, "wall_s_20k": wall * 20_000 / tr.step,
            "final_eval_success": tr.last_eval.get("success_rate"), "annotations_asked": tr.cache.asked}
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}, pinned to one core")
     print(f"{'guided training steps':<40} {tr.step}")
     print(f"{'steps/s (env + update)':<40} {res['steps_per_s']:.1f}")
-    hidden = "x".join(map(str, dc.hidden))
+    hidden = "x".join(map(str, (tr.sac_cfg if tc.learner == "sac" else dc).hidden))
     print(f"{f'update (batch {tc.batch_size}, {hidden} MLPs)':<40} {res['update_ms']:.2f} ms")
     print(f"{'wall time, scaled to 20k steps':<40} {res['wall_s_20k']:.0f} s   (target <= 180 s)")
     print(json.dumps({k: round(v, 4) if isinstance(v, float) else v for k, v in res.items()}))

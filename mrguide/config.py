@@ -112,7 +112,7 @@ def load_toml(path: str | Path) -> dict[str, Any]:
 #: The sections a run config may hold: one file may serve several commands (`configs/real_cell.toml` is
 #: read by `deploy` and `sim2real`), so each command reads its sections and any other known one is left to
 #: the command it belongs to; an unknown section (a typo: `[deplyo]`) is refused instead of ignored.
-RUN_SECTIONS = ("robot", "task", "twin", "train", "ddpg", "guidance", "deploy", "safety", "calibration",
+RUN_SECTIONS = ("robot", "task", "twin", "train", "ddpg", "sac", "guidance", "deploy", "safety", "calibration",
                 "calibration_twin")
 
 

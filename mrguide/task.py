@@ -207,17 +207,47 @@ OBS_LAYOUT = ("tcp_x", "tcp_y", "tcp_z", "g", "phi", "obj_x", "obj_y", "obj_z", 
 ACT_LAYOUT = ("target_x", "target_y", "target_z", "gripper")
 
 
+#: m: the scripted expert's grasp target lies this far into the object top so the cup seals.
+GRASP_PRESS = 0.003
+#: The phases whose marks stand for a whole demonstration when a person gives two marks (guidance.marks =
+#: "pick_place"): the grasp point (the pick mark) and the set-down point (the place mark).
+PICK_PHASE, PLACE_PHASE = 1, 4
+
+
 def oracle_target(obs: np.ndarray, cfg: TaskConfig) -> tuple[np.ndarray, float]:
     """The scripted expert's annotation: the current phase's target (m) and required gripper state ḡ_κ.
 
-    In the grasp phase the target lies 3 mm into the object top so the cup seals.
+    In the grasp phase the target lies GRASP_PRESS into the object top so the cup seals.
     """
     obs = np.asarray(obs, dtype=float)
     phase = phase_from_progress(obs[4])
     target = phase_target(phase, obs[5:8], obs[8:11], cfg)
     if phase == 1:
-        target = target - np.array([0.0, 0.0, 0.003])
+        target = target - np.array([0.0, 0.0, GRASP_PRESS])
     return target, float(G_REQUIRED[phase])
+
+
+def mark_phase(phase: int) -> int:
+    """The phase whose mark a pick-and-place demonstration follows in `phase`: the pick up to the lift, then the place."""
+    return PICK_PHASE if phase <= 2 else PLACE_PHASE
+
+
+def waypoint_from_mark(phase: int, mark: np.ndarray, cfg: TaskConfig) -> np.ndarray:
+    """The TCP waypoint of `phase` (m) that follows from its pick or place mark (see `mark_phase`).
+
+    The approach hovers `approach_height` above the part's top (GRASP_PRESS above the pick mark), the lift and
+    the transport rise to `lift_height` straight above the pick and the place marks, grasp and release are the
+    marks themselves. With exact marks these are the task model's phase targets (Eq. 4), except that the lift
+    stays above the grasp point instead of following the part.
+    """
+    mark = np.asarray(mark, dtype=float)
+    if phase == 0:
+        return mark + np.array([0.0, 0.0, GRASP_PRESS + cfg.approach_height])
+    if phase in (2, 3):
+        return np.array([mark[0], mark[1], cfg.lift_height])
+    if phase in (1, 4):
+        return mark.copy()
+    raise ValueError(f"phase must be in 0..{N_PHASES - 1}, got {phase}")
 
 
 def annotation_action(obs: np.ndarray, target: np.ndarray, grip: float, cfg: TaskConfig, to_normalized) -> np.ndarray:

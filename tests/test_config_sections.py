@@ -10,7 +10,7 @@ from mrguide.calibration.config import load_calibration_config
 from mrguide.config import RUN_SECTIONS, ConfigError, load_section
 from mrguide.deploy.safety import SafetyConfig
 from mrguide.deploy.session import DeployConfig
-from mrguide.policies.train import load_train_config
+from mrguide.policies.train import load_sac_config, load_train_config
 from mrguide.robot import load_robot_config
 from mrguide.twin.markers import TwinCalibrationConfig
 
@@ -18,9 +18,10 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def _every_loader(path: Path) -> None:
-    """What the commands read from a run config: train (robot, twin, task, train, ddpg, guidance), deploy and
+    """What the commands read from a run config: train (robot, twin, task, train, ddpg, sac, guidance), deploy and
     sim2real (deploy, safety), calibrate (calibration, calibration_twin)."""
     load_train_config(path)
+    load_sac_config(path)
     load_robot_config(path)
     load_section(DeployConfig, path, "deploy")
     load_section(SafetyConfig, path, "safety")

@@ -39,7 +39,10 @@ def add_annotate_command(sub: argparse._SubParsersAction) -> None:
     asub = p.add_subparsers(dest="annotate_command", required=True)
     b = asub.add_parser("bot", help="a scripted client that answers annotation requests like the simulated annotator")
     b.add_argument("--url", required=True, help="the annotation page URL printed by `mrguide train --expert live`")
-    b.add_argument("--noise", type=nonnegative_float, default=0.0, metavar="SIGMA", help="std of the marking error per axis, m")
+    b.add_argument("--noise", type=nonnegative_float, metavar="SIGMA",
+                   help="std of an isotropic marking error per axis, m (default 0, or the --config's)")
+    b.add_argument("--config", help="a training config whose [guidance.noise] is the error model to mark with, e.g. "
+                                    "configs/person.toml (a person in a headset: bias, line-of-sight error, slips)")
     b.add_argument("--seed", type=nonnegative_int, default=0, help="training seed whose simulated annotator to mimic")
     b.add_argument("--delay", type=nonnegative_float, default=0.0, metavar="S", help="think time before each answer, s")
     b.add_argument("--count", type=positive_int, help="stop after this many answers")
@@ -48,12 +51,17 @@ def add_annotate_command(sub: argparse._SubParsersAction) -> None:
 
 
 def cmd_annotate_bot(args: argparse.Namespace) -> int:
-    from mrguide.annotation.bot import AnnotationBot, BotError, BotOptions
-    from mrguide.policies.experts import AnnotatorNoise
+    import dataclasses
 
+    from mrguide.annotation.bot import AnnotationBot, BotError, BotOptions
+    from mrguide.config import load_section
+    from mrguide.policies.guidance import GuidanceConfig
+
+    noise = load_section(GuidanceConfig, args.config, "guidance").noise  # ConfigError: exit 2 with the reason
+    if args.noise is not None:
+        noise = dataclasses.replace(noise, sigma=args.noise)
     try:
-        bot = AnnotationBot(BotOptions(args.url, AnnotatorNoise(sigma=args.noise), args.seed, args.delay, args.count,
-                                       args.insecure))
+        bot = AnnotationBot(BotOptions(args.url, noise, args.seed, args.delay, args.count, args.insecure))
         print(f"annotation bot: connecting to {bot.url.split('?')[0]}", file=sys.stderr)
         report = bot.run()
     except BotError as exc:

@@ -22,7 +22,7 @@ from tqdm import tqdm
 
 from mrguide.cli_args import positive_int
 from mrguide.config import ConfigError, load_section
-from mrguide.experiments.runs import configs
+from mrguide.experiments.runs import configs, sac_config
 from mrguide.shipped_configs import shipped_config
 
 #: The three sim-to-real conditions (run by mrguide.experiments.sim2real; named here to check them without PyBullet).
@@ -52,6 +52,8 @@ def _experiments() -> dict[str, Experiment]:
     from mrguide.experiments import generalization as gen
     from mrguide.experiments import learning_curves as lc
     from mrguide.experiments import noise_robustness as nr
+    from mrguide.experiments import peers
+    from mrguide.experiments import person
     from mrguide.experiments import sim2real_runs as s2r
 
     return {
@@ -64,6 +66,10 @@ def _experiments() -> dict[str, Experiment]:
         "generalization": Experiment(gen.GeneralizationConfig, "generalization.toml", "runs/generalization", gen.runs,
                                      lambda c, b, r, e: gen.generalization_report(c, r, gen.runs(c, b)), gen.evaluate,
                                      lambda run, root: run.directory(root) / "goals.csv"),
+        "person": Experiment(person.PersonConfig, "person.toml", "runs/person", person.runs,
+                             lambda c, b, r, e: person.person_report(c, r, person.runs(c, b), e), person.evaluate, person.fresh_path),
+        "peers": Experiment(peers.PeersConfig, "peers.toml", "runs/peers", peers.runs,
+                            lambda c, b, r, e: peers.peers_report(c, peers.records(c, b, r, e))),
         "sim2real": Experiment(s2r.Sim2RealConfig, "sim2real.toml", "runs/sim2real-experiment", s2r.runs,
                                lambda c, b, r, e: s2r.sim2real_report(c, r, s2r.runs(c, b)), s2r.evaluate, s2r.outcomes_path),
     }
@@ -77,7 +83,7 @@ def _evaluate(exp: Experiment, cfg: Any, base: str | None, out: Path, workers: i
     map_tasks(exp.evaluate, [(r, str(out), cfg) for r in todo], workers, address, "evaluation", show_progress)
 
 
-NAMES = ("learning-curves", "long-baseline", "noise-robustness", "generalization", "sim2real")
+NAMES = ("learning-curves", "long-baseline", "noise-robustness", "generalization", "person", "peers", "sim2real")
 
 
 def add_experiment_command(sub: argparse._SubParsersAction) -> None:
@@ -121,6 +127,7 @@ def _setup(args: argparse.Namespace) -> tuple[Experiment, Any, str | None, Path]
     out = Path(args.out or exp.default_out)
     for run in exp.runs(cfg, base):  # every run's configuration is checked before anything starts
         configs(run, f"{path} [experiment]")
+        sac_config(run, f"{path} [experiment]")
     return exp, cfg, base, out
 
 

@@ -8,6 +8,7 @@ import io
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import matplotlib
 
 matplotlib.use("Agg")
@@ -45,9 +46,15 @@ def write_report(out: Path, files: dict[str, bytes]) -> None:
     write_files_atomically({out / name: data for name, data in files.items()})
 
 
-def figure(title: str, xlabel: str, ylabel: str, size: tuple[float, float] = (7.0, 4.0)):
-    fig, ax = plt.subplots(figsize=size)
-    ax.set(title=title, xlabel=xlabel, ylabel=ylabel)
+def figure(title: str, xlabel: str, ylabel: str, size: tuple[float, float] = (7.0, 4.0), columns: int = 1):
+    """A figure with one axes (or `columns` side by side, sharing the title and the y label)."""
+    fig, ax = plt.subplots(1, columns, figsize=size)
+    for a in np.atleast_1d(ax):
+        a.set(xlabel=xlabel, ylabel=ylabel)
+    if columns == 1:
+        ax.set_title(title)
+    else:
+        fig.suptitle(title)
     return fig, ax
 
 

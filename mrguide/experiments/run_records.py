@@ -23,6 +23,7 @@ class RunRecord:
     row_steps: np.ndarray  # metrics.csv: one row per episode
     asked: np.ndarray  # cumulative annotations asked, per row
     ratio: np.ndarray  # realized expert ratio per row
+    row_wall: np.ndarray  # training wall time (s) at each row
     converged: Convergence
     wall_s: float
 
@@ -46,6 +47,10 @@ class RunRecord:
             out.append(float(self.eval_returns[seen][-1]) if seen.any() else np.nan)
         return np.array(out)
 
+    def at_evaluations(self, per_row: np.ndarray) -> np.ndarray:
+        """A metrics column (e.g. `asked`, `row_wall`) as it stood at each evaluation (its last row at or before it)."""
+        return np.array([per_row[self.row_steps <= s][-1] if (self.row_steps <= s).any() else 0 for s in self.eval_steps])
+
     def asked_on(self, grid: np.ndarray) -> np.ndarray:
         return np.array([self.asked[self.row_steps <= g].max(initial=0) for g in grid], dtype=float)
 
@@ -66,6 +71,6 @@ def read_run(run: TrainRun, root: Path, episodes_per_eval: int) -> RunRecord:
     return RunRecord(
         run, steps, rates, np.array([float(r["mean_return"]) for r in ev]),
         np.array([int(r["step"]) for r in rows]), np.array([int(r["asked"]) for r in rows]),
-        np.array([float(r["expert_ratio"]) for r in rows]),
+        np.array([float(r["expert_ratio"]) for r in rows]), np.array([float(r["wall_s"]) for r in rows]),
         convergence(steps.tolist(), rates.tolist(), episodes_per_eval), finished(run, root).wall_s,
     )

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -16,8 +17,8 @@ from typing import Any
 
 from mrguide.config import ConfigError, replace_path
 
-#: Which config an override key's first part addresses: train, ddpg, guidance, or the env's robot/twin/task.
-SECTIONS = ("train", "ddpg", "guidance", "robot", "twin", "task")
+#: Which config an override key's first part addresses: train, ddpg, sac, guidance, or the env's robot/twin/task.
+SECTIONS = ("train", "ddpg", "sac", "guidance", "robot", "twin", "task")
 
 
 @dataclass(frozen=True)
@@ -30,6 +31,9 @@ class TrainRun:
     guided: bool
     config: str | None = None
     overrides: dict[str, Any] = field(default_factory=dict)
+    #: "" = the configured expert source in process; "bot" = over the wire: a live session answered by the
+    #: annotation bot with the run's guidance.noise (mrguide.annotation.bot_session).
+    client: str = ""
 
     def directory(self, root: Path) -> Path:
         return root / self.name
@@ -62,9 +66,23 @@ def configs(run: TrainRun, where: str = "experiment"):
             dc = replace_path(dc, path, value, where)
         elif section == "guidance":
             gc = replace_path(gc, path, value, where)
+        elif section == "sac":
+            continue  # sac_config
         else:
             ec = dataclasses.replace(ec, **{section: replace_path(getattr(ec, section), path, value, where)})
     return tc, dc, gc, ec
+
+
+def sac_config(run: TrainRun, where: str = "experiment"):
+    """The SACConfig of `run` (the peer learner): its file's [sac] and its "sac.*" overrides."""
+    from mrguide.policies.train import load_sac_config
+
+    sc = load_sac_config(run.config)
+    for key, value in run.overrides.items():
+        section, _, path = key.partition(".")
+        if section == "sac":
+            sc = replace_path(sc, path, value, where)
+    return sc
 
 
 def is_done(run: TrainRun, root: Path) -> bool:
@@ -97,11 +115,28 @@ def train(run: TrainRun, root: str, on_episode: Callable[[dict], None] | None = 
         for stale in ("metrics.csv", "eval.csv", "annotations.jsonl"):  # a start that never checkpointed
             (out / stale).unlink(missing_ok=True)
     (out / "run.json").write_text(json.dumps(dataclasses.asdict(run), indent=1) + "\n")
-    tr = Trainer(tc, dc, gc, ec, out)
+    bot, factory = None, None
+    if run.client == "bot":
+        from mrguide.annotation.bot_session import BotSession
+
+        gc = dataclasses.replace(gc, source="live")
+        stop = threading.Event()
+        bot = BotSession(gc.noise, run.seed, on_failure=stop.set)
+        factory = bot.source_factory
+    try:
+        tr = Trainer(tc, dc, gc, ec, out, factory, sac_config(run))
+    except BaseException:
+        if bot:
+            bot.close()
+        raise
+    if bot:
+        tr.stop_requested = stop
     try:
         if (out / "checkpoint.pt").exists():
             tr.load_checkpoint()
         tr.run(on_episode)
+        if bot and bot.error:
+            raise RuntimeError(f"{run.name}: the annotation bot stopped: {bot.error}")
         tr.save_checkpoint()
         export_actor(tr.agent.policy_actor, out / "policy.npz", tr.env.robot_spec, tr.env.task_cfg, tr.env.twin_cfg.decision_period,
                      {"trained": {"steps": tr.step, "seed": run.seed, "guidance": run.guided, "run": run.name}})
@@ -110,6 +145,8 @@ def train(run: TrainRun, root: str, on_episode: Callable[[dict], None] | None = 
         tmp.replace(out / "done")
     finally:
         tr.close()
+        if bot:
+            bot.close()
     return finished(run, Path(root))
 
 

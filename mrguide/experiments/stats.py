@@ -12,6 +12,8 @@ import numpy as np
 #: says "stays above the task threshold" without a number).
 CONVERGENCE_THRESHOLD = 0.8
 WINDOW_EPISODES = 20
+#: A person's time per mark, s: person-minutes = marks × this / 60 (our assumption: a few seconds per mark).
+PERSON_SECONDS_PER_MARK = 4.0
 
 
 def wilson(successes: int, n: int, z: float = 1.959964) -> tuple[float, float]:

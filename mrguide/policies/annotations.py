@@ -77,7 +77,8 @@ class AnnotationCache:
     def __init__(self, tolerance: float = 0.005, path: str | Path | None = None):
         self.tolerance = tolerance
         self.path = Path(path) if path else None
-        self._keys: list[np.ndarray] = []
+        self._keys: list[np.ndarray] = []  # a superseded record's key never matches (inf)
+        self._observations: list[np.ndarray] = []  # every record's observation, superseded ones included
         self._values: list[Annotation] = []
         self._matrix: np.ndarray | None = None
         self.asked = 0
@@ -103,6 +104,7 @@ class AnnotationCache:
         if supersedes is not None:
             self._retire(supersedes)
         self._keys.append(anchor_key(obs))
+        self._observations.append(np.asarray(obs, dtype=float).copy())
         self._values.append(annotation)
         self._matrix = None
         if persist and self.path is not None:
@@ -113,6 +115,14 @@ class AnnotationCache:
                 fh.flush()
                 os.fsync(fh.fileno())
         return index
+
+    def get(self, index: int) -> Annotation:
+        """Record `index` (superseded or not)."""
+        return self._values[index]
+
+    def history(self) -> list[tuple[np.ndarray, Annotation]]:
+        """Every record in insertion order, superseded ones included: (observation, annotation)."""
+        return list(zip(self._observations, self._values))
 
     def _retire(self, index: int) -> None:
         if not 0 <= index < len(self._keys):

@@ -76,7 +76,7 @@ def _refuse(message: str) -> int:
 def cmd_train(args: argparse.Namespace, live: LivePlugin | None = None) -> int:
     """Train (or resume), show progress, export the policy; Ctrl-C checkpoints and exits 130."""
     from mrguide.policies.tensorboard_log import TensorBoardLog, summary_writer_class
-    from mrguide.policies.train import CheckpointError, Trainer, load_train_config
+    from mrguide.policies.train import CheckpointError, Trainer, load_sac_config, load_train_config
 
     if args.tensorboard:
         try:
@@ -95,7 +95,7 @@ def cmd_train(args: argparse.Namespace, live: LivePlugin | None = None) -> int:
         session = live.open_session(args, lambda waiting: bar.set_description_str(
             "train | waiting for an annotation" if waiting else "train"))
     try:
-        tr = Trainer(tc, dc, gc, ec, out, session.source_factory if session else None)
+        tr = Trainer(tc, dc, gc, ec, out, session.source_factory if session else None, load_sac_config(args.config))
     except BaseException:
         if session:
             session.close()

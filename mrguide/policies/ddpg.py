@@ -16,7 +16,7 @@ from torch import nn
 
 from mrguide.config import ConfigError, check_number
 from mrguide.deploy.policy import ANCHOR_KINDS
-from mrguide.policies.replay import Batch
+from mrguide.policies.replay import Batch, TaggedReplay
 from mrguide.robot import Workspace
 
 ACTOR_HEADS = ("absolute", "tcp_offset", *ANCHOR_KINDS)
@@ -41,6 +41,8 @@ class DDPGConfig:
     #: plain DDPG. It acts only on expert samples, so a run without guidance is unaffected, and it fades
     #: with λ_t as expert samples thin out of the batches.
     bc_weight: float = 20.0
+    #: LayerNorm in every hidden layer of the critics (RLPD's critics; ours here).
+    critic_layer_norm: bool = False
     #: Q-filter on the BC term (Nair et al. 2018): an expert sample is cloned only where the first critic
     #: rates its action above the actor's, Q_φ1(s, a^e) > Q_φ1(s, μ(s)), so a demonstration the critic has
     #: learned to beat stops pulling the actor. Not in the paper; off by default (ours, for noisy experts).
@@ -153,14 +155,23 @@ class Actor(nn.Module):
         self.net = mlp([len(maps[0]) if maps else len(scaler.offset), *hidden, act_dim], nn.Tanh)
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
+        return self.output(obs, self.net(self.inputs(obs)))
+
+    def inputs(self, obs: torch.Tensor) -> torch.Tensor:
+        """The MLP's input: the scaled observation, through the head's feature map."""
         x = self.scaler(obs)
         if self.head == "absolute":
-            return self.net(x)
+            return x
         inputs = x @ self.features.T
         if self.head in ANCHOR_KINDS:
-            carry = obs[..., 4:5] > CARRY_PROGRESS
-            inputs = torch.where(carry, x @ self.carry_features.T, inputs)
-        y = self.net(inputs)
+            inputs = torch.where(obs[..., 4:5] > CARRY_PROGRESS, x @ self.carry_features.T, inputs)
+        return inputs
+
+    def output(self, obs: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
+        """The action from the MLP's output y ∈ [-1, 1]^act_dim: as it is (absolute), or the head's offset added to its base."""
+        if self.head == "absolute":
+            return y
+        carry = obs[..., 4:5] > CARRY_PROGRESS
         base = torch.where(carry, obs[..., 8:11], obs[..., 5:8]) if self.head == "anchor_offset" else obs[..., :3]
         target = base + self.max_offset * y[..., :3]  # m
         normalized = (target - self.scaler.offset[:3]) * self.scaler.scale[:3]  # the workspace's [-1, 1] box
@@ -175,9 +186,10 @@ class Actor(nn.Module):
 class CriticEnsemble(nn.Module):
     """n critics Q_φ1..Q_φn(s, a) with the same layout, evaluated together: each layer is one batched
     matrix product over the stacked weights (n = 1 is the DDPG critic, n = 2 the clipped double-Q pair).
-    Weights and biases are initialized as `nn.Linear` does."""
+    Weights and biases are initialized as `nn.Linear` does. With `layer_norm`, every hidden layer is
+    normalized (with a learned gain and bias per member) before its ReLU, as in RLPD's critics."""
 
-    def __init__(self, scaler: ObsScaler, act_dim: int, hidden: tuple[int, ...], n: int):
+    def __init__(self, scaler: ObsScaler, act_dim: int, hidden: tuple[int, ...], n: int, layer_norm: bool = False):
         super().__init__()
         self.scaler = scaler
         sizes = [len(scaler.offset) + act_dim, *hidden, 1]
@@ -187,20 +199,40 @@ class CriticEnsemble(nn.Module):
             bound = 1.0 / fan_in**0.5
             self.weights.append(nn.Parameter(torch.empty(n, fan_in, fan_out).uniform_(-bound, bound)))
             self.biases.append(nn.Parameter(torch.empty(n, 1, fan_out).uniform_(-bound, bound)))
+        self.norm_gains = nn.ParameterList([nn.Parameter(torch.ones(n, 1, h)) for h in hidden] if layer_norm else [])
+        self.norm_biases = nn.ParameterList([nn.Parameter(torch.zeros(n, 1, h)) for h in hidden] if layer_norm else [])
 
-    def forward(self, obs: torch.Tensor, act: torch.Tensor, members: slice = slice(None)) -> torch.Tensor:
-        """Q values of the selected members, shape (members, batch)."""
+    @property
+    def n(self) -> int:
+        return self.weights[0].shape[0]
+
+    def forward(self, obs: torch.Tensor, act: torch.Tensor, members: slice | torch.Tensor = slice(None)) -> torch.Tensor:
+        """Q values of the selected members (a slice or an index tensor), shape (members, batch)."""
         x = torch.cat([self.scaler(obs), act], dim=-1)
-        if members == slice(None):  # no slicing: its backward would copy every weight gradient once more
-            ws, bs = list(self.weights), list(self.biases)
-        else:
-            ws, bs = [w[members] for w in self.weights], [b[members] for b in self.biases]
+        params = [list(self.weights), list(self.biases), list(self.norm_gains), list(self.norm_biases)]
+        if not (isinstance(members, slice) and members == slice(None)):  # no slicing: its backward would copy every weight gradient once more
+            params = [[p[members] for p in group] for group in params]
+        ws, bs, gains, shifts = params
         h = x.expand(ws[0].shape[0], *x.shape)
         for i, (w, b) in enumerate(zip(ws, bs)):
             h = torch.baddbmm(b, h, w)
             if i < len(ws) - 1:
+                if gains:
+                    h = nn.functional.layer_norm(h, h.shape[-1:]) * gains[i] + shifts[i]
                 h = torch.relu(h)
         return h.squeeze(-1)
+
+
+#: The behaviour-cloning term asks the gripper output for the expert's side of 0 by at least this much, no more:
+#: pulling a tanh output towards a label of exactly ±1 saturates it, and a saturated gripper output never
+#: learns again (ours; seen when early noisy release marks had taught "vacuum on" at the goal).
+GRIP_MARGIN = 0.5
+
+
+def bc_error(pi: torch.Tensor, act: torch.Tensor) -> torch.Tensor:
+    """Per sample: the squared error of the target position plus a squared hinge on the gripper command."""
+    grip = torch.relu(GRIP_MARGIN - torch.sign(act[..., 3]) * pi[..., 3]) ** 2
+    return ((pi[..., :3] - act[..., :3]) ** 2).sum(-1) + grip
 
 
 class DDPG:
@@ -216,9 +248,9 @@ class DDPG:
 
         n_critics = 2 if cfg.clipped_double_q else 1
         self.actor = Actor(scaler(), act_dim, cfg.hidden, cfg.actor_head, cfg.max_offset)
-        self.critic = CriticEnsemble(scaler(), act_dim, cfg.hidden, n_critics)
+        self.critic = CriticEnsemble(scaler(), act_dim, cfg.hidden, n_critics, cfg.critic_layer_norm)
         self.actor_target = Actor(scaler(), act_dim, cfg.hidden, cfg.actor_head, cfg.max_offset)
-        self.critic_target = CriticEnsemble(scaler(), act_dim, cfg.hidden, n_critics)
+        self.critic_target = CriticEnsemble(scaler(), act_dim, cfg.hidden, n_critics, cfg.critic_layer_norm)
         self.actor_target.load_state_dict(self.actor.state_dict())
         self.critic_target.load_state_dict(self.critic.state_dict())
         # fused: one kernel per step for all parameters (same arithmetic as the loop version)
@@ -245,6 +277,11 @@ class DDPG:
         if rng is not None:
             a = a + rng.normal(0.0, self.cfg.exploration_noise if sigma is None else sigma, a.shape)
         return np.clip(a, -1.0, 1.0).astype(np.float32)
+
+    def learn(self, replay: TaggedReplay, lam: float, batch_size: int, rng: np.random.Generator) -> tuple[dict[str, float], float]:
+        """One environment step's learning: one update on a minibatch mixed by λ (Eq. 9); (statistics, expert share)."""
+        batch = replay.sample(batch_size, lam, rng)
+        return self.update(batch), batch.expert_ratio
 
     #: Keys of `update`'s statistics; the actor's three are present only when the actor stepped.
     CRITIC_STATS = ("critic_loss", "q_mean", "q_max")
@@ -303,7 +340,7 @@ class DDPG:
         bc_loss = torch.zeros(())
         if self.cfg.bc_weight > 0 and expert_mask.any():
             expert = torch.as_tensor(expert_mask)
-            sq_err = ((pi[expert] - act[expert]) ** 2).sum(-1)
+            sq_err = bc_error(pi[expert], act[expert])
             if self.cfg.q_filter:
                 sq_err = sq_err * self._expert_beats_actor(obs[expert], act[expert], pi[expert])
             bc_loss = sq_err.mean()

@@ -113,6 +113,14 @@ class GuidanceConfig:
     reference: str = "nominal"  # a^e of Eq. 13: "nominal" (model target) or "running_median"
     cache_tolerance: float = 0.005  # m; observations this close reuse a cached annotation
     reask_after: int = 15  # expert steps on one waypoint without reaching it before it is asked again (0: never; ours)
+    #: What a person marks per demonstration. "phases" (the paper's): every phase's waypoint, bounded around
+    #: `reference`. "pick_place" (ours): the grasp point and the set-down point, from which the five waypoints
+    #: follow (task.waypoint_from_mark); each mark is fused with every earlier one as a measurement of one offset
+    #: from the part (pick) or the goal (place), bounded by Eq. 13 around their fused value (`reference` unused).
+    marks: str = "phases"
+    #: Store a demonstration's steps as expert data (ζ = 1) only once their phase is completed; those of a phase it
+    #: did not complete, or that followed a mark marked again, as agent data (ζ = 0). Ours; see Trainer._expert_episode.
+    completed_phases_only: bool = False
     source: str = "annotator"  # "oracle", "annotator" (oracle + noise), "file", or "live" (a person: `--expert live`)
     noise: AnnotatorNoise = field(default_factory=AnnotatorNoise)
     #: m, std per axis of fresh Gaussian noise on every stored expert action, after Eq. 13 (so the bound
@@ -134,6 +142,8 @@ class GuidanceConfig:
             raise ConfigError(f"guidance.mode must be 'replay' or 'takeover', got {self.mode!r}")
         if self.reference not in ("nominal", "running_median"):
             raise ConfigError(f"guidance.reference must be 'nominal' or 'running_median', got {self.reference!r}")
+        if self.marks not in ("phases", "pick_place"):
+            raise ConfigError(f"guidance.marks must be 'phases' or 'pick_place', got {self.marks!r}")
         if self.source not in ("oracle", "annotator", "file", "live"):
             raise ConfigError(f"guidance.source must be 'oracle', 'annotator', 'file' or 'live', got {self.source!r}")
         if self.source == "file" and not self.annotation_file:

@@ -8,10 +8,11 @@ from typing import NamedTuple
 import numpy as np
 
 from mrguide.config import ConfigError
-from mrguide.policies.annotations import Annotation, AnnotationCache
+from mrguide.policies.annotations import AnnotationCache
 from mrguide.policies.experts import ANNOTATOR_SEED_OFFSET, ExpertSource, FileExpert, OracleExpert, SimulatedAnnotator
 from mrguide.policies.guidance import GuidanceConfig, ReferencePose, bounded_projection
-from mrguide.task import TaskConfig, annotation_action
+from mrguide.policies.mark_fusion import KINDS, MarkFusion, anchor
+from mrguide.task import G_REQUIRED, TaskConfig, annotation_action, mark_phase, phase_from_progress, progress, waypoint_from_mark
 from mrguide.twin.env import PickPlaceEnv
 
 ACTION_NOISE_SEED_OFFSET = 104_729  # the expert-action noise of training seed s draws from RNG seed s + this
@@ -30,14 +31,20 @@ class ExpertStep(NamedTuple):
 class GuidedExpert:
     """Expert actions for the learner: cache → source (counted) → bounded projection → normalized action.
 
-    A waypoint the arm has followed for `reask_after` consecutive expert steps without the phase
-    advancing was not reachable as marked (noise, a slip of the hand): it is asked again, as a person
-    watching the arm would re-mark it, and the new mark supersedes the old one in the cache.
+    With `marks = "phases"` (the paper's protocol) every phase's waypoint is a mark of its own, bounded by Eq. 13
+    around `reference`. With `marks = "pick_place"` a demonstration needs two marks, the pick (grasp point) and
+    the place (set-down point): every mark is fused with all earlier ones (`MarkFusion`), the fused mark bounded
+    by Eq. 13 around the reference's pick or place point, and the five phase waypoints follow from it
+    (`waypoint_from_mark`).
+
+    A waypoint the arm has followed for `reask_after` consecutive expert steps without the phase advancing was
+    not reachable as marked (noise, a slip of the hand): it is asked again, as a person watching the arm would
+    re-mark it, and the new mark supersedes the old one in the cache.
     """
 
     def __init__(self, source: ExpertSource, reference: ReferencePose, cache: AnnotationCache, delta: float, task: TaskConfig,
                  to_normalized, reask_after: int = 0, action_noise: float = 0.0, noise_on: str = "executed", seed: int = 0,
-                 noise_clip: bool = True):
+                 noise_clip: bool = True, marks: str = "phases"):
         self.source, self.reference, self.cache = source, reference, cache
         self.action_noise, self.noise_on, self.noise_clip = action_noise, noise_on, noise_clip
         self.rng = np.random.default_rng(seed + ACTION_NOISE_SEED_OFFSET)  # draws only when action_noise > 0
@@ -45,31 +52,24 @@ class GuidedExpert:
         self.task = task
         self.to_normalized = to_normalized
         self.reask_after = reask_after
+        self.marks = marks
+        self.fusion = MarkFusion()
         self.projected = 0  # annotations moved onto the Δ-sphere
         self.remarks = 0  # waypoints asked again because the arm did not reach them
-        self._streak = (-1, 0)  # (cache index in use, consecutive expert steps on it)
+        self._streak = (-1, 0)  # phases: (cache index in use, consecutive expert steps on it); pick_place: (phase, steps)
+        self._plan: dict[int, tuple[int, np.ndarray]] = {}  # pick_place: mark phase → (cache index, fused mark in m)
 
     def begin_demonstration(self) -> None:
         self._streak = (-1, 0)
+        self._plan = {}
 
     def action(self, obs: np.ndarray) -> ExpertStep | None:
         """The expert's normalized action for `obs` (executed and stored), or None when nobody annotated."""
-        hit = self.cache.lookup(obs)
-        if hit is None:
-            ann = self._ask(obs, None)
-        elif self.reask_after and self._streak == (hit.index, self.reask_after):
-            self.remarks += 1
-            ann = self._ask(obs, hit)
-        else:
-            self.cache.reused += 1
-            ann = hit.annotation
-            self._streak = (hit.index, self._streak[1] + 1 if self._streak[0] == hit.index else 1)
-        if ann is None:
+        waypoint = self._pick_place_waypoint(obs) if self.marks == "pick_place" else self._phase_waypoint(obs)
+        if waypoint is None:
             return None
-        ref = self.reference.reference(obs)
-        target = bounded_projection(ann.target, ref, self.delta)
-        self.projected += int(not np.allclose(target, ann.target))
-        clean = annotation_action(obs, target, ann.grip, self.task, self.to_normalized)
+        target, grip = waypoint
+        clean = annotation_action(obs, target, grip, self.task, self.to_normalized)
         if self.action_noise == 0:
             return ExpertStep(clean, clean)
         noisy = clean.copy()  # the motion is perturbed; the vacuum command stays the annotation's (decided on the clean waypoint)
@@ -78,15 +78,76 @@ class GuidedExpert:
             noisy[:3] = np.clip(noisy[:3], -1.0, 1.0)
         return ExpertStep(noisy, noisy) if self.noise_on == "executed" else ExpertStep(clean, noisy)
 
-    def _ask(self, obs: np.ndarray, previous) -> Annotation | None:
-        ann = self.source.annotate(obs, previous.annotation if previous else None)
+    def _phase_waypoint(self, obs: np.ndarray) -> tuple[np.ndarray, float] | None:
+        """The paper's protocol: this phase's own mark, bounded by Eq. 13 around the reference."""
+        hit = self.cache.lookup(obs)
+        if hit is None or (self.reask_after and self._streak == (hit.index, self.reask_after)):
+            self.remarks += int(hit is not None)
+            index = self._ask(obs, hit.index if hit else None)
+            if index is None:
+                return None
+            self._streak = (index, 1)
+        else:
+            self.cache.reused += 1
+            index = hit.index
+            self._streak = (index, self._streak[1] + 1 if self._streak[0] == index else 1)
+        ann = self.cache.get(index)
+        target = bounded_projection(ann.target, self.reference.reference(obs), self.delta)
+        self.projected += int(not np.allclose(target, ann.target))
+        return target, ann.grip
+
+    def _pick_place_waypoint(self, obs: np.ndarray) -> tuple[np.ndarray, float] | None:
+        """Two marks per demonstration: the phase's waypoint from the fused pick or place mark, fixed for the
+        demonstration when first needed (so the lift rises above where the cup went down)."""
+        phase = phase_from_progress(obs[4])
+        kind = mark_phase(phase)
+        steps = self._streak[1] + 1 if self._streak[0] == phase else 1
+        asking = obs.copy()
+        asking[4] = progress(kind)  # the request names the mark's phase: the page asks for the grasp or set-down point
+        planned = self._plan.get(kind)
+        due = planned is not None and self.reask_after and steps > self.reask_after
+        if planned is None or due:
+            hit = self.cache.lookup(asking) if planned is None else None
+            if hit is not None:
+                self.cache.reused += 1
+                index = hit.index
+            else:
+                self.remarks += int(bool(due))
+                index = self._ask(asking, planned[0] if planned else None)
+                if index is None:
+                    return None
+                steps = 1
+            fused = self.fusion.point(kind, anchor(kind, asking))
+            bounded = bounded_projection(fused, self.reference.reference(asking), self.delta)
+            self.projected += int(not np.allclose(bounded, fused))
+            self._plan[kind] = (index, bounded)
+        else:
+            self.cache.reused += 1
+        self._streak = (phase, steps)
+        return waypoint_from_mark(phase, self._plan[kind][1], self.task), float(G_REQUIRED[phase])
+
+    def _ask(self, obs: np.ndarray, previous: int | None) -> int | None:
+        """Ask the source (a re-mark of cache record `previous` if given); the new record's index, or None."""
+        ann = self.source.annotate(obs, self.cache.get(previous) if previous is not None else None)
         self.cache.asked += 1
         if ann is None:
             return None
-        index = self.cache.insert(obs, ann, supersedes=previous.index if previous else None)
+        index = self.cache.insert(obs, ann, supersedes=previous)
+        if self.marks == "pick_place":
+            kind = phase_from_progress(obs[4])
+            self.fusion.add(kind, anchor(kind, obs), ann.target)
         self.reference.observe(obs, ann)
-        self._streak = (index, 1)
-        return ann
+        return index
+
+    def reload(self) -> None:
+        """Rebuild the fused marks and the reference from the cache (after it was loaded on resume), in the order the
+        marks were made."""
+        self.fusion = MarkFusion()
+        for obs, ann in self.cache.history():
+            kind = phase_from_progress(obs[4])
+            if self.marks == "pick_place" and kind in KINDS:
+                self.fusion.add(kind, anchor(kind, obs), ann.target)
+            self.reference.observe(obs, ann)
 
 
 def make_expert_source(g: GuidanceConfig, env: PickPlaceEnv, seed: int) -> ExpertSource:

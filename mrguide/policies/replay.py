@@ -94,6 +94,17 @@ class TaggedReplay:
         n_exp = min(int(rng.binomial(batch_size, float(np.clip(lam, 0.0, 1.0)))), self.expert.size)
         if self.agent.size == 0:  # only expert data so far
             n_exp = batch_size
+        return self._batch(batch_size, n_exp, rng)
+
+    def sample_split(self, batch_size: int, n_expert: int, rng: np.random.Generator) -> Batch:
+        """A minibatch of exactly `n_expert` expert samples (RLPD's symmetric sampling), all agent data while the
+        expert pool is empty, all expert data while the agent pool is."""
+        if len(self) == 0:
+            raise ValueError("cannot sample from an empty replay buffer")
+        n_exp = batch_size if self.agent.size == 0 else (n_expert if self.expert.size else 0)
+        return self._batch(batch_size, n_exp, rng)
+
+    def _batch(self, batch_size: int, n_exp: int, rng: np.random.Generator) -> Batch:
         n_agent = batch_size - n_exp
         parts = []
         if n_exp:

@@ -27,7 +27,7 @@ import numpy as np
 import torch
 
 from mrguide import __version__
-from mrguide.config import check_number, load_section, to_dict
+from mrguide.config import ConfigError, check_number, load_section, to_dict
 from mrguide.policies.annotations import AnnotationCache
 from mrguide.policies.checkpoint import CheckpointError, read_checkpoint, with_defaults, write_checkpoint
 from mrguide.policies.ddpg import DDPG, DDPGConfig, obs_scaling
@@ -36,12 +36,14 @@ from mrguide.policies.guidance import (GuidanceConfig, NominalReference, Referen
                                        ThresholdTrigger, expert_ratio)
 from mrguide.policies.guided_expert import GuidedExpert, make_expert_source
 from mrguide.policies.replay import TaggedReplay
+from mrguide.policies.sac import SACConfig, SAC
 from mrguide.robot import RobotSpec
-from mrguide.task import ACT_DIM, OBS_DIM
+from mrguide.task import ACT_DIM, OBS_DIM, phase_from_progress
 from mrguide.twin.env import EnvConfig, PickPlaceEnv
 
 log = logging.getLogger(__name__)
 
+LEARNERS = ("ddpg", "sac")
 
 
 @dataclass(frozen=True)
@@ -49,6 +51,8 @@ class TrainConfig:
     """A training run ([train] in a TOML config, with [ddpg] and [guidance] beside it)."""
 
     total_steps: int = 20_000  # paper: 20k timesteps (Fig. 3)
+    #: "ddpg" (the paper's learner, [ddpg]) or "sac" (the RLPD-style peer, [sac]; `mrguide experiment peers`).
+    learner: str = "ddpg"
     seed: int = 0
     batch_size: int = 256  # Table I
     buffer_size: int = 1_000_000  # Table I
@@ -60,6 +64,8 @@ class TrainConfig:
 
     def __post_init__(self) -> None:
         check_number("train.total_steps", self.total_steps, 1, 10**9, integer=True)
+        if self.learner not in LEARNERS:
+            raise ConfigError(f"train.learner = {self.learner!r}: expected one of {', '.join(LEARNERS)}")
         check_number("train.seed", self.seed, 0, 2**32 - 1, integer=True)
         check_number("train.batch_size", self.batch_size, 1, 1 << 20, integer=True)
         check_number("train.buffer_size", self.buffer_size, 1, 10**8, integer=True)
@@ -68,6 +74,11 @@ class TrainConfig:
         check_number("train.eval_episodes", self.eval_episodes, 1, 10**5, integer=True)
         check_number("train.checkpoint_every", self.checkpoint_every, 1, 10**9, integer=True)
         check_number("train.torch_threads", self.torch_threads, 1, 1024, integer=True)
+
+
+def load_sac_config(path: str | Path | None) -> SACConfig:
+    """[sac] of a training config (the peer learner's settings)."""
+    return load_section(SACConfig, path, "sac")
 
 
 def load_train_config(path: str | Path | None) -> tuple[TrainConfig, DDPGConfig, GuidanceConfig, EnvConfig]:
@@ -86,18 +97,18 @@ def _arm_record(spec: RobotSpec) -> dict[str, Any]:
     return {"name": spec.name, "tool_offset": float(spec.T_flange_tcp[2, 3]), **values, "workspace": to_dict(spec.workspace)}
 
 
-def _fingerprint(tc: TrainConfig, dc: DDPGConfig, gc: GuidanceConfig, ec: EnvConfig, arm: dict[str, Any]) -> dict:
+def _fingerprint(tc: TrainConfig, dc: DDPGConfig, gc: GuidanceConfig, ec: EnvConfig, arm: dict[str, Any], sc: SACConfig) -> dict:
     """The configuration a checkpoint must match to be resumed (the run's length and cadences may change)."""
     return {"train": {k: v for k, v in to_dict(tc).items() if k not in ("total_steps", "checkpoint_every", "eval_every")},
-            "ddpg": to_dict(dc), "guidance": to_dict(gc), "env": {**to_dict(ec), "robot": arm}}
+            "ddpg": to_dict(dc), "guidance": to_dict(gc), "env": {**to_dict(ec), "robot": arm}, "sac": to_dict(sc)}
 
 
 EVAL_SEED_BASE = 1_000_000  # evaluation env seeds start here (training seeds come from the run's RNG)
 #: Update statistics in metrics.csv, each the mean over the updates since the previous row (see DDPG.update):
-#: critic loss, actor loss, mean and max Q_φ1(s, a) of the batch, BC loss. Empty in a row with no update
+#: critic loss, actor loss, mean and max Q_φ1(s, a) of the batch, BC loss (DDPG), temperature (SAC). Empty in a row with no update
 #: since the previous one (before learning_starts; the agent row of a triggered episode, which follows
 #: its expert row); the actor's are also empty when no actor step fell in the row (policy_delay > 1).
-UPDATE_FIELDS = ("critic_loss", "actor_loss", "q_mean", "q_max", "bc_loss")
+UPDATE_FIELDS = ("critic_loss", "actor_loss", "q_mean", "q_max", "bc_loss", "temperature")
 METRIC_FIELDS = ("step", "episode", "kind", "return", "success", "outcome", "length", "triggered", "lambda", "expert_ratio",
                  "asked", "reused", "remarks", "skipped", "wall_s", *UPDATE_FIELDS)  # new columns go at the end
 EVAL_FIELDS = ("step", "success_rate", "mean_return")
@@ -125,14 +136,18 @@ class Trainer:
     """One seed's training run, resumable from its checkpoint."""
 
     def __init__(self, cfg: TrainConfig, ddpg_cfg: DDPGConfig, guidance: GuidanceConfig, env_cfg: EnvConfig, out_dir: str | Path,
-                 source_factory: Callable[[PickPlaceEnv], ExpertSource] | None = None):
-        """`source_factory` builds the expert source from the env (a live annotation session); default: the config's."""
+                 source_factory: Callable[[PickPlaceEnv], ExpertSource] | None = None, sac_cfg: SACConfig | None = None):
+        """`source_factory` builds the expert source from the env (a live annotation session); default: the config's.
+        `sac_cfg` configures the peer learner (train.learner = "sac")."""
         self.cfg, self.ddpg_cfg, self.guidance, self.env_cfg = cfg, ddpg_cfg, guidance, env_cfg
+        self.sac_cfg = sac_cfg or SACConfig()
         self.out = Path(out_dir)
         self.out.mkdir(parents=True, exist_ok=True)
         torch.set_num_threads(cfg.torch_threads)
         self.env = PickPlaceEnv(env_cfg)
-        self.agent = DDPG(*obs_scaling(self.env.workspace), ACT_DIM, ddpg_cfg, seed=cfg.seed)
+        scaling = obs_scaling(self.env.workspace)
+        self.agent: DDPG | SAC = (SAC(*scaling, ACT_DIM, self.sac_cfg, seed=cfg.seed) if cfg.learner == "sac"
+                                  else DDPG(*scaling, ACT_DIM, ddpg_cfg, seed=cfg.seed))
         self.replay = TaggedReplay(cfg.buffer_size, OBS_DIM, ACT_DIM)
         self.rng = np.random.default_rng(cfg.seed)
         self.source = source_factory(self.env) if source_factory else make_expert_source(guidance, self.env, cfg.seed)
@@ -142,13 +157,14 @@ class Trainer:
         self.cache = AnnotationCache(guidance.cache_tolerance, self.out / "annotations.jsonl")
         self.expert = GuidedExpert(self.source, reference, self.cache, guidance.delta, self.env.task_cfg, self.env.workspace.to_normalized,
                                    guidance.reask_after, guidance.action_noise, guidance.action_noise_on, cfg.seed,
-                                   guidance.action_noise_clip)
+                                   guidance.action_noise_clip, guidance.marks)
         self.trigger = ThresholdTrigger(guidance.r_threshold)
         self.step = 0
         self.episode = 0
         self.interventions = 0
         self.skipped = 0  # demonstrations dropped because nobody annotated
         self.stop_requested = threading.Event()  # set (e.g. on Ctrl-C) to stop at the next step
+        self._segment: list[tuple] = []  # the demonstration's steps held until their phase completes
         self.last_ratio = 0.0
         self._ratio_sum, self._ratio_n = 0.0, 0
         self._stat_sum: dict[str, float] = {}  # update statistics summed since the last metrics row
@@ -198,23 +214,32 @@ class Trainer:
     def lam(self) -> float:
         return expert_ratio(self.step, self.cfg.total_steps, self.guidance.lam_max, self.guidance.lam_min) if self.guidance.enabled else 0.0
 
-    def _env_step(self, action: np.ndarray, zeta: int, obs: np.ndarray, stored: np.ndarray | None = None):
-        """Execute `action`; store the transition with `stored` as its action (default: the executed one)."""
+    def _env_step(self, action: np.ndarray, zeta: int | None, obs: np.ndarray, stored: np.ndarray | None = None):
+        """Execute `action`; store the transition with `stored` as its action (default: the executed one), tagged
+        `zeta` — or, with zeta None, hold it in the demonstration's current segment (see `_expert_episode`)."""
         next_obs, r, term, trunc, info = self.env.step(action)
-        self.replay.add(obs, action if stored is None else stored, r, next_obs, term, zeta)
+        transition = (obs, action if stored is None else stored, r, next_obs, term)
+        if zeta is None:
+            self._segment.append(transition)
+        else:
+            self.replay.add(*transition, zeta)
         self.step += 1
         if len(self.replay) >= self.cfg.learning_starts:
             t = time.perf_counter()
-            batch = self.replay.sample(self.cfg.batch_size, self.lam(), self.rng)
-            stats = self.agent.update(batch)
+            stats, ratio = self.agent.learn(self.replay, self.lam(), self.cfg.batch_size, self.rng)
             self.update_s += time.perf_counter() - t
-            self.last_ratio = batch.expert_ratio
-            self._ratio_sum += batch.expert_ratio
+            self.last_ratio = ratio
+            self._ratio_sum += ratio
             self._ratio_n += 1
             for k, v in stats.items():
                 self._stat_sum[k] = self._stat_sum.get(k, 0.0) + v
                 self._stat_n[k] = self._stat_n.get(k, 0) + 1
         return next_obs, r, term, trunc, info
+
+    def _flush_segment(self, zeta: int) -> None:
+        for transition in self._segment:
+            self.replay.add(*transition, zeta)
+        self._segment = []
 
     def _agent_episode(self, end: int) -> dict:
         seed = int(self.rng.integers(2**31))
@@ -247,20 +272,34 @@ class Trainer:
         return self._row("agent", ret, success, info["outcome"] if not triggered else "guided", length, triggered)
 
     def _expert_episode(self, obs: np.ndarray, end: int) -> None:
-        """The expert demonstrates from `obs` (ζ = 1); a waypoint nobody annotates ends the demonstration there."""
+        """The expert demonstrates from `obs` (ζ = 1); a waypoint nobody annotates ends the demonstration there.
+
+        With `guidance.completed_phases_only`, a demonstration's steps are held per phase and stored as expert
+        data (ζ = 1) once the phase is completed; the steps of a phase it did not complete, and those that followed
+        a mark that was then marked again, go to the agent pool (ζ = 0): the critic learns from them, nothing
+        clones them (ours: a mark the arm cannot complete the phase with is no demonstration of it)."""
         ret, length, info = 0.0, 0, {"outcome": None, "is_success": False}
         self.expert.begin_demonstration()
+        hold = self.guidance.completed_phases_only
+        remarks = self.expert.remarks
         while self.step < end and not self.stop_requested.is_set():
             step = self.expert.action(obs)
             if step is None:
                 self.skipped += int(not self.stop_requested.is_set())
                 info = {"outcome": "skipped", "is_success": False}
                 break
-            obs, r, term, trunc, info = self._env_step(step.executed, 1, obs, step.stored)
+            if self.expert.remarks != remarks:  # the phase's earlier mark did not complete it
+                self._flush_segment(0)
+                remarks = self.expert.remarks
+            phase = phase_from_progress(obs[4])
+            obs, r, term, trunc, info = self._env_step(step.executed, None if hold else 1, obs, step.stored)
+            if hold and (info["is_success"] or phase_from_progress(obs[4]) > phase):
+                self._flush_segment(1)
             ret += r
             length += 1
             if term or trunc:
                 break
+        self._flush_segment(0)
         self._log(self._row("expert", ret, bool(info["is_success"]), info["outcome"], length, False))
 
     # -- bookkeeping -----------------------------------------------------------------------------
@@ -320,7 +359,7 @@ class Trainer:
 
     # -- checkpoints -----------------------------------------------------------------------------
     def _fingerprint(self) -> dict:
-        return _fingerprint(self.cfg, self.ddpg_cfg, self.guidance, self.env_cfg, _arm_record(self.env.robot_spec))
+        return _fingerprint(self.cfg, self.ddpg_cfg, self.guidance, self.env_cfg, _arm_record(self.env.robot_spec), self.sac_cfg)
 
     def save_checkpoint(self) -> Path:
         """Everything to resume: networks, optimizers, both pools, RNG states, counters. Written atomically."""
@@ -343,7 +382,7 @@ class Trainer:
         """Resume from a checkpoint; a corrupt or mismatched file raises CheckpointError."""
         path = Path(path) if path else self.out / "checkpoint.pt"
         state = read_checkpoint(path)
-        defaults = _fingerprint(TrainConfig(), DDPGConfig(), GuidanceConfig(), EnvConfig(), _arm_record(self.env.robot_spec))
+        defaults = _fingerprint(TrainConfig(), DDPGConfig(), GuidanceConfig(), EnvConfig(), _arm_record(self.env.robot_spec), SACConfig())
         stored = with_defaults(state["config"], defaults)
         if stored != self._fingerprint():
             diff = [k for k in stored if stored[k] != self._fingerprint().get(k)]
@@ -376,6 +415,7 @@ class Trainer:
         path = self.out / "annotations.jsonl"
         if path.exists():
             n = self.cache.load(path, repair=True)
+            self.expert.reload()
             log.info("reloaded %d annotations from %s", n, path)
 
     def _truncate_logs(self) -> None:

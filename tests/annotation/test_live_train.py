@@ -151,3 +151,51 @@ def test_ctrl_c_while_waiting_checkpoints_and_resume_asks_nothing_twice(tmp_path
     keys = [anchor_key(np.array(r["obs"])) for r in after if r["supersedes"] is None]
     for i, k in enumerate(keys):  # no waypoint asked twice (re-marks aside)
         assert all(np.abs(k - other).max() > 0.005 for other in keys[:i])
+
+
+PERSON = AnnotatorNoise(bias_sigma=0.007, sigma_across=0.01, sigma_along=0.02, outlier_rate=0.03, outlier_scale=0.1)
+
+
+def test_a_persons_marks_over_the_wire_in_pick_place_equal_the_in_process_person(tmp_path):
+    """The experiments' BotSession: the headset error model and two marks per demonstration, bit for bit over the wire."""
+    from mrguide.annotation.bot_session import BotSession
+
+    def person_trainer(out: Path, source: str, factory=None) -> Trainer:
+        tc, dc, gc, ec = load_train_config(None)
+        tc = dataclasses.replace(tc, total_steps=600, learning_starts=64, batch_size=32, eval_every=10_000, checkpoint_every=10_000)
+        dc = dataclasses.replace(dc, hidden=(32, 32))
+        gc = dataclasses.replace(gc, intake_steps=400, source=source, noise=PERSON, marks="pick_place")
+        return Trainer(tc, dc, gc, ec, out, factory)
+
+    local = person_trainer(tmp_path / "local", "annotator")
+    try:
+        local.run(stop_at=300)
+    finally:
+        local.close()
+    bot = BotSession(PERSON, seed=0)
+    live = person_trainer(tmp_path / "live", "live", bot.source_factory)
+    try:
+        live.run(stop_at=300)
+    finally:
+        live.close()
+        bot.close()
+    a, b = records(tmp_path / "local" / "annotations.jsonl"), records(tmp_path / "live" / "annotations.jsonl")
+    assert len(a) == len(b) > 3 and bot.error is None and bot.report.answers == len(b)
+    assert [r["target"] for r in a] == [r["target"] for r in b]
+    assert {round(r["obs"][4] * 5) for r in b} == {1, 4}  # only pick (grasp) and place (release) marks were asked
+    assert rows(tmp_path / "local" / "metrics.csv") == rows(tmp_path / "live" / "metrics.csv")
+
+
+def test_an_experiment_run_over_the_wire_stops_with_the_reason_when_the_bot_fails(tmp_path, monkeypatch):
+    """A bot that cannot go on stops the run (no `done`, no policy) instead of leaving it waiting forever."""
+    from mrguide.annotation import bot_session
+    from mrguide.experiments.runs import TrainRun, train
+
+    def broken(self):
+        raise bot_session.BotError("the server refused the connection (403: Forbidden)")
+
+    monkeypatch.setattr(bot_session.AnnotationBot, "run", broken)
+    run = TrainRun("seed0", 0, 300, True, None, {"train.learning_starts": 64, "ddpg.hidden": [32, 32]}, "bot")
+    with pytest.raises(RuntimeError, match="annotation bot stopped: the server refused"):
+        train(run, str(tmp_path))
+    assert not (tmp_path / "seed0" / "done").exists() and not (tmp_path / "seed0" / "policy.npz").exists()

@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from mrguide.config import ConfigError
-from mrguide.policies.ddpg import DDPG, DDPGConfig
+from mrguide.policies.ddpg import DDPG, GRIP_MARGIN, DDPGConfig, bc_error
 from mrguide.policies.replay import TaggedReplay
 
 
@@ -108,10 +108,26 @@ def test_update_statistics_agree_with_a_direct_evaluation_on_the_same_batch(clip
     assert stats["q_max"] == pytest.approx(q[0].max().item(), rel=1e-6)
     assert stats["q_max"] > stats["q_mean"]
     assert stats["critic_loss"] == pytest.approx(((q - target) ** 2).mean(1).sum().item(), rel=1e-5)
-    bc = ((pi[expert] - act[expert]) ** 2).sum(-1).mean().item()
+    pe, ae = pi[expert], act[expert]
+    grip = torch.relu(GRIP_MARGIN - torch.sign(ae[:, 3]) * pe[:, 3]) ** 2  # a hinge on the gripper command
+    bc = (((pe[:, :3] - ae[:, :3]) ** 2).sum(-1) + grip).mean().item()
     assert stats["bc_loss"] == pytest.approx(bc, rel=1e-5) and bc > 0
     assert stats["actor_q"] == pytest.approx((-q_pi.mean() / (q_pi.abs().mean() + 1e-6)).item(), rel=1e-5)
     assert stats["actor_loss"] == pytest.approx(stats["actor_q"] + cfg.bc_weight * stats["bc_loss"], rel=1e-6)
+
+
+def test_bc_gripper_term_asks_for_the_right_side_of_zero_by_the_margin_and_no_more():
+    """A gripper output already beyond the margin on the expert's side gets no pull (so tanh never saturates); the
+    wrong side or too close to 0 is pulled; the position part is a plain squared error."""
+    act = torch.tensor([[0.1, 0.2, 0.3, 1.0], [0.1, 0.2, 0.3, -1.0], [0.1, 0.2, 0.3, 1.0], [0.1, 0.2, 0.3, -1.0]])
+    pi = torch.tensor([[0.1, 0.2, 0.3, 0.7], [0.1, 0.2, 0.3, -0.9], [0.1, 0.2, 0.3, 0.2], [0.2, 0.2, 0.3, 0.4]],
+                      requires_grad=True)
+    err = bc_error(pi, act)
+    assert err[:2].tolist() == [0.0, 0.0]
+    assert err[2].item() == pytest.approx((GRIP_MARGIN - 0.2) ** 2)
+    assert err[3].item() == pytest.approx(0.1**2 + (GRIP_MARGIN + 0.4) ** 2)
+    err.sum().backward()
+    assert pi.grad[0].abs().sum() == 0 and pi.grad[2, 3] < 0 and pi.grad[3, 3] > 0
 
 
 def test_bc_term_is_zero_without_expert_samples_and_positive_with_them():
@@ -163,7 +179,7 @@ def test_q_filter_clones_only_the_expert_actions_the_critic_rates_above_the_acto
     with torch.no_grad():
         pi = before.actor(obs)  # the actor before its step, against the critic after its step
         keep = agent.critic(obs, act)[0] > agent.critic(obs, pi)[0]
-        sq_err = ((pi - act) ** 2).sum(-1)
+        sq_err = bc_error(pi, act)
     assert 0 < keep.sum() < len(keep)  # the test batch exercises both sides of the filter
     assert stats["bc_loss"] == pytest.approx((sq_err * keep).sum().item() / len(keep), rel=1e-5)
     assert stats["bc_loss"] < sq_err.mean().item()  # what the unfiltered term would have been

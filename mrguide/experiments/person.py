@@ -1,0 +1,129 @@
+"""A person's marks: guided training where every mark is made over the live protocol by the annotation bot
+with a headset user's errors (`configs/person.toml`: a registration bias drawn once per run, more error
+along the line of sight than across it, the odd slip), then every final policy on fresh episodes.
+
+Reported beside Fig. 7's isotropic σ: convergence, marks and person-minutes until convergence, marks over
+the run, and the final policies' success on `episodes` start states no evaluation used.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from mrguide.config import ConfigError, check_number
+from mrguide.experiments import report
+from mrguide.experiments.run_records import RunRecord, read_run
+from mrguide.experiments.runs import TrainRun, configs
+from mrguide.experiments.stats import PERSON_SECONDS_PER_MARK, wilson
+
+#: Fresh start states of the final-policy evaluation: env seeds from here, disjoint from training's evaluations (1e6 + …).
+FRESH_SEED_BASE = 3_000_000
+CLIENTS = ("bot", "")
+
+
+@dataclass(frozen=True)
+class PersonConfig:
+    """[experiment] of configs/experiments/person.toml."""
+
+    seeds: int = 10
+    steps: int = 20_000
+    config: str = "../person.toml"  # base training config (its [guidance.noise] is the person), relative to the file
+    client: str = "bot"  # "bot": every mark over the wire; "": the same simulated person in process
+    episodes: int = 50  # fresh episodes per final policy
+    overrides: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        check_number("experiment.seeds", self.seeds, 1, 1000, integer=True)
+        check_number("experiment.steps", self.steps, 1, 10**8, integer=True)
+        check_number("experiment.episodes", self.episodes, 1, 10**5, integer=True)
+        if self.client not in CLIENTS:
+            raise ConfigError(f"experiment.client = {self.client!r}: expected 'bot' (over the wire) or '' (in process)")
+
+
+def runs(cfg: PersonConfig, base_config: str | None) -> list[TrainRun]:
+    return [TrainRun(f"seed{s}", s, cfg.steps, True, base_config, dict(cfg.overrides), cfg.client) for s in range(cfg.seeds)]
+
+
+def fresh_path(run: TrainRun, root: Path) -> Path:
+    return run.directory(root) / "fresh.csv"
+
+
+def evaluate(run: TrainRun, root: str, cfg: PersonConfig) -> str:
+    """The final policy (the exported file, by the deploy's numpy runner) on `episodes` fresh start states (a Ray task)."""
+    from mrguide.deploy.policy import ExportedPolicy
+    from mrguide.twin.env import PickPlaceEnv
+    from mrguide.twin.rollout import run_episodes
+
+    out = fresh_path(run, Path(root))
+    if out.exists():
+        return str(out)
+    env = PickPlaceEnv(configs(run)[3])
+    try:
+        policy = ExportedPolicy.load(run.directory(Path(root)) / "policy.npz", env.robot_spec, env.task_cfg)
+        summary = run_episodes(env, policy, range(FRESH_SEED_BASE, FRESH_SEED_BASE + cfg.episodes))
+    finally:
+        env.close()
+    rows = [{"seed": e.seed, "outcome": e.outcome, "return": round(e.ret, 4), "steps": e.steps} for e in summary.episodes]
+    report.write_report(out.parent, {out.name: report.csv_bytes(rows, ["seed", "outcome", "return", "steps"])})
+    return str(out)
+
+
+def fresh_success(run: TrainRun, root: Path) -> float:
+    rows = report.read_csv(fresh_path(run, root))
+    return float(np.mean([r["outcome"] == "success" for r in rows]))
+
+
+def person_minutes(marks: int | float | None) -> float | None:
+    return None if marks is None else round(marks * PERSON_SECONDS_PER_MARK / 60.0, 1)
+
+
+def person_report(cfg: PersonConfig, root: Path, run_list: list[TrainRun], episodes_per_eval: int) -> dict[str, bytes]:
+    """summary.csv, runs.csv, summary.md and a figure of evaluation success against the marks asked."""
+    recs = [read_run(r, root, episodes_per_eval) for r in run_list]
+    fresh = [fresh_success(r, root) for r in run_list]
+    rows = [{"seed": rec.run.seed, "convergence_step": rec.converged.step, "reached_at_end": int(rec.converged.at_end),
+             "marks_until_convergence": rec.annotations_until_convergence,
+             "person_minutes_until_convergence": person_minutes(rec.annotations_until_convergence),
+             "marks_total": rec.annotations_total, "final_eval_success": float(rec.eval_rates[-1]),
+             f"fresh_success_{cfg.episodes}": f, "wall_s": rec.wall_s} for rec, f in zip(recs, fresh)]
+    conv = [r for r in recs if r.converged.step is not None]
+    marks = [r.annotations_until_convergence for r in conv]
+    lo, hi = wilson(len(conv), len(recs))
+    summary = [{"seeds": len(recs), "converged": len(conv), "ci_low": round(lo, 3), "ci_high": round(hi, 3),
+                "median_step": int(np.median([r.converged.step for r in conv])) if conv else None,
+                "median_marks": int(np.median(marks)) if marks else None,
+                "median_person_minutes": person_minutes(float(np.median(marks))) if marks else None,
+                "median_marks_total": int(np.median([r.annotations_total for r in recs])),
+                "fresh_success_median": round(float(np.median(fresh)), 3), "fresh_success_min": round(min(fresh), 3),
+                "fresh_success_max": round(max(fresh), 3)}]
+    md = (f"A person's marks over the wire (client: {cfg.client or 'in process'}): {cfg.seeds} seeds × {cfg.steps} steps; "
+          f"convergence with the learning-curves rule; person-minutes at {PERSON_SECONDS_PER_MARK:.0f} s per mark; every final "
+          f"policy on {cfg.episodes} fresh start states.\n\n"
+          + report.markdown(summary, [("seeds", "seeds"), ("converged", "converged"), ("ci_low", "95 % CI low"),
+                                      ("ci_high", "95 % CI high"), ("median_step", "median convergence step"),
+                                      ("median_marks", "marks until convergence (median)"),
+                                      ("median_person_minutes", "person-minutes until convergence (median)"),
+                                      ("median_marks_total", "marks per run (median)"),
+                                      ("fresh_success_median", f"fresh success, median of {cfg.seeds}"),
+                                      ("fresh_success_min", "min"), ("fresh_success_max", "max")])
+          + "\n\n" + report.markdown(rows, [(k, k.replace("_", " ")) for k in rows[0]]))
+    return {
+        "summary.csv": report.csv_bytes(summary, list(summary[0])),
+        "runs.csv": report.csv_bytes(rows, list(rows[0])),
+        "summary.md": md.encode(),
+        "person_marks.png": _figure(recs),
+    }
+
+
+def _figure(recs: list[RunRecord]) -> bytes:
+    fig, ax = report.figure("Evaluation success against a person's marks", "marks asked (cumulative)", "evaluation success")
+    for rec in recs:
+        marks = [rec.asked[rec.row_steps <= s].max(initial=0) for s in rec.eval_steps]
+        ax.plot(marks, rec.eval_rates, alpha=0.7, label=f"seed {rec.run.seed}")
+    ax.set_ylim(-0.02, 1.02)
+    ax.legend(loc="lower right", ncol=2, fontsize=7)
+    return report.png_bytes(fig)

@@ -1,0 +1,184 @@
+"""The peer learner: SAC as RLPD (Ball et al. 2023) and HIL-SERL use it, on the CPU.
+
+Read top to bottom: `SACConfig` says what can be set (RLPD's values unless marked ours); `SAC.learn` is one
+environment step's learning: `utd` critic steps, each on a fresh minibatch that is half expert and half agent
+data (RLPD's symmetric sampling; the λ schedule of Eq. 11 is not used), then one actor step and one
+temperature step. The critics are an ensemble with LayerNorm; the TD target takes the minimum over a random
+pair of target critics and backs up the entropy; the actor maximizes the ensemble's mean Q. No
+behaviour-cloning term: demonstrations are just off-policy data, stored with the action that was executed.
+
+The policy is a tanh-Gaussian over the actor's MLP output y, through the same output heads as DDPG's actor
+(`ddpg.Actor`), so the deterministic policy (tanh of the mean) exports and deploys as DDPG's does.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from torch import nn
+
+from mrguide.config import ConfigError, check_number
+from mrguide.policies.ddpg import ACTOR_HEADS, Actor, CriticEnsemble, ObsScaler
+from mrguide.policies.replay import TaggedReplay
+
+LOG_STD_MIN, LOG_STD_MAX = -20.0, 2.0  # RLPD's clip of the log standard deviation
+
+
+@dataclass(frozen=True)
+class SACConfig:
+    """[sac] of a training config; used when train.learner = "sac"."""
+
+    hidden: tuple[int, ...] = (256, 256)  # RLPD
+    lr: float = 3e-4  # actor, critics and temperature (RLPD)
+    gamma: float = 0.99
+    tau: float = 0.005
+    n_critics: int = 10  # RLPD: an ensemble of 10 ...
+    n_min: int = 2  # ... whose TD target is the minimum over a random 2
+    layer_norm: bool = True  # LayerNorm in the critics (RLPD)
+    utd: int = 2  # critic updates per environment step (RLPD's runs: 20; ours, for the CPU)
+    expert_fraction: float = 0.5  # share of every batch drawn from the expert pool (RLPD's offline_ratio)
+    actor_head: str = "absolute"  # as ddpg.actor_head
+    max_offset: float = 0.5  # m, as ddpg.max_offset
+
+    def __post_init__(self) -> None:
+        if not self.hidden or any(isinstance(h, bool) or not isinstance(h, int) or not 1 <= h <= 4096 for h in self.hidden):
+            raise ConfigError(f"sac.hidden = {list(self.hidden)!r}: expected one or more layer widths in [1, 4096]")
+        check_number("sac.lr", self.lr, 1e-8, 1.0)
+        check_number("sac.gamma", self.gamma, 0.0, 1.0)
+        check_number("sac.tau", self.tau, 1e-6, 1.0)
+        check_number("sac.n_critics", self.n_critics, 1, 100, integer=True)
+        check_number("sac.n_min", self.n_min, 1, self.n_critics, integer=True)
+        check_number("sac.utd", self.utd, 1, 100, integer=True)
+        check_number("sac.expert_fraction", self.expert_fraction, 0.0, 1.0)
+        if self.actor_head not in ACTOR_HEADS:
+            raise ConfigError(f"sac.actor_head = {self.actor_head!r}: expected one of {', '.join(ACTOR_HEADS)}")
+        check_number("sac.max_offset", self.max_offset, 0.01, 10.0, " m")
+
+
+class GaussianActor(nn.Module):
+    """π(a | s): y = tanh(u), u ~ N(μ(s), σ(s)), a = the head's action for y. `base` is a DDPG actor whose MLP
+    gives μ; `log_std` reads the same trunk. The deterministic policy, base(s) = head(tanh(μ(s))), is what
+    is evaluated and exported."""
+
+    def __init__(self, base: Actor):
+        super().__init__()
+        self.base = base
+        mean_layer = base.net[-2]
+        self.log_std = nn.Linear(mean_layer.in_features, mean_layer.out_features)
+
+    def sample(self, obs: torch.Tensor, eps: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """(action, log π) for standard-normal `eps`; log π is that of y (the head is affine in y but for the box clamp)."""
+        h = self.base.net[:-2](self.base.inputs(obs))
+        mean = self.base.net[-2](h)
+        log_std = self.log_std(h).clamp(LOG_STD_MIN, LOG_STD_MAX)
+        u = mean + log_std.exp() * eps
+        y = torch.tanh(u)
+        gauss = -0.5 * eps.pow(2) - log_std - 0.5 * np.log(2 * np.pi)
+        squash = 2.0 * (np.log(2.0) - u - nn.functional.softplus(-2.0 * u))  # log(1 − tanh(u)²), stable
+        return self.base.output(obs, y), (gauss - squash).sum(-1)
+
+
+class SAC:
+    """Soft actor-critic with a LayerNorm critic ensemble; `learn` is one environment step's updates."""
+
+    CRITIC_STATS = ("critic_loss", "q_mean", "q_max")
+    ACTOR_STATS = ("actor_loss", "temperature", "entropy")
+
+    def __init__(self, obs_offset: np.ndarray, obs_scale: np.ndarray, act_dim: int, cfg: SACConfig, seed: int = 0):
+        self.cfg = cfg
+        self.act_dim = act_dim
+        torch.manual_seed(seed)
+
+        def scaler() -> ObsScaler:
+            return ObsScaler(obs_offset, obs_scale)
+
+        self.actor = GaussianActor(Actor(scaler(), act_dim, cfg.hidden, cfg.actor_head, cfg.max_offset))
+        self.critic = CriticEnsemble(scaler(), act_dim, cfg.hidden, cfg.n_critics, cfg.layer_norm)
+        self.critic_target = CriticEnsemble(scaler(), act_dim, cfg.hidden, cfg.n_critics, cfg.layer_norm)
+        self.critic_target.load_state_dict(self.critic.state_dict())
+        self.log_temperature = torch.zeros((), requires_grad=True)  # temperature 1 at the start (RLPD)
+        self.target_entropy = -act_dim / 2  # RLPD
+        self.actor_params = list(self.actor.parameters())
+        self.actor_opt = torch.optim.Adam(self.actor_params, lr=cfg.lr, fused=True)
+        self.critic_opt = torch.optim.Adam(self.critic.parameters(), lr=cfg.lr, fused=True)
+        self.temperature_opt = torch.optim.Adam([self.log_temperature], lr=cfg.lr)
+        self.updates = 0  # critic steps so far
+        self._soft = (list(self.critic.parameters()), list(self.critic_target.parameters()))
+
+    @property
+    def policy_actor(self) -> Actor:
+        """The deterministic actor (tanh of the mean) that is evaluated and exported."""
+        return self.actor.base
+
+    @torch.no_grad()
+    def act(self, obs: np.ndarray, rng: np.random.Generator | None = None, sigma: float | None = None) -> np.ndarray:
+        """Without `rng` the deterministic action; with it a sample of π (its noise from `rng`; `sigma` unused)."""
+        o = torch.as_tensor(obs, dtype=torch.float32).unsqueeze(0)
+        if rng is None:
+            a = self.actor.base(o)
+        else:
+            a, _ = self.actor.sample(o, torch.as_tensor(rng.normal(size=(1, self.act_dim)), dtype=torch.float32))
+        return np.clip(a.squeeze(0).numpy(), -1.0, 1.0).astype(np.float32)
+
+    def learn(self, replay: TaggedReplay, lam: float, batch_size: int, rng: np.random.Generator) -> tuple[dict[str, float], float]:
+        """`utd` critic steps and one actor and temperature step; (statistics, realized expert share). `lam` unused."""
+        n_expert = int(round(self.cfg.expert_fraction * batch_size))
+        stats: list[torch.Tensor] = []
+        for _ in range(self.cfg.utd):
+            batch = replay.sample_split(batch_size, n_expert, rng)
+            stats = self._critic_step(batch)
+        obs = torch.as_tensor(batch.obs)
+        stats = stats + self._actor_step(obs)
+        with torch.no_grad():
+            return dict(zip(self.CRITIC_STATS + self.ACTOR_STATS, torch.stack(stats).tolist())), batch.expert_ratio
+
+    def _critic_step(self, batch) -> list[torch.Tensor]:
+        obs, act, rew, next_obs, done = (torch.as_tensor(x) for x in (batch.obs, batch.act, batch.rew, batch.next_obs, batch.done))
+        with torch.no_grad():
+            next_act, next_logp = self.actor.sample(next_obs, torch.randn(len(rew), self.act_dim))
+            pair = torch.randperm(self.cfg.n_critics)[: self.cfg.n_min]
+            next_q = self.critic_target(next_obs, next_act, pair).min(0).values
+            target = rew + self.cfg.gamma * (1.0 - done) * (next_q - self.log_temperature.exp() * next_logp)
+        q = self.critic(obs, act)
+        loss = nn.functional.mse_loss(q, target.expand_as(q)) * q.shape[0]  # sum of the members' losses
+        self.critic_opt.zero_grad()
+        loss.backward()
+        self.critic_opt.step()
+        self.updates += 1
+        with torch.no_grad():
+            torch._foreach_lerp_(self._soft[1], self._soft[0], self.cfg.tau)
+            return [loss, q.mean(), q.max()]
+
+    def _actor_step(self, obs: torch.Tensor) -> list[torch.Tensor]:
+        act, logp = self.actor.sample(obs, torch.randn(len(obs), self.act_dim))
+        temperature = self.log_temperature.exp()
+        loss = (temperature.detach() * logp - self.critic(obs, act).mean(0)).mean()
+        for p, g in zip(self.actor_params, torch.autograd.grad(loss, self.actor_params)):
+            p.grad = g
+        self.actor_opt.step()
+        entropy = -logp.detach().mean()
+        temp_loss = temperature * (entropy - self.target_entropy)
+        self.temperature_opt.zero_grad()
+        temp_loss.backward()
+        self.temperature_opt.step()
+        return [loss.detach(), temperature.detach(), entropy]
+
+    def state_dict(self) -> dict:
+        return {
+            "actor": self.actor.state_dict(), "critic": self.critic.state_dict(), "critic_target": self.critic_target.state_dict(),
+            "log_temperature": self.log_temperature.detach().clone(), "actor_opt": self.actor_opt.state_dict(),
+            "critic_opt": self.critic_opt.state_dict(), "temperature_opt": self.temperature_opt.state_dict(), "updates": self.updates,
+        }
+
+    def load_state_dict(self, state: dict) -> None:
+        self.actor.load_state_dict(state["actor"])
+        self.critic.load_state_dict(state["critic"])
+        self.critic_target.load_state_dict(state["critic_target"])
+        with torch.no_grad():
+            self.log_temperature.copy_(state["log_temperature"])
+        self.actor_opt.load_state_dict(state["actor_opt"])
+        self.critic_opt.load_state_dict(state["critic_opt"])
+        self.temperature_opt.load_state_dict(state["temperature_opt"])
+        self.updates = state["updates"]

@@ -1,0 +1,218 @@
+"""A person's marks: the headset error model, pick and place marks, and their fusion over a run."""
+
+import numpy as np
+import pytest
+
+from mrguide.config import ConfigError
+from mrguide.policies.annotations import Annotation, AnnotationCache
+from mrguide.policies.experts import AnnotatorNoise, OracleExpert, SimulatedAnnotator
+from mrguide.policies.guidance import NominalReference
+from mrguide.policies.guided_expert import GuidedExpert
+from mrguide.policies.mark_fusion import MarkFusion
+from mrguide.robot import Workspace, load_robot
+from mrguide.task import (GRASP_PRESS, PICK_PHASE, PLACE_PHASE, TaskConfig, mark_phase, observation, oracle_target,
+                          phase_from_progress, phase_target, waypoint_from_mark)
+
+WIDE = Workspace((-5.0, -5.0, -5.0), (5.0, 5.0, 5.0))  # no clamping: noise statistics as drawn
+OBJ, GOAL = np.array([0.5, -0.1, 0.025]), np.array([0.5, 0.2, 0.025])
+
+
+def _obs(phase, obj=OBJ, goal=GOAL, tcp=(0.5, 0.1, 0.3), g=-1):
+    return observation(np.array(tcp), g, phase / 5, np.asarray(obj), np.asarray(goal))
+
+
+def _errors(noise, seed, n=4000, point=(0.5, -0.1, 0.047)):
+    ann = SimulatedAnnotator(TaskConfig(), noise, WIDE, seed=seed)
+    obs = _obs(1, obj=np.array(point) - [0, 0, 0.022])
+    exact = OracleExpert(TaskConfig()).annotate(obs).target
+    return ann, np.array([ann.annotate(obs).target - exact for _ in range(n)])
+
+
+def test_person_bias_is_drawn_once_per_run_and_differs_between_runs():
+    a, errs = _errors(AnnotatorNoise(bias_sigma=0.007), seed=1, n=50)
+    assert np.allclose(errs, errs[0]) and np.linalg.norm(errs[0]) > 1e-4  # every mark of the run shares it
+    assert np.allclose(a.run_bias, errs[0])
+    b, _ = _errors(AnnotatorNoise(bias_sigma=0.007), seed=2, n=1)
+    assert not np.allclose(a.run_bias, b.run_bias)
+    biases = np.array([SimulatedAnnotator(TaskConfig(), AnnotatorNoise(bias_sigma=0.007), WIDE, seed=s).run_bias for s in range(400)])
+    assert biases.std(0) == pytest.approx([0.007] * 3, rel=0.15)
+
+
+def test_person_error_is_larger_along_the_line_of_sight_than_across():
+    noise = AnnotatorNoise(sigma_across=0.01, sigma_along=0.02)
+    point = np.array([0.5, -0.1, 0.047])
+    _, errs = _errors(noise, seed=3, point=tuple(point))
+    u = point - np.array(noise.viewpoint)
+    u /= np.linalg.norm(u)
+    along = errs @ u
+    across = errs - np.outer(along, u)
+    assert along.std() == pytest.approx(0.02, rel=0.08)
+    assert np.sqrt((across**2).sum(1).mean() / 2) == pytest.approx(0.01, rel=0.08)  # per axis across the sight line
+    assert abs(along.mean()) < 0.002
+
+
+def test_person_slips_are_rare_and_gross():
+    _, errs = _errors(AnnotatorNoise(sigma_across=0.005, sigma_along=0.005, outlier_rate=0.03, outlier_scale=0.1), seed=4)
+    gross = np.linalg.norm(errs, axis=1) > 0.05
+    assert 0.015 < gross.mean() < 0.045
+
+
+def test_isotropic_annotator_stream_is_unchanged_by_the_person_terms():
+    """Fig. 7's annotator (sigma only) draws exactly as before the person model: 3 normals per mark."""
+    _, errs = _errors(AnnotatorNoise(sigma=0.02), seed=5, n=3)
+    rng = np.random.default_rng(5)
+    assert np.allclose(errs, rng.normal(0.0, 0.02, (3, 3)))
+
+
+@pytest.mark.parametrize("field, value", [("bias_sigma", -0.01), ("sigma_along", float("nan")), ("viewpoint", (1.0, 2.0))])
+def test_person_noise_refuses_bad_values(field, value):
+    with pytest.raises(ConfigError, match=f"guidance.noise.{field}"):
+        AnnotatorNoise(**{field: value})
+
+
+def test_waypoints_from_exact_marks_are_the_task_models_targets():
+    task = TaskConfig()
+    pick = oracle_target(_obs(PICK_PHASE), task)[0]
+    place = oracle_target(_obs(PLACE_PHASE), task)[0]
+    assert np.allclose(pick, phase_target(1, OBJ, GOAL, task) - [0, 0, GRASP_PRESS])
+    for phase in range(5):
+        mark = pick if mark_phase(phase) == PICK_PHASE else place
+        expected = oracle_target(_obs(phase), task)[0]
+        assert np.allclose(waypoint_from_mark(phase, mark, task), expected), phase
+    # the lift rises above the grasp point, not above wherever the part has moved to
+    moved = _obs(2, obj=OBJ + [0.01, 0.0, 0.05])
+    assert np.allclose(waypoint_from_mark(2, pick, task), [OBJ[0], OBJ[1], task.lift_height])
+    assert not np.allclose(waypoint_from_mark(2, pick, task), oracle_target(moved, task)[0])
+
+
+def test_fusion_averages_the_scatter_and_outvotes_a_slip():
+    rng = np.random.default_rng(0)
+    fusion = MarkFusion()
+    offset = np.array([0.0, 0.0, 0.022])
+    for k in range(40):
+        at = np.array([0.4 + 0.2 * rng.random(), -0.1 + 0.2 * rng.random(), 0.025])
+        err = rng.normal(0.0, 0.02, 3) if k != 7 else np.array([0.3, -0.2, 0.1])  # one slip
+        fusion.add(PICK_PHASE, at, at + offset + err)
+    assert np.abs(fusion.estimate(PICK_PHASE) - offset).max() < 0.01  # 2 cm per mark, 40 marks
+    assert fusion.estimate(PLACE_PHASE) is None
+    assert np.allclose(fusion.point(PICK_PHASE, [1.0, 2.0, 3.0]), np.array([1.0, 2.0, 3.0]) + fusion.estimate(PICK_PHASE))
+
+
+def test_pick_place_bounds_the_fused_mark_around_the_reference(tmp_path):
+    """Eq. 13 acts on the fused mark (around the nominal target here), not on each mark against the earlier ones."""
+    src = _Recorder(answers=[OBJ + [0.3, 0.0, 0.022]])  # a wild first mark, 0.3 m off in x
+    expert, _ = _pick_place(src, tmp_path)
+    expert.begin_demonstration()
+    target = _target_m(expert.action(_obs(1)).executed)
+    ref = phase_target(1, OBJ, GOAL, TaskConfig())  # the nominal reference: the part's top centre
+    assert np.linalg.norm(target - ref) == pytest.approx(0.05, abs=1e-6) and target[0] > ref[0] + 0.049  # on the 5 cm sphere
+    assert expert.projected == 1 and np.allclose(expert.fusion.offsets[PICK_PHASE][0], [0.3, 0.0, 0.022])  # kept as marked
+
+
+class _Recorder:
+    """An expert source that answers like the oracle (plus an offset) and records the phases it was asked."""
+
+    def __init__(self, offset=(0.0, 0.0, 0.0), answers=None):
+        self.offset = np.asarray(offset, dtype=float)
+        self.asked, self.previous = [], []
+        self.answers = answers
+
+    def annotate(self, obs, previous=None):
+        self.asked.append(phase_from_progress(obs[4]))
+        self.previous.append(previous)
+        if self.answers is not None:
+            target = self.answers.pop(0)
+            return None if target is None else Annotation(np.array(target), 1.0, "live")
+        target, grip = oracle_target(obs, TaskConfig())
+        return Annotation(target + self.offset, grip, "live")
+
+
+def _pick_place(source, tmp_path, reask_after=15, path="ann.jsonl"):
+    task = TaskConfig()
+    cache = AnnotationCache(0.005, tmp_path / path)
+    expert = GuidedExpert(source, NominalReference(task), cache, 0.05, task, load_robot().workspace.to_normalized, reask_after,
+                          marks="pick_place")
+    return expert, cache
+
+
+def _target_m(action):
+    return load_robot().workspace.to_cartesian(action[:3])
+
+
+def test_a_pick_place_demonstration_asks_two_marks_and_follows_the_five_waypoints(tmp_path):
+    src = _Recorder()
+    expert, cache = _pick_place(src, tmp_path)
+    expert.begin_demonstration()
+    task = TaskConfig()
+    for phase in range(5):
+        for _ in range(3):
+            step = expert.action(_obs(phase, g=1 if phase in (2, 3) else -1))
+            assert np.allclose(_target_m(step.executed), oracle_target(_obs(phase), task)[0], atol=1e-6), phase
+    assert src.asked == [PICK_PHASE, PLACE_PHASE] and cache.asked == 2 and cache.reused == 13
+    # the same start restored (a replayed demonstration) reuses both marks
+    expert.begin_demonstration()
+    for phase in range(5):
+        expert.action(_obs(phase))
+    assert cache.asked == 2 and src.asked == [PICK_PHASE, PLACE_PHASE]
+    # another scene asks again, and the new marks' waypoints follow the new part and goal
+    expert.begin_demonstration()
+    other = OBJ + [0.05, 0.1, 0.0]
+    step = expert.action(_obs(1, obj=other))
+    assert cache.asked == 3 and np.allclose(_target_m(step.executed), oracle_target(_obs(1, obj=other), task)[0], atol=1e-6)
+
+
+def test_pick_place_fuses_the_marks_of_a_run(tmp_path):
+    """A biased, scattered person: every new demonstration uses the median offset of all marks so far."""
+    scenes = [OBJ + [0.0, 0.1 * k, 0.0] for k in range(3)]
+    errors = [[0.0, 0.0, 0.01], [0.02, 0.0, 0.01], [0.03, 0.0, 0.01]]
+    src = _Recorder(answers=[obj + [0.0, 0.0, 0.022] + err for obj, err in zip(scenes, errors)])
+    expert, cache = _pick_place(src, tmp_path)
+    offsets = []
+    for obj in scenes:
+        expert.begin_demonstration()
+        offsets.append(_target_m(expert.action(_obs(1, obj=obj)).executed) - obj)
+    assert cache.asked == 3
+    assert np.allclose([o[0] for o in offsets], [0.0, 0.01, 0.02], atol=1e-6)  # medians of 0; 0, 2; 0, 2, 3 cm
+    assert np.allclose([o[2] for o in offsets], 0.032, atol=1e-6)
+
+
+def test_pick_place_remarks_an_unreached_phase_and_resume_rebuilds_the_fusion(tmp_path):
+    src = _Recorder(answers=[OBJ + [0.0, 0.0, 0.04], OBJ + [0.0, 0.0, 0.022]])
+    expert, cache = _pick_place(src, tmp_path, reask_after=15)
+    expert.begin_demonstration()
+    first = [_target_m(expert.action(_obs(1)).executed) for _ in range(15)]
+    assert cache.asked == 1 and expert.remarks == 0
+    again = _target_m(expert.action(_obs(1)).executed)
+    assert expert.remarks == 1 and cache.asked == 2 and src.previous[1] is not None
+    assert np.allclose(src.previous[1].target, OBJ + [0.0, 0.0, 0.04])
+    assert np.allclose(first[0][2], OBJ[2] + 0.04) and np.allclose(again[2], OBJ[2] + 0.031)  # median of 4 and 2.2 cm
+    # a resumed trainer reloads the file and rebuilds the same fused estimate
+    resumed, fresh = _pick_place(_Recorder(answers=[]), tmp_path, path="ann.jsonl")
+    fresh.load(tmp_path / "ann.jsonl")
+    resumed.reload()
+    assert np.allclose(resumed.fusion.estimate(PICK_PHASE), expert.fusion.estimate(PICK_PHASE))
+    assert len(resumed.fusion.offsets[PICK_PHASE]) == 2  # the superseded mark still counts as a measurement
+
+
+def test_pick_place_nobody_answering_ends_the_demonstration(tmp_path):
+    expert, cache = _pick_place(_Recorder(answers=[None]), tmp_path)
+    expert.begin_demonstration()
+    assert expert.action(_obs(0)) is None and cache.asked == 1 and len(cache) == 0
+
+
+def test_pick_place_in_a_short_guided_run_asks_about_two_marks_per_demonstration(tmp_path):
+    import dataclasses
+
+    from mrguide.policies.train import Trainer, load_train_config
+
+    tc, dc, gc, ec = load_train_config(None)
+    tc = dataclasses.replace(tc, total_steps=600, eval_every=10_000, checkpoint_every=10_000)
+    gc = dataclasses.replace(gc, marks="pick_place", source="oracle")
+    tr = Trainer(tc, dc, gc, ec, tmp_path)
+    try:
+        tr.run()
+    finally:
+        tr.close()
+    demos = tr.interventions
+    assert demos > 3 and tr.cache.asked <= 2 * demos + tr.expert.remarks
+    assert tr.cache.asked >= demos  # every demonstration asked for its pick mark at least
