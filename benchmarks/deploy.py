@@ -33,7 +33,7 @@ def bench_inference(n: int = 20000) -> tuple[float, str]:
     """Median time of one forward pass of an exported default-size actor, and its hidden layout."""
     from mrguide.policies.ddpg import DDPG, DDPGConfig
     from mrguide.policies.export import export_actor
-    from mrguide.policies.ddpg import obs_scaling
+    from mrguide.policies.networks import obs_scaling
     from mrguide.task import TaskConfig
 
     spec = load_robot()

@@ -1,3 +1,3 @@
 """mrguide: demonstration-augmented DDPG with mixed-reality guidance, a PyBullet twin and a CANopen deploy stack."""
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"

@@ -204,6 +204,8 @@ def observation(tcp: np.ndarray, g: int, phi: float, obj: np.ndarray, goal: np.n
 OBS_DIM = 11
 ACT_DIM = 4
 OBS_LAYOUT = ("tcp_x", "tcp_y", "tcp_z", "g", "phi", "obj_x", "obj_y", "obj_z", "goal_x", "goal_y", "goal_z")
+#: The observation's parts, by name (see `observation`).
+OBS_TCP, OBS_GRIP, OBS_PROGRESS, OBS_OBJECT, OBS_GOAL = slice(0, 3), 3, 4, slice(5, 8), slice(8, 11)
 ACT_LAYOUT = ("target_x", "target_y", "target_z", "gripper")
 
 

@@ -23,7 +23,8 @@ import numpy as np
 from mrguide.config import ConfigError, to_dict
 from mrguide.errors import InputError
 from mrguide.robot import RobotSpec, Workspace
-from mrguide.task import ACT_DIM, ACT_LAYOUT, N_PHASES, OBS_DIM, OBS_LAYOUT, PHASES, TaskConfig, progress
+from mrguide.task import (ACT_DIM, ACT_LAYOUT, N_PHASES, OBS_DIM, OBS_GOAL, OBS_LAYOUT, OBS_OBJECT, OBS_PROGRESS, PHASES, TaskConfig,
+                          progress)
 
 FORMAT = "mrguide-policy"
 FORMAT_VERSION = 1
@@ -32,8 +33,11 @@ MAX_DECISION_PERIOD = 10.0
 ACTIVATIONS = {"relu": lambda x: np.maximum(x, 0.0), "tanh": np.tanh}
 #: The arm of policy files that record none (exported before arm identities): the only arm there was then.
 LEGACY_ARM = "ur5"
-#: Output heads with a second first layer for transport and release (W0_carry, b0_carry).
-ANCHOR_KINDS = ("phase_anchor", "anchor_offset")
+#: The output head every policy file declares: target = anchor + max_offset · y, the part up to φ = carry_progress
+#: and the goal beyond, with a second first layer (W0_carry, b0_carry) for the goal-anchored inputs. The heads of
+#: earlier versions (absolute, tcp_offset, phase_anchor) are retired: their files are refused with the reason.
+HEAD_KIND = "anchor_offset"
+RETIRED_HEADS, RETIRED_IN = ("absolute", "tcp_offset", "phase_anchor"), "0.2.0"
 
 log = logging.getLogger(__name__)
 
@@ -44,28 +48,24 @@ class PolicyFileError(InputError):
 
 @dataclass(frozen=True)
 class OffsetHead:
-    """The output head of tcp_offset and phase_anchor, target = TCP + max_offset · y (m), and of anchor_offset,
-    target = anchor + max_offset · y with the object as anchor up to φ = `anchor_switch` and the goal beyond;
-    normalized to the trained box."""
+    """The output head: target = anchor + max_offset · y (m), the part as anchor up to φ = `anchor_switch` and the
+    goal beyond, normalized to the trained box."""
 
     max_offset: float
     centre: np.ndarray
     half: np.ndarray
-    anchor_switch: float | None = None
+    anchor_switch: float
 
     def __call__(self, obs: np.ndarray, y: np.ndarray) -> np.ndarray:
-        if self.anchor_switch is None:
-            base = obs[:, :3]
-        else:
-            base = np.where(obs[:, 4:5] > self.anchor_switch, obs[:, 8:11], obs[:, 5:8])
+        base = np.where(obs[:, OBS_PROGRESS:OBS_PROGRESS + 1] > self.anchor_switch, obs[:, OBS_GOAL], obs[:, OBS_OBJECT])
         pos = np.clip((base + self.max_offset * y[:, :3] - self.centre) / self.half, -1.0, 1.0)
         return np.column_stack([pos, y[:, 3:]])
 
 
 @dataclass(frozen=True)
 class CarryLayer:
-    """The anchor heads' second first layer, used instead of layer 0 where φ > `progress` (transport and
-    release: the goal-anchored inputs instead of the object-anchored ones; both maps folded into the weights)."""
+    """The second first layer, used instead of layer 0 where φ > `progress` (transport and release: the
+    goal-anchored inputs instead of the object-anchored ones; both maps folded into the weights)."""
 
     W: np.ndarray
     b: np.ndarray
@@ -74,15 +74,15 @@ class CarryLayer:
 
 @dataclass
 class ExportedPolicy:
-    """An MLP actor: obs (11,) → action (4,) in [-1, 1]; with `head`, the MLP's output is a TCP offset, with
-    `carry` the first layer depends on the task phase."""
+    """An MLP actor: obs (11,) → action (4,) in [-1, 1]; the MLP's output is an offset from the phase's anchor
+    (`head`), and its first layer depends on the task phase (`carry`)."""
 
     weights: list[np.ndarray]
     biases: list[np.ndarray]
     activations: list[str]
     metadata: dict[str, Any]
-    head: OffsetHead | None = None
-    carry: CarryLayer | None = None
+    head: OffsetHead
+    carry: CarryLayer
 
     @property
     def decision_period(self) -> float:
@@ -98,12 +98,10 @@ class ExportedPolicy:
         x = obs
         for i, (W, b, act) in enumerate(zip(self.weights, self.biases, self.activations)):
             pre = x @ W.T + b
-            if i == 0 and self.carry is not None:
-                pre = np.where(obs[:, 4:5] > self.carry.progress, x @ self.carry.W.T + self.carry.b, pre)
+            if i == 0:
+                pre = np.where(obs[:, OBS_PROGRESS:OBS_PROGRESS + 1] > self.carry.progress, x @ self.carry.W.T + self.carry.b, pre)
             x = ACTIVATIONS[act](pre)
-        if self.head is not None:
-            x = self.head(obs, x)
-        return x.astype(np.float32)
+        return self.head(obs, x).astype(np.float32)
 
     @classmethod
     def load(cls, path: str | Path, robot: RobotSpec | None = None, task: TaskConfig | None = None) -> "ExportedPolicy":
@@ -141,7 +139,7 @@ class ExportedPolicy:
             if diff:
                 raise PolicyFileError(f"{path}: task parameters differ from the configuration: {', '.join(diff)}")
         head = _head(path, meta, trained)
-        carry = _carry_layer(path, meta, arrays, weights[0]) if meta["head"]["kind"] in ANCHOR_KINDS else None
+        carry = _carry_layer(path, meta, arrays, weights[0])
         policy = cls(weights, biases, acts, meta, head, carry)
         _refuse_non_finite_output(path, policy, trained)
         return policy
@@ -207,25 +205,23 @@ def _metadata(path: Path, arrays: dict[str, np.ndarray]) -> dict[str, Any]:
     return meta
 
 
-def _head(path: Path, meta: dict[str, Any], trained: Workspace) -> OffsetHead | None:
-    """The output head the metadata declares: none (absolute targets; also files without the field), the TCP
-    offset of tcp_offset and phase_anchor, or the anchor offset of anchor_offset (the anchor kinds also with a
-    carry_progress in (0, 1))."""
-    head = meta.setdefault("head", {"kind": "absolute"})
+def _head(path: Path, meta: dict[str, Any], trained: Workspace) -> OffsetHead:
+    """The output head the metadata declares: HEAD_KIND with a max_offset (m) and a carry_progress in (0, 1)."""
+    head = meta.get("head", {"kind": "absolute"})  # files without the field came before the output heads
     kind = head.get("kind") if isinstance(head, dict) else None
-    if kind == "absolute":
-        return None
-    offset = head.get("max_offset") if kind in ("tcp_offset", *ANCHOR_KINDS) else None
-    switch = head.get("carry_progress") if kind in ANCHOR_KINDS else 0.5
-    if any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in (offset, switch)) or not (0 < offset < 100 and 0 < switch < 1):
-        raise PolicyFileError(f"{path}: metadata head {head!r} not understood (absolute, tcp_offset with a max_offset "
-                              "in m, or phase_anchor or anchor_offset with a max_offset and a carry_progress in (0, 1))")
-    anchor_switch = float(switch) if kind == "anchor_offset" else None
-    return OffsetHead(float(offset), 0.5 * (trained.lo + trained.hi), 0.5 * (trained.hi - trained.lo), anchor_switch)
+    if kind in RETIRED_HEADS:
+        raise PolicyFileError(f"{path}: exported with the {kind!r} output head, which this version no longer runs (retired "
+                              f"in mrguide {RETIRED_IN}); train and export the policy again")
+    offset, switch = (head.get(k) if isinstance(head, dict) else None for k in ("max_offset", "carry_progress"))
+    if kind != HEAD_KIND or any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in (offset, switch)) \
+            or not (0 < offset < 100 and 0 < switch < 1):
+        raise PolicyFileError(f"{path}: metadata head {head!r} not understood ({HEAD_KIND} with a max_offset in m and a "
+                              "carry_progress in (0, 1))")
+    return OffsetHead(float(offset), 0.5 * (trained.lo + trained.hi), 0.5 * (trained.hi - trained.lo), float(switch))
 
 
 def _carry_layer(path: Path, meta: dict[str, Any], arrays: dict[str, np.ndarray], W0: np.ndarray) -> CarryLayer:
-    """The anchor heads' W0_carry and b0_carry, shaped and checked as layer 0."""
+    """W0_carry and b0_carry, shaped and checked as layer 0."""
     W, b = _layer_array(path, arrays, "W0_carry"), _layer_array(path, arrays, "b0_carry")
     if W.shape != W0.shape or b.shape != (W0.shape[0],):
         raise PolicyFileError(f"{path}: carry layer has weights {W.shape} and bias {b.shape}; expected those of layer 0, {W0.shape}")

@@ -12,8 +12,8 @@ from torch import nn
 
 from mrguide import __version__
 from mrguide.config import to_dict
-from mrguide.deploy.policy import ANCHOR_KINDS, FORMAT, FORMAT_VERSION
-from mrguide.policies.ddpg import CARRY_PROGRESS, Actor
+from mrguide.deploy.policy import FORMAT, FORMAT_VERSION, HEAD_KIND
+from mrguide.policies.networks import CARRY_PROGRESS, MAX_OFFSET, Actor
 from mrguide.robot import RobotSpec
 from mrguide.task import ACT_LAYOUT, OBS_LAYOUT, TaskConfig
 
@@ -36,7 +36,7 @@ def export_actor(
         "robot": {"name": robot.name, "fingerprint": robot.fingerprint, "joints": list(robot.joint_names)},
         "task": to_dict(task),
         "decision_period": decision_period,
-        "head": _head_metadata(actor),
+        "head": {"kind": HEAD_KIND, "max_offset": MAX_OFFSET, "carry_progress": CARRY_PROGRESS},
         "versions": {"mrguide": __version__, "torch": torch.__version__, "numpy": np.__version__},
         **(extra or {}),
     }
@@ -45,8 +45,7 @@ def export_actor(
     for i, lin in enumerate(linears[1:], start=1):
         arrays[f"W{i}"] = lin.weight.detach().cpu().numpy().astype(np.float64)
         arrays[f"b{i}"] = lin.bias.detach().cpu().numpy().astype(np.float64)
-    if actor.head in ANCHOR_KINDS:
-        arrays["W0_carry"], arrays["b0_carry"] = _first_layer(actor, "carry_features")
+    arrays["W0_carry"], arrays["b0_carry"] = _first_layer(actor, "carry_features")
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.name + ".tmp.npz")
@@ -55,23 +54,12 @@ def export_actor(
     return path
 
 
-def _head_metadata(actor: Actor) -> dict[str, Any]:
-    """The policy file's `head` entry, which `mrguide.deploy.policy` reads to apply the actor's output head."""
-    head: dict[str, Any] = {"kind": actor.head}
-    if actor.head != "absolute":
-        head["max_offset"] = actor.max_offset
-    if actor.head in ANCHOR_KINDS:
-        head["carry_progress"] = CARRY_PROGRESS
-    return head
-
-
 def _first_layer(actor: Actor, feature_map: str) -> tuple[np.ndarray, np.ndarray]:
-    """Layer 0 acting on the raw observation: the feature map `feature_map` (if the head has one) and the input
-    scaling folded into the weights, W F ((x − o) s) + b = (W F s) x + (b − W F (o s))."""
+    """Layer 0 acting on the raw observation: the feature map `feature_map` and the input scaling folded into the
+    weights, W F ((x − o) s) + b = (W F s) x + (b − W F (o s))."""
     lin = next(m for m in actor.net if isinstance(m, nn.Linear))
     W = lin.weight.detach().cpu().numpy().astype(np.float64)
     b = lin.bias.detach().cpu().numpy().astype(np.float64)
-    if actor.head != "absolute":
-        W = W @ getattr(actor, feature_map).detach().cpu().numpy().astype(np.float64)
+    W = W @ getattr(actor, feature_map).detach().cpu().numpy().astype(np.float64)
     o, sc = (t.detach().cpu().numpy().astype(np.float64) for t in (actor.scaler.offset, actor.scaler.scale))
     return W * sc, b - W @ (o * sc)

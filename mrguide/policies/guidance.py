@@ -108,38 +108,25 @@ class GuidanceConfig:
     intake_steps: int = 10_000  # expert intake window: the first 10k of 20k steps (paper, Sec. IV-B)
     lam_max: float = 0.9  # λ_max (Table I)
     lam_min: float = 0.1  # λ_min (Table I)
-    mode: str = "replay"  # "replay": restore the episode start and demonstrate; "takeover": from now on
     delta: float = 0.05  # Δ of Eq. 13, m (ours)
-    reference: str = "nominal"  # a^e of Eq. 13: "nominal" (model target) or "running_median"
+    reference: str = "nominal"  # a^e of Eq. 13: "nominal" (the task model's target) or "running_median" (no ground truth)
     cache_tolerance: float = 0.005  # m; observations this close reuse a cached annotation
     reask_after: int = 15  # expert steps on one waypoint without reaching it before it is asked again (0: never; ours)
-    #: What a person marks per demonstration. "phases" (the paper's): every phase's waypoint, bounded around
-    #: `reference`. "pick_place" (ours): the grasp point and the set-down point, from which the five waypoints
-    #: follow (task.waypoint_from_mark); each mark is fused with every earlier one as a measurement of one offset
-    #: from the part (pick) or the goal (place), bounded by Eq. 13 around their fused value (`reference` unused).
-    marks: str = "phases"
-    #: Store a demonstration's steps as expert data (ζ = 1) only once their phase is completed; those of a phase it
-    #: did not complete, or that followed a mark marked again, as agent data (ζ = 0). Ours; see Trainer._expert_episode.
-    completed_phases_only: bool = False
+    #: What a person marks per demonstration. "pick_place" (ours): the grasp point and the set-down point, each
+    #: fused with every earlier one as a measurement of one offset from the part (pick) or the goal (place), the
+    #: five waypoints following from the fused marks (task.waypoint_from_mark). "phases" (the paper's): every
+    #: phase's waypoint, used as marked. Both bounded by Eq. 13 around `reference`.
+    marks: str = "pick_place"
     source: str = "annotator"  # "oracle", "annotator" (oracle + noise), "file", or "live" (a person: `--expert live`)
     noise: AnnotatorNoise = field(default_factory=AnnotatorNoise)
-    #: m, std per axis of fresh Gaussian noise on every stored expert action, after Eq. 13 (so the bound
-    #: cannot filter it): the paper's "perturbing expert actions" (Sec. V-E, Fig. 7). `noise` above is
-    #: the other reading: a persistent error of each marked waypoint.
+    #: m, std per axis of fresh Gaussian noise on every stored expert action, after Eq. 13 (so the bound cannot
+    #: filter it), while the arm follows the clean one: Fig. 7's "stored" reading (label noise). Not clipped to
+    #: the action box: near its floor — the grasp target lies 2 mm above it — clipping would bias the grasp
+    #: height's labels upwards. `noise` above is the "marks" reading: each mark off by an error of its own.
     action_noise: float = 0.0
-    #: "executed": the perturbed action also drives the arm; "stored": the arm follows the clean action
-    #: and only the stored transition carries the perturbed one (label noise).
-    action_noise_on: str = "executed"
-    #: Clip the perturbed action to the action box [-1, 1] (the committed Fig. 7 runs). Near the box's floor —
-    #: the grasp target lies 2 mm above it — clipping cuts off the downward half of the noise, so the stored
-    #: labels of the grasp height are biased upwards (7 mm at σ = 2 cm, 19 mm at 5 cm). False
-    #: stores the unclipped, zero-mean label; an executed action is clamped to the box by the environment.
-    action_noise_clip: bool = True
     annotation_file: str = ""  # for source = "file"
 
     def __post_init__(self) -> None:
-        if self.mode not in ("replay", "takeover"):
-            raise ConfigError(f"guidance.mode must be 'replay' or 'takeover', got {self.mode!r}")
         if self.reference not in ("nominal", "running_median"):
             raise ConfigError(f"guidance.reference must be 'nominal' or 'running_median', got {self.reference!r}")
         if self.marks not in ("phases", "pick_place"):
@@ -156,5 +143,3 @@ class GuidanceConfig:
         check_number("guidance.cache_tolerance", self.cache_tolerance, 0.0, 0.1, " m")
         check_number("guidance.reask_after", self.reask_after, 0, 10**6, integer=True)
         check_number("guidance.action_noise", self.action_noise, 0.0, 1.0, " m")
-        if self.action_noise_on not in ("executed", "stored"):
-            raise ConfigError(f"guidance.action_noise_on must be 'executed' or 'stored', got {self.action_noise_on!r}")

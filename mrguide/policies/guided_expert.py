@@ -21,7 +21,7 @@ ACTION_NOISE_SEED_OFFSET = 104_729  # the expert-action noise of training seed s
 class ExpertStep(NamedTuple):
     """What the expert does at one step: the action that drives the arm and the one stored with ζ = 1.
 
-    They differ only under `guidance.action_noise_on = "stored"` (noisy labels, clean execution).
+    They differ only under `guidance.action_noise` (noisy labels, clean execution).
     """
 
     executed: np.ndarray
@@ -43,10 +43,9 @@ class GuidedExpert:
     """
 
     def __init__(self, source: ExpertSource, reference: ReferencePose, cache: AnnotationCache, delta: float, task: TaskConfig,
-                 to_normalized, reask_after: int = 0, action_noise: float = 0.0, noise_on: str = "executed", seed: int = 0,
-                 noise_clip: bool = True, marks: str = "phases"):
+                 to_normalized, reask_after: int = 0, action_noise: float = 0.0, seed: int = 0, marks: str = "pick_place"):
         self.source, self.reference, self.cache = source, reference, cache
-        self.action_noise, self.noise_on, self.noise_clip = action_noise, noise_on, noise_clip
+        self.action_noise = action_noise
         self.rng = np.random.default_rng(seed + ACTION_NOISE_SEED_OFFSET)  # draws only when action_noise > 0
         self.delta = delta
         self.task = task
@@ -72,11 +71,9 @@ class GuidedExpert:
         clean = annotation_action(obs, target, grip, self.task, self.to_normalized)
         if self.action_noise == 0:
             return ExpertStep(clean, clean)
-        noisy = clean.copy()  # the motion is perturbed; the vacuum command stays the annotation's (decided on the clean waypoint)
+        noisy = clean.copy()  # the label's motion is perturbed; the vacuum command stays the annotation's
         noisy[:3] = self.to_normalized(target + self.rng.normal(0.0, self.action_noise, 3))
-        if self.noise_clip:
-            noisy[:3] = np.clip(noisy[:3], -1.0, 1.0)
-        return ExpertStep(noisy, noisy) if self.noise_on == "executed" else ExpertStep(clean, noisy)
+        return ExpertStep(clean, noisy)
 
     def _phase_waypoint(self, obs: np.ndarray) -> tuple[np.ndarray, float] | None:
         """The paper's protocol: this phase's own mark, bounded by Eq. 13 around the reference."""

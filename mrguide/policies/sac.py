@@ -7,8 +7,8 @@ temperature step. The critics are an ensemble with LayerNorm; the TD target take
 pair of target critics and backs up the entropy; the actor maximizes the ensemble's mean Q. No
 behaviour-cloning term: demonstrations are just off-policy data, stored with the action that was executed.
 
-The policy is a tanh-Gaussian over the actor's MLP output y, through the same output heads as DDPG's actor
-(`ddpg.Actor`), so the deterministic policy (tanh of the mean) exports and deploys as DDPG's does.
+The policy is a tanh-Gaussian over the actor's MLP output y, through the same anchored head as DDPG's actor
+(`networks.Actor`), so the deterministic policy (tanh of the mean) exports and deploys as DDPG's does.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ import torch
 from torch import nn
 
 from mrguide.config import ConfigError, check_number
-from mrguide.policies.ddpg import ACTOR_HEADS, Actor, CriticEnsemble, ObsScaler
+from mrguide.policies.networks import Actor, CriticEnsemble, ObsScaler
 from mrguide.policies.replay import TaggedReplay
 
 LOG_STD_MIN, LOG_STD_MAX = -20.0, 2.0  # RLPD's clip of the log standard deviation
@@ -30,17 +30,14 @@ LOG_STD_MIN, LOG_STD_MAX = -20.0, 2.0  # RLPD's clip of the log standard deviati
 class SACConfig:
     """[sac] of a training config; used when train.learner = "sac"."""
 
-    hidden: tuple[int, ...] = (256, 256)  # RLPD
+    hidden: tuple[int, ...] = (128, 128)  # RLPD: 256; ours for the CPU (a 20k-step run at 256 takes ~20 min on one core)
     lr: float = 3e-4  # actor, critics and temperature (RLPD)
     gamma: float = 0.99
     tau: float = 0.005
     n_critics: int = 10  # RLPD: an ensemble of 10 ...
     n_min: int = 2  # ... whose TD target is the minimum over a random 2
-    layer_norm: bool = True  # LayerNorm in the critics (RLPD)
     utd: int = 2  # critic updates per environment step (RLPD's runs: 20; ours, for the CPU)
     expert_fraction: float = 0.5  # share of every batch drawn from the expert pool (RLPD's offline_ratio)
-    actor_head: str = "absolute"  # as ddpg.actor_head
-    max_offset: float = 0.5  # m, as ddpg.max_offset
 
     def __post_init__(self) -> None:
         if not self.hidden or any(isinstance(h, bool) or not isinstance(h, int) or not 1 <= h <= 4096 for h in self.hidden):
@@ -52,13 +49,10 @@ class SACConfig:
         check_number("sac.n_min", self.n_min, 1, self.n_critics, integer=True)
         check_number("sac.utd", self.utd, 1, 100, integer=True)
         check_number("sac.expert_fraction", self.expert_fraction, 0.0, 1.0)
-        if self.actor_head not in ACTOR_HEADS:
-            raise ConfigError(f"sac.actor_head = {self.actor_head!r}: expected one of {', '.join(ACTOR_HEADS)}")
-        check_number("sac.max_offset", self.max_offset, 0.01, 10.0, " m")
 
 
 class GaussianActor(nn.Module):
-    """π(a | s): y = tanh(u), u ~ N(μ(s), σ(s)), a = the head's action for y. `base` is a DDPG actor whose MLP
+    """π(a | s): y = tanh(u), u ~ N(μ(s), σ(s)), a = the head's action for y. `base` is an actor whose MLP
     gives μ; `log_std` reads the same trunk. The deterministic policy, base(s) = head(tanh(μ(s))), is what
     is evaluated and exported."""
 
@@ -94,9 +88,9 @@ class SAC:
         def scaler() -> ObsScaler:
             return ObsScaler(obs_offset, obs_scale)
 
-        self.actor = GaussianActor(Actor(scaler(), act_dim, cfg.hidden, cfg.actor_head, cfg.max_offset))
-        self.critic = CriticEnsemble(scaler(), act_dim, cfg.hidden, cfg.n_critics, cfg.layer_norm)
-        self.critic_target = CriticEnsemble(scaler(), act_dim, cfg.hidden, cfg.n_critics, cfg.layer_norm)
+        self.actor = GaussianActor(Actor(scaler(), act_dim, cfg.hidden))
+        self.critic = CriticEnsemble(scaler(), act_dim, cfg.hidden, cfg.n_critics)
+        self.critic_target = CriticEnsemble(scaler(), act_dim, cfg.hidden, cfg.n_critics)
         self.critic_target.load_state_dict(self.critic.state_dict())
         self.log_temperature = torch.zeros((), requires_grad=True)  # temperature 1 at the start (RLPD)
         self.target_entropy = -act_dim / 2  # RLPD

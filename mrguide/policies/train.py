@@ -1,11 +1,12 @@
-"""Training: DDPG in the twin, with MR-style expert guidance injected into a tagged replay buffer.
+"""Training: guided DDPG (or the SAC peer) in the twin, with MR-style expert guidance injected into a tagged
+replay buffer.
 
 Read top to bottom: `TrainConfig` says what can be set; `Trainer.run` is the loop. One agent episode
 runs with exploration noise; if its running reward drops below R_th (Eq. 12) while expert intake is
-open, the episode is cut and the expert demonstrates it — from the episode's start state restored in
-the twin (default) or taking over from the current step — and those transitions are stored with ζ = 1.
-Every env step (agent or expert) counts as a training step and is followed by one update on a
-minibatch mixed by λ_t (Eq. 9, 11).
+open, the episode is cut, its start state restored in the twin and the expert demonstrates it; the
+demonstration's steps are stored with ζ = 1 phase by phase as it completes them. Every env step (agent or
+expert) counts as a training step and is followed by the learner's update (DDPG: one, on a minibatch
+mixed by λ_t, Eq. 9, 11).
 
 Files in the run directory: `metrics.csv` (one row per agent or expert episode), `eval.csv` (one row per
 evaluation), `annotations.jsonl`, `checkpoint.pt`; with a `TensorBoardLog` attached (`mrguide train
@@ -30,7 +31,8 @@ from mrguide import __version__
 from mrguide.config import ConfigError, check_number, load_section, to_dict
 from mrguide.policies.annotations import AnnotationCache
 from mrguide.policies.checkpoint import CheckpointError, read_checkpoint, with_defaults, write_checkpoint
-from mrguide.policies.ddpg import DDPG, DDPGConfig, obs_scaling
+from mrguide.policies.ddpg import DDPG, DDPGConfig
+from mrguide.policies.networks import obs_scaling
 from mrguide.policies.experts import ExpertSource
 from mrguide.policies.guidance import (GuidanceConfig, NominalReference, ReferencePose, RunningMedianReference,
                                        ThresholdTrigger, expert_ratio)
@@ -156,8 +158,7 @@ class Trainer:
         )
         self.cache = AnnotationCache(guidance.cache_tolerance, self.out / "annotations.jsonl")
         self.expert = GuidedExpert(self.source, reference, self.cache, guidance.delta, self.env.task_cfg, self.env.workspace.to_normalized,
-                                   guidance.reask_after, guidance.action_noise, guidance.action_noise_on, cfg.seed,
-                                   guidance.action_noise_clip, guidance.marks)
+                                   guidance.reask_after, guidance.action_noise, cfg.seed, guidance.marks)
         self.trigger = ThresholdTrigger(guidance.r_threshold)
         self.step = 0
         self.episode = 0
@@ -216,7 +217,7 @@ class Trainer:
 
     def _env_step(self, action: np.ndarray, zeta: int | None, obs: np.ndarray, stored: np.ndarray | None = None):
         """Execute `action`; store the transition with `stored` as its action (default: the executed one), tagged
-        `zeta` — or, with zeta None, hold it in the demonstration's current segment (see `_expert_episode`)."""
+        `zeta` — or, with zeta None, hold it in the demonstration's current phase (see `_expert_episode`)."""
         next_obs, r, term, trunc, info = self.env.step(action)
         transition = (obs, action if stored is None else stored, r, next_obs, term)
         if zeta is None:
@@ -245,7 +246,7 @@ class Trainer:
         seed = int(self.rng.integers(2**31))
         obs, _ = self.env.reset(seed=seed)
         guided = self._intake_open()
-        start = self.env.snapshot() if guided and self.guidance.mode == "replay" else None
+        start = self.env.snapshot() if guided else None
         self.trigger.reset()
         ret, length, info, triggered = 0.0, 0, {"outcome": None, "is_success": False}, False
         try:
@@ -274,13 +275,12 @@ class Trainer:
     def _expert_episode(self, obs: np.ndarray, end: int) -> None:
         """The expert demonstrates from `obs` (ζ = 1); a waypoint nobody annotates ends the demonstration there.
 
-        With `guidance.completed_phases_only`, a demonstration's steps are held per phase and stored as expert
-        data (ζ = 1) once the phase is completed; the steps of a phase it did not complete, and those that followed
-        a mark that was then marked again, go to the agent pool (ζ = 0): the critic learns from them, nothing
-        clones them (ours: a mark the arm cannot complete the phase with is no demonstration of it)."""
+        A demonstration's steps are held per phase and stored as expert data (ζ = 1) once the phase is completed;
+        the steps of a phase it did not complete, and those that followed a mark that was then marked again, go to
+        the agent pool (ζ = 0): the critic learns from them, nothing clones them (ours: a mark the arm cannot
+        complete the phase with is no demonstration of it)."""
         ret, length, info = 0.0, 0, {"outcome": None, "is_success": False}
         self.expert.begin_demonstration()
-        hold = self.guidance.completed_phases_only
         remarks = self.expert.remarks
         while self.step < end and not self.stop_requested.is_set():
             step = self.expert.action(obs)
@@ -292,8 +292,8 @@ class Trainer:
                 self._flush_segment(0)
                 remarks = self.expert.remarks
             phase = phase_from_progress(obs[4])
-            obs, r, term, trunc, info = self._env_step(step.executed, None if hold else 1, obs, step.stored)
-            if hold and (info["is_success"] or phase_from_progress(obs[4]) > phase):
+            obs, r, term, trunc, info = self._env_step(step.executed, None, obs, step.stored)
+            if info["is_success"] or phase_from_progress(obs[4]) > phase:
                 self._flush_segment(1)
             ret += r
             length += 1

@@ -21,7 +21,7 @@ from mrguide.twin.env import EnvConfig
 
 REPO = Path(__file__).resolve().parents[2]
 HORIZON = 4
-BIASES = np.array([0.5, -0.4, 0.2, -1.0])  # a constant action (tanh of these), vacuum off
+BIASES = np.array([0.5, -0.4, 0.2, -1.0])  # a constant offset from the anchor (0.5 m · tanh of these), vacuum off
 
 
 def _arm(name: str):
@@ -30,10 +30,10 @@ def _arm(name: str):
 
 @pytest.fixture
 def exported(tmp_path, policy_file):
-    """exported(arm name or None for no arm, **metadata changes) -> policy file (one layer, constant action)."""
+    """exported(arm name or None for no arm, **metadata changes) -> policy file (one layer, constant offset)."""
     def write(name: str | None, **changes) -> Path:
         robot = {} if name is None else {"robot": {"name": name, "fingerprint": _arm(name).fingerprint}}
-        return policy_file(tmp_path / f"{name}.npz", task=to_dict(TaskConfig(horizon=HORIZON)), arrays={"b0": BIASES},
+        return policy_file(tmp_path / f"{name}.npz", task=to_dict(TaskConfig(horizon=HORIZON)), arrays={"b0": BIASES, "b0_carry": BIASES},
                            **robot, **changes)
     return write
 
@@ -101,7 +101,9 @@ def test_ur10_deploy_dry_run_over_the_simulated_bus(tmp_path, exported, capsys):
     ur10, ur5 = _arm("ur10"), _arm("ur5")
     steps = [r for r in read_log(log) if r["kind"] == "decision" and "setpoints" in r]
     assert len(steps) == HORIZON
-    assert all(np.allclose(r["target"], ur10.workspace.to_cartesian(np.tanh(BIASES[:3]))) for r in steps)
+    # the part's centre plus the offset, in the UR10's box (the part does not move: the vacuum stays off)
+    expected = ur10.workspace.clamp(np.array(steps[0]["obs"][5:8]) + 0.5 * np.tanh(BIASES[:3]))[0]
+    assert all(np.allclose(r["target"], expected, atol=2e-4) for r in steps)  # the log keeps 0.1 mm
     first = np.array(steps[0]["setpoints"][0])  # streamed from the UR10's home, not the UR5's
     assert np.max(np.abs(first - ur10.q_home)) < 0.05 < np.max(np.abs(first - ur5.q_home))
 

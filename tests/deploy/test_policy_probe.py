@@ -14,7 +14,7 @@ import pytest
 
 from mrguide.cli import main
 from mrguide.config import to_dict
-from mrguide.deploy.policy import FORMAT, FORMAT_VERSION, ExportedPolicy, PolicyFileError
+from mrguide.deploy.policy import FORMAT, FORMAT_VERSION, HEAD_KIND, ExportedPolicy, PolicyFileError
 from mrguide.drivers.cobot import Cobot
 from mrguide.robot import load_robot
 from mrguide.task import ACT_LAYOUT, OBS_DIM, OBS_LAYOUT, TaskConfig
@@ -27,10 +27,12 @@ def _write_policy(path: Path, layers: list[tuple[np.ndarray, np.ndarray]]) -> Pa
     meta = {"format": FORMAT, "format_version": FORMAT_VERSION, "obs_layout": list(OBS_LAYOUT),
             "act_layout": list(ACT_LAYOUT), "activations": ["relu"] * (len(layers) - 1) + ["tanh"],
             "workspace": {"low": list(load_robot().workspace.low), "high": list(load_robot().workspace.high)},
-            "task": to_dict(TaskConfig()), "decision_period": 0.1}
+            "task": to_dict(TaskConfig()), "decision_period": 0.1,
+            "head": {"kind": HEAD_KIND, "max_offset": 0.5, "carry_progress": 0.5}}
     arrays = {"metadata": np.array(json.dumps(meta))}
     for i, (W, b) in enumerate(layers):
         arrays[f"W{i}"], arrays[f"b{i}"] = W, b
+    arrays["W0_carry"], arrays["b0_carry"] = layers[0]  # the same first layer in transport and release
     np.savez(path, **arrays)
     return path
 

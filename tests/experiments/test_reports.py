@@ -52,11 +52,9 @@ def test_noise_summary_with_wilson_intervals(tmp_path):
     cfg = nr.NoiseConfig(seeds=2, steps=5000, sigmas=(0.0, 0.05))
     names = [r.name for r in nr.runs(cfg, None)]
     assert names == ["sigma_0.000/seed0", "sigma_0.050/seed0", "sigma_0.000/seed1", "sigma_0.050/seed1"]
-    assert nr.runs(cfg, None)[1].overrides == {"guidance.action_noise": 0.05, "guidance.action_noise_on": "stored"}
-    executed = dataclasses.replace(cfg, reading="executed")
-    assert nr.runs(executed, None)[1].overrides == {"guidance.action_noise": 0.05, "guidance.action_noise_on": "executed"}
-    marks = dataclasses.replace(cfg, reading="marks")
-    assert nr.runs(marks, None)[3].overrides == {"guidance.noise.sigma": 0.05}
+    assert cfg.reading == "marks" and nr.runs(cfg, None)[3].overrides == {"guidance.noise.sigma": 0.05}
+    stored = dataclasses.replace(cfg, reading="stored")
+    assert nr.runs(stored, None)[1].overrides == {"guidance.action_noise": 0.05}
     for name, rates in zip(names, ([0.5, 0.9, 1.0, 1.0, 1.0], [0.0, 0.5, 0.9, 0.9, 0.9], [0.6, 0.9, 0.9, 0.8, 0.9], [0.0] * 5)):
         write_run(tmp_path / name, rates, list(range(10)))
     files = nr.noise_report(cfg, nr.records(cfg, None, tmp_path, 10))

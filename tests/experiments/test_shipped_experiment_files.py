@@ -25,8 +25,8 @@ def test_shipped_experiment_file_sets_up_every_run(path):
     assert cfg.seeds >= 1
 
 
-def test_a_file_with_an_unknown_actor_head_is_refused_before_anything_runs(tmp_path):
+def test_a_file_with_a_bad_override_is_refused_before_anything_runs(tmp_path):
     bad = tmp_path / "gen.toml"
-    bad.write_text((ROOT / "configs/experiments/generalization_phase_anchor.toml").read_text().replace('"phase_anchor"', '"phase_anchr"'))
-    with pytest.raises(ConfigError, match="phase_anchr"):
+    bad.write_text((ROOT / "configs/experiments/generalization.toml").read_text() + '\n[experiment.overrides]\n"guidance.marks" = "pick_plase"\n')
+    with pytest.raises(ConfigError, match="pick_plase"):
         _setup(argparse.Namespace(name="generalization", config=str(bad), seeds=None, steps=None, out=None))

@@ -18,25 +18,24 @@ def test_train_smoke_and_resume(tmp_path, capsys):
 
 def test_bad_config_is_one_clear_error(tmp_path, capsys):
     cfg = tmp_path / "bad.toml"
-    cfg.write_text("[guidance]\nmode = 'sideways'\n")
+    cfg.write_text("[guidance]\nmarks = 'sideways'\n")
     assert main(["train", "--config", str(cfg), "--out", str(tmp_path / "r"), "--quiet"]) == 2
-    assert "guidance.mode" in capsys.readouterr().err
+    assert "guidance.marks" in capsys.readouterr().err
 
 
-def test_act_with_target_exports_the_target_actor(tmp_path):
-    """`ddpg.act_with_target = true`: the policy file holds the target actor's weights, not the online actor's."""
+def test_train_exports_the_target_actor(tmp_path):
+    """The policy file holds the target actor's weights, not the online actor's."""
     import numpy as np
     import torch
 
     from mrguide.policies.checkpoint import read_checkpoint
-    from mrguide.policies.ddpg import DDPG, DDPGConfig, obs_scaling
+    from mrguide.policies.ddpg import DDPG, DDPGConfig
+    from mrguide.policies.networks import obs_scaling
     from mrguide.robot import load_robot
 
-    cfg = tmp_path / "target.toml"
-    cfg.write_text("[ddpg]\nact_with_target = true\n")
     out = tmp_path / "run"
-    assert main(["train", "--config", str(cfg), "--steps", "300", "--out", str(out), "--quiet"]) == 0
-    agent = DDPG(*obs_scaling(load_robot().workspace), 4, DDPGConfig(act_with_target=True))
+    assert main(["train", "--steps", "300", "--out", str(out), "--quiet"]) == 0
+    agent = DDPG(*obs_scaling(load_robot().workspace), 4, DDPGConfig())
     agent.load_state_dict(read_checkpoint(out / "checkpoint.pt")["agent"])
     obs = np.random.default_rng(0).uniform(-0.2, 0.6, (50, 11)).astype(np.float32)
     with torch.no_grad():

@@ -1,4 +1,4 @@
-"""DDPG update mechanics: delayed actor steps, the critic pair, config validation."""
+"""DDPG update mechanics: every update steps critic, actor and targets; the critic pair; the BC term; config validation."""
 
 import copy
 
@@ -31,24 +31,36 @@ def changed(before, net):
     return any(not torch.equal(a, b) for a, b in zip(before, net.parameters()))
 
 
-def test_actor_and_targets_step_every_policy_delay_updates():
-    agent = DDPG(np.zeros(11), np.ones(11), 4, DDPGConfig(hidden=(16, 16), policy_delay=3))
-    for k, batch in enumerate(batches(6), start=1):
-        actor, target, critic = params(agent.actor), params(agent.critic_target), params(agent.critic)
+def test_every_update_steps_the_critic_the_actor_and_both_targets():
+    agent = DDPG(np.zeros(11), np.ones(11), 4, DDPGConfig(hidden=(16, 16)))
+    for batch in batches(3):
+        before = [params(n) for n in (agent.actor, agent.critic, agent.actor_target, agent.critic_target)]
         losses = agent.update(batch)
-        assert changed(critic, agent.critic)
-        assert changed(actor, agent.actor) == (k % 3 == 0) == ("actor_loss" in losses)
-        assert changed(target, agent.critic_target) == (k % 3 == 0)
-    assert agent.state_dict()["updates"] == 6
+        assert all(changed(b, n) for b, n in zip(before, (agent.actor, agent.critic, agent.actor_target, agent.critic_target)))
+        assert set(losses) == set(DDPG.CRITIC_STATS + DDPG.ACTOR_STATS)
+    assert agent.state_dict()["updates"] == 3
 
 
-def test_clipped_double_q_keeps_two_critics_and_plain_ddpg_one():
-    two = DDPG(np.zeros(11), np.ones(11), 4, DDPGConfig(hidden=(16, 16)))
-    one = DDPG(np.zeros(11), np.ones(11), 4, DDPGConfig(hidden=(16, 16), clipped_double_q=False))
-    obs, act = torch.zeros(5, 11), torch.zeros(5, 4)
-    assert two.critic(obs, act).shape == (2, 5) and one.critic(obs, act).shape == (1, 5)
-    q = two.critic(obs, act)
-    assert not torch.equal(q[0], q[1])  # independently initialized members
+def test_two_independently_initialized_critics():
+    agent = DDPG(np.zeros(11), np.ones(11), 4, DDPGConfig(hidden=(16, 16)))
+    q = agent.critic(torch.zeros(5, 11), torch.zeros(5, 4))
+    assert q.shape == (2, 5) and not torch.equal(q[0], q[1])
+
+
+def test_the_critics_normalize_every_hidden_layer():
+    agent = DDPG(np.zeros(11), np.ones(11), 4, DDPGConfig(hidden=(16, 16)))
+    assert [tuple(g.shape) for g in agent.critic.norm_gains] == [(2, 1, 16), (2, 1, 16)]
+    obs, act = torch.randn(7, 11), torch.randn(7, 4)
+    with torch.no_grad():  # a first layer 1000 times larger changes nothing after its norm
+        q = agent.critic(obs, act)
+        agent.critic.weights[0].mul_(1000.0)
+        agent.critic.biases[0].mul_(1000.0)
+        assert torch.allclose(agent.critic(obs, act), q, atol=1e-4)
+        agent.critic.weights[1].mul_(1000.0)  # the second layer's norm too
+        agent.critic.biases[1].mul_(1000.0)
+        assert torch.allclose(agent.critic(obs, act), q, atol=1e-4)
+        agent.critic.weights[2].mul_(2.0)  # but not the output layer
+        assert not torch.allclose(agent.critic(obs, act), q, atol=1e-4)
 
 
 def test_update_state_round_trip_continues_identically():
@@ -62,13 +74,13 @@ def test_update_state_round_trip_continues_identically():
     torch.manual_seed(5)
     for b in bs[3:]:
         a.update(b)
-    torch.manual_seed(5)  # target smoothing draws from torch's RNG
+    torch.manual_seed(5)
     for b in bs[3:]:
         c.update(b)
     assert all(torch.equal(p, q) for p, q in zip(a.actor.parameters(), c.actor.parameters()))
 
 
-@pytest.mark.parametrize("bad", [{"policy_delay": 0}, {"target_noise": -0.1}, {"target_noise_clip": -1.0}])
+@pytest.mark.parametrize("bad", [{"hidden": ()}, {"tau": 0.0}, {"bc_weight": -1.0}])
 def test_bad_config_refused(bad):
     with pytest.raises(ConfigError):
         DDPGConfig(**bad)
@@ -83,9 +95,8 @@ def one_batch(expert_share, size=64, seed=0):
     return rb.sample(size, expert_share, rng)
 
 
-@pytest.mark.parametrize("clipped_double_q", [True, False])
-def test_update_statistics_agree_with_a_direct_evaluation_on_the_same_batch(clipped_double_q):
-    cfg = DDPGConfig(hidden=(16, 16), clipped_double_q=clipped_double_q)
+def test_update_statistics_agree_with_a_direct_evaluation_on_the_same_batch():
+    cfg = DDPGConfig(hidden=(16, 16))
     agent = DDPG(np.zeros(11), np.ones(11), 4, cfg, seed=3)
     for b in batches(5):  # away from the initialization
         agent.update(b)
@@ -141,15 +152,8 @@ def test_bc_term_is_zero_without_expert_samples_and_positive_with_them():
     assert off.update(one_batch(0.5, seed=1))["bc_loss"] == 0.0
 
 
-def test_actor_statistics_only_on_actor_steps():
-    agent = DDPG(np.zeros(11), np.ones(11), 4, DDPGConfig(hidden=(16, 16), policy_delay=2))
-    keys = [set(agent.update(b)) for b in batches(4)]
-    assert keys[0] == keys[2] == {"critic_loss", "q_mean", "q_max"}
-    assert keys[1] == keys[3] == {"critic_loss", "q_mean", "q_max", "actor_loss", "actor_q", "bc_loss"}
-
-
 def test_td_target_takes_the_minimum_of_the_two_target_critics_and_stops_at_terminals():
-    agent = make(clipped_double_q=True)
+    agent = make()
     rng = np.random.default_rng(0)
     next_obs = torch.as_tensor(rng.uniform(-1, 1, (64, 11)), dtype=torch.float32)
     rew = torch.as_tensor(rng.normal(size=64), dtype=torch.float32)
@@ -161,41 +165,17 @@ def test_td_target_takes_the_minimum_of_the_two_target_critics_and_stops_at_term
     expected = rew + agent.cfg.gamma * (1 - done) * torch.minimum(q_pair[0], q_pair[1])
     assert torch.allclose(target, expected)
     assert torch.equal(target[done == 1], rew[done == 1])  # terminated: no bootstrap
-    plain = make(clipped_double_q=False)
-    with torch.no_grad():
-        q1 = plain.critic_target(next_obs, plain.actor_target(next_obs))[0]
-    assert torch.allclose(plain.td_target(rew, next_obs, torch.zeros(64)), rew + plain.cfg.gamma * q1)
 
 
-def test_q_filter_clones_only_the_expert_actions_the_critic_rates_above_the_actor():
-    agent = DDPG(np.zeros(11), np.ones(11), 4, DDPGConfig(hidden=(16, 16), q_filter=True), seed=3)
-    for b in batches(5):
-        agent.update(b)
-    batch = one_batch(0.5)
-    before = copy.deepcopy(agent)
-    stats = agent.update(batch)
-    expert = torch.as_tensor(batch.expert)
-    obs, act = torch.as_tensor(batch.obs)[expert], torch.as_tensor(batch.act)[expert]
-    with torch.no_grad():
-        pi = before.actor(obs)  # the actor before its step, against the critic after its step
-        keep = agent.critic(obs, act)[0] > agent.critic(obs, pi)[0]
-        sq_err = bc_error(pi, act)
-    assert 0 < keep.sum() < len(keep)  # the test batch exercises both sides of the filter
-    assert stats["bc_loss"] == pytest.approx((sq_err * keep).sum().item() / len(keep), rel=1e-5)
-    assert stats["bc_loss"] < sq_err.mean().item()  # what the unfiltered term would have been
-
-
-
-
-def test_a_target_clamped_below_the_box_still_learns_under_anchor_offset():
-    """The part's centre lies below the box floor, so anchor_offset starts with its targets clamped there; its
+def test_a_target_clamped_below_the_box_still_learns():
+    """The part's centre lies below the box floor, so the actor starts with its targets clamped there; its
     straight-through clamp passes the gradient, and cloning lifts the target to the label (with a plain clamp
     the height got no gradient and stayed on the floor: the approach height was never learned)."""
-    from mrguide.policies.ddpg import obs_scaling
+    from mrguide.policies.networks import obs_scaling
     from mrguide.robot import load_robot
 
     ws = load_robot().workspace
-    agent = DDPG(*obs_scaling(ws), 4, DDPGConfig(hidden=(16, 16), actor_head="anchor_offset"), seed=0)
+    agent = DDPG(*obs_scaling(ws), 4, DDPGConfig(hidden=(16, 16)), seed=0)
     obs = np.array([0.5, 0.1, 0.2, -1.0, 0.0, 0.47, -0.05, -0.3, 0.57, 0.16, 0.02], dtype=np.float32)  # part 30 cm below
     label = np.concatenate([ws.to_normalized([0.47, -0.05, 0.13]), [-1.0]]).astype(np.float32)
     o, a = torch.as_tensor(obs[None]), torch.as_tensor(label[None])
@@ -209,9 +189,8 @@ def test_a_target_clamped_below_the_box_still_learns_under_anchor_offset():
     assert abs(ws.to_cartesian(agent.actor(o).detach().numpy()[0, :3])[2] - 0.13) < 0.005
 
 
-@pytest.mark.parametrize("act_with_target", [False, True])
-def test_act_with_target_evaluates_the_averaged_actor_and_explores_with_the_online_one(act_with_target):
-    agent = make(act_with_target=act_with_target)
+def test_the_averaged_actor_is_evaluated_and_the_online_one_explores():
+    agent = make()
     for b in batches(20):
         agent.update(b)  # the online actor moves; its target follows only by τ
     obs = np.random.default_rng(1).normal(size=(8, 11)).astype(np.float32)
@@ -219,7 +198,6 @@ def test_act_with_target_evaluates_the_averaged_actor_and_explores_with_the_onli
         online, target = (net(torch.as_tensor(obs)).numpy() for net in (agent.actor, agent.actor_target))
     assert np.abs(online - target).max() > 1e-3
     evaluated = np.array([agent.act(o) for o in obs])
-    assert np.allclose(evaluated, target if act_with_target else online, atol=1e-6)
-    assert agent.policy_actor is (agent.actor_target if act_with_target else agent.actor)
+    assert np.allclose(evaluated, target, atol=1e-6) and agent.policy_actor is agent.actor_target
     explored = np.array([agent.act(o, np.random.default_rng(0), sigma=0.0) for o in obs])
     assert np.allclose(explored, online, atol=1e-6)

@@ -10,7 +10,7 @@ import torch
 from mrguide.deploy.policy import ExportedPolicy, PolicyFileError
 from mrguide.policies.ddpg import DDPG, DDPGConfig
 from mrguide.policies.export import export_actor
-from mrguide.policies.ddpg import obs_scaling
+from mrguide.policies.networks import obs_scaling
 from mrguide.robot import RobotConfig, Workspace, load_robot
 from mrguide.task import TaskConfig
 
@@ -91,70 +91,19 @@ def _random_obs(ws: Workspace, n: int, seed: int = 0) -> np.ndarray:
                            rng.uniform(ws.lo, ws.hi, (n, 3)), rng.uniform(ws.lo, ws.hi, (n, 3))], axis=1).astype(np.float32)
 
 
-def test_tcp_offset_head_exports_and_runs_the_same_in_numpy(tmp_path):
+def _policy(tmp_path):
     spec = load_robot()
-    ws = spec.workspace
-    agent = DDPG(*obs_scaling(ws), 4, DDPGConfig(actor_head="tcp_offset", max_offset=0.3), seed=3)
-    with torch.no_grad():  # weights large enough that some targets leave the box and are clipped
-        for p in agent.actor.net.parameters():
-            p.mul_(3.0)
-    path = export_actor(agent.actor, tmp_path / "policy.npz", spec, TaskConfig(), 0.1)
-    pol = ExportedPolicy.load(path, spec, TaskConfig())
-    assert pol.metadata["head"] == {"kind": "tcp_offset", "max_offset": 0.3}
-    obs = _random_obs(ws, 500)
-    with torch.no_grad():
-        ref = agent.actor(torch.as_tensor(obs)).numpy()
-    got = pol.batch(obs)
-    assert np.max(np.abs(got - ref)) < 1e-5 and np.any(np.abs(got[:, :3]) == 1.0) and np.any(np.abs(got[:, :3]) < 0.9)
-
-
-def test_tcp_offset_policy_moves_with_the_scene_in_x_and_y():
-    """Shift TCP, object and goal together: the target shifts with them; the absolute head does not."""
-    ws = Workspace(low=(-1.0, -1.0, 0.045), high=(2.0, 2.0, 0.35))  # large enough that nothing is clipped
-    obs = _random_obs(load_robot().workspace, 200)
-    shifted = obs.copy()
-    for k in (0, 5, 8):
-        shifted[:, k] += 0.4
-        shifted[:, k + 1] -= 0.3
-    moved = {}
-    for head in ("tcp_offset", "absolute"):
-        agent = DDPG(*obs_scaling(ws), 4, DDPGConfig(actor_head=head, max_offset=0.3), seed=1)
-        with torch.no_grad():
-            a, b = (ws.to_cartesian(agent.actor(torch.as_tensor(o)).numpy()[:, :3]) for o in (obs, shifted))
-        moved[head] = b - a
-    assert np.allclose(moved["tcp_offset"], [0.4, -0.3, 0.0], atol=1e-5)
-    assert not np.allclose(moved["absolute"], [0.4, -0.3, 0.0], atol=1e-2)
-
-
-def test_unknown_head_refused(exported, tmp_path):
-    _, path, _ = exported
-
-    def head(arrays):
-        meta = json.loads(str(arrays["metadata"]))
-        meta["head"] = {"kind": "tcp_offset", "max_offset": "far"}
-        arrays["metadata"] = np.array(json.dumps(meta))
-
-    with pytest.raises(PolicyFileError, match="head"):
-        ExportedPolicy.load(_rewrite(path, tmp_path / "bad.npz", head), load_robot(), TaskConfig())
-
-
-ANCHOR_HEADS = ("phase_anchor", "anchor_offset")
-
-
-def _anchor_policy(tmp_path, head):
-    spec = load_robot()
-    agent = DDPG(*obs_scaling(spec.workspace), 4, DDPGConfig(actor_head=head, max_offset=0.3), seed=4)
+    agent = DDPG(*obs_scaling(spec.workspace), 4, DDPGConfig(), seed=4)
     with torch.no_grad():  # weights large enough that some targets leave the box and are clipped
         for p in agent.actor.net.parameters():
             p.mul_(3.0)
     return agent, export_actor(agent.actor, tmp_path / "policy.npz", spec, TaskConfig(), 0.1)
 
 
-@pytest.mark.parametrize("head", ANCHOR_HEADS)
-def test_anchor_heads_export_and_run_the_same_in_numpy(tmp_path, head):
-    agent, path = _anchor_policy(tmp_path, head)
+def test_the_anchored_head_exports_and_runs_the_same_in_numpy_in_every_phase(tmp_path):
+    agent, path = _policy(tmp_path)
     pol = ExportedPolicy.load(path, load_robot(), TaskConfig())
-    assert pol.metadata["head"] == {"kind": head, "max_offset": 0.3, "carry_progress": 0.5}
+    assert pol.metadata["head"] == {"kind": "anchor_offset", "max_offset": 0.5, "carry_progress": 0.5}
     obs = _random_obs(load_robot().workspace, 500)
     obs[:, 4] = np.random.default_rng(1).choice([0.0, 0.2, 0.4, 0.6, 0.8, 1.0], 500)  # every phase, both layers
     with torch.no_grad():
@@ -163,12 +112,11 @@ def test_anchor_heads_export_and_run_the_same_in_numpy(tmp_path, head):
     assert np.max(np.abs(got - ref)) < 1e-5 and np.any(np.abs(got[:, :3]) == 1.0) and np.any(np.abs(got[:, :3]) < 0.9)
 
 
-@pytest.mark.parametrize("head", ANCHOR_HEADS)
-def test_anchor_policies_follow_the_object_before_transport_and_the_goal_from_it(head):
+def test_the_policy_follows_the_object_before_transport_and_the_goal_from_it():
     """Before transport the target moves with TCP + object and ignores the goal; from transport on it moves
     with TCP + goal and ignores the object."""
     ws = Workspace(low=(-1.0, -1.0, 0.045), high=(2.0, 2.0, 0.35))  # large enough that nothing is clipped
-    agent = DDPG(*obs_scaling(ws), 4, DDPGConfig(actor_head=head, max_offset=0.3), seed=1)
+    agent = DDPG(*obs_scaling(ws), 4, DDPGConfig(), seed=1)
     obs = _random_obs(load_robot().workspace, 200)
 
     def target(o):
@@ -186,12 +134,11 @@ def test_anchor_policies_follow_the_object_before_transport_and_the_goal_from_it
         assert np.allclose(target(unrelated), target(obs), atol=1e-6)
 
 
-@pytest.mark.parametrize("head, base", [("phase_anchor", (0, 0)), ("anchor_offset", (5, 8))])
-def test_anchor_offset_adds_its_offset_to_the_anchor_and_phase_anchor_to_the_tcp(tmp_path, head, base):
-    """With a constant MLP output the target is base + max_offset · tanh(bias): the TCP for phase_anchor, the
-    object (before transport) or the goal (from transport on) for anchor_offset; torch and the numpy runner alike."""
+def test_the_offset_is_added_to_the_object_before_transport_and_to_the_goal_from_it(tmp_path):
+    """With a constant MLP output the target is anchor + MAX_OFFSET · tanh(bias), the object (before transport) or
+    the goal (from transport on); torch and the numpy runner alike."""
     ws = Workspace(low=(-1.0, -1.0, -1.0), high=(2.0, 2.0, 2.0))  # large enough that nothing is clipped
-    agent = DDPG(*obs_scaling(ws), 4, DDPGConfig(actor_head=head, max_offset=0.3), seed=2)
+    agent = DDPG(*obs_scaling(ws), 4, DDPGConfig(), seed=2)
     last = agent.actor.net[-2]
     with torch.no_grad():
         last.weight.zero_()
@@ -201,19 +148,45 @@ def test_anchor_offset_adds_its_offset_to_the_anchor_and_phase_anchor_to_the_tcp
     obs = _random_obs(load_robot().workspace, 300)
     obs[:, 4] = np.random.default_rng(3).choice([0.0, 0.2, 0.4, 0.6, 0.8, 1.0], 300)
     before = obs[:, 4] <= 0.5
-    expected = np.where(before[:, None], obs[:, base[0]: base[0] + 3], obs[:, base[1]: base[1] + 3]) + 0.3 * np.tanh([0.1, -0.2, 0.3])
+    expected = np.where(before[:, None], obs[:, 5:8], obs[:, 8:11]) + 0.5 * np.tanh([0.1, -0.2, 0.3])
     with torch.no_grad():
         from_torch = ws.to_cartesian(agent.actor(torch.as_tensor(obs)).numpy()[:, :3])
     assert np.allclose(from_torch, expected, atol=1e-5)
     assert np.allclose(ws.to_cartesian(pol.batch(obs)[:, :3]), expected, atol=1e-5)
 
 
-@pytest.mark.parametrize("head", ANCHOR_HEADS)
-def test_anchor_file_without_its_carry_layer_refused(tmp_path, head):
-    _, path = _anchor_policy(tmp_path, head)
+def test_a_file_without_its_carry_layer_refused(tmp_path):
+    _, path = _policy(tmp_path)
     bad = _rewrite(path, tmp_path / "bad.npz", lambda a: a.pop("W0_carry"))
     with pytest.raises(PolicyFileError, match="W0_carry"):
         ExportedPolicy.load(bad)
     bad = _rewrite(path, tmp_path / "short.npz", lambda a: a.update(b0_carry=np.zeros(3)))
     with pytest.raises(PolicyFileError, match="carry layer"):
         ExportedPolicy.load(bad)
+
+
+def _with_head(head):
+    def mutate(arrays):
+        meta = json.loads(str(arrays["metadata"]))
+        if head is None:
+            meta.pop("head")
+        else:
+            meta["head"] = head
+        arrays["metadata"] = np.array(json.dumps(meta))
+    return mutate
+
+
+@pytest.mark.parametrize("head", [{"kind": "anchor_offset", "max_offset": "far", "carry_progress": 0.5},
+                                  {"kind": "anchor_offset", "max_offset": 0.5, "carry_progress": 1.5}, {"kind": "sideways"}, []])
+def test_a_head_not_understood_is_refused(exported, tmp_path, head):
+    _, path, _ = exported
+    with pytest.raises(PolicyFileError, match="head .* not understood"):
+        ExportedPolicy.load(_rewrite(path, tmp_path / "bad.npz", _with_head(head)), load_robot(), TaskConfig())
+
+
+@pytest.mark.parametrize("head", [{"kind": "absolute"}, {"kind": "tcp_offset", "max_offset": 0.5}, None])
+def test_a_file_of_a_retired_head_is_refused_with_the_reason(exported, tmp_path, head):
+    """Files of earlier versions (absolute targets, also files without the field; tcp_offset; phase_anchor)."""
+    _, path, _ = exported
+    with pytest.raises(PolicyFileError, match=r"no longer runs \(retired in mrguide 0.2.0\); train and export the policy again"):
+        ExportedPolicy.load(_rewrite(path, tmp_path / "old.npz", _with_head(head)), load_robot(), TaskConfig())

@@ -195,7 +195,8 @@ def _guided(source, tmp_path, reask_after):
 
     task = TaskConfig()
     cache = AnnotationCache(0.005, tmp_path / "ann.jsonl")
-    return GuidedExpert(source, NominalReference(task), cache, 0.05, task, load_robot().workspace.to_normalized, reask_after), cache
+    return GuidedExpert(source, NominalReference(task), cache, 0.05, task, load_robot().workspace.to_normalized, reask_after,
+                        marks="phases"), cache
 
 
 def test_a_waypoint_not_reached_is_asked_again_and_supersedes_the_first(tmp_path):
@@ -245,22 +246,20 @@ def test_action_noise_perturbs_every_action_afresh_after_the_projection(tmp_path
         def annotate(self, obs, previous=None):
             return exact
 
-    def steps(sigma, seed=0, on="executed"):
+    def steps(sigma, seed=0):
         expert = GuidedExpert(Exact(), NominalReference(task), AnnotationCache(0.005), 0.05, task, ws.to_normalized, 0, sigma,
-                              on, seed)
+                              seed, marks="phases")
         out = [expert.action(_obs(0)) for _ in range(400)]
         return np.array([s.executed[:3] for s in out]), np.array([s.stored[:3] for s in out])
 
-    clean, _ = steps(0.0)
-    assert np.allclose(clean, clean[0])  # one mark, one action
-    noisy, stored = steps(0.03)
-    assert np.array_equal(noisy, stored)  # "executed": the perturbed action drives the arm and is stored
-    err = ws.to_cartesian(noisy) - ws.to_cartesian(clean)
+    clean, clean_labels = steps(0.0)
+    assert np.allclose(clean, clean[0]) and np.array_equal(clean, clean_labels)  # one mark, one action
+    executed, labels = steps(0.03)
+    assert np.allclose(executed, clean)  # the arm follows the clean action, the stored label is perturbed
+    err = ws.to_cartesian(labels) - ws.to_cartesian(clean)
     assert err.std(axis=0) == pytest.approx([0.03] * 3, rel=0.15)  # fresh per step, not clipped to Δ = 5 cm
-    assert np.abs(err).max() > 0.05 and len({tuple(r) for r in noisy}) == 400
-    assert np.array_equal(steps(0.03)[0], noisy) and not np.array_equal(steps(0.03, seed=1)[0], noisy)
-    executed, labels = steps(0.03, on="stored")  # "stored": clean execution, noisy labels (same draws)
-    assert np.allclose(executed, clean) and np.array_equal(labels, noisy)
+    assert np.abs(err).max() > 0.05 and len({tuple(r) for r in labels}) == 400
+    assert np.array_equal(steps(0.03)[1], labels) and not np.array_equal(steps(0.03, seed=1)[1], labels)
 
 
 def test_action_noise_never_changes_the_vacuum_command(tmp_path):
@@ -280,17 +279,17 @@ def test_action_noise_never_changes_the_vacuum_command(tmp_path):
         def annotate(self, obs, previous=None):
             return Annotation(place, -1.0)
 
-    for on in ("executed", "stored"):
-        expert = GuidedExpert(AtPlace(), NominalReference(task), AnnotationCache(0.005), 0.05, task, ws.to_normalized, 0, 0.01, on, 0)
-        steps = [expert.action(obs) for _ in range(200)]
-        assert all(s.executed[3] == -1.0 and s.stored[3] == -1.0 for s in steps)
-        assert len({tuple(s.stored[:3]) for s in steps}) == 200  # the motion is still perturbed afresh
+    expert = GuidedExpert(AtPlace(), NominalReference(task), AnnotationCache(0.005), 0.05, task, ws.to_normalized, 0, 0.01, 0,
+                          marks="phases")
+    steps = [expert.action(obs) for _ in range(200)]
+    assert all(s.executed[3] == -1.0 and s.stored[3] == -1.0 for s in steps)
+    assert len({tuple(s.stored[:3]) for s in steps}) == 200  # the motion is still perturbed afresh
 
 
-def test_unclipped_action_noise_keeps_the_grasp_height_label_unbiased(tmp_path):
-    """A grasp mark 5 mm above the box's floor: clipping the perturbed label to the box cuts off the noise's
-    downward half and lifts the labels' mean by about σ·φ(0) (σ = 5 cm: ~18 mm); unclipped labels average to
-    the mark (and may leave the box)."""
+def test_action_noise_keeps_the_grasp_height_label_unbiased(tmp_path):
+    """A grasp mark 5 mm above the box's floor: the perturbed labels are not clipped to the box, so they average to
+    the mark and may leave the box (clipping would cut off the noise's downward half and lift the labels' mean by
+    about σ·φ(0), ~18 mm at σ = 5 cm)."""
     from mrguide.policies.guidance import NominalReference
     from mrguide.policies.guided_expert import GuidedExpert
 
@@ -301,13 +300,9 @@ def test_unclipped_action_noise_keeps_the_grasp_height_label_unbiased(tmp_path):
         def annotate(self, obs, previous=None):
             return Annotation(mark, 1.0)
 
-    def label_heights(clip):
-        expert = GuidedExpert(Grasp(), NominalReference(task), AnnotationCache(0.005), 0.05, task, ws.to_normalized, 0, 0.05,
-                              "stored", 0, clip)
-        obs = _obs(1, tcp=(0.5, -0.1, 0.06), obj=(0.5, -0.1, ws.lo[2] + 0.005 - 0.5 * task.object_height))
-        return ws.to_cartesian(np.array([expert.action(obs).stored[:3] for _ in range(4000)]))[:, 2]
-
-    clipped, unclipped = label_heights(True), label_heights(False)
-    assert clipped.min() >= ws.lo[2] - 1e-9 and unclipped.min() < ws.lo[2] - 0.05
-    assert clipped.mean() - mark[2] == pytest.approx(0.018, abs=0.004)
-    assert abs(unclipped.mean() - mark[2]) < 0.003
+    expert = GuidedExpert(Grasp(), NominalReference(task), AnnotationCache(0.005), 0.05, task, ws.to_normalized, 0, 0.05, 0,
+                          marks="phases")
+    obs = _obs(1, tcp=(0.5, -0.1, 0.06), obj=(0.5, -0.1, ws.lo[2] + 0.005 - 0.5 * task.object_height))
+    heights = ws.to_cartesian(np.array([expert.action(obs).stored[:3] for _ in range(4000)]))[:, 2]
+    assert heights.min() < ws.lo[2] - 0.05
+    assert abs(heights.mean() - mark[2]) < 0.003

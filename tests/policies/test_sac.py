@@ -8,7 +8,7 @@ import pytest
 import torch
 
 from mrguide.config import ConfigError
-from mrguide.policies.ddpg import obs_scaling
+from mrguide.policies.networks import obs_scaling
 from mrguide.policies.replay import TaggedReplay
 from mrguide.policies.sac import SAC, SACConfig
 from mrguide.robot import load_robot
@@ -30,7 +30,7 @@ def _replay(n=600, expert_every=3, seed=0):
 
 
 def test_log_probability_is_the_tanh_gaussians():
-    """log π of the sampled y equals torch's own TanhTransform of the Normal (the absolute head outputs y)."""
+    """log π of the sampled y equals torch's own TanhTransform of the Normal; the action is the head's for y."""
     agent = _agent()
     obs = torch.as_tensor(_replay(8).agent.obs[:5])
     eps = torch.randn(5, 4)
@@ -40,7 +40,7 @@ def test_log_probability_is_the_tanh_gaussians():
     dist = torch.distributions.TransformedDistribution(torch.distributions.Normal(mean, log_std.exp()),
                                                        [torch.distributions.TanhTransform()])
     y = torch.tanh(mean + log_std.exp() * eps)
-    assert torch.allclose(action, y)
+    assert torch.allclose(action, agent.actor.base.output(obs, y))
     assert torch.allclose(logp, dist.log_prob(y.clamp(-1 + 1e-6, 1 - 1e-6)).sum(-1), atol=1e-3)
 
 
@@ -95,7 +95,7 @@ def test_state_round_trip_continues_identically():
     assert sa == sb
 
 
-@pytest.mark.parametrize("field, value", [("n_min", 11), ("utd", 0), ("expert_fraction", 1.5), ("actor_head", "x")])
+@pytest.mark.parametrize("field, value", [("n_min", 11), ("utd", 0), ("expert_fraction", 1.5), ("hidden", ())])
 def test_sac_config_refuses_bad_values(field, value):
     with pytest.raises(ConfigError, match=f"sac.{field}"):
         SACConfig(**{field: value})
@@ -109,7 +109,7 @@ def test_a_short_guided_sac_run_trains_resumes_and_exports(tmp_path):
     tc, dc, gc, ec = load_train_config(None)
     tc = dataclasses.replace(tc, total_steps=400, learning_starts=64, batch_size=32, eval_every=10_000, checkpoint_every=200,
                              learner="sac")
-    sc = dataclasses.replace(SMALL, actor_head="anchor_offset")
+    sc = SMALL
     tr = Trainer(tc, dc, gc, ec, tmp_path, sac_cfg=sc)
     try:
         tr.run(stop_at=200)
