@@ -17,7 +17,7 @@ from mrguide.config import ConfigError, check_number
 from mrguide.experiments import report
 from mrguide.experiments.run_records import RunRecord, read_run
 from mrguide.experiments.runs import TrainRun
-from mrguide.experiments.stats import CONVERGENCE_THRESHOLD, WINDOW_EPISODES
+from mrguide.experiments.stats import CONVERGENCE_THRESHOLD, PERSON_SECONDS_PER_MARK, WINDOW_EPISODES, person_minutes
 
 VARIANTS = ("baseline", "guided")
 COLORS = {"baseline": "tab:blue", "guided": "tab:red"}
@@ -69,6 +69,7 @@ def learning_curves_report(cfg: CurvesConfig, recs: dict[str, list[RunRecord]]) 
                       "converged_5k": sum(c <= 5000 for c in conv), "converged_20k": sum(c <= 20_000 for c in conv),
                       "median_step": int(np.median(conv)) if conv else None,
                       "median_annotations": int(np.median(ann)) if ann and v == "guided" else None,
+                      "median_person_minutes": person_minutes(float(np.median(ann))) if ann and v == "guided" else None,
                       "reached_at_end": sum(r.converged.at_end for r in rs),
                       "final_eval_success": round(float(np.mean([r.eval_rates[-1] for r in rs])), 3)})
     md = (f"Learning curves: {cfg.seeds} seeds × {cfg.steps} steps per variant. Convergence: the evaluation success over "
@@ -78,11 +79,12 @@ def learning_curves_report(cfg: CurvesConfig, recs: dict[str, list[RunRecord]]) 
                                     ("converged_5k", "converged ≤ 5k"), ("converged_20k", "converged ≤ 20k"),
                                     ("median_step", "median convergence step"),
                                     ("median_annotations", "annotations until convergence (median)"),
+                                    ("median_person_minutes", f"person-minutes until convergence (median, {PERSON_SECONDS_PER_MARK:.0f} s a mark)"),
                                     ("reached_at_end", "reached only at the end"), ("final_eval_success", "final eval success")]))
     grid = _grid(cfg.steps)
     files = {
         "summary.csv": report.csv_bytes(table, ["variant", "seeds", "converged_4k", "converged_5k", "converged_20k",
-                                                "median_step", "median_annotations"]),
+                                                "median_step", "median_annotations", "median_person_minutes"]),
         "runs.csv": report.csv_bytes(per_run_rows(recs), list(per_run_rows(recs)[0])),
         "summary.md": md.encode(),
         "fig3_learning_curves.png": _fig_returns(recs, grid, "Learning curves (Fig. 3)",

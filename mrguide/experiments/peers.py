@@ -17,9 +17,10 @@ import numpy as np
 
 from mrguide.config import ConfigError, check_number
 from mrguide.experiments import report
-from mrguide.experiments.person import CLIENTS, person_minutes
+from mrguide.experiments.person import CLIENTS
 from mrguide.experiments.run_records import RunRecord, read_run
 from mrguide.experiments.runs import TrainRun
+from mrguide.experiments.stats import person_minutes
 
 LEARNERS = ("ddpg", "sac")
 COLORS = {"ddpg": "tab:red", "sac": "tab:purple"}

@@ -18,7 +18,7 @@ from mrguide.config import ConfigError, check_number
 from mrguide.experiments import report
 from mrguide.experiments.run_records import RunRecord, read_run
 from mrguide.experiments.runs import TrainRun, configs
-from mrguide.experiments.stats import PERSON_SECONDS_PER_MARK, wilson
+from mrguide.experiments.stats import PERSON_SECONDS_PER_MARK, person_minutes, wilson
 
 #: Fresh start states of the final-policy evaluation: env seeds from here, disjoint from training's evaluations (1e6 + …).
 FRESH_SEED_BASE = 3_000_000
@@ -75,10 +75,6 @@ def evaluate(run: TrainRun, root: str, cfg: PersonConfig) -> str:
 def fresh_success(run: TrainRun, root: Path) -> float:
     rows = report.read_csv(fresh_path(run, root))
     return float(np.mean([r["outcome"] == "success" for r in rows]))
-
-
-def person_minutes(marks: int | float | None) -> float | None:
-    return None if marks is None else round(marks * PERSON_SECONDS_PER_MARK / 60.0, 1)
 
 
 def person_report(cfg: PersonConfig, root: Path, run_list: list[TrainRun], episodes_per_eval: int) -> dict[str, bytes]:

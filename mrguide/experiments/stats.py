@@ -16,6 +16,11 @@ WINDOW_EPISODES = 20
 PERSON_SECONDS_PER_MARK = 4.0
 
 
+def person_minutes(marks: float | None) -> float | None:
+    """A person's time for `marks` marks, min (one decimal), at PERSON_SECONDS_PER_MARK each."""
+    return None if marks is None else round(marks * PERSON_SECONDS_PER_MARK / 60.0, 1)
+
+
 def wilson(successes: int, n: int, z: float = 1.959964) -> tuple[float, float]:
     """95 % Wilson score interval of a binomial proportion (n = 0 gives (0, 1))."""
     if n == 0:

@@ -199,3 +199,22 @@ def test_an_experiment_run_over_the_wire_stops_with_the_reason_when_the_bot_fail
     with pytest.raises(RuntimeError, match="annotation bot stopped: the server refused"):
         train(run, str(tmp_path))
     assert not (tmp_path / "seed0" / "done").exists() and not (tmp_path / "seed0" / "policy.npz").exists()
+
+
+def test_annotate_bot_takes_its_error_model_from_a_training_config(tmp_path, capsys, monkeypatch):
+    """`--config` gives the bot the config's [guidance.noise] (`--noise` overrides its sigma); a bad one is refused."""
+    from mrguide.annotation import bot as bot_module
+    from mrguide.cli import main
+
+    seen = []
+    monkeypatch.setattr(bot_module.AnnotationBot, "run", lambda self: seen.append(self.options) or bot_module.BotReport(0, 0, []))
+    url = "http://127.0.0.1:1/?token=t"
+    person = Path(__file__).resolve().parents[2] / "configs" / "person.toml"
+    assert main(["annotate", "bot", "--url", url, "--config", str(person)]) == 0
+    assert main(["annotate", "bot", "--url", url, "--config", str(person), "--noise", "0.03"]) == 0
+    assert (seen[0].noise.bias_sigma, seen[0].noise.sigma_along, seen[0].noise.sigma) == (0.007, 0.02, 0.0)
+    assert (seen[1].noise.bias_sigma, seen[1].noise.sigma) == (0.007, 0.03)
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[guidance.noise]\nsigma_along = -1\n")
+    assert main(["annotate", "bot", "--url", url, "--config", str(bad)]) == 2
+    assert "guidance.noise.sigma_along" in capsys.readouterr().err and len(seen) == 2

@@ -25,7 +25,8 @@ intake_steps = 300
 
 
 def write_run(run: Path, eval_rates, asked_per_row, wall: float = 100.0) -> None:
-    """A finished run: eval.csv (one evaluation per 1000 steps), metrics.csv (a row per 500 steps), done."""
+    """A finished run: eval.csv (one evaluation per 1000 steps), metrics.csv (a row per 500 steps, the wall time
+    growing evenly to `wall`), done."""
     run.mkdir(parents=True)
     with (run / "eval.csv").open("w", newline="") as fh:
         w = csv.DictWriter(fh, ["step", "success_rate", "mean_return"])
@@ -35,7 +36,7 @@ def write_run(run: Path, eval_rates, asked_per_row, wall: float = 100.0) -> None
         w = csv.DictWriter(fh, METRIC_FIELDS, restval="0")
         w.writeheader()
         for i, asked in enumerate(asked_per_row):
-            w.writerow({"step": 500 * (i + 1), "asked": asked, "expert_ratio": 0.5})
+            w.writerow({"step": 500 * (i + 1), "asked": asked, "expert_ratio": 0.5, "wall_s": wall * (i + 1) / len(asked_per_row)})
     (run / "done").write_text(json.dumps({"wall_s": wall, "update_ms": 5.0, "steps": 1000 * len(eval_rates)}))
 
 

@@ -36,7 +36,7 @@ def test_tiny_learning_curves_on_local_ray_then_report_again(tiny_experiment, ca
             run = out / v / f"seed{s}"
             assert (run / "done").exists() and steps_of(run)[-1] == 300
     summary = (out / "summary.csv").read_text().splitlines()
-    assert summary[0] == "variant,seeds,converged_4k,converged_5k,converged_20k,median_step,median_annotations"
+    assert summary[0] == "variant,seeds,converged_4k,converged_5k,converged_20k,median_step,median_annotations,median_person_minutes"
     assert len(summary) == 3 and (out / "fig3_learning_curves.png").stat().st_size > 10_000
     mtime = (out / "guided" / "seed0" / "done").stat().st_mtime
     capsys.readouterr()
