@@ -19,7 +19,8 @@ import torch
 from mrguide.errors import InputError
 
 MAGIC = b"MRGUIDE-CHECKPOINT"
-FORMAT = 5  # 2: critics as one ensemble; 3: update counter; 4: evaluation counter; 5: digest header, re-marks
+FORMAT = 6  # 2: critics as one ensemble; 3: update counter; 4: evaluation counter; 5: digest header, re-marks;
+# 6: the 0.2 learner (anchored actor, LayerNorm critics, the SAC peer)
 REQUIRED = ("config", "agent", "agent_pool", "expert_pool", "rng", "torch_rng", "annotator_rng", "expert_noise_rng", "counters")
 
 

@@ -38,8 +38,7 @@ class DDPGConfig:
     lr_critic: float = 5e-4  # Table I
     gamma: float = 0.99  # Table I
     tau: float = 0.005  # soft target update rate (ours)
-    exploration_noise: float = 0.1  # std of the Gaussian action noise at the start, normalized units (ours)
-    exploration_noise_final: float = 0.1  # ... decayed linearly to this by the end of training (ours)
+    exploration_noise: float = 0.1  # std of the Gaussian action noise, normalized units (ours)
     #: Weight of the behaviour-cloning term on the expert (ζ = 1) samples of each batch, with the Q term
     #: normalized by its mean magnitude as in TD3+BC (Fujimoto & Gu 2021). Not in the paper; 0 gives plain
     #: DDPG's actor step. It acts only on expert samples, so a run without guidance is unaffected.
@@ -53,7 +52,6 @@ class DDPGConfig:
         check_number("ddpg.gamma", self.gamma, 0.0, 1.0)
         check_number("ddpg.tau", self.tau, 1e-6, 1.0)
         check_number("ddpg.exploration_noise", self.exploration_noise, 0.0, 2.0)
-        check_number("ddpg.exploration_noise_final", self.exploration_noise_final, 0.0, 2.0)
         check_number("ddpg.bc_weight", self.bc_weight, 0.0, 1e4)
 
 
@@ -96,13 +94,13 @@ class DDPG:
         return self.actor_target
 
     @torch.no_grad()
-    def act(self, obs: np.ndarray, rng: np.random.Generator | None = None, sigma: float | None = None) -> np.ndarray:
+    def act(self, obs: np.ndarray, rng: np.random.Generator | None = None) -> np.ndarray:
         """Without `rng`, the evaluated policy's deterministic action (`policy_actor`); with it, the online
-        actor's action plus Gaussian noise of std `sigma` (default: the initial exploration noise). Clipped to [-1, 1]."""
+        actor's action plus Gaussian exploration noise. Clipped to [-1, 1]."""
         actor = self.actor if rng is not None else self.policy_actor
         a = actor(torch.as_tensor(obs, dtype=torch.float32).unsqueeze(0)).squeeze(0).numpy()
         if rng is not None:
-            a = a + rng.normal(0.0, self.cfg.exploration_noise if sigma is None else sigma, a.shape)
+            a = a + rng.normal(0.0, self.cfg.exploration_noise, a.shape)
         return np.clip(a, -1.0, 1.0).astype(np.float32)
 
     def learn(self, replay: TaggedReplay, lam: float, batch_size: int, rng: np.random.Generator) -> tuple[dict[str, float], float]:

@@ -107,8 +107,8 @@ class SAC:
         return self.actor.base
 
     @torch.no_grad()
-    def act(self, obs: np.ndarray, rng: np.random.Generator | None = None, sigma: float | None = None) -> np.ndarray:
-        """Without `rng` the deterministic action; with it a sample of π (its noise from `rng`; `sigma` unused)."""
+    def act(self, obs: np.ndarray, rng: np.random.Generator | None = None) -> np.ndarray:
+        """Without `rng` the deterministic action; with it a sample of π (its noise from `rng`)."""
         o = torch.as_tensor(obs, dtype=torch.float32).unsqueeze(0)
         if rng is None:
             a = self.actor.base(o)

@@ -207,10 +207,6 @@ class Trainer:
     def _intake_open(self) -> bool:
         return self.guidance.enabled and self.step < self.guidance.intake_steps
 
-    def exploration_sigma(self) -> float:
-        """Exploration noise, decayed linearly from its initial to its final value over training."""
-        d = self.ddpg_cfg
-        return d.exploration_noise + (d.exploration_noise_final - d.exploration_noise) * min(1.0, self.step / self.cfg.total_steps)
 
     def lam(self) -> float:
         return expert_ratio(self.step, self.cfg.total_steps, self.guidance.lam_max, self.guidance.lam_min) if self.guidance.enabled else 0.0
@@ -251,7 +247,7 @@ class Trainer:
         ret, length, info, triggered = 0.0, 0, {"outcome": None, "is_success": False}, False
         try:
             while self.step < end and not self.stop_requested.is_set():
-                action = self.agent.act(obs, self.rng, self.exploration_sigma())
+                action = self.agent.act(obs, self.rng)
                 obs, r, term, trunc, info = self._env_step(action, 0, obs)
                 ret += r
                 length += 1

@@ -1,6 +1,7 @@
 """DDPG update mechanics: every update steps critic, actor and targets; the critic pair; the BC term; config validation."""
 
 import copy
+import dataclasses
 
 import numpy as np
 import pytest
@@ -199,5 +200,7 @@ def test_the_averaged_actor_is_evaluated_and_the_online_one_explores():
     assert np.abs(online - target).max() > 1e-3
     evaluated = np.array([agent.act(o) for o in obs])
     assert np.allclose(evaluated, target, atol=1e-6) and agent.policy_actor is agent.actor_target
-    explored = np.array([agent.act(o, np.random.default_rng(0), sigma=0.0) for o in obs])
-    assert np.allclose(explored, online, atol=1e-6)
+    explored = np.array([agent.act(o, np.random.default_rng(0)) for o in obs])
+    assert not np.allclose(explored, online, atol=1e-3)  # exploration noise on the online actor's action
+    agent.cfg = dataclasses.replace(agent.cfg, exploration_noise=0.0)
+    assert np.allclose([agent.act(o, np.random.default_rng(0)) for o in obs], online, atol=1e-6)

@@ -111,7 +111,7 @@ def test_corrupt_and_mismatched_checkpoints_refused(tmp_path):
         for i in rng.choice(np.arange(header_end, len(good)), 64, replace=False):
             flipped[i] ^= 0xFF
         for damaged, reason in ((bytes(flipped), "digest"), (good[:1000], "digest"), (b"garbage", "not an mrguide checkpoint"),
-                                (good.replace(b"MRGUIDE-CHECKPOINT 5", b"MRGUIDE-CHECKPOINT 3", 1), "format 3")):
+                                (good.replace(b"MRGUIDE-CHECKPOINT 6", b"MRGUIDE-CHECKPOINT 5", 1), "format 5")):
             path.write_bytes(damaged)
             with pytest.raises(CheckpointError, match=reason):
                 same.load_checkpoint()
