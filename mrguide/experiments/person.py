@@ -116,10 +116,16 @@ def person_report(cfg: PersonConfig, root: Path, run_list: list[TrainRun], episo
 
 
 def _figure(recs: list[RunRecord]) -> bytes:
-    fig, ax = report.figure("Evaluation success against a person's marks", "marks asked (cumulative)", "evaluation success")
+    """Evaluation success (left) and the marks asked (right) by training step, one line per seed; a dot where a
+    run converged."""
+    fig, (success, marks) = report.figure("A person's marks over the wire", "training step", "evaluation success",
+                                          size=(11.0, 4.0), columns=2)
     for rec in recs:
-        marks = [rec.asked[rec.row_steps <= s].max(initial=0) for s in rec.eval_steps]
-        ax.plot(marks, rec.eval_rates, alpha=0.7, label=f"seed {rec.run.seed}")
-    ax.set_ylim(-0.02, 1.02)
-    ax.legend(loc="lower right", ncol=2, fontsize=7)
+        line, = success.plot(rec.eval_steps, rec.eval_rates, alpha=0.7, label=f"seed {rec.run.seed}")
+        marks.plot(rec.row_steps, rec.asked, color=line.get_color(), alpha=0.7)
+        if rec.converged.step is not None:
+            marks.plot([rec.converged.step], [rec.annotations_until_convergence], "o", color=line.get_color())
+    success.set_ylim(-0.02, 1.02)
+    success.legend(loc="lower right", ncol=2, fontsize=7)
+    marks.set_ylabel("marks asked (cumulative); dot: converged")
     return report.png_bytes(fig)

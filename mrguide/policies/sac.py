@@ -24,6 +24,7 @@ from mrguide.policies.networks import Actor, CriticEnsemble, ObsScaler
 from mrguide.policies.replay import TaggedReplay
 
 LOG_STD_MIN, LOG_STD_MAX = -20.0, 2.0  # RLPD's clip of the log standard deviation
+INITIAL_TEMPERATURE = 0.01  # HIL-SERL's temperature_init
 
 
 @dataclass(frozen=True)
@@ -92,7 +93,9 @@ class SAC:
         self.critic = CriticEnsemble(scaler(), act_dim, cfg.hidden, cfg.n_critics)
         self.critic_target = CriticEnsemble(scaler(), act_dim, cfg.hidden, cfg.n_critics)
         self.critic_target.load_state_dict(self.critic.state_dict())
-        self.log_temperature = torch.zeros((), requires_grad=True)  # temperature 1 at the start (RLPD)
+        # the temperature starts at 0.01 as in HIL-SERL (RLPD: 1.0, tuned for million-step runs; at this 20k-step
+        # budget an entropy bonus of that size keeps the policy near uniform)
+        self.log_temperature = torch.tensor(float(np.log(INITIAL_TEMPERATURE)), requires_grad=True)
         self.target_entropy = -act_dim / 2  # RLPD
         self.actor_params = list(self.actor.parameters())
         self.actor_opt = torch.optim.Adam(self.actor_params, lr=cfg.lr, fused=True)

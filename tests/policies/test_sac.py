@@ -51,7 +51,7 @@ def test_deterministic_action_is_the_exported_actor_and_exploration_samples():
     assert np.allclose(det, agent.policy_actor(torch.as_tensor(obs).unsqueeze(0)).detach().numpy()[0], atol=1e-6)
     rng = np.random.default_rng(0)
     samples = np.array([agent.act(obs, rng) for _ in range(50)])
-    assert samples.std(0).min() > 0.05 and np.all(np.abs(samples) <= 1.0)  # temperature 1 at the start: broad
+    assert samples.std(0).min() > 0.05 and np.all(np.abs(samples) <= 1.0)  # an untrained policy: broad
 
 
 def test_every_batch_is_half_expert_and_learning_steps_utd_critics():
