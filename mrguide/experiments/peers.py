@@ -17,7 +17,6 @@ import numpy as np
 
 from mrguide.config import ConfigError, check_number
 from mrguide.experiments import report
-from mrguide.experiments.person import CLIENTS
 from mrguide.experiments.run_records import RunRecord, read_run
 from mrguide.experiments.runs import TrainRun
 from mrguide.experiments.stats import person_minutes
@@ -33,8 +32,7 @@ class PeersConfig:
     seeds: int = 10
     steps: int = 20_000
     learners: tuple[str, ...] = LEARNERS
-    config: str = "../person.toml"  # base training config, relative to the experiment file
-    client: str = ""  # "" in process, "bot" over the wire (the marks are the same)
+    config: str = "../person.toml"  # base training config, relative to the experiment file (the marks in process)
     marks_budget: int = 100  # compare the learners' evaluation success after this many marks ...
     time_budget_s: float = 180.0  # ... and after this much training wall time
     overrides: dict[str, Any] = field(default_factory=dict)  # for every learner ("sac.utd" = 4, ...)
@@ -46,13 +44,11 @@ class PeersConfig:
         check_number("experiment.time_budget_s", self.time_budget_s, 1.0, 1e7, " s")
         if not self.learners or any(v not in LEARNERS for v in self.learners):
             raise ConfigError(f"experiment.learners = {list(self.learners)!r}: expected some of {', '.join(LEARNERS)}")
-        if self.client not in CLIENTS:
-            raise ConfigError(f"experiment.client = {self.client!r}: expected 'bot' (over the wire) or '' (in process)")
 
 
 def runs(cfg: PeersConfig, base_config: str | None) -> list[TrainRun]:
     """Seed by seed, every learner within: an experiment stopped early still compares both."""
-    return [TrainRun(f"{learner}/seed{s}", s, cfg.steps, True, base_config, {**cfg.overrides, "train.learner": learner}, cfg.client)
+    return [TrainRun(f"{learner}/seed{s}", s, cfg.steps, True, base_config, {**cfg.overrides, "train.learner": learner})
             for s in range(cfg.seeds) for learner in cfg.learners]
 
 

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from mrguide.config import ConfigError, check_number
+from mrguide.config import check_number
 from mrguide.experiments import report
 from mrguide.experiments.run_records import RunRecord, read_run
 from mrguide.experiments.runs import TrainRun, configs
@@ -22,7 +22,6 @@ from mrguide.experiments.stats import PERSON_SECONDS_PER_MARK, person_minutes, w
 
 #: Fresh start states of the final-policy evaluation: env seeds from here, disjoint from training's evaluations (1e6 + …).
 FRESH_SEED_BASE = 3_000_000
-CLIENTS = ("bot", "")
 
 
 @dataclass(frozen=True)
@@ -32,7 +31,6 @@ class PersonConfig:
     seeds: int = 10
     steps: int = 20_000
     config: str = "../person.toml"  # base training config (its [guidance.noise] is the person), relative to the file
-    client: str = "bot"  # "bot": every mark over the wire; "": the same simulated person in process
     episodes: int = 50  # fresh episodes per final policy
     overrides: dict[str, Any] = field(default_factory=dict)
 
@@ -40,12 +38,11 @@ class PersonConfig:
         check_number("experiment.seeds", self.seeds, 1, 1000, integer=True)
         check_number("experiment.steps", self.steps, 1, 10**8, integer=True)
         check_number("experiment.episodes", self.episodes, 1, 10**5, integer=True)
-        if self.client not in CLIENTS:
-            raise ConfigError(f"experiment.client = {self.client!r}: expected 'bot' (over the wire) or '' (in process)")
 
 
 def runs(cfg: PersonConfig, base_config: str | None) -> list[TrainRun]:
-    return [TrainRun(f"seed{s}", s, cfg.steps, True, base_config, dict(cfg.overrides), cfg.client) for s in range(cfg.seeds)]
+    """Every mark over the wire: a live session answered by the annotation bot with the run's error model."""
+    return [TrainRun(f"seed{s}", s, cfg.steps, True, base_config, dict(cfg.overrides), "bot") for s in range(cfg.seeds)]
 
 
 def fresh_path(run: TrainRun, root: Path) -> Path:
@@ -96,7 +93,7 @@ def person_report(cfg: PersonConfig, root: Path, run_list: list[TrainRun], episo
                 "median_marks_total": int(np.median([r.annotations_total for r in recs])),
                 "fresh_success_median": round(float(np.median(fresh)), 3), "fresh_success_min": round(min(fresh), 3),
                 "fresh_success_max": round(max(fresh), 3)}]
-    md = (f"A person's marks over the wire (client: {cfg.client or 'in process'}): {cfg.seeds} seeds × {cfg.steps} steps; "
+    md = (f"A person's marks over the wire (the annotation bot): {cfg.seeds} seeds × {cfg.steps} steps; "
           f"convergence with the learning-curves rule; person-minutes at {PERSON_SECONDS_PER_MARK:.0f} s per mark; every final "
           f"policy on {cfg.episodes} fresh start states.\n\n"
           + report.markdown(summary, [("seeds", "seeds"), ("converged", "converged"), ("ci_low", "95 % CI low"),
