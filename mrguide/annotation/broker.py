@@ -4,8 +4,12 @@ Thread-safe and free of web code. The trainer's thread calls `request`, which bl
 a skip, the timeout, or an interrupt; the server's thread calls `attach`, `receive` and `detach` for
 each client. Messages to a client go through the `send` callable given at `attach`, which must not
 block (the server queues them into its event loop); they are queued under the broker's lock, so every
-client sees them in the order the broker decided them (an answer's `ack` before its `cancel`). Nothing a
-client sends can raise here: every refusal becomes an `ack` with the reason, and is counted.
+client sees them in the order the broker decided them. Nothing a client sends can raise here: every
+refusal becomes an `ack` with its code and reason, and is counted under its code (protocol.REFUSALS).
+
+An answer is acknowledged once the trainer has it on disk (`acknowledge`, after the annotation log's fsync),
+unless `request(..., acknowledge=True)` acknowledges it at once. A claim expires when its client has sent
+nothing (no answer, no ping) for `claim_timeout_s`: the request is open to every client again.
 """
 
 from __future__ import annotations
@@ -22,14 +26,17 @@ from typing import Any
 
 import numpy as np
 
-from mrguide.annotation.protocol import AnnotationRequest, ProtocolError, parse_answer, parse_hello, parse_message
+from mrguide.annotation.protocol import (REFUSALS, AnnotationRequest, ProtocolError, parse_answer, parse_hello,
+                                        parse_message)
 from mrguide.robot import Workspace
 
 log = logging.getLogger(__name__)
 
 Send = Callable[[dict[str, Any]], None]
-#: How often a waiting `request` wakes up (so Ctrl-C is handled promptly), s.
+#: How often a waiting `request` wakes up (so Ctrl-C and expired claims are handled promptly), s.
 POLL_S = 0.05
+#: A claimant that sends nothing for this long loses its claim (s; `mrguide train --claim-timeout`).
+CLAIM_TIMEOUT_S = 60.0
 
 
 @dataclass(frozen=True)
@@ -58,6 +65,7 @@ class _Client:
     send: Send
     kind: str = "unknown"
     name: str = "unknown"
+    last_seen: float = field(default_factory=time.monotonic)  # its last message of any kind
 
 
 @dataclass
@@ -78,20 +86,22 @@ class BrokerStats:
     answered: int = 0
     timeouts: int = 0
     skipped: int = 0
-    refused: collections.Counter = field(default_factory=collections.Counter)
+    claims_expired: int = 0
+    refused: collections.Counter = field(default_factory=collections.Counter)  # by code, protocol.REFUSALS
 
 
 class AnnotationBroker:
     """One outstanding request at a time; first claim wins; answers validated against the workspace."""
 
-    def __init__(self, workspace: Workspace, hello: dict[str, Any] | None = None):
+    def __init__(self, workspace: Workspace, hello: dict[str, Any] | None = None, claim_timeout_s: float = CLAIM_TIMEOUT_S):
         self.workspace = workspace
+        self.claim_timeout_s = claim_timeout_s
         self._hello = dict(hello or {})
         self._lock = threading.Lock()
         self._changed = threading.Condition(self._lock)
         self._clients: dict[str, _Client] = {}
         self._ids = itertools.count(1)
-        self._session = secrets.token_hex(2)
+        self._session = secrets.token_hex(8)  # 64 bits: a resumed run's ids never meet an earlier run's
         self._seq = itertools.count(1)
         self._pending: _Pending | None = None
         self._status: dict[str, Any] = {"type": "status", "waiting": False}
@@ -100,8 +110,10 @@ class AnnotationBroker:
         self.on_waiting: Callable[[bool], None] | None = None
 
     # -- trainer side ------------------------------------------------------------------------------
-    def request(self, req: AnnotationRequest, timeout: float | None = None) -> LiveAnswer | NoAnswer:
-        """Ask every client; block until an answer, a skip, `timeout` seconds (None: no limit) or shutdown."""
+    def request(self, req: AnnotationRequest, timeout: float | None = None, acknowledge: bool = True) -> LiveAnswer | NoAnswer:
+        """Ask every client; block until an answer, a skip, `timeout` seconds (None: no limit) or shutdown. An
+        answer is acknowledged to its client at once, or with `acknowledge=False` when the caller calls
+        `acknowledge(answer)` (once it has recorded it)."""
         with self._lock:
             if self._pending is not None:
                 raise RuntimeError("an annotation request is already outstanding")
@@ -125,11 +137,31 @@ class AnnotationBroker:
                         self.stats.timeouts += 1
                         pending.result = NoAnswer(request_id, "timeout")
                         break
+                    self._expire_claim(pending)
                     self._changed.wait(POLL_S)
                 result = pending.result
         finally:
+            if acknowledge and isinstance(pending.result, LiveAnswer):
+                self.acknowledge(pending.result)  # before the cancel: the answerer learns first that it was taken
             self._finish(pending)
         return result
+
+    def acknowledge(self, answer: LiveAnswer) -> None:
+        """Tell the answering client its answer was taken (call once it is recorded)."""
+        with self._lock:
+            self._reply(answer.client_id, _ack("answer", answer.request_id, True, None))
+
+    def _expire_claim(self, pending: _Pending) -> None:
+        """Release the claim of a claimant that has sent nothing for claim_timeout_s (lock held)."""
+        client = self._clients.get(pending.claimed_by) if pending.claimed_by else None
+        if client is None or time.monotonic() - client.last_seen < self.claim_timeout_s:
+            return
+        log.info("annotation client %s claimed request %s and went quiet: claim released", client.client_id, pending.request_id)
+        self.stats.claims_expired += 1
+        pending.claimed_by = None
+        pending.message["claimed_by"] = None
+        self._deliver([(c, {"type": "claimed", "id": pending.request_id, "client_id": None, "reason": "expired"})
+                       for c in self._clients.values()])
 
     def _finish(self, pending: _Pending) -> None:
         """Close the request (also on KeyboardInterrupt) and tell the clients why."""
@@ -200,22 +232,27 @@ class AnnotationBroker:
                 self._deliver([(c, {"type": "claimed", "id": p.request_id, "client_id": None}) for c in self._clients.values()])
         log.info("annotation client %s disconnected", client_id)
 
-    def receive(self, client_id: str, text: str | bytes) -> None:
-        """Handle one message from a client; never raises. Replies are queued in order, under the lock."""
+    def receive(self, client_id: str, text: str | bytes) -> bool:
+        """Handle one message from a client; never raises. Replies are queued in order, under the lock. Returns
+        False when the connection is to be closed (a hello of another protocol version)."""
         kind, msg_id = None, None
         with self._lock:
+            client = self._clients.get(client_id)
+            if client is not None:
+                client.last_seen = time.monotonic()
             try:
                 msg = parse_message(text)
                 kind, msg_id = msg["type"], msg.get("id")
                 self._handle(client_id, kind, msg)
             except ProtocolError as exc:
-                reason = str(exc)
-                self.stats.refused[reason.split(":")[0]] += 1
-                self._reply(client_id, _ack(kind, msg_id if isinstance(msg_id, str) else None, False, reason))
+                self.stats.refused[exc.code] += 1
+                self._reply(client_id, _ack(kind, msg_id if isinstance(msg_id, str) else None, False, str(exc), exc.code))
+                return exc.code != "unsupported_protocol"
             except Exception as exc:  # a bug here must not take the server or the trainer down
-                log.exception("annotation broker failed on a message from %s", client_id)
-                self.stats.refused["internal error"] += 1
-                self._reply(client_id, _ack(kind, None, False, f"internal error: {type(exc).__name__}"))
+                log.error("annotation broker failed on a message from %s: %s: %s", client_id, type(exc).__name__, exc)
+                self.stats.refused["internal"] += 1
+                self._reply(client_id, _ack(kind, None, False, f"internal error: {type(exc).__name__}", "internal"))
+        return True
 
     def _handle(self, client_id: str, kind: str, msg: dict[str, Any]) -> None:
         """Act on a parsed message (lock held); refusals raise ProtocolError."""
@@ -232,10 +269,11 @@ class AnnotationBroker:
         target = parse_answer(msg, self.workspace) if kind == "answer" else None
         p = self._pending
         if p is None or p.result is not None or msg["id"] != p.request_id:
-            raise ProtocolError("stale request id: no such request is outstanding")
+            raise ProtocolError("stale", "stale request id: no such request is outstanding")
         if p.claimed_by not in (None, client_id):
-            raise ProtocolError(f"claimed by {p.claimed_by}")
-        self._reply(client_id, _ack(kind, p.request_id, True, None))
+            raise ProtocolError("claimed", f"claimed by {p.claimed_by}")
+        if target is None:  # an answer is acknowledged once it is recorded (`acknowledge`)
+            self._reply(client_id, _ack(kind, p.request_id, True, None))
         if p.claimed_by is None:
             p.claimed_by = client_id
             p.message["claimed_by"] = client_id
@@ -263,7 +301,8 @@ class AnnotationBroker:
         return {**p.message, "remaining_s": remaining}
 
     def _status_message(self) -> dict[str, Any]:
-        return {**self._status, "type": "status", "refused": dict(self.stats.refused)}
+        refused = {code: self.stats.refused[code] for code in REFUSALS if self.stats.refused[code]}
+        return {**self._status, "type": "status", "refused": refused, "claims_expired": self.stats.claims_expired}
 
     def _set_waiting(self, waiting: bool) -> None:
         self.publish_status(waiting=waiting)
@@ -279,5 +318,5 @@ class AnnotationBroker:
                 log.debug("could not queue a message for %s", client.client_id, exc_info=True)
 
 
-def _ack(kind: str | None, request_id: str | None, accepted: bool, reason: str | None) -> dict[str, Any]:
-    return {"type": "ack", "for": kind, "id": request_id, "accepted": accepted, "reason": reason}
+def _ack(kind: str | None, request_id: str | None, accepted: bool, reason: str | None, code: str | None = None) -> dict[str, Any]:
+    return {"type": "ack", "for": kind, "id": request_id, "accepted": accepted, "reason": reason, "code": code}

@@ -24,13 +24,15 @@ class LiveTrainPlugin:
                             "scripted oracle answer, tagged and not counted as human input (oracle)")
         g.add_argument("--annotation-timeout", type=positive_float, default=30.0, metavar="S",
                        help="seconds a request waits under --on-timeout skip|oracle")
+        g.add_argument("--claim-timeout", type=positive_float, default=60.0, metavar="S",
+                       help="a client that claimed a request and sends nothing for this long loses the claim")
         g.add_argument("--registration", help="calibration JSON of `mrguide calibrate`: places the scene in the headset")
 
     def open_session(self, args: argparse.Namespace, on_waiting: Callable[[bool], None]):
         from mrguide.annotation.live import LiveOptions, LiveSession
 
         options = LiveOptions(args.host, args.port, args.cert, args.key, args.token, args.on_timeout,
-                              args.annotation_timeout, args.registration)
+                              args.annotation_timeout, args.claim_timeout, args.registration)
         return LiveSession(options, on_waiting)
 
 

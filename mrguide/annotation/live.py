@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from mrguide.annotation.broker import AnnotationBroker, LiveAnswer
+from mrguide.annotation.broker import CLAIM_TIMEOUT_S, AnnotationBroker, LiveAnswer
 from mrguide.annotation.protocol import AnnotationRequest
 from mrguide.annotation.server import AnnotationServer
 from mrguide.calibration.calibration_file import load_calibration
@@ -43,6 +43,7 @@ class LiveOptions:
     token: str | None = None  # default: a fresh random token per session
     on_timeout: str = "wait"  # "wait" (training pauses), "skip" (drop the demonstration), "oracle" (fallback)
     timeout_s: float = 30.0  # how long a request waits under "skip" and "oracle"
+    claim_timeout_s: float = CLAIM_TIMEOUT_S  # a claimant that sends nothing for this long loses its claim
     registration: str | None = None  # calibration JSON of `mrguide calibrate`: places the scene in XR
 
     def __post_init__(self) -> None:
@@ -50,6 +51,8 @@ class LiveOptions:
             raise ValueError(f"on-timeout must be one of {', '.join(ON_TIMEOUT)}, got {self.on_timeout!r}")
         if not (self.timeout_s > 0 and np.isfinite(self.timeout_s)):
             raise ValueError(f"annotation timeout must be a positive number of seconds, got {self.timeout_s}")
+        if not (self.claim_timeout_s > 0 and np.isfinite(self.claim_timeout_s)):
+            raise ValueError(f"claim timeout must be a positive number of seconds, got {self.claim_timeout_s}")
         if not 0 <= self.port <= 65535:
             raise ValueError(f"port must be in 0..65535, got {self.port}")
 
@@ -73,6 +76,7 @@ class LiveExpert:
         self.timeout_s = None if on_timeout == "wait" else timeout_s
         self.oracle = OracleExpert(env.task_cfg)
         self.counts = LiveCounts()
+        self._unacknowledged: dict[str, LiveAnswer] = {}  # answers given out, acknowledged once recorded
 
     def annotate(self, obs: np.ndarray, previous: Annotation | None = None) -> Annotation | None:
         """Ask the person for the current phase's waypoint; None when the demonstration is to be dropped."""
@@ -83,9 +87,10 @@ class LiveExpert:
             vacuum_on=bool(obs[3] > 0), object_position=obs[5:8], object_orientation=orientation, goal=obs[8:11], obs=obs,
             remark=previous is not None, previous_target=None if previous is None else np.asarray(previous.target),
         )
-        res = self.broker.request(req, self.timeout_s)
+        res = self.broker.request(req, self.timeout_s, acknowledge=False)
         if isinstance(res, LiveAnswer):
             self.counts.answers += 1
+            self._unacknowledged[res.request_id] = res
             return Annotation(res.target, 1.0 if res.vacuum else -1.0, "live",
                               {"client": res.client, "client_id": res.client_id, "request": res.request_id,
                                "latency_s": round(res.latency_s, 4)})
@@ -99,6 +104,12 @@ class LiveExpert:
             self.counts.skipped += 1
         log.info("annotation request %s ended without an answer: %s", res.request_id, res.reason)
         return None
+
+    def recorded(self, annotation: Annotation) -> None:
+        """The trainer has the annotation on disk: acknowledge the answer to the client that gave it."""
+        answer = self._unacknowledged.pop(annotation.info.get("request", ""), None)
+        if answer is not None:
+            self.broker.acknowledge(answer)
 
 
 class LiveSession:
@@ -117,7 +128,7 @@ class LiveSession:
         o = self.options
         spec = env.robot_spec
         hello = hello_fields(spec, env.task_cfg, self._registration, o.on_timeout)
-        self.broker = AnnotationBroker(spec.workspace, hello)
+        self.broker = AnnotationBroker(spec.workspace, hello, o.claim_timeout_s)
         self.broker.on_waiting = self.on_waiting
         self.server = AnnotationServer(self.broker, spec, o.host, o.port, o.cert, o.key, o.token)
         self.server.start()

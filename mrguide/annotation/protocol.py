@@ -31,8 +31,24 @@ PROMPTS: tuple[str, ...] = (
 REMARK_PROMPT = "The arm did not reach your last mark for this step. Mark it again. "
 
 
+#: Why a client message is refused: the `code` of its `ack`, and the keys of the refusal counts in `status`
+#: (a fixed set, whatever a client sends).
+REFUSALS = ("malformed", "too_large", "binary", "not_an_object", "no_type", "unknown_type", "no_id", "bad_hello",
+            "unsupported_protocol", "stale", "claimed", "bad_target", "not_finite", "outside_workspace", "bad_vacuum",
+            "internal")
+#: The most digits a number may have (a longer one is refused before Python turns it into an int).
+MAX_DIGITS = 18
+#: Reasons are cut to this many characters (they may quote a piece of the message).
+MAX_REASON = 160
+
+
 class ProtocolError(ValueError):
-    """A client message that is refused; the message is the reason sent back in the `ack`."""
+    """A client message that is refused: `code` (one of REFUSALS) and the reason sent back in the `ack`."""
+
+    def __init__(self, code: str, reason: str):
+        assert code in REFUSALS, code
+        super().__init__(reason[:MAX_REASON])
+        self.code = code
 
 
 @dataclass(frozen=True)
@@ -72,39 +88,51 @@ def _floats(x: np.ndarray) -> list[float]:
 
 
 def _refuse_constant(name: str) -> float:
-    raise ProtocolError(f"not finite: {name} is not allowed in JSON")
+    raise ProtocolError("not_finite", f"not finite: {name} is not allowed in JSON")
+
+
+def _integer(digits: str) -> int:
+    if len(digits.lstrip("-")) > MAX_DIGITS:
+        raise ProtocolError("too_large", f"a number with more than {MAX_DIGITS} digits")
+    return int(digits)
 
 
 def parse_message(text: str | bytes) -> dict[str, Any]:
     """Decode one client message: a JSON object of known `type` within the size limit."""
     if isinstance(text, (bytes, bytearray)):
-        raise ProtocolError("binary frames are not part of the protocol; send JSON text")
+        raise ProtocolError("binary", "binary frames are not part of the protocol; send JSON text")
     if len(text.encode("utf-8", "surrogatepass")) > MAX_MESSAGE_BYTES:
-        raise ProtocolError(f"message larger than {MAX_MESSAGE_BYTES} bytes")
+        raise ProtocolError("too_large", f"message larger than {MAX_MESSAGE_BYTES} bytes")
     try:
-        msg = json.loads(text, parse_constant=_refuse_constant)
+        msg = json.loads(text, parse_constant=_refuse_constant, parse_int=_integer)
     except json.JSONDecodeError as exc:
-        raise ProtocolError(f"malformed JSON: {exc.msg} at line {exc.lineno} column {exc.colno}") from exc
+        raise ProtocolError("malformed", f"malformed JSON: {exc.msg} at line {exc.lineno} column {exc.colno}") from exc
+    except RecursionError as exc:
+        raise ProtocolError("malformed", "malformed JSON: nested too deeply") from exc
     if not isinstance(msg, dict):
-        raise ProtocolError(f"a message must be a JSON object, got {type(msg).__name__}")
+        raise ProtocolError("not_an_object", f"a message must be a JSON object, got {type(msg).__name__}")
     kind = msg.get("type")
     if not isinstance(kind, str):
-        raise ProtocolError("message has no string field 'type'")
+        raise ProtocolError("no_type", "message has no string field 'type'")
     if kind not in CLIENT_TYPES:
-        raise ProtocolError(f"unknown message type {kind[:40]!r}")
+        raise ProtocolError("unknown_type", f"unknown message type {kind[:40]!r}")
     if kind in ("claim", "answer", "skip") and not isinstance(msg.get("id"), str):
-        raise ProtocolError(f"'{kind}' needs a string field 'id'")
+        raise ProtocolError("no_id", f"'{kind}' needs a string field 'id'")
     return msg
 
 
 def parse_hello(msg: dict[str, Any]) -> tuple[str, str]:
-    """(client kind, display name) of a client `hello`; another protocol version is refused."""
-    if msg.get("protocol") != PROTOCOL_VERSION:
-        raise ProtocolError(f"protocol {msg.get('protocol')!r} not supported: this server speaks {PROTOCOL_VERSION}")
+    """(client kind, display name) of a client `hello`; another protocol version (or a version that is not a
+    whole number: JSON's `true` is no 1) is refused with "unsupported_protocol", and the server then closes the
+    connection."""
+    version = msg.get("protocol")
+    if isinstance(version, bool) or not isinstance(version, int) or version != PROTOCOL_VERSION:
+        raise ProtocolError("unsupported_protocol",
+                            f"protocol {repr(version)[:20]} not supported: this server speaks {PROTOCOL_VERSION}")
     kind = msg.get("client", "unknown")
     name = msg.get("name", kind)
     if not isinstance(kind, str) or not isinstance(name, str):
-        raise ProtocolError("'client' and 'name' must be strings")
+        raise ProtocolError("bad_hello", "'client' and 'name' must be strings")
     return kind[:40], name[:80]
 
 
@@ -112,19 +140,19 @@ def parse_answer(msg: dict[str, Any], workspace: Workspace) -> tuple[np.ndarray,
     """(target in m, vacuum on) of an `answer`: three finite numbers inside the workspace box, a bool."""
     target = msg.get("target")
     if not isinstance(target, list) or len(target) != 3:
-        raise ProtocolError("'target' must be a list of 3 numbers [x, y, z] in metres")
+        raise ProtocolError("bad_target", "'target' must be a list of 3 numbers [x, y, z] in metres")
     for i, v in enumerate(target):
         if isinstance(v, bool) or not isinstance(v, (int, float)):
-            raise ProtocolError(f"target[{i}] is not a number: {v!r}"[:120])
+            raise ProtocolError("bad_target", f"target[{i}] is not a number: {v!r}"[:120])
         if not math.isfinite(v):
-            raise ProtocolError(f"not finite: target[{i}]")
+            raise ProtocolError("not_finite", f"not finite: target[{i}]")
     vacuum = msg.get("vacuum")
     if not isinstance(vacuum, bool):
-        raise ProtocolError("'vacuum' must be true or false")
+        raise ProtocolError("bad_vacuum", "'vacuum' must be true or false")
     p = np.array(target, dtype=float)
     for i, axis in enumerate("xyz"):
         if p[i] < workspace.lo[i]:
-            raise ProtocolError(f"target outside the workspace box: {axis} = {p[i]:.4f} < {workspace.lo[i]:.4f}")
+            raise ProtocolError("outside_workspace", f"target outside the workspace box: {axis} = {p[i]:.4f} < {workspace.lo[i]:.4f}")
         if p[i] > workspace.hi[i]:
-            raise ProtocolError(f"target outside the workspace box: {axis} = {p[i]:.4f} > {workspace.hi[i]:.4f}")
+            raise ProtocolError("outside_workspace", f"target outside the workspace box: {axis} = {p[i]:.4f} > {workspace.hi[i]:.4f}")
     return p, vacuum

@@ -3,19 +3,28 @@
 aiohttp (not `websockets`) because one library serves the static page, the npm modules, the URDF with
 its meshes and the WebSocket on one port, with TLS, from one asyncio loop. The loop runs in a daemon
 thread; the trainer never waits on it. Bound to 127.0.0.1 unless told otherwise.
+
+What a client sends never reaches a 500: the page and the WebSocket need the access token (403 without),
+a browser's `Origin` must be the page's own and the `Host` one this machine answers to (403: no other site,
+and no DNS rebinding, can drive a session), paths outside the robot package or of other file types are 404,
+idle connections close after KEEPALIVE_S, and a client whose hello speaks another protocol is refused and
+disconnected.
 """
 
 from __future__ import annotations
 
 import asyncio
 import hmac
+import ipaddress
 import json
 import logging
 import secrets
+import socket
 import ssl
 import threading
 from pathlib import Path
 from typing import Any
+from urllib.parse import urlsplit
 
 from aiohttp import WSMsgType, web
 
@@ -31,6 +40,12 @@ MESH_SUFFIXES = {".dae", ".stl", ".obj", ".png", ".jpg", ".jpeg"}
 CUP_RADIUS = 0.02  # m, as the twin's cup
 #: A client that does not read its messages is dropped once this many are queued.
 MAX_QUEUED = 1000
+#: An HTTP connection that sends no request for this long is closed, s (aiohttp's default: an hour).
+KEEPALIVE_S = 15.0
+#: The shortest access token `--token` may set (the default is 22 random URL-safe characters).
+MIN_TOKEN_LENGTH = 16
+#: What /static/ serves from the page's folder: its scripts and style (the page itself only at /, with the token).
+STATIC_SUFFIXES = {".js", ".css"}
 
 
 class ServerError(ConfigError):
@@ -45,6 +60,9 @@ class AnnotationServer:
                  web_dir: Path | None = None):
         self.broker, self.robot = broker, robot
         self.host, self.port = host, port
+        if token is not None and (len(token) < MIN_TOKEN_LENGTH or not token.isascii() or not token.isprintable()):
+            raise ServerError(f"the access token must be at least {MIN_TOKEN_LENGTH} printable ASCII characters "
+                              f"(got {len(token)}); leave --token out for a random one")
         self.token = token or secrets.token_urlsafe(16)
         self.web_dir = web_dir or WEB_DIR
         self._ssl = _ssl_context(cert, key)
@@ -60,8 +78,11 @@ class AnnotationServer:
 
     @property
     def url(self) -> str:
-        """The page's URL, token included (what a person opens)."""
-        host = "127.0.0.1" if self.host in ("0.0.0.0", "::", "") else self.host
+        """The page's URL, token included (what a person opens): on a server bound to every interface, with
+        this machine's address on the network (a headset cannot reach 127.0.0.1); IPv6 addresses bracketed."""
+        host = reachable_address() if self.host in ("0.0.0.0", "::", "") else self.host
+        if ":" in host:
+            host = f"[{host}]"
         return f"{self.scheme}://{host}:{self.port}/?token={self.token}"
 
     @property
@@ -116,11 +137,11 @@ class AnnotationServer:
         app.router.add_get("/ws", self._websocket)
         app.router.add_get("/robot/robot.urdf", self._robot_urdf)
         app.router.add_get("/robot/pkg/{path:.+}", self._robot_file)
-        app.router.add_static("/static/", self.web_dir, follow_symlinks=False)
+        app.router.add_get("/static/{name}", self._static_file)
         modules = self.web_dir / "node_modules"
         if modules.is_dir():
             app.router.add_static("/node_modules/", modules, follow_symlinks=False)
-        self._runner = web.AppRunner(app, access_log=None, shutdown_timeout=1.0)
+        self._runner = web.AppRunner(app, access_log=None, shutdown_timeout=1.0, keepalive_timeout=KEEPALIVE_S)
         await self._runner.setup()
         site = web.TCPSite(self._runner, self.host, self.port, ssl_context=self._ssl)
         await site.start()
@@ -136,26 +157,52 @@ class AnnotationServer:
 
     # -- handlers ----------------------------------------------------------------------------------
     def _authorized(self, request: web.Request) -> bool:
-        return hmac.compare_digest(request.query.get("token", ""), self.token)
+        """The token (compared as bytes: any text a client sends is comparable) and, for a browser, the origin."""
+        given = request.query.get("token", "").encode("utf-8", "surrogatepass")
+        return hmac.compare_digest(given, self.token.encode()) and self._same_origin(request)
+
+    def _same_origin(self, request: web.Request) -> bool:
+        """The Host is one this machine answers to (an IP address, localhost or its own name: not a domain an
+        attacker points at it), and a browser's Origin, when sent, is the page's own (scheme, host, port)."""
+        host = request.host
+        try:
+            name = urlsplit(f"//{host}").hostname or ""
+        except ValueError:  # an unbalanced bracket, a port that is no number
+            return False
+        if not _local_name(name):
+            return False
+        origin = request.headers.get("Origin")
+        return origin is None or origin == f"{self.scheme}://{host}"
 
     async def _page(self, request: web.Request) -> web.StreamResponse:
         if not self._authorized(request):
-            raise web.HTTPForbidden(text="access token missing or wrong: open the URL that mrguide printed\n")
+            raise web.HTTPForbidden(text="access token missing or wrong, or another site's page: open the URL that mrguide printed\n")
         return web.FileResponse(self.web_dir / "index.html", headers={"Cache-Control": "no-store"})
+
+    async def _static_file(self, request: web.Request) -> web.StreamResponse:
+        name = request.match_info["name"]
+        path = self.web_dir / name
+        if "/" in name or "\x00" in name or path.suffix not in STATIC_SUFFIXES or not path.is_file():
+            raise web.HTTPNotFound()
+        return web.FileResponse(path)
 
     async def _robot_urdf(self, request: web.Request) -> web.Response:
         return web.Response(text=self._urdf, content_type="application/xml")
 
     async def _robot_file(self, request: web.Request) -> web.StreamResponse:
         root = self.robot.package_dir.resolve()
-        path = (root / request.match_info["path"]).resolve()
-        if not path.is_relative_to(root) or path.suffix.lower() not in MESH_SUFFIXES or not path.is_file():
+        try:
+            path = (root / request.match_info["path"]).resolve()
+            found = path.is_relative_to(root) and path.suffix.lower() in MESH_SUFFIXES and path.is_file()
+        except (ValueError, OSError):  # a NUL byte, a name too long for the file system
+            found = False
+        if not found:
             raise web.HTTPNotFound()
         return web.FileResponse(path)
 
     async def _websocket(self, request: web.Request) -> web.StreamResponse:
         if not self._authorized(request):
-            raise web.HTTPForbidden(text="access token missing or wrong\n")
+            raise web.HTTPForbidden(text="access token missing or wrong, or another site's page\n")
         ws = web.WebSocketResponse(heartbeat=20.0, max_msg_size=1 << 20)
         await ws.prepare(request)
         self._sockets.add(ws)
@@ -169,10 +216,11 @@ class AnnotationServer:
         client_id = self.broker.attach(send)
         try:
             async for msg in ws:
-                if msg.type is WSMsgType.TEXT:
-                    self.broker.receive(client_id, msg.data)
-                elif msg.type is WSMsgType.BINARY:
-                    self.broker.receive(client_id, msg.data)
+                if msg.type in (WSMsgType.TEXT, WSMsgType.BINARY):
+                    if not self.broker.receive(client_id, msg.data):
+                        await asyncio.sleep(0.05)  # let the refusal's ack go out first
+                        await ws.close(code=1002, message=b"protocol version not supported")
+                        break
                 elif msg.type is WSMsgType.ERROR:
                     log.info("annotation client %s: connection error %s", client_id, ws.exception())
         finally:
@@ -213,6 +261,32 @@ async def _security_headers(request: web.Request, handler) -> web.StreamResponse
     return response
 
 
+def _local_name(name: str) -> bool:
+    """An IP address literal, localhost, or this machine's own host name."""
+    try:
+        ipaddress.ip_address(name)
+        return True
+    except ValueError:
+        pass
+    own = {socket.gethostname().lower(), socket.getfqdn().lower()}
+    return name.lower() in {"localhost", *own, *(f"{n}.local" for n in own)}
+
+
+def reachable_address() -> str:
+    """This machine's address on its network (the interface a packet to the outside would leave by; nothing is
+    sent), or 127.0.0.1 when it has none."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        try:
+            probe.connect(("192.0.2.1", 9))  # TEST-NET-1: routable form, never answered
+            return probe.getsockname()[0]
+        except OSError:
+            return "127.0.0.1"
+
+
+def _no_password() -> str:
+    raise ServerError("the TLS key is encrypted: give a key without a passphrase (openssl rsa -in key.pem -out plain.pem)")
+
+
 def _ssl_context(cert: str | Path | None, key: str | Path | None) -> ssl.SSLContext | None:
     if cert is None and key is None:
         return None
@@ -220,7 +294,7 @@ def _ssl_context(cert: str | Path | None, key: str | Path | None) -> ssl.SSLCont
         raise ServerError("TLS needs both --cert and --key")
     ctx = ssl.SSLContext(ssl.PROTOCOL_TLS_SERVER)
     try:
-        ctx.load_cert_chain(str(cert), str(key))
+        ctx.load_cert_chain(str(cert), str(key), password=_no_password)  # never a prompt on the terminal
     except (OSError, ssl.SSLError) as exc:
         raise ServerError(f"cannot load the TLS certificate {cert} / key {key}: {exc}") from exc
     return ctx

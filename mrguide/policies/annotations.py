@@ -132,8 +132,8 @@ class AnnotationCache:
     def load(self, path: str | Path, repair: bool = False) -> int:
         """Read records written by `insert`; returns how many are in use.
 
-        A torn last line (a crash mid-write) is skipped, and with `repair` cut off the file so the next
-        record starts on a line of its own. Anything else that is not a valid record raises
+        A torn last line (a crash mid-write) is skipped, and with `repair` cut off the file, or a whole last
+        record without its newline given one, so the next record starts on a line of its own. Anything else that is not a valid record raises
         AnnotationError naming the file and line.
         """
         path = Path(path)
@@ -160,6 +160,11 @@ class AnnotationCache:
         if repair and good_end < len(raw):
             with path.open("r+b") as fh:
                 fh.truncate(good_end)
+        elif repair and raw and not raw.endswith(b"\n"):  # a whole last record that lost its newline (full disk, crash)
+            with path.open("ab") as fh:
+                fh.write(b"\n")
+                fh.flush()
+                os.fsync(fh.fileno())
         return len(self)
 
 

@@ -21,7 +21,9 @@ class ExpertSource(Protocol):
     """Gives an annotation (TCP target in the robot frame + gripper command) for an observation.
 
     `previous` is the annotation of this waypoint that the arm did not reach (a request to re-mark it).
-    None means nobody annotated: the demonstration is dropped.
+    None means nobody annotated: the demonstration is dropped. A source that wants to know when an
+    annotation it gave is on disk (the live session acknowledges the answer then) has a method
+    `recorded(annotation)`, which the trainer calls after the annotation log's fsync.
     """
 
     def annotate(self, obs: np.ndarray, previous: Annotation | None = None) -> Annotation | None: ...

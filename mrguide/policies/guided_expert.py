@@ -129,7 +129,10 @@ class GuidedExpert:
         self.cache.asked += 1
         if ann is None:
             return None
-        index = self.cache.insert(obs, ann, supersedes=previous)
+        index = self.cache.insert(obs, ann, supersedes=previous)  # on disk (fsync'd) when this returns
+        recorded = getattr(self.source, "recorded", None)
+        if recorded is not None:
+            recorded(ann)
         if self.marks == "pick_place":
             kind = phase_from_progress(obs[4])
             self.fusion.add(kind, anchor(kind, obs), ann.target)

@@ -33,13 +33,14 @@ def make_request(phase: int = 1, remark: bool = False, obj: np.ndarray = OBJ, go
                              np.array([0.5, -0.08, 0.06]) if remark else None)
 
 
-def ask_in_thread(broker: AnnotationBroker, req: AnnotationRequest, timeout: float | None = None) -> Future:
+def ask_in_thread(broker: AnnotationBroker, req: AnnotationRequest, timeout: float | None = None,
+                  acknowledge: bool = True) -> Future:
     """broker.request in a thread (it blocks, as in the trainer); the result arrives in the future."""
     fut: Future = Future()
 
     def run() -> None:
         try:
-            fut.set_result(broker.request(req, timeout))
+            fut.set_result(broker.request(req, timeout, acknowledge))
         except BaseException as exc:  # handed to the test
             fut.set_exception(exc)
 

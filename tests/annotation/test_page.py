@@ -268,7 +268,7 @@ def test_refusal_reason_is_shown(browser, served, spec):
         assert s["lastAck"]["reason"].startswith("stale request id")
         assert page.text("feedback").startswith("Refused: stale request id")
         assert not page.page.is_disabled("#submit")  # the person may try again (or wait for the next)
-        assert broker.stats.refused["stale request id"] == 1
+        assert broker.stats.refused["stale"] == 1
         assert dropped, "the cancel should have been held back"
     finally:
         page.close()

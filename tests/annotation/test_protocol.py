@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from mrguide.annotation.broker import LiveAnswer, NoAnswer
+from mrguide.annotation.protocol import REFUSALS
 from tests.annotation.conftest import ask_in_thread, connect, make_request, wait_until
 
 
@@ -32,7 +33,7 @@ def test_hello_request_answer_ack_cancel(served):
             assert req["state"]["goal"] == pytest.approx([0.48, 0.2, 0.025]) and len(req["state"]["joints"]) == 6
             await c.send({"type": "answer", "id": req["id"], "target": [0.5, -0.08, 0.047], "vacuum": True})
             ack = await c.recv("ack")
-            assert ack == {"type": "ack", "for": "answer", "id": req["id"], "accepted": True, "reason": None}
+            assert ack == {"type": "ack", "for": "answer", "id": req["id"], "accepted": True, "reason": None, "code": None}
             cancel = await c.recv("cancel")
             assert cancel["reason"] == "answered"
             return fut.result(5)
@@ -57,7 +58,10 @@ BAD = [
     ('{"type": "answer", "id": "ID", "target": [0.5, 0.0], "vacuum": true}', "list of 3 numbers"),
     ('{"type": "answer", "id": "ID", "target": [0.5, "a", 0.1], "vacuum": true}', "not a number"),
     ('{"type": "answer", "id": "ID", "target": [0.5, 0.0, 0.1], "vacuum": 1}', "'vacuum' must be true or false"),
-    ('{"type": "hello", "protocol": 2}', "protocol 2 not supported"),
+    ('{"type": "hello", "protocol": 1, "client": 7}', "'client' and 'name' must be strings"),
+    ('{"type": "answer", "id": "ID", "target": [0.5, 1' + "0" * 400 + ', 0.1], "vacuum": true}', "more than 18 digits"),
+    ('{"type": "answer", "id": "ID", "target": [0.5, 1' + "0" * 5000 + ', 0.1], "vacuum": true}', "more than 18 digits"),
+    ('{"type": "ping", "x": ' + "[" * 5000 + "]" * 5000 + "}", "nested too deeply"),
     ("x" * 70_000, "larger than"),
 ]
 
@@ -84,6 +88,25 @@ def test_every_bad_message_is_refused_with_a_reason_and_the_request_survives(ser
 
     assert isinstance(run(scenario()), LiveAnswer)
     assert sum(broker.stats.refused.values()) == len(BAD) + 1
+    assert set(broker.stats.refused) <= set(REFUSALS) and "internal" not in broker.stats.refused
+
+
+@pytest.mark.parametrize("version", [2, True, "1", 1.0, None])
+def test_a_hello_of_another_protocol_is_refused_and_the_connection_closed(served, version):
+    """JSON's `true` is no protocol 1 (Python's True == 1); the client is told why, then disconnected."""
+    broker, server = served
+
+    async def scenario():
+        async with aiohttp.ClientSession() as http:
+            c = await connect(http, server)
+            await c.send({"type": "hello", "protocol": version, "client": "test"})
+            ack = await c.recv("ack")
+            closed = await c.ws.receive(timeout=5)
+            return ack, closed
+
+    ack, closed = run(scenario())
+    assert ack["accepted"] is False and ack["code"] == "unsupported_protocol" and "not supported" in ack["reason"]
+    assert closed.type in (aiohttp.WSMsgType.CLOSE, aiohttp.WSMsgType.CLOSED) and wait_until(lambda: broker.client_count == 0)
 
 
 def test_two_clients_race_for_the_claim_first_wins(served):

@@ -117,6 +117,19 @@ def test_cache_repair_cuts_a_torn_tail_so_the_next_record_is_whole(tmp_path):
     assert AnnotationCache().load(path) == 2  # no record glued onto the torn line
 
 
+def test_cache_repair_gives_a_whole_last_record_its_lost_newline(tmp_path):
+    """A record written whole but without its newline (a full disk, a crash between the two writes): the resumed
+    run's next record would be glued onto it and every later load would fail."""
+    path = tmp_path / "ann.jsonl"
+    cache = AnnotationCache(0.005, path)
+    cache.insert(_obs(0), Annotation(np.array([0.5, -0.1, 0.13]), -1.0))
+    path.write_bytes(path.read_bytes().rstrip(b"\n"))
+    resumed = AnnotationCache(0.005, path)
+    assert resumed.load(path, repair=True) == 1
+    resumed.insert(_obs(3), Annotation(np.array([0.5, 0.2, 0.15]), 1.0))
+    assert AnnotationCache().load(path) == 2 and path.read_bytes().count(b"\n") == 2
+
+
 def test_cache_load_skips_torn_last_line_but_refuses_corruption(tmp_path):
     path = tmp_path / "ann.jsonl"
     cache = AnnotationCache(0.005, path)

@@ -358,8 +358,14 @@ async function main() {
     $('xr-message').textContent = xr.info.error ? `${xrMsg} — ${xr.info.error}` : xrMsg;
   }
 
-  // Countdown of requests with a deadline, and the reconnect timer.
+  // Countdown of requests with a deadline, the reconnect timer, and a ping every 10 s while this page holds a
+  // claim (the server releases a claim whose client sends nothing for its claim timeout).
+  let lastPing = 0;
   setInterval(() => {
+    if (S.request && S.claimedBy === S.clientId && conn.connected && performance.now() - lastPing > 10000) {
+      conn.send({ type: 'ping' });
+      lastPing = performance.now();
+    }
     const req = S.request;
     const left = req ? (req.remaining_s ?? req.timeout_s) : null; // remaining_s: sent with hello on (re)connect
     $('countdown').textContent = left
