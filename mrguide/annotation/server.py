@@ -28,6 +28,7 @@ from urllib.parse import urlsplit
 
 from aiohttp import WSMsgType, web
 
+from mrguide.annotation import page_assets
 from mrguide.annotation.broker import AnnotationBroker
 from mrguide.config import ConfigError
 from mrguide.robot import RobotSpec, urdf_with_tool
@@ -94,6 +95,10 @@ class AnnotationServer:
         """Start the loop thread and bind; returns the URL. Raises ServerError when it cannot serve."""
         if not (self.web_dir / "index.html").is_file():
             raise ServerError(f"the annotation page is not installed: {self.web_dir / 'index.html'} is missing")
+        why = page_assets.missing(self.web_dir)
+        if why is not None:
+            raise ServerError(f"{why}: the page's scripts come from npm. In a checkout run `npm ci` in {self.web_dir} "
+                              "(./run.sh does); an installed mrguide was built without npm: install Node.js and reinstall")
         ready = threading.Event()
         failure: list[BaseException] = []
 

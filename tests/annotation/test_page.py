@@ -22,7 +22,7 @@ from mrguide.annotation.broker import AnnotationBroker, LiveAnswer, NoAnswer
 from mrguide.annotation.headless import HeadlessBrowser, chromium_path
 from mrguide.annotation.live import hello_fields
 from mrguide.annotation.protocol import PROMPTS
-from mrguide.annotation.server import WEB_DIR, AnnotationServer
+from mrguide.annotation.server import WEB_DIR, AnnotationServer, ServerError
 from mrguide.robot import load_robot
 from mrguide.task import TaskConfig
 from tests.annotation.conftest import ask_in_thread, make_request
@@ -307,3 +307,52 @@ def test_reconnect_after_reload_and_server_restart(browser, served, spec):
             server2.stop()
     finally:
         page.close()
+
+
+SERVE_INSTALLED = """
+import sys
+import mrguide.annotation.server as s
+from mrguide.annotation.broker import AnnotationBroker
+from mrguide.annotation.live import hello_fields
+from mrguide.robot import load_robot
+from mrguide.task import TaskConfig
+spec = load_robot()
+server = s.AnnotationServer(AnnotationBroker(spec.workspace, hello_fields(spec, TaskConfig())), spec, port=0)
+print(s.WEB_DIR, server.start(), flush=True)
+sys.stdin.read()
+"""
+
+
+def test_a_plain_wheel_serves_a_working_page(browser, tmp_path):
+    """`pip install .` carries the page's scripts: the wheel, installed apart from the checkout, serves a page that
+    loads and draws the arm in Chromium."""
+    import subprocess
+    import sys
+
+    subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q", "-w", str(tmp_path), str(REPO)],
+                   check=True, capture_output=True, timeout=300)
+    (wheel,) = tmp_path.glob("mrguide-*.whl")
+    site = tmp_path / "site"
+    subprocess.run([sys.executable, "-m", "pip", "install", "--no-deps", "-q", "--target", str(site), str(wheel)],
+                   check=True, capture_output=True, timeout=300)
+    proc = subprocess.Popen([sys.executable, "-c", SERVE_INSTALLED], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+                            env={**os.environ, "PYTHONPATH": str(site)}, cwd=tmp_path)
+    try:
+        web_dir, url = proc.stdout.readline().split()
+        assert Path(web_dir).is_relative_to(site)  # the installed copy, not the checkout
+        page = browser.open(url)
+        try:
+            assert page.wait_robot()["loaded"]
+        finally:
+            page.close()
+    finally:
+        proc.stdin.close()
+        proc.wait(10)
+
+
+def test_a_server_without_the_page_scripts_refuses_to_start_saying_how_to_get_them(tmp_path, spec):
+    web = tmp_path / "web"
+    shutil.copytree(WEB_DIR, web, ignore=shutil.ignore_patterns("node_modules"))
+    server = AnnotationServer(AnnotationBroker(spec.workspace, {}), spec, port=0, web_dir=web)
+    with pytest.raises(ServerError, match=r"needs .*node_modules.*which is not there.*npm ci"):
+        server.start()

@@ -175,3 +175,17 @@ def test_an_encrypted_key_fails_at_once_instead_of_prompting(broker, tmp_path):
     with pytest.raises(ServerError, match="the TLS key is encrypted"):
         AnnotationServer(broker, load_robot(), port=0, cert=cert, key=key)
     assert time.monotonic() - t0 < 10
+
+
+def test_the_page_assets_are_the_module_graph_of_the_page():
+    """What the wheel ships: every npm file the page's scripts import (through the import map and the modules' own
+    imports), with the packages' licences, and nothing else of node_modules."""
+    from mrguide.annotation.page_assets import import_map, module_files
+    from mrguide.annotation.server import WEB_DIR
+
+    files = {str(p.relative_to(WEB_DIR.resolve() / "node_modules")) for p in module_files(WEB_DIR)}
+    assert {"three/build/three.module.js", "three/build/three.core.js", "urdf-loader/src/URDFLoader.js",
+            "three/examples/jsm/controls/TransformControls.js", "three/examples/jsm/loaders/ColladaLoader.js",
+            "iwer/build/iwer.module.js", "three/LICENSE", "iwer/LICENSE"} <= files
+    assert not any(f.endswith((".ts", ".md", ".json")) or "/test" in f for f in files) and len(files) < 40
+    assert import_map(WEB_DIR)["three"] == "/node_modules/three/build/three.module.js"
