@@ -356,3 +356,53 @@ def test_a_server_without_the_page_scripts_refuses_to_start_saying_how_to_get_th
     server = AnnotationServer(AnnotationBroker(spec.workspace, {}), spec, port=0, web_dir=web)
     with pytest.raises(ServerError, match=r"needs .*node_modules.*which is not there.*npm ci"):
         server.start()
+
+
+def _click(page, point) -> None:
+    """A person's click on what the page shows at robot-frame `point`."""
+    px = page.page.evaluate("(p) => window.mrguide.screenOf(p)", list(map(float, point)))
+    page.page.mouse.click(px["x"], px["y"])
+
+
+def test_click_to_place_on_the_part_the_goal_and_the_table(browser, served, spec):
+    """One click on the part's top puts the pick mark at its centre; on the goal ring the place mark at the goal; on
+    the table at that point, at the phase's height; a second click submits. A drag is no click: it orbits."""
+    broker, server = served
+    task = TaskConfig()
+    page = browser.open(server.url)
+    try:
+        fut = ask_in_thread(broker, make_request(1, obj=OBJ, goal=GOAL, quat=QUAT))  # the pick mark (grasp)
+        page.wait_request()
+        page.wait_robot()
+        _click(page, OBJ + [0.004, -0.006, 0.5 * task.object_height])  # a little off the top face's centre
+        s = page.wait_state("s.placedOn === 'object'")
+        assert s["target"] == pytest.approx([OBJ[0], OBJ[1], task.object_height], abs=1e-4)  # snapped to the centre
+        page.click_submit()
+        pick = fut.result(10)
+        assert isinstance(pick, LiveAnswer) and pick.target == pytest.approx([OBJ[0], OBJ[1], task.object_height], abs=1e-4)
+
+        fut = ask_in_thread(broker, make_request(4, obj=OBJ, goal=GOAL, quat=QUAT))  # the place mark (release)
+        page.wait_state("s.phase === 'release'")
+        _click(page, GOAL + [0.03, 0.0, -GOAL[2] + 0.001])  # on the ring, 3 cm from the goal
+        s = page.wait_state("s.placedOn === 'goal'")
+        assert s["target"] == pytest.approx([GOAL[0], GOAL[1], task.object_height], abs=1e-4)
+        page.press("Enter")
+        place = fut.result(10)
+        assert place.target == pytest.approx([GOAL[0], GOAL[1], task.object_height], abs=1e-4)
+
+        fut = ask_in_thread(broker, make_request(3, obj=OBJ, goal=GOAL, quat=QUAT))  # transport: table point, lift height
+        page.wait_state("s.phase === 'transport'")
+        spot = np.array([0.42, 0.05, 0.0])
+        _click(page, spot)
+        s = page.wait_state("s.placedOn === 'table'")
+        assert s["target"][:2] == pytest.approx(spot[:2], abs=0.003) and s["target"][2] == pytest.approx(task.lift_height), s["target"]
+        before = s["target"]
+        px = page.page.evaluate("(p) => window.mrguide.screenOf(p)", [0.5, 0.25, 0.0])
+        page.page.mouse.move(px["x"], px["y"])
+        page.page.mouse.down()
+        page.page.mouse.move(px["x"] + 60, px["y"] + 20, steps=5)  # a drag: the camera turns, the target stays
+        page.page.mouse.up()
+        assert page.state()["target"] == before
+        page.skip()
+    finally:
+        page.close()

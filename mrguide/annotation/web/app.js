@@ -14,7 +14,7 @@
 //   window.mrguide.setVacuum(bool)       set the vacuum command
 //   window.mrguide.submit() / skip()     as the buttons (false when there is nothing to answer)
 //   window.mrguide.gizmoHandle(axis)     page coordinates {x, y} of the gizmo's X/Y/Z arrow, for a mouse drag
-//   window.mrguide.screenOf([x,y,z])     page coordinates of a robot-frame point
+//   window.mrguide.screenOf([x,y,z])     page coordinates of a robot-frame point (clicked, it places the target)
 //   window.mrguide.enterXR() / exitXR()  as the headset button
 //   window.mrguide.dropConnection()      close the socket as a network failure would (reconnects)
 //   window.mrguide.redraw()              draw the view again (it draws on demand)
@@ -58,6 +58,7 @@ const S = {
   status: {},
   answers: 0,
   autoSubmit: false,
+  placedOn: null, // what the last click placed the target on: 'object', 'goal' or 'table'
 };
 
 async function main() {
@@ -125,6 +126,7 @@ async function main() {
     S.request = req;
     S.claimedBy = req.claimed_by;
     if (!same) {
+      S.placedOn = null;
       S.receivedAt = performance.now();
       S.claimSent = false;
       S.submitted = null;
@@ -212,6 +214,23 @@ async function main() {
     p[axis] += delta;
     setTarget(p);
   }
+
+  // Click (or tap) to place: a press and release on the same spot of the view, not on the gizmo, puts the
+  // target on what it shows (scene.js `pick`); a drag still orbits, the gizmo and the keys still adjust.
+  const canvas = view.renderer.domElement;
+  let press = null;
+  canvas.addEventListener('pointerdown', (e) => {
+    press = e.isPrimary && !view.onGizmo() ? { x: e.clientX, y: e.clientY } : null;
+  });
+  canvas.addEventListener('pointerup', (e) => {
+    if (!press || !S.request || Math.hypot(e.clientX - press.x, e.clientY - press.y) > 5) return;
+    press = null;
+    const picked = view.pick(e.clientX, e.clientY, S.request.phase_index, (S.hello && S.hello.task) || {});
+    if (picked) {
+      S.placedOn = picked.on;
+      setTarget(picked.point);
+    }
+  });
 
   view.addEventListener('interact', claim);
   view.addEventListener('target', (e) => {
@@ -391,6 +410,7 @@ async function main() {
       refusals: S.refusals.slice(),
       closed: S.closed,
       answers: S.answers,
+      placedOn: S.placedOn,
       status: { ...S.status },
       workspace: view.workspace,
       robot: { ...view.robotState, joints: view.jointValues(), tcp: view.modelTcp() },

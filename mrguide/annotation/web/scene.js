@@ -142,7 +142,11 @@ export class TwinView extends EventTarget {
     this.goalRing = ring;
     this.goalGhost = new THREE.LineSegments(new THREE.EdgesGeometry(new THREE.BoxGeometry(1, 1, 1)),
       new THREE.LineBasicMaterial({ color: COLORS.goal, transparent: true, opacity: 0.8 }));
-    this.goal.add(ring, this.goalGhost);
+    // what a click on the goal hits: a disc as wide as the ring, drawn fully transparent
+    this.goalDisc = new THREE.Mesh(new THREE.CircleGeometry(0.036, 48),
+      new THREE.MeshBasicMaterial({ transparent: true, opacity: 0, depthWrite: false, side: THREE.DoubleSide }));
+    this.goalDisc.name = 'goal-disc';
+    this.goal.add(ring, this.goalGhost, this.goalDisc);
     this.goal.visible = false;
     this.root.add(this.goal);
 
@@ -275,6 +279,7 @@ export class TwinView extends EventTarget {
     this.object.visible = true;
     this.goal.position.copy(v3(s.goal));
     this.goalRing.position.set(0, 0, -s.goal[2] + 0.001);
+    this.goalDisc.position.set(0, 0, -s.goal[2] + 0.0012);
     this.goal.visible = true;
     this.tcp.position.copy(v3(s.tcp));
     this.tcp.visible = true;
@@ -344,6 +349,35 @@ export class TwinView extends EventTarget {
     for (const o of [this.dropLine, this.footprint]) o.visible = show;
     this.moveLine.visible = show && this.tcp.visible;
     for (const g of [this.dropLine.geometry, this.moveLine.geometry]) g.computeBoundingSphere();
+  }
+
+  /**
+   * Click to place: what the pixel (page coordinates) shows, and the target it stands for in `phase`. On the
+   * object, its centre; on the goal, the goal; on the table, that point; each at the phase's height (task
+   * parameters from the hello): the approach hovers approach_height above the part's top, the grasp and the
+   * release are at the top of a part on the table, lift and transport at lift_height. Null off those surfaces.
+   */
+  pick(clientX, clientY, phase, task = {}) {
+    const rect = this.renderer.domElement.getBoundingClientRect();
+    const ndc = new THREE.Vector2((clientX - rect.left) / rect.width * 2 - 1, -((clientY - rect.top) / rect.height) * 2 + 1);
+    const ray = new THREE.Raycaster();
+    this.scene.updateMatrixWorld(true);
+    ray.setFromCamera(ndc, this.camera);
+    const surfaces = [this.object, this.goalDisc, this.tableGroup[0]].filter((o) => o.visible || o === this.goalDisc);
+    const hit = ray.intersectObjects(surfaces, false)[0];
+    if (!hit) return null;
+    const top = this.objectHeight; // a part standing on the table (z = 0)
+    const z = phase === 0 ? top + (task.approach_height ?? 0.08)
+      : phase === 2 || phase === 3 ? (task.lift_height ?? 0.15) : top;
+    if (hit.object === this.object) return { on: 'object', point: [this.object.position.x, this.object.position.y, z] };
+    if (hit.object === this.goalDisc) return { on: 'goal', point: [this.goal.position.x, this.goal.position.y, z] };
+    const p = this.root.worldToLocal(hit.point.clone());
+    return { on: 'table', point: [p.x, p.y, z] };
+  }
+
+  /** Whether the pointer is on one of the gizmo's handles (a drag there moves the target, it is no click). */
+  onGizmo() {
+    return this.gizmo.enabled && this.gizmo.axis !== null;
   }
 
   // -- camera, rendering, screen positions -----------------------------------------------------
