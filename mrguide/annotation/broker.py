@@ -87,6 +87,7 @@ class BrokerStats:
     timeouts: int = 0
     skipped: int = 0
     claims_expired: int = 0
+    interventions: int = 0  # a person stepped in ("intervene"), counted when the trainer took it up
     refused: collections.Counter = field(default_factory=collections.Counter)  # by code, protocol.REFUSALS
 
 
@@ -106,6 +107,7 @@ class AnnotationBroker:
         self._pending: _Pending | None = None
         self._status: dict[str, Any] = {"type": "status", "waiting": False}
         self._closed = threading.Event()  # an Event, not a flag under the lock: close() may run in a signal handler
+        self._intervene: str | None = None  # the client that asked to step in, until the trainer takes it up
         self.stats = BrokerStats()
         self.on_waiting: Callable[[bool], None] | None = None
 
@@ -172,6 +174,14 @@ class AnnotationBroker:
             reason = "interrupted" if r is None else ("answered" if isinstance(r, LiveAnswer) else r.reason)
             self._deliver([(c, {"type": "cancel", "id": pending.request_id, "reason": reason}) for c in self._clients.values()])
         self._set_waiting(False)
+
+    def take_intervention(self) -> str | None:
+        """The client that asked to step in since the last call (and forget it), or None."""
+        with self._lock:
+            client, self._intervene = self._intervene, None
+            if client is not None:
+                self.stats.interventions += 1
+            return client
 
     def publish_status(self, **fields: Any) -> None:
         """Update the training status and push it to every client."""
@@ -265,6 +275,12 @@ class AnnotationBroker:
             return
         if kind == "ping":
             self._reply(client_id, _ack("ping", None, True, None))
+            return
+        if kind == "intervene":  # step in now: the trainer cuts the agent's episode and asks for a demonstration
+            if self._pending is not None:
+                raise ProtocolError("stale", "a demonstration is already being asked for: answer it")
+            self._intervene = client_id
+            self._reply(client_id, _ack("intervene", None, True, None))
             return
         target = parse_answer(msg, self.workspace) if kind == "answer" else None
         p = self._pending

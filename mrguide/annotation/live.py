@@ -105,6 +105,10 @@ class LiveExpert:
         log.info("annotation request %s ended without an answer: %s", res.request_id, res.reason)
         return None
 
+    def intervention_requested(self) -> bool:
+        """Whether a person asked to step in since the last call (the trainer then demonstrates the episode)."""
+        return self.broker.take_intervention() is not None
+
     def recorded(self, annotation: Annotation) -> None:
         """The trainer has the annotation on disk: acknowledge the answer to the client that gave it."""
         answer = self._unacknowledged.pop(annotation.info.get("request", ""), None)

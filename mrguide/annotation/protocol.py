@@ -18,7 +18,7 @@ from mrguide.task import G_REQUIRED, PHASES
 
 PROTOCOL_VERSION = 1
 MAX_MESSAGE_BYTES = 64 * 1024
-CLIENT_TYPES = ("hello", "claim", "answer", "skip", "ping")
+CLIENT_TYPES = ("hello", "claim", "answer", "skip", "ping", "intervene")
 
 #: What is asked in each phase, in words a person at the page or in the headset understands.
 PROMPTS: tuple[str, ...] = (

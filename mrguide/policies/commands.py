@@ -177,7 +177,8 @@ def _run(tr, stop_after: int | None, bar: tqdm, session: LiveSessionLike | None)
     def status() -> dict:
         return {"step": tr.step, "total_steps": tr.cfg.total_steps, "episode": tr.episode, "lambda": round(tr.lam(), 4),
                 "success_rate": sum(recent) / len(recent) if recent else None, "asked": tr.cache.asked,
-                "reused": tr.cache.reused, "remarks": tr.expert.remarks, "skipped": tr.skipped, "interventions": tr.interventions}
+                "reused": tr.cache.reused, "remarks": tr.expert.remarks, "skipped": tr.skipped, "interventions": tr.interventions,
+                "person_interventions": tr.person_interventions}
 
     def progress(row: dict) -> None:
         recent.append(row["success"])

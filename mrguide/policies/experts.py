@@ -23,7 +23,9 @@ class ExpertSource(Protocol):
     `previous` is the annotation of this waypoint that the arm did not reach (a request to re-mark it).
     None means nobody annotated: the demonstration is dropped. A source that wants to know when an
     annotation it gave is on disk (the live session acknowledges the answer then) has a method
-    `recorded(annotation)`, which the trainer calls after the annotation log's fsync.
+    `recorded(annotation)`, which the trainer calls after the annotation log's fsync. A source through which
+    a person can step in at any time has `intervention_requested() -> bool`, which the trainer polls at every
+    agent step of the intake window.
     """
 
     def annotate(self, obs: np.ndarray, previous: Annotation | None = None) -> Annotation | None: ...

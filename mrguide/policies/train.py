@@ -112,7 +112,7 @@ EVAL_SEED_BASE = 1_000_000  # evaluation env seeds start here (training seeds co
 #: its expert row); the actor's are also empty when no actor step fell in the row (policy_delay > 1).
 UPDATE_FIELDS = ("critic_loss", "actor_loss", "q_mean", "q_max", "bc_loss", "temperature")
 METRIC_FIELDS = ("step", "episode", "kind", "return", "success", "outcome", "length", "triggered", "lambda", "expert_ratio",
-                 "asked", "reused", "remarks", "skipped", "wall_s", *UPDATE_FIELDS)  # new columns go at the end
+                 "asked", "reused", "remarks", "skipped", "wall_s", *UPDATE_FIELDS, "intervened")  # new columns go at the end
 EVAL_FIELDS = ("step", "success_rate", "mean_return")
 
 
@@ -162,7 +162,8 @@ class Trainer:
         self.trigger = ThresholdTrigger(guidance.r_threshold)
         self.step = 0
         self.episode = 0
-        self.interventions = 0
+        self.interventions = 0  # demonstrations asked: threshold-triggered (Eq. 12) and person-triggered
+        self.person_interventions = 0  # of those, a person stepped in ("Intervene" on the page)
         self.skipped = 0  # demonstrations dropped because nobody annotated
         self.stop_requested = threading.Event()  # set (e.g. on Ctrl-C) to stop at the next step
         self._segment: list[tuple] = []  # the demonstration's steps held until their phase completes
@@ -244,20 +245,25 @@ class Trainer:
         guided = self._intake_open()
         start = self.env.snapshot() if guided else None
         self.trigger.reset()
-        ret, length, info, triggered = 0.0, 0, {"outcome": None, "is_success": False}, False
+        ret, length, info, triggered, stepped_in = 0.0, 0, {"outcome": None, "is_success": False}, False, False
+        person = getattr(self.source, "intervention_requested", None) if guided else None
         try:
             while self.step < end and not self.stop_requested.is_set():
                 action = self.agent.act(obs, self.rng)
                 obs, r, term, trunc, info = self._env_step(action, 0, obs)
                 ret += r
                 length += 1
-                if guided and self.trigger.update(r) and not (term or trunc):
-                    triggered = True
-                    break
+                if guided and not (term or trunc):
+                    fired = self.trigger.update(r)
+                    stepped_in = not fired and person is not None and person()  # a person stepped in: as Eq. 12 would
+                    if fired or stepped_in:
+                        triggered = True
+                        break
                 if term or trunc:
                     break
             if triggered:
                 self.interventions += 1
+                self.person_interventions += int(stepped_in)
                 if start is not None:
                     obs = self.env.restore(start)
                 self._expert_episode(obs, end)
@@ -266,7 +272,7 @@ class Trainer:
                 self.env.discard(start)
         self.episode += 1
         success = bool(info["is_success"]) and not triggered
-        return self._row("agent", ret, success, info["outcome"] if not triggered else "guided", length, triggered)
+        return self._row("agent", ret, success, info["outcome"] if not triggered else "guided", length, triggered, stepped_in)
 
     def _expert_episode(self, obs: np.ndarray, end: int) -> None:
         """The expert demonstrates from `obs` (ζ = 1); a waypoint nobody annotates ends the demonstration there.
@@ -306,7 +312,7 @@ class Trainer:
     def wall_s(self) -> float:
         return self._wall_before + time.perf_counter() - self._t0
 
-    def _row(self, kind: str, ret: float, success: bool, outcome, length: int, triggered: bool) -> dict:
+    def _row(self, kind: str, ret: float, success: bool, outcome, length: int, triggered: bool, intervened: bool = False) -> dict:
         """A metrics row; `expert_ratio` and the UPDATE_FIELDS are means over the updates since the last row."""
         ratio = self._ratio_sum / self._ratio_n if self._ratio_n else self.last_ratio
         self._ratio_sum, self._ratio_n = 0.0, 0
@@ -317,7 +323,7 @@ class Trainer:
             "outcome": outcome, "length": length, "triggered": int(triggered), "lambda": round(self.lam(), 4),
             "expert_ratio": round(ratio, 4), "asked": self.cache.asked, "reused": self.cache.reused,
             "remarks": self.expert.remarks, "skipped": self.skipped, "wall_s": round(self.wall_s(), 2),
-            **{k: means.get(k, "") for k in UPDATE_FIELDS},
+            **{k: means.get(k, "") for k in UPDATE_FIELDS}, "intervened": int(intervened),
         }
 
     def _log(self, row: dict) -> None:
@@ -366,7 +372,8 @@ class Trainer:
             "annotator_rng": getattr(self.source, "rng", None) and self.source.rng.bit_generator.state,
             "expert_noise_rng": self.expert.rng.bit_generator.state,
             "counters": {
-                "step": self.step, "episode": self.episode, "interventions": self.interventions, "asked": self.cache.asked,
+                "step": self.step, "episode": self.episode, "interventions": self.interventions,
+                "person_interventions": self.person_interventions, "asked": self.cache.asked,
                 "reused": self.cache.reused, "projected": self.expert.projected, "remarks": self.expert.remarks,
                 "skipped": self.skipped, "last_ratio": self.last_ratio,
                 "next_eval": self._next_eval, "evaluations": self.evaluations, "wall_s": self.wall_s(), "update_s": self.update_s,
@@ -394,6 +401,7 @@ class Trainer:
             self.expert.rng.bit_generator.state = state["expert_noise_rng"]
             c = state["counters"]
             self.step, self.episode, self.interventions = c["step"], c["episode"], c["interventions"]
+            self.person_interventions = c["person_interventions"]
             self.expert.projected, self.last_ratio, self._next_eval = c["projected"], c["last_ratio"], c["next_eval"]
             self.evaluations, self.expert.remarks, self.skipped = c["evaluations"], c["remarks"], c["skipped"]
             self._wall_before, self.update_s = c["wall_s"], c["update_s"]

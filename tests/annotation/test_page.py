@@ -25,7 +25,7 @@ from mrguide.annotation.protocol import PROMPTS
 from mrguide.annotation.server import WEB_DIR, AnnotationServer, ServerError
 from mrguide.robot import load_robot
 from mrguide.task import TaskConfig
-from tests.annotation.conftest import ask_in_thread, make_request
+from tests.annotation.conftest import ask_in_thread, make_request, wait_until
 
 REPO = Path(__file__).resolve().parents[2]
 OBJ = np.array([0.52, -0.06, 0.025])
@@ -404,5 +404,28 @@ def test_click_to_place_on_the_part_the_goal_and_the_table(browser, served, spec
         page.page.mouse.up()
         assert page.state()["target"] == before
         page.skip()
+    finally:
+        page.close()
+
+
+def test_the_person_steps_in_with_the_intervene_button_or_the_i_key(browser, served):
+    """No request outstanding: Intervene (button, or I) asks the trainer to cut the agent's episode; while a
+    request is shown the button is off (answer it instead)."""
+    broker, _ = served
+    page = browser.open(served[1].url)
+    try:
+        page.wait_state("s.connected")
+        assert not page.page.is_disabled("#intervene")
+        page.page.click("#intervene")
+        assert wait_until(lambda: broker._intervene is not None)
+        assert broker.take_intervention() == page.state()["clientId"]
+        assert "Stepping in" in page.text("feedback")
+        page.press("i")
+        assert wait_until(lambda: broker.take_intervention() is not None)
+        fut = ask_in_thread(broker, make_request(1, obj=OBJ, goal=GOAL, quat=QUAT))
+        page.wait_request()
+        assert page.page.is_disabled("#intervene")
+        page.skip()
+        fut.result(10)
     finally:
         page.close()

@@ -282,3 +282,27 @@ def test_the_page_gets_the_configured_arm(broker, tmp_path):
     finally:
         broker.close()
         server.stop()
+
+
+def test_a_person_steps_in_with_intervene_unless_a_demonstration_is_already_asked(served):
+    broker, server = served
+
+    async def scenario():
+        async with aiohttp.ClientSession() as http:
+            c = await connect(http, server)
+            await c.send({"type": "intervene"})
+            first = await c.recv("ack")
+            assert wait_until(lambda: broker._intervene is not None)
+            taken = broker.take_intervention()
+            fut = ask_in_thread(broker, make_request())
+            req = await c.recv("request")
+            await c.send({"type": "intervene"})  # a demonstration is being asked for already
+            second = await c.recv("ack")
+            await c.send({"type": "skip", "id": req["id"]})
+            fut.result(5)
+            return first, taken, second
+
+    first, taken, second = run(scenario())
+    assert first["accepted"] and first["for"] == "intervene" and taken.startswith("c")
+    assert second["accepted"] is False and second["code"] == "stale" and "already being asked" in second["reason"]
+    assert broker.take_intervention() is None and broker.stats.interventions == 1

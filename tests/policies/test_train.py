@@ -243,3 +243,31 @@ def test_a_checkpoint_from_before_a_new_setting_resumes_with_its_default(tmp_pat
     with pytest.raises(CheckpointError, match=r"different configuration \(sections differ: ddpg\)"):
         other.load_checkpoint()
     other.close()
+
+
+def test_a_person_stepping_in_cuts_the_agents_episode_and_it_is_demonstrated(tmp_path):
+    """A source through which a person steps in (`intervention_requested`): at the step it says so, the episode is
+    cut, restored and demonstrated as Eq. 12 would; counted apart, and marked in metrics.csv."""
+    from mrguide.policies.experts import OracleExpert
+
+    tc, dc, gc, ec = load_train_config(None)
+    tc = dataclasses.replace(tc, total_steps=200, learning_starts=64, batch_size=32, eval_every=10_000, checkpoint_every=10_000)
+    gc = dataclasses.replace(gc, r_threshold=-1e4)  # Eq. 12 never fires on its own here
+
+    class PersonStepsIn(OracleExpert):
+        polls = 0
+
+        def intervention_requested(self) -> bool:
+            PersonStepsIn.polls += 1
+            return PersonStepsIn.polls == 5  # at the fifth agent step
+
+    tr = Trainer(tc, dataclasses.replace(dc, hidden=(16, 16)), gc, ec, tmp_path / "i", lambda env: PersonStepsIn(ec.task))
+    try:
+        tr.run(stop_at=200)
+    finally:
+        tr.close()
+    rows = _rows(tmp_path / "i" / "metrics.csv")
+    assert tr.person_interventions == 1 == tr.interventions
+    (cut,) = [r for r in rows if r["intervened"] == "1"]
+    assert cut["kind"] == "agent" and cut["triggered"] == "1" and cut["length"] == "5"
+    assert rows[rows.index(cut) - 1]["kind"] == "expert"  # its demonstration (logged before the agent's row)

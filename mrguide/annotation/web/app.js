@@ -59,6 +59,7 @@ const S = {
   answers: 0,
   autoSubmit: false,
   placedOn: null, // what the last click placed the target on: 'object', 'goal' or 'table'
+  intervened: false, // an intervene was sent since the last request
 };
 
 async function main() {
@@ -127,6 +128,7 @@ async function main() {
     S.claimedBy = req.claimed_by;
     if (!same) {
       S.placedOn = null;
+      S.intervened = false;
       S.receivedAt = performance.now();
       S.claimSent = false;
       S.submitted = null;
@@ -208,6 +210,15 @@ async function main() {
     return conn.send({ type: 'skip', id: S.request.id });
   }
 
+  // Step in at any time: the trainer cuts the agent's running episode and asks for its demonstration.
+  const canIntervene = () => conn.connected && !S.request;
+  function intervene() {
+    if (!canIntervene()) return false;
+    S.intervened = conn.send({ type: 'intervene' });
+    render();
+    return S.intervened;
+  }
+
   function nudge(axis, delta) {
     if (!S.request) return;
     const p = S.target.slice();
@@ -243,6 +254,7 @@ async function main() {
 
   $('submit').addEventListener('click', () => submit());
   $('skip').addEventListener('click', () => skip());
+  $('intervene').addEventListener('click', () => intervene());
   $('vacuum').addEventListener('click', () => setVacuum(!S.vacuum));
   document.addEventListener('keydown', (e) => {
     if (e.target && ['INPUT', 'TEXTAREA', 'SELECT'].includes(e.target.tagName)) return;
@@ -253,6 +265,7 @@ async function main() {
     switch (e.key) {
       case 'Enter': submit(); break;
       case 's': case 'S': skip(); break;
+      case 'i': case 'I': intervene(); break;
       case 'v': case 'V': setVacuum(!S.vacuum); break;
       case 'c': case 'C': view.resetCamera(); break;
       case 'Home': if (S.start) setTarget(S.start); break;
@@ -290,6 +303,7 @@ async function main() {
     if (S.submitted && S.request && S.submitted.id === S.request.id) return 'Sent; waiting for the server…';
     if (S.closed && S.closed.mine) return 'Your answer was accepted.';
     if (a && a.accepted && a.for === 'answer') return 'Your answer was accepted.';
+    if (S.intervened && !S.request) return 'Stepping in: the trainer will ask for this episode\'s demonstration.';
     return '';
   }
 
@@ -338,6 +352,7 @@ async function main() {
     vac.innerHTML = `Vacuum <b>${S.vacuum ? 'ON' : 'OFF'}</b> <kbd>V</kbd>`;
     $('submit').disabled = !canAnswer();
     $('skip').disabled = !canAnswer();
+    $('intervene').disabled = !canIntervene();
     const fb = $('feedback');
     fb.textContent = feedbackText();
     fb.className = `feedback ${S.lastAck && !S.lastAck.accepted ? 'bad' : 'ok'}`;
@@ -350,6 +365,7 @@ async function main() {
     $('st-success').textContent = s.success_rate === undefined ? '–' : `${(100 * s.success_rate).toFixed(0)} %`;
     $('st-asked').textContent = `${fmt(s.asked)} / ${fmt(s.reused)}`;
     $('st-remarks').textContent = fmt(s.remarks);
+    $('st-interventions').textContent = s.interventions === undefined ? '–' : `${s.interventions} (${fmt(s.person_interventions)})`;
     $('st-skipped').textContent = `${fmt(s.skipped)} / ${fmt(s.fallbacks)}`;
     $('st-waiting').textContent = s.waiting ? 'yes — for an annotation' : s.waiting === false ? 'no' : '–';
     $('st-clients').textContent = fmt(s.clients);
