@@ -9,10 +9,14 @@
    playwright, WebGL on SwiftShader), submitted by the page's test hook (`autoSubmit`) as soon as the
    page has shown the request (after 5 untimed warm-up requests); the answer must be the page's start
    target, the TCP.
+3. A person with the mouse alone: pick and place requests answered on the page by a click on the part or
+   the goal and a click on Submit (`AnnotationPage.mark_like_a_person`); the answer must be the part's top
+   centre or the goal. Counts the clicks and the page's interaction time per mark (machine time: what the page
+   itself costs, not a person's thinking).
 
 An answer is lost when a request ends without the answer that was sent for it. Prints a table and, last,
 one JSON line: round_trip_p99_ms (target <= 20), browser_round_trip_p99_ms (<= 150), answers_lost (0),
-bad_messages_survived.
+bad_messages_survived, actions_per_mark (<= 2), page_interaction_ms_per_mark.
 """
 
 from __future__ import annotations
@@ -24,6 +28,7 @@ import multiprocessing
 import platform
 import subprocess
 import sys
+import threading
 import time
 
 import aiohttp
@@ -42,8 +47,9 @@ WARMUP = 5  # browser requests answered before timing starts
 BAD_MESSAGES = (
     "{not json", "[1, 2]", '{"type": "teleport"}', '{"type": "answer", "id": "stale-1", "target": [0.5, 0, 0.1], "vacuum": true}',
     '{"type": "answer", "id": "x", "target": [NaN, 0, 0.1], "vacuum": true}', '{"type": "claim"}', "x" * 70_000,
-    '{"type": "answer", "id": "x", "target": [0.5, 0, -3], "vacuum": true}', '{"type": "hello", "protocol": 9}',
-)
+    '{"type": "answer", "id": "x", "target": [0.5, 0, -3], "vacuum": true}', '{"type": "hello", "protocol": 1, "client": 9}',
+    '{"type": "ping", "x": ' + "[" * 3000 + "]" * 3000 + "}", '{"type": "answer", "id": "x", "target": [1' + "0" * 500 + ', 0, 0.1]}',
+)  # (a hello of another protocol is refused and disconnected: the flooder would stop flooding)
 
 
 def requests(n: int, seed: int = 0) -> list[AnnotationRequest]:
@@ -115,6 +121,30 @@ def browser_round_trips(broker: AnnotationBroker, server: AnnotationServer, n: i
     return times, lost
 
 
+def person_marks(broker: AnnotationBroker, server: AnnotationServer, n: int) -> tuple[list[int], list[float], int]:
+    """(clicks per mark, page interaction s per mark, answers lost) for pick and place requests answered with the
+    mouse alone."""
+    reqs = [r for r in requests(5 * n, seed=3) if r.phase in (1, 4)][:n]
+    actions, seconds, lost = [], [], 0
+    with HeadlessBrowser() as browser:
+        page = browser.open(server.url)
+        page.wait_robot()
+        done: list[dict] = []
+        for req in reqs:
+            ask = threading.Thread(target=lambda r=req: done.append({"req": r, "res": broker.request(r, timeout=30.0)}))
+            ask.start()
+            mark = page.mark_like_a_person(done[-1]["res"].request_id if done else None)
+            ask.join(30)
+            actions.append(mark["actions"])
+            seconds.append(mark["seconds"])
+            res = done[-1]["res"]
+            top = req.object_position if req.phase == 1 else req.goal
+            expected = np.array([top[0], top[1], TaskConfig().object_height])
+            lost += int(not (isinstance(res, LiveAnswer) and np.allclose(res.target, expected, atol=2e-4)))
+        page.close()
+    return actions, seconds, lost
+
+
 def pct(x: list[float], q: float) -> float:
     return float(np.percentile(np.asarray(x) * 1e3, q))
 
@@ -123,6 +153,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--requests", type=int, default=500)
     ap.add_argument("--browser-requests", type=int, default=100)
+    ap.add_argument("--person-marks", type=int, default=20)
     args = ap.parse_args()
     spec = load_robot()
     broker = AnnotationBroker(spec.workspace, hello_fields(spec, TaskConfig()))
@@ -131,6 +162,7 @@ def main() -> None:
     try:
         bot_t, bot_lost, bad = bot_round_trips(broker, server, args.requests)
         browser_t, browser_lost = browser_round_trips(broker, server, args.browser_requests)
+        person_actions, person_s, person_lost = person_marks(broker, server, args.person_marks)
     finally:
         broker.close()
         server.stop()
@@ -139,11 +171,14 @@ def main() -> None:
     for name, t, lost in (("bot", bot_t, bot_lost), ("browser", browser_t, browser_lost)):
         print(f"{name:<10} {len(t):>8} {pct(t, 50):>8.2f} {pct(t, 99):>8.2f} {pct(t, 100):>8.2f} {lost:>5}")
     print(f"bad messages refused by the broker during the bot run, none of which stopped an answer: {bad}")
+    print(f"a person with the mouse: {len(person_actions)} marks, median {np.median(person_actions):.0f} clicks and "
+          f"{1e3 * np.median(person_s):.0f} ms of page interaction per mark, {person_lost} lost")
     print(json.dumps({
         "round_trip_p50_ms": round(pct(bot_t, 50), 3), "round_trip_p99_ms": round(pct(bot_t, 99), 3),
         "browser_round_trip_p50_ms": round(pct(browser_t, 50), 3), "browser_round_trip_p99_ms": round(pct(browser_t, 99), 3),
-        "answers_lost": bot_lost + browser_lost, "bad_messages_survived": bad, "requests": len(bot_t),
-        "browser_requests": len(browser_t),
+        "answers_lost": bot_lost + browser_lost + person_lost, "bad_messages_survived": bad, "requests": len(bot_t),
+        "browser_requests": len(browser_t), "actions_per_mark": float(np.median(person_actions)),
+        "page_interaction_ms_per_mark": round(1e3 * float(np.median(person_s)), 1), "person_marks": len(person_actions),
     }))
 
 

@@ -213,6 +213,25 @@ class AnnotationPage:
         mouse.up()
         return self.state()["target"]
 
+    def mark_like_a_person(self, previous_id: str | None = None, timeout_s: float | None = None) -> dict[str, Any]:
+        """Answer the next request with the mouse alone, as a person would: look at what it asks, click the
+        part (a pick, or any phase up to the lift) or the goal (a place, transport), then click Submit. Returns
+        {"id", "phase", "target", "actions" (clicks), "seconds" (from the request shown to the submit)}."""
+        self.wait_js("(id) => { const s = window.mrguide.state(); return s.requestId && s.requestId !== id && s.target; }",
+                     previous_id, timeout_s)
+        t0 = time.monotonic()
+        req = self.page.evaluate("() => ({id: window.mrguide.state().requestId, phase: window.mrguide.state().phase})")
+        shown = self.page.evaluate("() => window.mrguide.shown()")
+        on_goal = shown["phase_index"] >= 3
+        spot = list(shown["goal"]) if on_goal else list(shown["object"])
+        spot[2] = 0.001 if on_goal else spot[2] + 0.5 * shown["object_height"]  # the goal ring on the table, the part's top
+        px = self.page.evaluate("(p) => window.mrguide.screenOf(p)", spot)
+        self.page.mouse.click(px["x"], px["y"])
+        self.wait_state(f"s.placedOn === '{'goal' if on_goal else 'object'}'")
+        self.click_submit()
+        target = self.wait_state(f"s.submitted && s.submitted.id === '{req['id']}'")["submitted"]["target"]
+        return {**req, "target": target, "actions": 2, "seconds": time.monotonic() - t0}
+
     def enter_xr(self) -> dict[str, Any]:
         """Click the headset button and wait until the session presents."""
         self.page.click("#xr-button", timeout=self.timeout_s * 1000)

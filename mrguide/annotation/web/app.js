@@ -13,11 +13,13 @@
 //   window.mrguide.setTarget([x,y,z])    move the target (robot frame, m; clamped, rounded to 0.1 mm)
 //   window.mrguide.setVacuum(bool)       set the vacuum command
 //   window.mrguide.submit() / skip()     as the buttons (false when there is nothing to answer)
+//   window.mrguide.intervene()           as the Intervene button (false while a request is shown)
 //   window.mrguide.gizmoHandle(axis)     page coordinates {x, y} of the gizmo's X/Y/Z arrow, for a mouse drag
 //   window.mrguide.screenOf([x,y,z])     page coordinates of a robot-frame point (clicked, it places the target)
 //   window.mrguide.enterXR() / exitXR()  as the headset button
 //   window.mrguide.dropConnection()      close the socket as a network failure would (reconnects)
 //   window.mrguide.redraw()              draw the view again (it draws on demand)
+//   window.mrguide.shown()               {phase_index, object, goal, object_height} of the outstanding request
 //   window.mrguide.autoSubmit(on)        answer every new request as soon as it is shown, with the start
 //                                        target and the suggested vacuum (benchmarks: no polling delay)
 //   window.mrguide.xrDevice              IWER's XRDevice when ?xr= is given (tests drive it)
@@ -437,6 +439,10 @@ async function main() {
     setVacuum: (on) => setVacuum(on),
     submit: () => submit(),
     skip: () => skip(),
+    intervene: () => intervene(),
+    // what the outstanding request shows: the part, the goal, the phase (for a scripted person)
+    shown: () => (S.request ? { phase_index: S.request.phase_index, object: S.request.state.object.position,
+      goal: S.request.state.goal, object_height: view.objectHeight } : null),
     gizmoHandle: (axis) => view.gizmoHandle(axis),
     screenOf: (p) => view.screenOf(p),
     viewAxes: () => view.viewAxes(),
