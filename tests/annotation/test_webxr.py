@@ -19,7 +19,7 @@ from mrguide.annotation.live import hello_fields
 from mrguide.annotation.server import WEB_DIR, AnnotationServer
 from mrguide.robot import load_robot
 from mrguide.task import TaskConfig
-from tests.annotation.conftest import ask_in_thread, make_request
+from tests.annotation.conftest import ask_in_thread, make_request, wait_until
 
 OBJ = np.array([0.52, -0.06, 0.025])
 GOAL = np.array([0.46, 0.22, 0.025])
@@ -59,6 +59,7 @@ def serve(spec, registration=None):
 RIGHT_TRIGGER = "(v) => window.mrguide.xrDevice.controllers.right.updateButtonValue('trigger', v)"
 LEFT_TRIGGER = "(v) => window.mrguide.xrDevice.controllers.left.updateButtonValue('trigger', v)"
 RIGHT_PINCH = "(v) => window.mrguide.xrDevice.hands.right.updatePinchValue(v)"
+RIGHT_SQUEEZE = "(v) => window.mrguide.xrDevice.controllers.right.updateButtonValue('squeeze', v)"
 
 
 def press(page, button: str) -> None:
@@ -194,6 +195,47 @@ def test_quest3_without_ar_falls_back_to_vr_and_places_in_front(browser, spec):
         page.page.evaluate("() => window.mrguide.exitXR()")
         s = page.wait_state("!s.xr.presenting")
         np.testing.assert_allclose(placement(s), [[1, 0, 0, 0], [0, 0, 1, 0], [0, -1, 0, 0], [0, 0, 0, 1]], atol=1e-9)
+    finally:
+        page.close()
+        broker.close()
+        server.stop()
+
+
+def squeeze(page) -> None:
+    """A full squeeze of the right controller's grip: press, release, until the page counted it."""
+    n = page.state()["xr"]["squeezes"]
+    page.page.evaluate(RIGHT_SQUEEZE, 1)
+    page.page.evaluate(RIGHT_SQUEEZE, 0)
+    page.wait_state(f"s.xr.squeezes > {n}")
+
+
+def test_squeeze_steps_in_without_a_request_and_toggles_the_vacuum_with_one(browser, spec):
+    """In the headset the grip does what the Intervene button does while no request is open, and
+    toggles the vacuum of the answer while one is."""
+    broker, server = serve(spec)
+    page = browser.open(server.url + "&xr=quest3-vr")
+    try:
+        page.wait_state("s.connected")
+        page.enter_xr()
+        page.wait_state("s.xr.placed")
+        squeeze(page)
+        assert wait_until(lambda: broker._intervene is not None, timeout=15)
+        assert broker.take_intervention() == page.state()["clientId"]
+
+        fut = ask_in_thread(broker, make_request(1, obj=OBJ, goal=GOAL))  # grasp: vacuum suggested on
+        s = page.wait_request()
+        assert s["vacuum"] is True
+        squeeze(page)
+        s = page.wait_state("s.vacuum === false")
+        M = placement(s)
+        p_robot = np.array([0.50, -0.05, 0.10])
+        w = transform(M, p_robot)
+        page.page.evaluate(f"() => window.mrguide.xrDevice.controllers.right.position.set({w[0]}, {w[1]}, {w[2]})")
+        page.wait_state(f"s.xr.frames > {s['xr']['frames'] + 2}")
+        press(page, RIGHT_TRIGGER)
+        answer = fut.result(timeout=15)
+        assert isinstance(answer, LiveAnswer) and answer.vacuum is False  # toggled, not the suggestion
+        assert broker.take_intervention() is None  # a squeeze during a request does not step in
     finally:
         page.close()
         broker.close()

@@ -77,14 +77,14 @@ async function main() {
   const view = new TwinView($('viewport'));
   const xr = new XRView(view, {
     onSelectPoint: (p) => { setTarget(p, true); submit('headset'); },
-    onToggleVacuum: () => setVacuum(!S.vacuum, true),
+    onSqueeze: () => (S.request ? setVacuum(!S.vacuum, true) : intervene()),
     onPresenting: (on) => {
       conn.send(helloMessage());
       $('xr-button').textContent = on ? 'Exit headset' : xrButtonLabel();
       render();
     },
     label: () => [
-      S.request ? `${phaseLabel(S.request)} · vacuum ${S.vacuum ? 'ON' : 'OFF'}` : 'No request',
+      S.request ? `${phaseLabel(S.request)} · vacuum ${S.vacuum ? 'ON' : 'OFF'} (squeeze)` : 'No request · squeeze to step in',
       S.request ? S.request.prompt : (S.closed ? `Request closed: ${CANCEL_TEXT[S.closed.reason] || S.closed.reason}` : 'Waiting for the trainer to ask.'),
       `${feedbackText()}   step ${S.status.step ?? '–'}`,
     ],

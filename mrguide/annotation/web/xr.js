@@ -11,7 +11,8 @@
 //   needed: the twin's base sits on the real robot's base.
 // - In the session a controller or hand `select` marks the waypoint at the controller's tip (the
 //   pinch point for a hand), converted to the robot frame, clamped into the workspace box, and
-//   submits it with the current vacuum setting; `squeeze` toggles the vacuum.
+//   submits it with the current vacuum setting. `squeeze` toggles the vacuum while a request is open;
+//   with none open it steps in (as the page's Intervene button).
 
 import * as THREE from 'three';
 import { DESKTOP_ROOT, COLORS } from './scene.js';
@@ -22,7 +23,7 @@ const DEFAULT_DROP = 0.7; // m below the eyes (about a table)
 export class XRView {
   /**
    * @param view TwinView
-   * @param hooks {onSelectPoint(robotPoint) -> void, onToggleVacuum() -> void, onPresenting(bool) -> void,
+   * @param hooks {onSelectPoint(robotPoint) -> void, onSqueeze() -> void, onPresenting(bool) -> void,
    *               label() -> string[] (lines for the in-headset panel)}
    */
   constructor(view, hooks) {
@@ -34,7 +35,7 @@ export class XRView {
       available: false, arSupported: false, vrSupported: false, message: 'checking for WebXR...',
       mode: null, blendMode: null, presenting: false, transparent: false, referenceSpace: null,
       placed: false, placementSource: null, hitTest: false, reticleVisible: false,
-      selects: 0, lastSelect: null, error: null, frames: 0,
+      selects: 0, squeezes: 0, lastSelect: null, error: null, frames: 0,
     };
     this._buildProps();
   }
@@ -118,7 +119,7 @@ export class XRView {
     this.panel.visible = true;
 
     session.addEventListener('select', (e) => this._onSelect(e));
-    session.addEventListener('squeeze', () => this.hooks.onToggleVacuum());
+    session.addEventListener('squeeze', () => { this.info.squeezes += 1; this.hooks.onSqueeze(); });
     session.addEventListener('end', () => this._onEnd());
 
     if (this.registration) {
