@@ -240,3 +240,42 @@ def test_squeeze_steps_in_without_a_request_and_toggles_the_vacuum_with_one(brow
         page.close()
         broker.close()
         server.stop()
+
+
+def aim(page, controller: str, origin_world: np.ndarray, at_world: np.ndarray) -> None:
+    """Hold an IWER controller at `origin_world`, its target ray (-z) pointing at `at_world`."""
+    a = np.array([0.0, 0.0, -1.0])
+    d = (at_world - origin_world) / np.linalg.norm(at_world - origin_world)
+    q = np.append(np.cross(a, d), 1.0 + a @ d)  # the shortest rotation taking -z onto d (x, y, z, w)
+    q /= np.linalg.norm(q)
+    o = origin_world
+    page.page.evaluate(f"""() => {{ const c = window.mrguide.xrDevice.controllers.{controller};
+        c.position.set({o[0]}, {o[1]}, {o[2]}); c.quaternion.set({q[0]}, {q[1]}, {q[2]}, {q[3]}); }}""")
+
+
+def test_a_controller_outside_the_workspace_points_and_its_ray_places_the_target(browser, spec):
+    """Held outside the workspace box, a controller's select places the target where its ray meets the part
+    (snapped to the centre, at the phase's height), as a desktop click does; no clamped tip point."""
+    task = TaskConfig()
+    broker, server = serve(spec)
+    fut = ask_in_thread(broker, make_request(1, obj=OBJ, goal=GOAL))  # grasp
+    page = browser.open(server.url + "&xr=quest3-vr")
+    try:
+        page.wait_request()
+        page.enter_xr()
+        s = page.wait_state("s.xr.placed")
+        M = placement(s)
+        origin = np.array([0.95, -0.06, 0.60])  # beyond the workspace box, above and in front of the part
+        assert not spec.workspace.contains(origin)
+        top = np.array([OBJ[0] + 0.004, OBJ[1] - 0.006, task.object_height])  # a little off the top face's centre
+        aim(page, "right", transform(M, origin), transform(M, top))
+        page.wait_state(f"s.xr.frames > {s['xr']['frames'] + 2}")
+        press(page, RIGHT_TRIGGER)
+        answer = fut.result(timeout=15)
+        assert isinstance(answer, LiveAnswer) and answer.client == "headset"
+        np.testing.assert_allclose(answer.target, [OBJ[0], OBJ[1], task.object_height], atol=1.5e-4)
+        assert page.state()["xr"]["lastSelect"]["on"] == "object"
+    finally:
+        page.close()
+        broker.close()
+        server.stop()

@@ -76,7 +76,8 @@ async function main() {
 
   const view = new TwinView($('viewport'));
   const xr = new XRView(view, {
-    onSelectPoint: (p) => { setTarget(p, true); submit('headset'); },
+    onSelectPoint: (p, on) => { S.placedOn = on; setTarget(p, true); submit('headset'); },
+    pickRay: (ray) => (S.request ? view.pickRay(ray, S.request.phase_index, (S.hello && S.hello.task) || {}) : null),
     onSqueeze: () => (S.request ? setVacuum(!S.vacuum, true) : intervene()),
     onPresenting: (on) => {
       conn.send(helloMessage());

@@ -352,10 +352,8 @@ export class TwinView extends EventTarget {
   }
 
   /**
-   * Click to place: what the pixel (page coordinates) shows, and the target it stands for in `phase`. On the
-   * object, its centre; on the goal, the goal; on the table, that point; each at the phase's height (task
-   * parameters from the hello): the approach hovers approach_height above the part's top, the grasp and the
-   * release are at the top of a part on the table, lift and transport at lift_height. Null off those surfaces.
+   * Click to place: what the pixel (page coordinates) shows, and the target it stands for in `phase`
+   * (see `pickRay`). Null off those surfaces.
    */
   pick(clientX, clientY, phase, task = {}) {
     const rect = this.renderer.domElement.getBoundingClientRect();
@@ -363,6 +361,18 @@ export class TwinView extends EventTarget {
     const ray = new THREE.Raycaster();
     this.scene.updateMatrixWorld(true);
     ray.setFromCamera(ndc, this.camera);
+    return this.pickRay(ray, phase, task);
+  }
+
+  /**
+   * What a ray (world frame: the desktop camera's, or a headset controller's) meets first, and the target it
+   * stands for in `phase`. On the object, its centre; on the goal, the goal; on the table, that point; each
+   * at the phase's height (task parameters from the hello): the approach hovers approach_height above the
+   * part's top, the grasp and the release are at the top of a part on the table, lift and transport at
+   * lift_height. Null off those surfaces.
+   */
+  pickRay(ray, phase, task = {}) {
+    this.scene.updateMatrixWorld(true);
     const surfaces = [this.object, this.goalDisc, this.tableGroup[0]].filter((o) => o.visible || o === this.goalDisc);
     const hit = ray.intersectObjects(surfaces, false)[0];
     if (!hit) return null;

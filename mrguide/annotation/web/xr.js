@@ -11,8 +11,10 @@
 //   needed: the twin's base sits on the real robot's base.
 // - In the session a controller or hand `select` marks the waypoint at the controller's tip (the
 //   pinch point for a hand), converted to the robot frame, clamped into the workspace box, and
-//   submits it with the current vacuum setting. `squeeze` toggles the vacuum while a request is open;
-//   with none open it steps in (as the page's Intervene button).
+//   submits it with the current vacuum setting. A controller held outside the workspace points instead:
+//   where its ray meets the part, the goal or the table places the target as a desktop click does.
+//   `squeeze` toggles the vacuum while a request is open; with none open it steps in (as the page's
+//   Intervene button).
 
 import * as THREE from 'three';
 import { DESKTOP_ROOT, COLORS } from './scene.js';
@@ -23,7 +25,7 @@ const DEFAULT_DROP = 0.7; // m below the eyes (about a table)
 export class XRView {
   /**
    * @param view TwinView
-   * @param hooks {onSelectPoint(robotPoint) -> void, onSqueeze() -> void, onPresenting(bool) -> void,
+   * @param hooks {onSelectPoint(robotPoint, on) -> void, pickRay(raycaster) -> {point, on}|null, onSqueeze() -> void, onPresenting(bool) -> void,
    *               label() -> string[] (lines for the in-headset panel)}
    */
   constructor(view, hooks) {
@@ -255,12 +257,21 @@ export class XRView {
       return; // the first select places the robot; the next ones mark
     }
     const ref = this.view.renderer.xr.getReferenceSpace();
-    const world = pointOf(event.frame, event.inputSource, ref);
+    const source = event.inputSource;
+    const world = pointOf(event.frame, source, ref);
     if (!world) return;
     const local = this.view.root.worldToLocal(world.clone());
-    const robot = [local.x, local.y, local.z];
-    this.info.lastSelect = { world: [world.x, world.y, world.z], robot, hand: !!event.inputSource.hand };
-    this.hooks.onSelectPoint(robot);
+    let robot = [local.x, local.y, local.z];
+    let on = null;
+    // A controller held outside the workspace points: its ray places the target as a desktop click does.
+    const { lo, hi } = this.view.workspace;
+    if (!source.hand && robot.some((v, i) => v < lo[i] || v > hi[i])) {
+      const ray = rayOf(event.frame, source, ref);
+      const picked = ray && this.hooks.pickRay(ray);
+      if (picked) ({ point: robot, on } = picked);
+    }
+    this.info.lastSelect = { world: [world.x, world.y, world.z], robot, hand: !!source.hand, on };
+    this.hooks.onSelectPoint(robot, on);
   }
 
   _onEnd() {
@@ -303,6 +314,16 @@ function pointOf(frame, source, ref) {
   if (!pose) return null;
   const p = pose.transform.position;
   return new THREE.Vector3(p.x, p.y, p.z);
+}
+
+/** A controller's target ray (its pose's -z axis) as a raycaster in the reference space. */
+function rayOf(frame, source, ref) {
+  const pose = frame && frame.getPose(source.targetRaySpace, ref);
+  if (!pose) return null;
+  const m = new THREE.Matrix4().fromArray(pose.transform.matrix);
+  const origin = new THREE.Vector3().setFromMatrixPosition(m);
+  const dir = new THREE.Vector3(0, 0, -1).transformDirection(m);
+  return new THREE.Raycaster(origin, dir);
 }
 
 function wrap(ctx, text, x, y, width, lineHeight, maxLines) {
