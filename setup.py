@@ -36,8 +36,11 @@ class BuildWithPage(build_py):
         if not (WEB / "node_modules").is_dir():
             npm = shutil.which("npm")
             if npm is None:
-                print("warning: npm not found: the wheel has no annotation page scripts (mrguide train --expert live "
-                      "will say so); install Node.js and build again for a wheel with the page", file=sys.stderr)
+                print(
+                    "warning: npm not found: the wheel has no annotation page scripts (mrguide train --expert live "
+                    "will say so); install Node.js and build again for a wheel with the page",
+                    file=sys.stderr,
+                )
                 return
             subprocess.run([npm, "ci", "--no-audit", "--no-fund", "--loglevel=error"], cwd=WEB, check=True)
         target = Path(self.build_lib) / "mrguide" / "annotation" / "web"

@@ -45,10 +45,17 @@ from mrguide.task import TaskConfig, observation, progress
 
 WARMUP = 5  # browser requests answered before timing starts
 BAD_MESSAGES = (
-    "{not json", "[1, 2]", '{"type": "teleport"}', '{"type": "answer", "id": "stale-1", "target": [0.5, 0, 0.1], "vacuum": true}',
-    '{"type": "answer", "id": "x", "target": [NaN, 0, 0.1], "vacuum": true}', '{"type": "claim"}', "x" * 70_000,
-    '{"type": "answer", "id": "x", "target": [0.5, 0, -3], "vacuum": true}', '{"type": "hello", "protocol": 1, "client": 9}',
-    '{"type": "ping", "x": ' + "[" * 3000 + "]" * 3000 + "}", '{"type": "answer", "id": "x", "target": [1' + "0" * 500 + ', 0, 0.1]}',
+    "{not json",
+    "[1, 2]",
+    '{"type": "teleport"}',
+    '{"type": "answer", "id": "stale-1", "target": [0.5, 0, 0.1], "vacuum": true}',
+    '{"type": "answer", "id": "x", "target": [NaN, 0, 0.1], "vacuum": true}',
+    '{"type": "claim"}',
+    "x" * 70_000,
+    '{"type": "answer", "id": "x", "target": [0.5, 0, -3], "vacuum": true}',
+    '{"type": "hello", "protocol": 1, "client": 9}',
+    '{"type": "ping", "x": ' + "[" * 3000 + "]" * 3000 + "}",
+    '{"type": "answer", "id": "x", "target": [1' + "0" * 500 + ", 0, 0.1]}",
 )  # (a hello of another protocol is refused and disconnected: the flooder would stop flooding)
 
 
@@ -82,8 +89,11 @@ def flood(url: str, stop) -> None:
 
 def bot_round_trips(broker: AnnotationBroker, server: AnnotationServer, n: int) -> tuple[list[float], int, int]:
     """(round trips in s, answers lost, bad messages refused meanwhile); bot and flooder are processes of their own."""
-    bot = subprocess.Popen([sys.executable, "-m", "mrguide.cli", "annotate", "bot", "--url", server.url, "--count", str(n)],
-                           stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    bot = subprocess.Popen(
+        [sys.executable, "-m", "mrguide.cli", "annotate", "bot", "--url", server.url, "--count", str(n)],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     ctx = multiprocessing.get_context("spawn")
     stop = ctx.Event()
     flooder = ctx.Process(target=flood, args=(server.ws_url, stop), daemon=True)
@@ -171,15 +181,27 @@ def main() -> None:
     for name, t, lost in (("bot", bot_t, bot_lost), ("browser", browser_t, browser_lost)):
         print(f"{name:<10} {len(t):>8} {pct(t, 50):>8.2f} {pct(t, 99):>8.2f} {pct(t, 100):>8.2f} {lost:>5}")
     print(f"bad messages refused by the broker during the bot run, none of which stopped an answer: {bad}")
-    print(f"a person with the mouse: {len(person_actions)} marks, median {np.median(person_actions):.0f} clicks and "
-          f"{1e3 * np.median(person_s):.0f} ms of page interaction per mark, {person_lost} lost")
-    print(json.dumps({
-        "round_trip_p50_ms": round(pct(bot_t, 50), 3), "round_trip_p99_ms": round(pct(bot_t, 99), 3),
-        "browser_round_trip_p50_ms": round(pct(browser_t, 50), 3), "browser_round_trip_p99_ms": round(pct(browser_t, 99), 3),
-        "answers_lost": bot_lost + browser_lost + person_lost, "bad_messages_survived": bad, "requests": len(bot_t),
-        "browser_requests": len(browser_t), "actions_per_mark": float(np.median(person_actions)),
-        "page_interaction_ms_per_mark": round(1e3 * float(np.median(person_s)), 1), "person_marks": len(person_actions),
-    }))
+    print(
+        f"a person with the mouse: {len(person_actions)} marks, median {np.median(person_actions):.0f} clicks and "
+        f"{1e3 * np.median(person_s):.0f} ms of page interaction per mark, {person_lost} lost"
+    )
+    print(
+        json.dumps(
+            {
+                "round_trip_p50_ms": round(pct(bot_t, 50), 3),
+                "round_trip_p99_ms": round(pct(bot_t, 99), 3),
+                "browser_round_trip_p50_ms": round(pct(browser_t, 50), 3),
+                "browser_round_trip_p99_ms": round(pct(browser_t, 99), 3),
+                "answers_lost": bot_lost + browser_lost + person_lost,
+                "bad_messages_survived": bad,
+                "requests": len(bot_t),
+                "browser_requests": len(browser_t),
+                "actions_per_mark": float(np.median(person_actions)),
+                "page_interaction_ms_per_mark": round(1e3 * float(np.median(person_s)), 1),
+                "person_marks": len(person_actions),
+            }
+        )
+    )
 
 
 if __name__ == "__main__":

@@ -29,8 +29,15 @@ from mrguide.calibration.detection import MarkerDetector
 from mrguide.calibration.pose import BoardPoseEstimator, estimate_marker_pose
 from mrguide.calibration.se3 import apply, invert, rotation_angle_deg
 from mrguide.twin.camera import Camera, Intrinsics, look_at
-from mrguide.twin.markers import (HOLOLENS2_PV, TwinCalibrationConfig, TwinHmd, add_board, add_marker_plane,
-                                  calibrate_twin_hmd, render)
+from mrguide.twin.markers import (
+    HOLOLENS2_PV,
+    TwinCalibrationConfig,
+    TwinHmd,
+    add_board,
+    add_marker_plane,
+    calibrate_twin_hmd,
+    render,
+)
 
 TARGET = np.array([0.5, 0.1, 0.0])
 
@@ -69,8 +76,11 @@ def sweep_marker(size: float, intrinsics: Intrinsics, distances, angles, azimuth
                     pos.append(np.linalg.norm(pose.T_cam_target[:3, 3] - truth[:3, 3]) * 1e3)
                     rot.append(rotation_angle_deg(pose.T_cam_target[:3, :3], truth[:3, :3]))
                 missed = int(np.sum(np.isnan(pos)))
-                out[(d, a)] = (float(np.nanmax(pos)), float(np.nanmax(rot)), missed) if missed < len(pos) \
+                out[(d, a)] = (
+                    (float(np.nanmax(pos)), float(np.nanmax(rot)), missed)
+                    if missed < len(pos)
                     else (np.nan, np.nan, missed)
+                )
         return out
     finally:
         pb.disconnect(client)
@@ -108,7 +118,9 @@ def bench_registration() -> dict:
     twin = TwinCalibrationConfig()
     client = pb.connect(pb.DIRECT)
     try:
-        hmd = TwinHmd(client, twin.T_base_hmd, look_at(np.array(twin.views[0]), np.array(twin.look_at), np.array([0, 0, 1.0])))
+        hmd = TwinHmd(
+            client, twin.T_base_hmd, look_at(np.array(twin.views[0]), np.array(twin.look_at), np.array([0, 0, 1.0]))
+        )
         run = calibrate_twin_hmd(hmd, CalibrationConfig(), twin.views, twin.look_at)
     finally:
         pb.disconnect(client)
@@ -136,8 +148,7 @@ def print_table(title: str, res: dict, distances, angles) -> None:
 def headline(res: dict, lo: float = 0.5, hi: float = 1.0) -> tuple[float, float, int]:
     """Max position (mm) and rotation (deg) errors over the detected views at lo..hi m, and the misses."""
     cells = [v for (d, _), v in res.items() if lo <= d <= hi]
-    return (float(np.nanmax([c[0] for c in cells])), float(np.nanmax([c[1] for c in cells])),
-            sum(c[2] for c in cells))
+    return (float(np.nanmax([c[0] for c in cells])), float(np.nanmax([c[1] for c in cells])), sum(c[2] for c in cells))
 
 
 def plot(path: Path, results: dict, distances, angles) -> None:
@@ -178,9 +189,11 @@ def main() -> None:
     for name, res in results.items():
         print_table(name, res, distances, angles)
     reg = bench_registration()
-    print(f"\ntwin HMD registration (board, 4 views): rms {reg['registration_rms_mm']:.2f} mm, "
-          f"max {reg['registration_max_mm']:.2f} mm; true error at the workspace centre "
-          f"{reg['registration_true_error_mm']:.2f} mm, rotation {reg['registration_true_rotation_deg']:.3f} deg")
+    print(
+        f"\ntwin HMD registration (board, 4 views): rms {reg['registration_rms_mm']:.2f} mm, "
+        f"max {reg['registration_max_mm']:.2f} mm; true error at the workspace centre "
+        f"{reg['registration_true_error_mm']:.2f} mm, rotation {reg['registration_true_rotation_deg']:.3f} deg"
+    )
     plot_path = args.out / "calibration_pose_error.png"
     plot(plot_path, results, distances, angles)
     names = list(results)
@@ -189,8 +202,10 @@ def main() -> None:
     low_p, low_r, low_miss = headline(results[names[2]])
     board_p, board_r, _ = headline(results[names[3]])
     detect_ms = float(np.median(detect_times) * 1e3)
-    print(f"\ndetection (incl. edge refinement) per 1280x720 image: median {detect_ms:.1f} ms; plot: {plot_path}; "
-          f"{time.perf_counter() - t0:.0f} s on {platform.processor() or platform.machine()} ({os.cpu_count()} cores)")
+    print(
+        f"\ndetection (incl. edge refinement) per 1280x720 image: median {detect_ms:.1f} ms; plot: {plot_path}; "
+        f"{time.perf_counter() - t0:.0f} s on {platform.processor() or platform.machine()} ({os.cpu_count()} cores)"
+    )
     figures = {
         "max_position_error_mm": cal_p,
         "max_rotation_error_deg": cal_r,

@@ -62,29 +62,47 @@ def main() -> None:
     T = look_at(np.array(EYE), np.array(TARGET), np.array([0.0, 0.0, 1.0]))
     images, truths = render_frames(camera, T)
     with tempfile.TemporaryDirectory() as d:
-        save_calibration(CalibrationRecord(T, "DICT_4X4_50", 0.04, "board", 0.0, 0.0, 1, 80, camera=camera.to_dict()),
-                         Path(d) / "cal.json")
+        save_calibration(
+            CalibrationRecord(T, "DICT_4X4_50", 0.04, "board", 0.0, 0.0, 1, 80, camera=camera.to_dict()),
+            Path(d) / "cal.json",
+        )
         pipeline = load_marker_pipeline(CameraSourceConfig(calibration="cal.json"), Path(d))
     from mrguide.calibration.hmd import HmdFrame
 
-    errors_mm = [np.linalg.norm(pipeline.observe(HmdFrame(im, np.eye(4))).position - t) * 1e3 for im, t in zip(images, truths)]
+    errors_mm = [
+        np.linalg.norm(pipeline.observe(HmdFrame(im, np.eye(4))).position - t) * 1e3 for im, t in zip(images, truths)
+    ]
     os.sched_setaffinity(0, {args.core})  # this thread, and the capture thread it starts
     cv2.setNumThreads(1)
     live, dropped = run(images, pipeline, 30.0, args.seconds)
     fast, _ = run(images, pipeline, 0.0, args.seconds / 2)
-    print(f"machine: {platform.machine()}, Python {platform.python_version()}, OpenCV {cv2.__version__}, "
-          f"{os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f}; pinned to core {args.core}")
+    print(
+        f"machine: {platform.machine()}, Python {platform.python_version()}, OpenCV {cv2.__version__}, "
+        f"{os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f}; pinned to core {args.core}"
+    )
     print(f"position error over the {len(images)} rendered frames: max {max(errors_mm):.2f} mm")
     print(f"{'run':<22}{'frames':>8}{'poses/s':>9}{'detected':>10}{'p50 ms':>8}{'p95 ms':>8}")
     for name, s in (("camera 30 fps", live), ("as fast as possible", fast)):
-        print(f"{name:<22}{s.frames:>8}{s.poses_per_s:>9.1f}{s.detection_rate:>10.0%}{s.latency_median_ms:>8.1f}"
-              f"{s.latency_p95_ms:>8.1f}")
+        print(
+            f"{name:<22}{s.frames:>8}{s.poses_per_s:>9.1f}{s.detection_rate:>10.0%}{s.latency_median_ms:>8.1f}"
+            f"{s.latency_p95_ms:>8.1f}"
+        )
     print(f"camera 30 fps: {dropped} frames dropped while the pipeline was busy")
-    print(json.dumps({"poses_per_s": round(live.poses_per_s, 2), "latency_median_ms": round(live.latency_median_ms, 1),
-                      "latency_p95_ms": round(live.latency_p95_ms, 1), "detection_rate": round(live.detection_rate, 3),
-                      "max_poses_per_s": round(fast.poses_per_s, 2), "max_rate_latency_median_ms":
-                      round(fast.latency_median_ms, 1), "max_position_error_mm": round(max(errors_mm), 2),
-                      "resolution": f"{camera.width}x{camera.height}", "load_average": round(os.getloadavg()[0], 1)}))
+    print(
+        json.dumps(
+            {
+                "poses_per_s": round(live.poses_per_s, 2),
+                "latency_median_ms": round(live.latency_median_ms, 1),
+                "latency_p95_ms": round(live.latency_p95_ms, 1),
+                "detection_rate": round(live.detection_rate, 3),
+                "max_poses_per_s": round(fast.poses_per_s, 2),
+                "max_rate_latency_median_ms": round(fast.latency_median_ms, 1),
+                "max_position_error_mm": round(max(errors_mm), 2),
+                "resolution": f"{camera.width}x{camera.height}",
+                "load_average": round(os.getloadavg()[0], 1),
+            }
+        )
+    )
 
 
 if __name__ == "__main__":

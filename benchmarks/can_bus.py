@@ -39,9 +39,11 @@ REFERENCE_BITRATE = 1_000_000
 
 def run_rate(rate: int, seconds: float, priority: int) -> dict[str, float]:
     robot = load_robot()
-    config = replace(CobotBusConfig(), bus=BusConfig(channel=f"bench-{rate}"),
-                     timing=TimingConfig(control_period=1.0 / rate, realtime_priority=priority,
-                                         setpoint_queue_depth=8))
+    config = replace(
+        CobotBusConfig(),
+        bus=BusConfig(channel=f"bench-{rate}"),
+        timing=TimingConfig(control_period=1.0 / rate, realtime_priority=priority, setpoint_queue_depth=8),
+    )
     lateness: list[float] = []
     tracking = TrackingRecorder(robot.dof)
 
@@ -88,26 +90,39 @@ def run_rate(rate: int, seconds: float, priority: int) -> dict[str, float]:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=30.0, help="measurement time per rate (default 30)")
-    parser.add_argument("--realtime-priority", type=int, default=50,
-                        help="SCHED_FIFO priority for the whole process, 0 = normal scheduling (default 50)")
+    parser.add_argument(
+        "--realtime-priority",
+        type=int,
+        default=50,
+        help="SCHED_FIFO priority for the whole process, 0 = normal scheduling (default 50)",
+    )
     args = parser.parse_args()
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
     realtime = args.realtime_priority > 0 and make_current_thread_realtime(args.realtime_priority)
     scheduling = f"SCHED_FIFO {args.realtime_priority}" if realtime else "normal (SCHED_OTHER)"
     print(f"CAN bus benchmark: 6 CiA 402 drives + vacuum generator, virtual bus, {args.seconds:g} s per rate")
-    print(f"machine: {platform.node()} {platform.machine()}, {os.cpu_count()} cores, "
-          f"load average {os.getloadavg()[0]:.2f}, python {platform.python_version()}, scheduling {scheduling}")
+    print(
+        f"machine: {platform.node()} {platform.machine()}, {os.cpu_count()} cores, "
+        f"load average {os.getloadavg()[0]:.2f}, python {platform.python_version()}, scheduling {scheduling}"
+    )
     try:
         results = {rate: run_rate(rate, args.seconds, args.realtime_priority if realtime else 0) for rate in RATES}
     except DriverError as exc:
         print(f"benchmark aborted: {type(exc).__name__}: {exc}", file=sys.stderr)
         return 1
 
-    rows = [("achieved SYNC rate (Hz)", "rate_hz", "{:.2f}"), ("jitter p50 (ms)", "jitter_p50_ms", "{:.3f}"),
-            ("jitter p99 (ms)", "jitter_p99_ms", "{:.3f}"), ("jitter max (ms)", "jitter_max_ms", "{:.3f}"),
-            ("missed cycles", "missed_cycles", "{:d}"), ("frames/s", "frames_per_s", "{:.0f}"),
-            ("bus load at 1 Mbit/s", "bus_load", "{:.1%}"), ("lost/late TPDOs", "lost_feedback", "{:d}"),
-            ("setpoint underruns", "underruns", "{:d}"), ("max tracking error (mrad)", "tracking_max_mrad", "{:.2f}")]
+    rows = [
+        ("achieved SYNC rate (Hz)", "rate_hz", "{:.2f}"),
+        ("jitter p50 (ms)", "jitter_p50_ms", "{:.3f}"),
+        ("jitter p99 (ms)", "jitter_p99_ms", "{:.3f}"),
+        ("jitter max (ms)", "jitter_max_ms", "{:.3f}"),
+        ("missed cycles", "missed_cycles", "{:d}"),
+        ("frames/s", "frames_per_s", "{:.0f}"),
+        ("bus load at 1 Mbit/s", "bus_load", "{:.1%}"),
+        ("lost/late TPDOs", "lost_feedback", "{:d}"),
+        ("setpoint underruns", "underruns", "{:d}"),
+        ("max tracking error (mrad)", "tracking_max_mrad", "{:.2f}"),
+    ]
     print(f"\n{'':28s}" + "".join(f"{f'{r} Hz':>12s}" for r in RATES))
     for label, key, fmt in rows:
         print(f"{label:28s}" + "".join(f"{fmt.format(results[r][key]):>12s}" for r in RATES))

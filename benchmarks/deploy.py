@@ -39,7 +39,9 @@ def bench_inference(n: int = 20000) -> tuple[float, str]:
     spec = load_robot()
     with tempfile.TemporaryDirectory() as tmp:
         cfg = DDPGConfig()
-        path = export_actor(DDPG(*obs_scaling(spec.workspace), 4, cfg).actor, Path(tmp) / "p.npz", spec, TaskConfig(), 0.1)
+        path = export_actor(
+            DDPG(*obs_scaling(spec.workspace), 4, cfg).actor, Path(tmp) / "p.npz", spec, TaskConfig(), 0.1
+        )
         pol = ExportedPolicy.load(path)
     obs = np.zeros(11, np.float32)
     times = []
@@ -60,10 +62,16 @@ def main() -> None:
         cfg = dataclasses.replace(cfg, robot=RobotConfig(name=args.robot))
     spec = load_robot(cfg.robot)
     ws = spec.workspace
-    with tempfile.TemporaryDirectory() as tmp:
-        with RunLog(Path(tmp) / "log.jsonl", {"benchmark": "deploy"}) as run_log:
-            summary = dry_run(None, cfg, load_cobot_bus_config(None, spec), args.episodes, 0, run_log,
-                              policy=lambda obs: oracle_action(obs, cfg.task, ws.to_normalized))
+    with tempfile.TemporaryDirectory() as tmp, RunLog(Path(tmp) / "log.jsonl", {"benchmark": "deploy"}) as run_log:
+        summary = dry_run(
+            None,
+            cfg,
+            load_cobot_bus_config(None, spec),
+            args.episodes,
+            0,
+            run_log,
+            policy=lambda obs: oracle_action(obs, cfg.task, ws.to_normalized),
+        )
     lat = summary.latency_ms()
     inference_ms, hidden = bench_inference()
     res = {
@@ -84,8 +92,10 @@ def main() -> None:
         ("control-cycle lateness p99 (SYNC vs deadline)", "cycle_jitter_p99_ms", ""),
     ):
         print(f"{name:<55} {res[key]:8.3f} ms  {target}")
-    print(f"missed cycles {res['missed_cycles']}, dry-run success {res['dry_run_success']:.0%} over {res['episodes']} episodes"
-          + (f", stopped: {summary.stopped}" if summary.stopped else ""))
+    print(
+        f"missed cycles {res['missed_cycles']}, dry-run success {res['dry_run_success']:.0%} over {res['episodes']} episodes"
+        + (f", stopped: {summary.stopped}" if summary.stopped else "")
+    )
     print(json.dumps({k: round(v, 4) if isinstance(v, float) else v for k, v in res.items()}))
 
 

@@ -55,8 +55,9 @@ def _private(config: CobotBusConfig) -> CobotBusConfig:
     return replace(config, bus=replace(config.bus, interface="virtual", channel=f"loss-{uuid.uuid4().hex[:10]}"))
 
 
-def loss_run(config: CobotBusConfig, robot: RobotSpec, loss: float, seconds: float,
-             seed: int) -> tuple[str, float, str] | None:
+def loss_run(
+    config: CobotBusConfig, robot: RobotSpec, loss: float, seconds: float, seed: int
+) -> tuple[str, float, str] | None:
     """One run with frame loss: None if it lasted, else (fault kind, seconds into the loss, message)."""
     config = _private(config)
     with SimulatedCobot(config, FirstOrderPlant(robot.q_home), seed=seed) as sim, Cobot(config, robot) as cobot:
@@ -97,8 +98,7 @@ def detect_silent_node(config: CobotBusConfig, robot: RobotSpec) -> dict[str, fl
         fault = _until(lambda: cobot.status().fault is not None)
         heartbeat = _until(lambda: SILENT_NODE in cobot.status().heartbeat_lost, DETECTION_LIMIT - fault) + fault
         kind = type(cobot.status().fault).__name__
-        return {"fault_s": fault, "heartbeat_s": heartbeat, "first_kind": kind,
-                "total_s": time.monotonic() - silenced}
+        return {"fault_s": fault, "heartbeat_s": heartbeat, "first_kind": kind, "total_s": time.monotonic() - silenced}
 
 
 def detect_heartbeat_only(config: CobotBusConfig, robot: RobotSpec) -> dict[str, float]:
@@ -107,8 +107,10 @@ def detect_heartbeat_only(config: CobotBusConfig, robot: RobotSpec) -> dict[str,
     with SimulatedCobot(config, FirstOrderPlant(robot.q_home)) as sim, Cobot(config, robot) as cobot:
         cobot.enable()
         sim.faults.silence(SILENT_NODE, heartbeat_only=True)
-        return {"fault_s": _until(lambda: cobot.status().fault is not None),
-                "first_kind": type(cobot.status().fault).__name__}
+        return {
+            "fault_s": _until(lambda: cobot.status().fault is not None),
+            "first_kind": type(cobot.status().fault).__name__,
+        }
 
 
 def detect_hung_master(config: CobotBusConfig, robot: RobotSpec) -> dict[str, float]:
@@ -118,12 +120,16 @@ def detect_hung_master(config: CobotBusConfig, robot: RobotSpec) -> dict[str, fl
     with SimulatedCobot(config, FirstOrderPlant(robot.q_home)) as sim, Cobot(config, robot) as cobot:
         cobot.enable()
         cycle = cobot._loop.cycle
-        cobot._loop.cycle = lambda tick: release.wait()  # noqa: SLF001 - a hung control thread, as in the tests
+        cobot._loop.cycle = lambda tick: release.wait()
         try:
-            took = _until(lambda: all(d.state != OPERATION_ENABLED for d in sim.drives)
-                          and not any(s.operational for s in (*sim.drives, sim.vacuum)))
+            took = _until(
+                lambda: (
+                    all(d.state != OPERATION_ENABLED for d in sim.drives)
+                    and not any(s.operational for s in (*sim.drives, sim.vacuum))
+                )
+            )
         finally:
-            cobot._loop.cycle = cycle  # noqa: SLF001
+            cobot._loop.cycle = cycle
             release.set()
     return {"devices_s": took}
 
@@ -140,9 +146,13 @@ def main() -> int:
     parser.add_argument("--seconds", type=float, default=5.0, help="length of one frame-loss run (default 5 s)")
     parser.add_argument("--loss", type=float, default=0.05, help="probability of losing each frame (default 0.05)")
     parser.add_argument("--repeats", type=int, default=5, help="repeats of each detection measurement (default 5)")
-    parser.add_argument("--realtime-priority", type=int, default=50,
-                        help="SCHED_FIFO priority of the whole process (master and simulated devices, which stand "
-                             "for hardware with its own timing), as on the robot PC; 0 = normal scheduling (default 50)")
+    parser.add_argument(
+        "--realtime-priority",
+        type=int,
+        default=50,
+        help="SCHED_FIFO priority of the whole process (master and simulated devices, which stand "
+        "for hardware with its own timing), as on the robot PC; 0 = normal scheduling (default 50)",
+    )
     args = parser.parse_args()
     if args.runs < 1 or args.repeats < 1 or not args.seconds > 0 or not 0 <= args.loss < 1:
         parser.error("--runs and --repeats must be >= 1, --seconds > 0, --loss in [0, 1)")
@@ -153,39 +163,63 @@ def main() -> int:
     t = config.timing
     robot = load_robot()
     freeze_heap()
-    print(f"frame-loss benchmark, timing of {args.config}: {t.control_period * 1e3:g} ms cycle, heartbeats every "
-          f"{t.heartbeat_ms} ms, consumer time {t.heartbeat_timeout_ms} ms (x{t.heartbeat_timeout_factor:g}), "
-          f"feedback lost after {t.max_missed_feedback} cycles, SCHED_FIFO {t.realtime_priority or 'off'}")
-    print(f"machine: {platform.node()} {platform.machine()}, {os.cpu_count()} cores, "
-          f"load average {os.getloadavg()[0]:.2f}, python {platform.python_version()}")
+    print(
+        f"frame-loss benchmark, timing of {args.config}: {t.control_period * 1e3:g} ms cycle, heartbeats every "
+        f"{t.heartbeat_ms} ms, consumer time {t.heartbeat_timeout_ms} ms (x{t.heartbeat_timeout_factor:g}), "
+        f"feedback lost after {t.max_missed_feedback} cycles, SCHED_FIFO {t.realtime_priority or 'off'}"
+    )
+    print(
+        f"machine: {platform.node()} {platform.machine()}, {os.cpu_count()} cores, "
+        f"load average {os.getloadavg()[0]:.2f}, python {platform.python_version()}"
+    )
 
     outcomes = [loss_run(config, robot, args.loss, args.seconds, seed) for seed in range(args.runs)]
     faults = [o for o in outcomes if o is not None]
     kinds = Counter(kind for kind, _, _ in faults)
-    print(f"\n{args.loss:.0%} frame loss, {args.runs} runs of {args.seconds:g} s: {len(faults)} quick stops"
-          + (f" {dict(kinds)}" if faults else ""))
+    print(
+        f"\n{args.loss:.0%} frame loss, {args.runs} runs of {args.seconds:g} s: {len(faults)} quick stops"
+        + (f" {dict(kinds)}" if faults else "")
+    )
     for kind, at, message in faults:
         print(f"  after {at:5.2f} s: {kind}: {message[:110]}")
 
     silent = [detect_silent_node(config, robot) for _ in range(args.repeats)]
     hb_only = [detect_heartbeat_only(config, robot) for _ in range(args.repeats)]
     hung = [detect_hung_master(config, robot) for _ in range(args.repeats)]
-    rows = [("silent drive -> latched fault", _stats([r["fault_s"] for r in silent]),
-             Counter(r["first_kind"] for r in silent)),
-            ("silent drive -> heartbeat lost", _stats([r["heartbeat_s"] for r in silent]), None),
-            ("drive heartbeat stops -> fault", _stats([r["fault_s"] for r in hb_only]),
-             Counter(r["first_kind"] for r in hb_only)),
-            ("master hangs -> devices disabled", _stats([r["devices_s"] for r in hung]), None)]
+    rows = [
+        (
+            "silent drive -> latched fault",
+            _stats([r["fault_s"] for r in silent]),
+            Counter(r["first_kind"] for r in silent),
+        ),
+        ("silent drive -> heartbeat lost", _stats([r["heartbeat_s"] for r in silent]), None),
+        (
+            "drive heartbeat stops -> fault",
+            _stats([r["fault_s"] for r in hb_only]),
+            Counter(r["first_kind"] for r in hb_only),
+        ),
+        ("master hangs -> devices disabled", _stats([r["devices_s"] for r in hung]), None),
+    ]
     print(f"\ndetection without loss, {args.repeats} repeats    median ms     max ms   detected by")
     for label, (median, worst), by in rows:
         print(f"{label:40s}{median * 1e3:10.1f}{worst * 1e3:11.1f}   {dict(by) if by else ''}")
 
-    figures = {"config": str(args.config), "loss": args.loss, "runs": args.runs, "seconds": args.seconds,
-               "heartbeat_ms": t.heartbeat_ms, "consumer_ms": t.heartbeat_timeout_ms,
-               "max_missed_feedback": t.max_missed_feedback, "realtime_priority": t.realtime_priority,
-               "quick_stops": len(faults), "quick_stop_kinds": dict(kinds), "load_average": os.getloadavg()[0]}
-    for (_, (median, worst), _), key in zip(rows, ("silent_fault", "silent_heartbeat", "heartbeat_only",
-                                                      "hung_master")):
+    figures = {
+        "config": str(args.config),
+        "loss": args.loss,
+        "runs": args.runs,
+        "seconds": args.seconds,
+        "heartbeat_ms": t.heartbeat_ms,
+        "consumer_ms": t.heartbeat_timeout_ms,
+        "max_missed_feedback": t.max_missed_feedback,
+        "realtime_priority": t.realtime_priority,
+        "quick_stops": len(faults),
+        "quick_stop_kinds": dict(kinds),
+        "load_average": os.getloadavg()[0],
+    }
+    for (_, (median, worst), _), key in zip(
+        rows, ("silent_fault", "silent_heartbeat", "heartbeat_only", "hung_master")
+    ):
         figures[f"{key}_median_ms"], figures[f"{key}_max_ms"] = round(median * 1e3, 1), round(worst * 1e3, 1)
     print(json.dumps(figures))
     return 0

@@ -31,10 +31,19 @@ def main() -> None:
         finally:
             tr.close()
     wall = tr.wall_s()
-    res = {"learner": tc.learner, "steps": tr.step, "steps_per_s": tr.step / wall, "update_ms": tr.update_ms(),
-           f"wall_s_{args.steps // 1000}k": wall, "wall_s_20k": wall * 20_000 / tr.step,
-           "final_eval_success": tr.last_eval.get("success_rate"), "annotations_asked": tr.cache.asked}
-    print(f"machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}, pinned to one core")
+    res = {
+        "learner": tc.learner,
+        "steps": tr.step,
+        "steps_per_s": tr.step / wall,
+        "update_ms": tr.update_ms(),
+        f"wall_s_{args.steps // 1000}k": wall,
+        "wall_s_20k": wall * 20_000 / tr.step,
+        "final_eval_success": tr.last_eval.get("success_rate"),
+        "annotations_asked": tr.cache.asked,
+    }
+    print(
+        f"machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}, pinned to one core"
+    )
     print(f"{'guided training steps':<40} {tr.step}")
     print(f"{'steps/s (env + update)':<40} {res['steps_per_s']:.1f}")
     hidden = "x".join(map(str, (tr.sac_cfg if tc.learner == "sac" else dc).hidden))

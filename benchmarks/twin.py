@@ -71,8 +71,12 @@ def bench_ik_round_trips(spec: RobotSpec, n: int = 500, grid: int = 7) -> dict:
             kin.ik(np.array(p), spec.q_home)
         except IKError:
             failures += 1
-    return {"ik_round_trip_max_mm": worst * 1e3, "ik_round_trips": n, "box_ik_failures": failures,
-            "box_points": grid ** 3}
+    return {
+        "ik_round_trip_max_mm": worst * 1e3,
+        "ik_round_trips": n,
+        "box_ik_failures": failures,
+        "box_points": grid**3,
+    }
 
 
 def bench_ruckig(spec: RobotSpec, n: int = 20000) -> dict:
@@ -98,10 +102,17 @@ def main() -> None:
         os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})  # one core
     cfg = EnvConfig.load(args.config)
     spec = load_robot(cfg.robot)
-    res = {"robot": spec.name, **bench_env(args.episodes, cfg), **bench_ik(spec), **bench_ik_round_trips(spec),
-           **bench_ruckig(spec)}
-    print(f"machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}, pinned to one core;"
-          f" arm {spec.name}")
+    res = {
+        "robot": spec.name,
+        **bench_env(args.episodes, cfg),
+        **bench_ik(spec),
+        **bench_ik_round_trips(spec),
+        **bench_ruckig(spec),
+    }
+    print(
+        f"machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}, pinned to one core;"
+        f" arm {spec.name}"
+    )
     rows = [
         ("env decisions/s (0.1 s decision, 4 ms control)", f"{res['decisions_per_s']:.0f}", ">= 200"),
         ("simulated / wall time", f"{res['sim_to_wall']:.1f}x", ""),

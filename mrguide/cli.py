@@ -24,18 +24,49 @@ def cmd_main(args: argparse.Namespace) -> int:
     if policy.exists():
         print(f"[1/3] using the policy trained before: {policy} (delete {out} to train again)")
     else:
-        print(f"[1/3] training a guided DDPG policy in the twin (simulated MR annotator): the first {args.train_steps} "
-              "steps of the 20k-step schedule")
-        rc = main(["train", "--stop-after", str(args.train_steps), "--seed", str(args.seed), "--out", str(out / "train")]
-                  + (["--quiet"] if args.quiet else []))
+        print(
+            f"[1/3] training a guided DDPG policy in the twin (simulated MR annotator): the first {args.train_steps} "
+            "steps of the 20k-step schedule"
+        )
+        rc = main(
+            ["train", "--stop-after", str(args.train_steps), "--seed", str(args.seed), "--out", str(out / "train")]
+            + (["--quiet"] if args.quiet else [])
+        )
         if rc:
             return rc
     print("\n[2/3] dry run: deploying it over the virtual CAN bus to simulated drives on a twin with reality gap")
-    rc = main(["deploy", "--policy", str(policy), "--config", real_config, "--dry-run", "--episodes", str(args.deploy_episodes),
-               "--log", str(out / "deploy.jsonl")] + (["--quiet"] if args.quiet else []))
+    rc = main(
+        [
+            "deploy",
+            "--policy",
+            str(policy),
+            "--config",
+            real_config,
+            "--dry-run",
+            "--episodes",
+            str(args.deploy_episodes),
+            "--log",
+            str(out / "deploy.jsonl"),
+        ]
+        + (["--quiet"] if args.quiet else [])
+    )
     print(f"\n[3/3] sim-to-real evaluation: {args.seeds} seeds x {args.episodes} episodes per condition")
-    rc2 = main(["sim2real", "--policy", str(policy), "--real-config", real_config, "--seeds", str(args.seeds),
-                "--episodes", str(args.episodes), "--out", str(out / "sim2real")] + (["--quiet"] if args.quiet else []))
+    rc2 = main(
+        [
+            "sim2real",
+            "--policy",
+            str(policy),
+            "--real-config",
+            real_config,
+            "--seeds",
+            str(args.seeds),
+            "--episodes",
+            str(args.episodes),
+            "--out",
+            str(out / "sim2real"),
+        ]
+        + (["--quiet"] if args.quiet else [])
+    )
     print(f"main job finished in {time.perf_counter() - t0:.0f} s")
     return rc or rc2
 
@@ -88,7 +119,9 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     """Run one command. Bad input: one line on stderr, exit 2; driver faults: exit 1; Ctrl-C: exit 130."""
     args = build_parser().parse_args(argv)
-    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    logging.basicConfig(
+        level=logging.DEBUG if args.verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s"
+    )
     name = f"mrguide {getattr(args, 'command_name', args.command)}"
 
     def fail(message: str, code: int) -> int:

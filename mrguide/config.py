@@ -112,8 +112,19 @@ def load_toml(path: str | Path) -> dict[str, Any]:
 #: The sections a run config may hold: one file may serve several commands (`configs/real_cell.toml` is
 #: read by `deploy` and `sim2real`), so each command reads its sections and any other known one is left to
 #: the command it belongs to; an unknown section (a typo: `[deplyo]`) is refused instead of ignored.
-RUN_SECTIONS = ("robot", "task", "twin", "train", "ddpg", "sac", "guidance", "deploy", "safety", "calibration",
-                "calibration_twin")
+RUN_SECTIONS = (
+    "robot",
+    "task",
+    "twin",
+    "train",
+    "ddpg",
+    "sac",
+    "guidance",
+    "deploy",
+    "safety",
+    "calibration",
+    "calibration_twin",
+)
 
 
 def load_section(cls: type[T], path: str | Path | None, section: str, known: tuple[str, ...] = RUN_SECTIONS) -> T:
@@ -125,8 +136,9 @@ def load_section(cls: type[T], path: str | Path | None, section: str, known: tup
     whole = load_toml(path)
     unknown = [key for key in whole if key not in known]
     if unknown:
-        raise ConfigError(f"{path}: unknown section [{unknown[0]}]; this file may hold "
-                          + ", ".join(f"[{k}]" for k in known))
+        raise ConfigError(
+            f"{path}: unknown section [{unknown[0]}]; this file may hold " + ", ".join(f"[{k}]" for k in known)
+        )
     data = whole.get(section, {})
     if not isinstance(data, dict):
         raise ConfigError(f"{path}: [{section}] must be a table")

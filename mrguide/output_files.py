@@ -26,7 +26,9 @@ def check_output_file(path: str | Path, option: str) -> Path:
     """Refuse file `path` (given by `option`) unless a regular file can be created or replaced there. Creates
     nothing."""
     path = Path(path)
-    problem = "exists and is not a regular file" if path.exists() and not path.is_file() else _directory_problem(path.parent)
+    problem = (
+        "exists and is not a regular file" if path.exists() and not path.is_file() else _directory_problem(path.parent)
+    )
     if problem:
         raise OutputPathError(f"{option} {path}: {problem}")
     return path

@@ -253,22 +253,42 @@ def _build(arm: ArmConfig, path: Path, where: str) -> RobotSpec:
         raise RobotSpecError(f"{where}: {exc}") from exc
     movable = tuple(j.name for j in chain if j.movable)
     if movable != arm.joints:
-        raise RobotSpecError(f"{where}: joints {list(arm.joints)} differ from the URDF's movable joints from "
-                             f"{arm.base_frame} to {arm.flange_frame}: {list(movable)}")
+        raise RobotSpecError(
+            f"{where}: joints {list(arm.joints)} differ from the URDF's movable joints from "
+            f"{arm.base_frame} to {arm.flange_frame}: {list(movable)}"
+        )
     if sorted(arm.can_nodes) != sorted(arm.joints):
-        raise RobotSpecError(f"{where}: can_nodes names {sorted(arm.can_nodes)}, expected one node per joint {list(arm.joints)}")
+        raise RobotSpecError(
+            f"{where}: can_nodes names {sorted(arm.can_nodes)}, expected one node per joint {list(arm.joints)}"
+        )
     nodes = tuple(arm.can_nodes[j] for j in arm.joints)
     if any(not 1 <= n <= 127 for n in nodes) or len(set(nodes)) != len(nodes):
         raise RobotSpecError(f"{where}: can_nodes {dict(arm.can_nodes)}: node IDs must be distinct, in 1..127")
     T = np.eye(4)
     T[2, 3] = arm.tool_offset
-    payload = {"joints": arm.joints, "base_frame": arm.base_frame, "flange_frame": arm.flange_frame,
-               "tool_offset": round(arm.tool_offset, 9), "workspace": to_dict(arm.workspace),
-               "chain": [dataclasses.astuple(j) for j in chain]}
+    payload = {
+        "joints": arm.joints,
+        "base_frame": arm.base_frame,
+        "flange_frame": arm.flange_frame,
+        "tool_offset": round(arm.tool_offset, 9),
+        "workspace": to_dict(arm.workspace),
+        "chain": [dataclasses.astuple(j) for j in chain],
+    }
     fingerprint = hashlib.sha256(json.dumps(payload, sort_keys=True).encode()).hexdigest()[:16]
-    return RobotSpec(name=arm.name, urdf_path=urdf, package_dir=package_dir, joint_names=arm.joints,
-                     base_frame=arm.base_frame, flange_frame=arm.flange_frame, T_flange_tcp=T, workspace=arm.workspace,
-                     node_ids=nodes, arm_file=path, fingerprint=fingerprint, **arrays)
+    return RobotSpec(
+        name=arm.name,
+        urdf_path=urdf,
+        package_dir=package_dir,
+        joint_names=arm.joints,
+        base_frame=arm.base_frame,
+        flange_frame=arm.flange_frame,
+        T_flange_tcp=T,
+        workspace=arm.workspace,
+        node_ids=nodes,
+        arm_file=path,
+        fingerprint=fingerprint,
+        **arrays,
+    )
 
 
 def _limit_arrays(arm: ArmConfig, where: str) -> dict[str, np.ndarray]:
@@ -276,7 +296,9 @@ def _limit_arrays(arm: ArmConfig, where: str) -> dict[str, np.ndarray]:
     arrays = {k: np.asarray(getattr(arm, k), dtype=float) for k in LIMIT_KEYS}
     for key, arr in arrays.items():
         if arr.shape != (len(arm.joints),) or not np.all(np.isfinite(arr)):
-            raise RobotSpecError(f"{where}: {key}: expected {len(arm.joints)} finite values, got {list(getattr(arm, key))}")
+            raise RobotSpecError(
+                f"{where}: {key}: expected {len(arm.joints)} finite values, got {list(getattr(arm, key))}"
+            )
     if np.any(arrays["q_upper"] <= arrays["q_lower"]):
         raise RobotSpecError(f"{where}: q_upper must exceed q_lower for every joint")
     for key in ("v_max", "a_max", "j_max"):
@@ -312,24 +334,35 @@ def urdf_with_tool(spec: RobotSpec, mesh_root: str, cup_radius: float, stroke: f
     length = float(spec.T_flange_tcp[2, 3])
     cyl = f'<cylinder radius="{cup_radius}" length="{length}"/>'
     origin = f'<origin xyz="0 0 {length / 2}" rpy="0 0 0"/>'
-    root.append(ET.fromstring(
-        f'<link name="suction_cup"><inertial><mass value="0.1"/>{origin}'
-        f'<inertia ixx="1e-4" ixy="0" ixz="0" iyy="1e-4" iyz="0" izz="1e-4"/></inertial>'
-        f'<visual>{origin}<geometry>{cyl}</geometry><material name="cup"><color rgba="0.15 0.15 0.15 1"/></material></visual>'
-        f'<collision>{origin}<geometry>{cyl}</geometry></collision></link>'
-    ))
-    joint = ('type="fixed">' if stroke <= 0 else
-             f'type="prismatic"><axis xyz="0 0 1"/><limit lower="{-stroke}" upper="0" effort="1000" velocity="1"/>')
-    root.append(ET.fromstring(
-        f'<joint name="flange_cup_joint" {joint}<parent link="{spec.flange_frame}"/><child link="suction_cup"/>'
-        f'<origin xyz="0 0 0" rpy="0 0 0"/></joint>'
-    ))
-    root.append(ET.fromstring(
-        '<link name="tcp"><inertial><mass value="0"/><origin xyz="0 0 0" rpy="0 0 0"/>'
-        '<inertia ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"/></inertial></link>'
-    ))
-    root.append(ET.fromstring(
-        f'<joint name="cup_tcp_joint" type="fixed"><parent link="suction_cup"/><child link="tcp"/>'
-        f'<origin xyz="0 0 {length}" rpy="0 0 0"/></joint>'
-    ))
+    root.append(
+        ET.fromstring(
+            f'<link name="suction_cup"><inertial><mass value="0.1"/>{origin}'
+            f'<inertia ixx="1e-4" ixy="0" ixz="0" iyy="1e-4" iyz="0" izz="1e-4"/></inertial>'
+            f'<visual>{origin}<geometry>{cyl}</geometry><material name="cup"><color rgba="0.15 0.15 0.15 1"/></material></visual>'
+            f"<collision>{origin}<geometry>{cyl}</geometry></collision></link>"
+        )
+    )
+    joint = (
+        'type="fixed">'
+        if stroke <= 0
+        else f'type="prismatic"><axis xyz="0 0 1"/><limit lower="{-stroke}" upper="0" effort="1000" velocity="1"/>'
+    )
+    root.append(
+        ET.fromstring(
+            f'<joint name="flange_cup_joint" {joint}<parent link="{spec.flange_frame}"/><child link="suction_cup"/>'
+            f'<origin xyz="0 0 0" rpy="0 0 0"/></joint>'
+        )
+    )
+    root.append(
+        ET.fromstring(
+            '<link name="tcp"><inertial><mass value="0"/><origin xyz="0 0 0" rpy="0 0 0"/>'
+            '<inertia ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"/></inertial></link>'
+        )
+    )
+    root.append(
+        ET.fromstring(
+            f'<joint name="cup_tcp_joint" type="fixed"><parent link="suction_cup"/><child link="tcp"/>'
+            f'<origin xyz="0 0 {length}" rpy="0 0 0"/></joint>'
+        )
+    )
     return ET.tostring(root, encoding="unicode")

@@ -18,5 +18,7 @@ def shipped_config(*parts: str) -> Path:
         path = root.joinpath(*parts)
         if path.is_file():
             return path
-    raise ConfigError(f"the shipped config {'/'.join(parts)} is missing (looked in {CHECKOUT} and {INSTALLED}); "
-                      "reinstall mrguide or give the file explicitly")
+    raise ConfigError(
+        f"the shipped config {'/'.join(parts)} is missing (looked in {CHECKOUT} and {INSTALLED}); "
+        "reinstall mrguide or give the file explicitly"
+    )

@@ -198,7 +198,9 @@ def task_step(
 
 def observation(tcp: np.ndarray, g: int, phi: float, obj: np.ndarray, goal: np.ndarray) -> np.ndarray:
     """The policy's observation [tcp xyz, g, φ, object xyz, goal xyz] (float32, shape (11,))."""
-    return np.concatenate([np.asarray(tcp, float), [float(g), float(phi)], np.asarray(obj, float), np.asarray(goal, float)]).astype(np.float32)
+    return np.concatenate(
+        [np.asarray(tcp, float), [float(g), float(phi)], np.asarray(obj, float), np.asarray(goal, float)]
+    ).astype(np.float32)
 
 
 OBS_DIM = 11

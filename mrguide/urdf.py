@@ -83,8 +83,12 @@ def _chain_joint(joint: ET.Element) -> ChainJoint:
     origin, axis = joint.find("origin"), joint.find("axis")
     xyz = _floats(origin.get("xyz") if origin is not None else None, 3)
     rpy = _floats(origin.get("rpy") if origin is not None else None, 3)
-    return ChainJoint(joint.get("name", ""), joint.get("type", ""), xyz + rpy,
-                      _floats(axis.get("xyz") if axis is not None else "1 0 0", 3))
+    return ChainJoint(
+        joint.get("name", ""),
+        joint.get("type", ""),
+        xyz + rpy,
+        _floats(axis.get("xyz") if axis is not None else "1 0 0", 3),
+    )
 
 
 def _floats(text: str | None, n: int) -> tuple[float, ...]:

@@ -36,7 +36,9 @@ def undocumented(cls: type, prefix: str, text: str) -> set[str]:
     """Settings of `cls` that TOML `text` neither sets nor shows; an inline array of tables (`markers = [{...}]`)
     documents its members."""
     documented = documented_keys(text)
+
     def shown(name: str) -> bool:
         parts = name.split(".")
         return any(".".join(parts[:n]) in documented for n in range(1, len(parts) + 1))
+
     return {name for name in setting_names(cls, prefix) if not shown(name)}

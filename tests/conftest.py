@@ -63,16 +63,27 @@ def policy_file():
     from mrguide.robot import load_robot
     from mrguide.task import ACT_DIM, ACT_LAYOUT, OBS_DIM, OBS_LAYOUT, TaskConfig
 
-    good = {"format": FORMAT, "format_version": FORMAT_VERSION, "obs_layout": list(OBS_LAYOUT),
-            "act_layout": list(ACT_LAYOUT), "activations": ["tanh"],
-            "workspace": {"low": list(load_robot().workspace.low), "high": list(load_robot().workspace.high)},
-            "task": to_dict(TaskConfig()), "decision_period": 0.1,
-            "head": {"kind": HEAD_KIND, "max_offset": 0.5, "carry_progress": 0.5}}
+    good = {
+        "format": FORMAT,
+        "format_version": FORMAT_VERSION,
+        "obs_layout": list(OBS_LAYOUT),
+        "act_layout": list(ACT_LAYOUT),
+        "activations": ["tanh"],
+        "workspace": {"low": list(load_robot().workspace.low), "high": list(load_robot().workspace.high)},
+        "task": to_dict(TaskConfig()),
+        "decision_period": 0.1,
+        "head": {"kind": HEAD_KIND, "max_offset": 0.5, "carry_progress": 0.5},
+    }
 
     def write(path: Path, metadata: Any = None, arrays: dict | None = None, drop: tuple = (), **changes: Any) -> Path:
         meta = metadata if metadata is not None else {k: v for k, v in {**good, **changes}.items() if k not in drop}
-        layers = {"W0": np.zeros((ACT_DIM, OBS_DIM)), "b0": np.zeros(ACT_DIM), "W0_carry": np.zeros((ACT_DIM, OBS_DIM)),
-                  "b0_carry": np.zeros(ACT_DIM), **(arrays or {})}
+        layers = {
+            "W0": np.zeros((ACT_DIM, OBS_DIM)),
+            "b0": np.zeros(ACT_DIM),
+            "W0_carry": np.zeros((ACT_DIM, OBS_DIM)),
+            "b0_carry": np.zeros(ACT_DIM),
+            **(arrays or {}),
+        }
         np.savez(path, metadata=np.array(json.dumps(meta)), **layers)
         return path
 

@@ -23,14 +23,30 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from mrguide.calibration.config import (BoardConfig, CalibrationConfig, DetectorConfig, HmdNoiseConfig, MarkerPlacement,
-                                        RegistrationConfig, TargetsConfig)
+from mrguide.calibration.config import (
+    BoardConfig,
+    CalibrationConfig,
+    DetectorConfig,
+    HmdNoiseConfig,
+    MarkerPlacement,
+    RegistrationConfig,
+    TargetsConfig,
+)
 from mrguide.cli import build_parser
 from mrguide.config import ConfigError, from_dict
 from mrguide.deploy.safety import SafetyConfig
 from mrguide.deploy.session import DeployConfig
-from mrguide.drivers.config import (BusConfig, CobotBusConfig, DriveConfig, JointDriveConfig, LimitOverrides,
-                                    MasterConfig, TimingConfig, VacuumConfig, resolve_limits)
+from mrguide.drivers.config import (
+    BusConfig,
+    CobotBusConfig,
+    DriveConfig,
+    JointDriveConfig,
+    LimitOverrides,
+    MasterConfig,
+    TimingConfig,
+    VacuumConfig,
+    resolve_limits,
+)
 from mrguide.robot import ArmConfig, RobotConfig, UrdfSource, Workspace, load_robot
 from mrguide.twin.camera import CameraConfig, Intrinsics
 from mrguide.twin.markers import TwinCalibrationConfig
@@ -39,21 +55,48 @@ FUZZ = settings(max_examples=120, deadline=None, suppress_health_check=[HealthCh
 
 SPECIAL_NUMBERS = [math.nan, math.inf, -math.inf, 0, -1, 1, 0.5, -0.5, 1e308, -1e308, 2**63, -(2**63), 2**70, 1e-300]
 #: Strings that some field somewhere accepts, so a string field is sometimes valid and sometimes crossed over.
-KNOWN_STRINGS = ["virtual", "socketcan", "pcan", "kvaser", "slcan", "etas", "mrguide", "can0", "cia402_drive.eds",
-                 "vacuum_generator.eds", "nope.eds", "grid", "charuco", "edges", "subpix", "DICT_4X4_50", "DICT_9X9_7",
-                 "runs/deploy", "", "nan", "1"]
-SCALARS = st.one_of(st.none(), st.booleans(), st.integers(), st.floats(allow_nan=True, allow_infinity=True),
-                    st.text(max_size=8))
-GARBAGE = st.recursive(SCALARS, lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=6), inner,
-                                                                                             max_size=3), max_leaves=8)
+KNOWN_STRINGS = [
+    "virtual",
+    "socketcan",
+    "pcan",
+    "kvaser",
+    "slcan",
+    "etas",
+    "mrguide",
+    "can0",
+    "cia402_drive.eds",
+    "vacuum_generator.eds",
+    "nope.eds",
+    "grid",
+    "charuco",
+    "edges",
+    "subpix",
+    "DICT_4X4_50",
+    "DICT_9X9_7",
+    "runs/deploy",
+    "",
+    "nan",
+    "1",
+]
+SCALARS = st.one_of(
+    st.none(), st.booleans(), st.integers(), st.floats(allow_nan=True, allow_infinity=True), st.text(max_size=8)
+)
+GARBAGE = st.recursive(
+    SCALARS,
+    lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=6), inner, max_size=3),
+    max_leaves=8,
+)
 
 
 def _number(default: typing.Any, integer: bool) -> st.SearchStrategy:
     """Numbers for a field: its default, values near it (within 3x), extremes, anything."""
     known = isinstance(default, (int, float)) and not isinstance(default, bool) and math.isfinite(default)
     scale = abs(default) if known and default else 50.0  # no default: a required id or a coordinate
-    near = (st.integers(-int(3 * scale) - 3, int(3 * scale) + 3) if integer
-            else st.floats(-3 * scale, 3 * scale, allow_nan=False))
+    near = (
+        st.integers(-int(3 * scale) - 3, int(3 * scale) + 3)
+        if integer
+        else st.floats(-3 * scale, 3 * scale, allow_nan=False)
+    )
     extreme = st.sampled_from(SPECIAL_NUMBERS) | st.integers() | st.floats()
     return _weighted((3, st.just(default) if known else near), (4, near), (3, extreme))
 
@@ -74,16 +117,24 @@ def _value(hint: typing.Any, default: typing.Any) -> st.SearchStrategy:
     elif hint in (int, float):
         plausible = _number(default, hint is int)
     elif hint is str:
-        plausible = st.sampled_from(KNOWN_STRINGS + ([default] * 3 if isinstance(default, str) else [])) | st.text(max_size=10)
+        plausible = st.sampled_from(KNOWN_STRINGS + ([default] * 3 if isinstance(default, str) else [])) | st.text(
+            max_size=10
+        )
     elif origin is tuple:
         items = [_value(a, d) for a, d in zip(args, default or [None] * len(args)) if a is not Ellipsis] or [GARBAGE]
         if Ellipsis in args:
             items = [_value(args[0], None)]
-        plausible = (st.lists(items[0], max_size=5) if Ellipsis in args
-                     else st.tuples(*items).map(list) | st.lists(items[0], max_size=len(items) + 1))
+        plausible = (
+            st.lists(items[0], max_size=5)
+            if Ellipsis in args
+            else st.tuples(*items).map(list) | st.lists(items[0], max_size=len(items) + 1)
+        )
     elif origin is dict:
-        plausible = st.dictionaries(st.sampled_from(["receive_own_messages", "rx_queue_size", "tty_baudrate"])
-                                    | st.text(max_size=8), SCALARS, max_size=3)
+        plausible = st.dictionaries(
+            st.sampled_from(["receive_own_messages", "rx_queue_size", "tty_baudrate"]) | st.text(max_size=8),
+            SCALARS,
+            max_size=3,
+        )
     else:
         plausible = GARBAGE
     return _weighted((9, plausible), (1, GARBAGE))
@@ -120,10 +171,32 @@ def _all_numbers_finite(obj: typing.Any, where: str = "") -> None:
         assert math.isfinite(obj), (where, obj)
 
 
-CONFIGS = [SafetyConfig, DeployConfig, BusConfig, TimingConfig, JointDriveConfig, DriveConfig, VacuumConfig,
-           MasterConfig, LimitOverrides, CobotBusConfig, DetectorConfig, BoardConfig, MarkerPlacement, TargetsConfig,
-           RegistrationConfig, HmdNoiseConfig, CalibrationConfig, TwinCalibrationConfig, Intrinsics, CameraConfig,
-           RobotConfig, ArmConfig, UrdfSource, Workspace]
+CONFIGS = [
+    SafetyConfig,
+    DeployConfig,
+    BusConfig,
+    TimingConfig,
+    JointDriveConfig,
+    DriveConfig,
+    VacuumConfig,
+    MasterConfig,
+    LimitOverrides,
+    CobotBusConfig,
+    DetectorConfig,
+    BoardConfig,
+    MarkerPlacement,
+    TargetsConfig,
+    RegistrationConfig,
+    HmdNoiseConfig,
+    CalibrationConfig,
+    TwinCalibrationConfig,
+    Intrinsics,
+    CameraConfig,
+    RobotConfig,
+    ArmConfig,
+    UrdfSource,
+    Workspace,
+]
 ROBOT = load_robot()
 
 
@@ -154,8 +227,30 @@ PARSER = build_parser()
 NUMERIC_TEXT = st.one_of(
     st.integers().map(str),
     st.floats(allow_nan=True, allow_infinity=True).map(repr),
-    st.sampled_from(["nan", "-nan", "inf", "-inf", "Infinity", "1e999", "-0", "0", "1", "-1", "0x10", "1_000", " 3",
-                     "3 ", "", "1.0", "2.5", "1e3", "١", "True"]),
+    st.sampled_from(
+        [
+            "nan",
+            "-nan",
+            "inf",
+            "-inf",
+            "Infinity",
+            "1e999",
+            "-0",
+            "0",
+            "1",
+            "-1",
+            "0x10",
+            "1_000",
+            " 3",
+            "3 ",
+            "",
+            "1.0",
+            "2.5",
+            "1e3",
+            "١",
+            "True",
+        ]
+    ),
     st.text(alphabet="0123456789.-+eEinfa_ x", max_size=8),
 )
 
@@ -212,8 +307,10 @@ def test_numeric_options_are_refused_or_meet_their_constraint(before, option, at
 
 
 @settings(max_examples=120, deadline=None)
-@given(st.sampled_from(["actuator_latency", "actuator_lag", "object_mass", "tracking_noise_m", "gravity", ""]),
-       st.lists(NUMERIC_TEXT, min_size=0, max_size=3))
+@given(
+    st.sampled_from(["actuator_latency", "actuator_lag", "object_mass", "tracking_noise_m", "gravity", ""]),
+    st.lists(NUMERIC_TEXT, min_size=0, max_size=3),
+)
 def test_sweep_values_are_refused_or_finite_numbers(name, values):
     args = _parse(["sim2real", "--policy", "p.npz", f"--sweep={name}={','.join(values)}"])
     if args is not None:

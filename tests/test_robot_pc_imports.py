@@ -21,7 +21,7 @@ import pytest
 ROOT = Path(__file__).parents[1]
 
 #: Installed in the subprocess before anything else: importing these raises, as on a PC without them.
-BLOCKER = '''
+BLOCKER = """
 import sys
 
 BLOCKED = ("torch", "pybullet", "pybullet_data", "pybullet_utils")
@@ -35,23 +35,29 @@ class _Blocker:
 
 
 sys.meta_path.insert(0, _Blocker())
-'''
+"""
 
 #: Appended after the command: nothing got hold of them some other way, and of the twin and the policies only
 #: their command-line wiring (the `mrguide` parser lists every command) was loaded.
-CHECK = '''
+CHECK = """
 loaded = sorted(m for m in sys.modules if m.split(".")[0] in BLOCKED
                 or (m.startswith(("mrguide.policies.", "mrguide.twin.")) and not m.endswith(".commands")))
 assert not loaded, loaded
 sys.exit(code)
-'''
+"""
 
 
 def _run_blocked(code: str, tmp_path: Path) -> subprocess.CompletedProcess:
     script = tmp_path / "robot_pc.py"
     script.write_text(BLOCKER + textwrap.dedent(code) + CHECK)
-    return subprocess.run([sys.executable, str(script)], cwd=ROOT, capture_output=True, text=True, timeout=300,
-                          env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"})
+    return subprocess.run(
+        [sys.executable, str(script)],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"},
+    )
 
 
 def test_the_blocker_blocks(tmp_path):
@@ -64,13 +70,18 @@ def test_deploy_on_the_real_bus_path(tmp_path, policy_file):
     from mrguide.config import to_dict
     from mrguide.task import TaskConfig
 
-    (tmp_path / "bus.toml").write_text('[bus]\ninterface = "virtual"\nchannel = "robot-pc"\n'
-                                       "[timing]\nheartbeat_period = 0.15\nheartbeat_timeout_factor = 3.0\n"
-                                       "max_missed_feedback = 25\n")
+    (tmp_path / "bus.toml").write_text(
+        '[bus]\ninterface = "virtual"\nchannel = "robot-pc"\n'
+        "[timing]\nheartbeat_period = 0.15\nheartbeat_timeout_factor = 3.0\n"
+        "max_missed_feedback = 25\n"
+    )
     (tmp_path / "cfg.toml").write_text('[deploy]\nbus_config = "bus.toml"\nepisodes = 1\n[task]\nhorizon = 3\n')
-    policy = policy_file(tmp_path / "p.npz", task=to_dict(TaskConfig(horizon=3)), arrays={"b0": np.array([0.5, 0.5, 0.2, -1.0])})
+    policy = policy_file(
+        tmp_path / "p.npz", task=to_dict(TaskConfig(horizon=3)), arrays={"b0": np.array([0.5, 0.5, 0.2, -1.0])}
+    )
     log = tmp_path / "log.jsonl"
-    result = _run_blocked(f'''
+    result = _run_blocked(
+        f"""
         import builtins
         import mrguide.cli as cli
         import mrguide.deploy.commands as deploy_commands
@@ -88,17 +99,22 @@ def test_deploy_on_the_real_bus_path(tmp_path, policy_file):
                              "--enable-drives", "--log", {str(log)!r}, "--quiet"])
         finally:
             sim.stop()
-    ''', tmp_path)
+    """,
+        tmp_path,
+    )
     assert result.returncode == 0, result.stderr
     assert "episodes: 1" in result.stdout
     records = [json.loads(line) for line in log.read_text().splitlines()]
     assert sum(r["kind"] == "decision" and "setpoints" in r for r in records) == 3
 
 
-@pytest.mark.parametrize("argv, words", [
-    (["bus", "selftest"], "PASS"),
-    (["bus", "monitor", "--simulate", "--duration", "0.5"], "frames in"),
-])
+@pytest.mark.parametrize(
+    "argv, words",
+    [
+        (["bus", "selftest"], "PASS"),
+        (["bus", "monitor", "--simulate", "--duration", "0.5"], "frames in"),
+    ],
+)
 def test_bus_commands(tmp_path, argv, words):
     result = _run_blocked(f"import mrguide.cli as cli\ncode = cli.main({argv!r})\n", tmp_path)
     assert result.returncode == 0, result.stderr
@@ -115,8 +131,19 @@ def test_calibrate_from_images(tmp_path):
         folder = render_calibration_images(client, tmp_path)
     finally:
         pb.disconnect(client)
-    argv = ["calibrate", "--images", str(folder), "--intrinsics", str(tmp_path / "k.json"), "--poses",
-            str(tmp_path / "poses.json"), "--out", str(tmp_path / "cal.json"), "--overlay", str(tmp_path / "o.png")]
+    argv = [
+        "calibrate",
+        "--images",
+        str(folder),
+        "--intrinsics",
+        str(tmp_path / "k.json"),
+        "--poses",
+        str(tmp_path / "poses.json"),
+        "--out",
+        str(tmp_path / "cal.json"),
+        "--overlay",
+        str(tmp_path / "o.png"),
+    ]
     result = _run_blocked(f"import mrguide.cli as cli\ncode = cli.main({argv!r})\n", tmp_path)
     assert result.returncode == 0, result.stderr
     assert "registration: 3 frames" in result.stdout and (tmp_path / "cal.json").is_file()
@@ -125,8 +152,16 @@ def test_calibrate_from_images(tmp_path):
 # -- every import, also the function-local ones ---------------------------------------------------------------
 
 ROBOT_PC_PACKAGES = ("deploy", "drivers", "motion", "calibration")
-FORBIDDEN = ("torch", "pybullet", "pybullet_data", "pybullet_utils", "mrguide.twin", "mrguide.policies",
-             "mrguide.annotation", "mrguide.experiments")
+FORBIDDEN = (
+    "torch",
+    "pybullet",
+    "pybullet_data",
+    "pybullet_utils",
+    "mrguide.twin",
+    "mrguide.policies",
+    "mrguide.annotation",
+    "mrguide.experiments",
+)
 #: Known exceptions (file, function, module), each with the reason it is still there: none (the twin hands
 #: `calibrate --twin` and `deploy --dry-run` their twin code).
 KNOWN: set[tuple[str, str, str]] = set()

@@ -62,8 +62,13 @@ def ws_url(page_url: str) -> str:
 def obs_from_request(req: dict[str, Any]) -> np.ndarray:
     """The policy observation the trainer asked with (exactly: its float32 values travel as JSON floats)."""
     s = req["state"]
-    return observation(np.array(s["tcp"]), 1 if s["vacuum_on"] else -1, progress(int(req["phase_index"])),
-                       np.array(s["object"]["position"]), np.array(s["goal"]))
+    return observation(
+        np.array(s["tcp"]),
+        1 if s["vacuum_on"] else -1,
+        progress(int(req["phase_index"])),
+        np.array(s["object"]["position"]),
+        np.array(s["goal"]),
+    )
 
 
 class AnnotationBot:
@@ -81,17 +86,18 @@ class AnnotationBot:
         return self.report
 
     async def _main(self) -> None:
-        ctx = False if self.options.insecure else True
+        ctx = not self.options.insecure
         timeout = aiohttp.ClientTimeout(total=None, connect=self.options.connect_timeout_s)
         async with aiohttp.ClientSession(timeout=timeout) as http:
             try:
                 async with http.ws_connect(self.url, ssl=ctx, heartbeat=20.0) as ws:
-                    await ws.send_json({"type": "hello", "protocol": PROTOCOL_VERSION, "client": "bot",
-                                        "name": "mrguide annotate bot"})
+                    await ws.send_json(
+                        {"type": "hello", "protocol": PROTOCOL_VERSION, "client": "bot", "name": "mrguide annotate bot"}
+                    )
                     await self._serve(ws)
             except aiohttp.WSServerHandshakeError as exc:
                 raise BotError(f"{self.url}: the server refused the connection ({exc.status}: {exc.message})") from exc
-            except (aiohttp.ClientConnectionError, asyncio.TimeoutError) as exc:
+            except (TimeoutError, aiohttp.ClientConnectionError) as exc:
                 raise BotError(f"cannot connect to {self.url}: {exc}") from exc
 
     async def _serve(self, ws: aiohttp.ClientWebSocketResponse) -> None:
@@ -118,8 +124,12 @@ class AnnotationBot:
             return
         ws = hello["robot"]["workspace"]
         task = TaskConfig(**hello["task"])
-        self._annotator = SimulatedAnnotator(task, self.options.noise, Workspace(tuple(ws["lo"]), tuple(ws["hi"])),
-                                             seed=self.options.seed + ANNOTATOR_SEED_OFFSET)
+        self._annotator = SimulatedAnnotator(
+            task,
+            self.options.noise,
+            Workspace(tuple(ws["lo"]), tuple(ws["hi"])),
+            seed=self.options.seed + ANNOTATOR_SEED_OFFSET,
+        )
 
     async def _answer(self, ws: aiohttp.ClientWebSocketResponse, req: dict[str, Any]) -> None:
         if req.get("claimed_by") or self._annotator is None:
@@ -128,8 +138,9 @@ class AnnotationBot:
         ann = self._annotator.annotate(obs_from_request(req))
         if self.options.delay_s:
             await asyncio.sleep(self.options.delay_s)
-        await ws.send_json({"type": "answer", "id": req["id"], "target": [float(v) for v in ann.target],
-                            "vacuum": bool(ann.grip > 0)})
+        await ws.send_json(
+            {"type": "answer", "id": req["id"], "target": [float(v) for v in ann.target], "vacuum": bool(ann.grip > 0)}
+        )
         self.report.answers += 1
         self.report.latencies_s.append(time.perf_counter() - t0)
 

@@ -26,8 +26,14 @@ from typing import Any
 
 import numpy as np
 
-from mrguide.annotation.protocol import (REFUSALS, AnnotationRequest, ProtocolError, parse_answer, parse_hello,
-                                        parse_message)
+from mrguide.annotation.protocol import (
+    REFUSALS,
+    AnnotationRequest,
+    ProtocolError,
+    parse_answer,
+    parse_hello,
+    parse_message,
+)
 from mrguide.robot import Workspace
 
 log = logging.getLogger(__name__)
@@ -94,7 +100,9 @@ class BrokerStats:
 class AnnotationBroker:
     """One outstanding request at a time; first claim wins; answers validated against the workspace."""
 
-    def __init__(self, workspace: Workspace, hello: dict[str, Any] | None = None, claim_timeout_s: float = CLAIM_TIMEOUT_S):
+    def __init__(
+        self, workspace: Workspace, hello: dict[str, Any] | None = None, claim_timeout_s: float = CLAIM_TIMEOUT_S
+    ):
         self.workspace = workspace
         self.claim_timeout_s = claim_timeout_s
         self._hello = dict(hello or {})
@@ -112,7 +120,9 @@ class AnnotationBroker:
         self.on_waiting: Callable[[bool], None] | None = None
 
     # -- trainer side ------------------------------------------------------------------------------
-    def request(self, req: AnnotationRequest, timeout: float | None = None, acknowledge: bool = True) -> LiveAnswer | NoAnswer:
+    def request(
+        self, req: AnnotationRequest, timeout: float | None = None, acknowledge: bool = True
+    ) -> LiveAnswer | NoAnswer:
         """Ask every client; block until an answer, a skip, `timeout` seconds (None: no limit) or shutdown. An
         answer is acknowledged to its client at once, or with `acknowledge=False` when the caller calls
         `acknowledge(answer)` (once it has recorded it)."""
@@ -121,8 +131,9 @@ class AnnotationBroker:
                 raise RuntimeError("an annotation request is already outstanding")
             request_id = f"{self._session}-{next(self._seq)}"
             now = time.monotonic()
-            pending = _Pending(request_id, req.to_message(request_id, timeout, None), now,
-                               None if timeout is None else now + timeout)
+            pending = _Pending(
+                request_id, req.to_message(request_id, timeout, None), now, None if timeout is None else now + timeout
+            )
             self.stats.requests += 1
             if self._closed.is_set():
                 return NoAnswer(request_id, "shutdown")
@@ -158,12 +169,20 @@ class AnnotationBroker:
         client = self._clients.get(pending.claimed_by) if pending.claimed_by else None
         if client is None or time.monotonic() - client.last_seen < self.claim_timeout_s:
             return
-        log.info("annotation client %s claimed request %s and went quiet: claim released", client.client_id, pending.request_id)
+        log.info(
+            "annotation client %s claimed request %s and went quiet: claim released",
+            client.client_id,
+            pending.request_id,
+        )
         self.stats.claims_expired += 1
         pending.claimed_by = None
         pending.message["claimed_by"] = None
-        self._deliver([(c, {"type": "claimed", "id": pending.request_id, "client_id": None, "reason": "expired"})
-                       for c in self._clients.values()])
+        self._deliver(
+            [
+                (c, {"type": "claimed", "id": pending.request_id, "client_id": None, "reason": "expired"})
+                for c in self._clients.values()
+            ]
+        )
 
     def _finish(self, pending: _Pending) -> None:
         """Close the request (also on KeyboardInterrupt) and tell the clients why."""
@@ -172,7 +191,9 @@ class AnnotationBroker:
                 self._pending = None
             r = pending.result
             reason = "interrupted" if r is None else ("answered" if isinstance(r, LiveAnswer) else r.reason)
-            self._deliver([(c, {"type": "cancel", "id": pending.request_id, "reason": reason}) for c in self._clients.values()])
+            self._deliver(
+                [(c, {"type": "cancel", "id": pending.request_id, "reason": reason}) for c in self._clients.values()]
+            )
         self._set_waiting(False)
 
     def take_intervention(self) -> str | None:
@@ -220,8 +241,14 @@ class AnnotationBroker:
             client = _Client(f"c{next(self._ids)}", send)
             self._clients[client.client_id] = client
             self._status["clients"] = len(self._clients)
-            hello = {"type": "hello", "protocol": 1, "client_id": client.client_id, **self._hello,
-                     "status": self._status_message(), "request": self._outstanding()}
+            hello = {
+                "type": "hello",
+                "protocol": 1,
+                "client_id": client.client_id,
+                **self._hello,
+                "status": self._status_message(),
+                "request": self._outstanding(),
+            }
             self._deliver([(client, hello)])
             status = self._status_message()
             self._deliver([(c, status) for c in self._clients.values() if c is not client])
@@ -239,7 +266,9 @@ class AnnotationBroker:
             if p is not None and p.claimed_by == client_id:
                 p.claimed_by = None
                 p.message["claimed_by"] = None
-                self._deliver([(c, {"type": "claimed", "id": p.request_id, "client_id": None}) for c in self._clients.values()])
+                self._deliver(
+                    [(c, {"type": "claimed", "id": p.request_id, "client_id": None}) for c in self._clients.values()]
+                )
         log.info("annotation client %s disconnected", client_id)
 
     def receive(self, client_id: str, text: str | bytes) -> bool:
@@ -256,7 +285,9 @@ class AnnotationBroker:
                 self._handle(client_id, kind, msg)
             except ProtocolError as exc:
                 self.stats.refused[exc.code] += 1
-                self._reply(client_id, _ack(kind, msg_id if isinstance(msg_id, str) else None, False, str(exc), exc.code))
+                self._reply(
+                    client_id, _ack(kind, msg_id if isinstance(msg_id, str) else None, False, str(exc), exc.code)
+                )
                 return exc.code != "unsupported_protocol"
             except Exception as exc:  # a bug here must not take the server or the trainer down
                 log.error("annotation broker failed on a message from %s: %s: %s", client_id, type(exc).__name__, exc)
@@ -293,9 +324,13 @@ class AnnotationBroker:
         if p.claimed_by is None:
             p.claimed_by = client_id
             p.message["claimed_by"] = client_id
-            self._deliver([(c, {"type": "claimed", "id": p.request_id, "client_id": client_id}) for c in self._clients.values()])
+            self._deliver(
+                [(c, {"type": "claimed", "id": p.request_id, "client_id": client_id}) for c in self._clients.values()]
+            )
         if target is not None:
-            p.result = LiveAnswer(p.request_id, target[0], target[1], client_id, client.kind, time.monotonic() - p.created)
+            p.result = LiveAnswer(
+                p.request_id, target[0], target[1], client_id, client.kind, time.monotonic() - p.created
+            )
             self.stats.answered += 1
         elif kind == "skip":
             p.result = NoAnswer(p.request_id, "skipped")
@@ -334,5 +369,7 @@ class AnnotationBroker:
                 log.debug("could not queue a message for %s", client.client_id, exc_info=True)
 
 
-def _ack(kind: str | None, request_id: str | None, accepted: bool, reason: str | None, code: str | None = None) -> dict[str, Any]:
+def _ack(
+    kind: str | None, request_id: str | None, accepted: bool, reason: str | None, code: str | None = None
+) -> dict[str, Any]:
     return {"type": "ack", "for": kind, "id": request_id, "accepted": accepted, "reason": reason, "code": code}

@@ -14,25 +14,55 @@ class LiveTrainPlugin:
 
     def add_arguments(self, parser: argparse.ArgumentParser) -> None:
         g = parser.add_argument_group("live annotation (--expert live)")
-        g.add_argument("--host", default="127.0.0.1", help="address to serve the annotation page on (0.0.0.0: every interface)")
+        g.add_argument(
+            "--host", default="127.0.0.1", help="address to serve the annotation page on (0.0.0.0: every interface)"
+        )
         g.add_argument("--port", type=nonnegative_int, default=8765, help="port (0: any free port)")
-        g.add_argument("--cert", help="TLS certificate (PEM) for https/wss: a headset's browser needs a secure context off localhost")
+        g.add_argument(
+            "--cert",
+            help="TLS certificate (PEM) for https/wss: a headset's browser needs a secure context off localhost",
+        )
         g.add_argument("--key", help="TLS private key (PEM)")
         g.add_argument("--token", help="access token in the page URL (default: a new random token)")
-        g.add_argument("--on-timeout", choices=("wait", "skip", "oracle"), default="wait",
-                       help="when nobody answers: pause training (wait), drop the demonstration (skip), or let the "
-                            "scripted oracle answer, tagged and not counted as human input (oracle)")
-        g.add_argument("--annotation-timeout", type=positive_float, default=30.0, metavar="S",
-                       help="seconds a request waits under --on-timeout skip|oracle")
-        g.add_argument("--claim-timeout", type=positive_float, default=60.0, metavar="S",
-                       help="a client that claimed a request and sends nothing for this long loses the claim")
-        g.add_argument("--registration", help="calibration JSON of `mrguide calibrate`: places the scene in the headset")
+        g.add_argument(
+            "--on-timeout",
+            choices=("wait", "skip", "oracle"),
+            default="wait",
+            help="when nobody answers: pause training (wait), drop the demonstration (skip), or let the "
+            "scripted oracle answer, tagged and not counted as human input (oracle)",
+        )
+        g.add_argument(
+            "--annotation-timeout",
+            type=positive_float,
+            default=30.0,
+            metavar="S",
+            help="seconds a request waits under --on-timeout skip|oracle",
+        )
+        g.add_argument(
+            "--claim-timeout",
+            type=positive_float,
+            default=60.0,
+            metavar="S",
+            help="a client that claimed a request and sends nothing for this long loses the claim",
+        )
+        g.add_argument(
+            "--registration", help="calibration JSON of `mrguide calibrate`: places the scene in the headset"
+        )
 
     def open_session(self, args: argparse.Namespace, on_waiting: Callable[[bool], None]):
         from mrguide.annotation.live import LiveOptions, LiveSession
 
-        options = LiveOptions(args.host, args.port, args.cert, args.key, args.token, args.on_timeout,
-                              args.annotation_timeout, args.claim_timeout, args.registration)
+        options = LiveOptions(
+            args.host,
+            args.port,
+            args.cert,
+            args.key,
+            args.token,
+            args.on_timeout,
+            args.annotation_timeout,
+            args.claim_timeout,
+            args.registration,
+        )
         return LiveSession(options, on_waiting)
 
 
@@ -41,10 +71,17 @@ def add_annotate_command(sub: argparse._SubParsersAction) -> None:
     asub = p.add_subparsers(dest="annotate_command", required=True)
     b = asub.add_parser("bot", help="a scripted client that answers annotation requests like the simulated annotator")
     b.add_argument("--url", required=True, help="the annotation page URL printed by `mrguide train --expert live`")
-    b.add_argument("--noise", type=nonnegative_float, metavar="SIGMA",
-                   help="std of an isotropic marking error per axis, m (default 0, or the --config's)")
-    b.add_argument("--config", help="a training config whose [guidance.noise] is the error model to mark with, e.g. "
-                                    "configs/person.toml (a person in a headset: bias, line-of-sight error, slips)")
+    b.add_argument(
+        "--noise",
+        type=nonnegative_float,
+        metavar="SIGMA",
+        help="std of an isotropic marking error per axis, m (default 0, or the --config's)",
+    )
+    b.add_argument(
+        "--config",
+        help="a training config whose [guidance.noise] is the error model to mark with, e.g. "
+        "configs/person.toml (a person in a headset: bias, line-of-sight error, slips)",
+    )
     b.add_argument("--seed", type=nonnegative_int, default=0, help="training seed whose simulated annotator to mimic")
     b.add_argument("--delay", type=nonnegative_float, default=0.0, metavar="S", help="think time before each answer, s")
     b.add_argument("--count", type=positive_int, help="stop after this many answers")
@@ -70,6 +107,8 @@ def cmd_annotate_bot(args: argparse.Namespace) -> int:
         print(f"mrguide annotate bot: {exc}", file=sys.stderr)
         return 2
     lat = sorted(report.latencies_s or [0.0])
-    print(f"annotation bot: {report.answers} answers, {report.refused} refused; "
-          f"median think time {1e3 * lat[len(lat) // 2]:.2f} ms")
+    print(
+        f"annotation bot: {report.answers} answers, {report.refused} refused; "
+        f"median think time {1e3 * lat[len(lat) // 2]:.2f} ms"
+    )
     return 0

@@ -48,8 +48,12 @@ class HeadlessError(RuntimeError):
 
 def chromium_path() -> str:
     """Debian's chromium (or $MRGUIDE_CHROMIUM); a clear error when it is missing."""
-    candidates = [os.environ.get("MRGUIDE_CHROMIUM"), "/usr/bin/chromium", shutil.which("chromium"),
-                  shutil.which("chromium-browser")]
+    candidates = [
+        os.environ.get("MRGUIDE_CHROMIUM"),
+        "/usr/bin/chromium",
+        shutil.which("chromium"),
+        shutil.which("chromium-browser"),
+    ]
     for c in candidates:
         if c and Path(c).is_file() and os.access(c, os.X_OK):
             return c
@@ -59,8 +63,7 @@ def chromium_path() -> str:
 class HeadlessBrowser:
     """One headless Chromium with a fresh profile; `open(url)` gives an `AnnotationPage`."""
 
-    def __init__(self, executable: str | None = None, viewport: tuple[int, int] = (1280, 800),
-                 timeout_s: float = 30.0):
+    def __init__(self, executable: str | None = None, viewport: tuple[int, int] = (1280, 800), timeout_s: float = 30.0):
         try:
             from playwright.sync_api import sync_playwright
         except ImportError as exc:  # a dev dependency
@@ -69,8 +72,11 @@ class HeadlessBrowser:
         self._pw = sync_playwright().start()
         try:
             self.context = self._pw.chromium.launch_persistent_context(
-                self._profile, executable_path=executable or chromium_path(), headless=True,
-                args=list(CHROMIUM_ARGS), viewport={"width": viewport[0], "height": viewport[1]},
+                self._profile,
+                executable_path=executable or chromium_path(),
+                headless=True,
+                args=list(CHROMIUM_ARGS),
+                viewport={"width": viewport[0], "height": viewport[1]},
                 timeout=timeout_s * 1000,
             )
         except Exception:
@@ -122,8 +128,10 @@ class AnnotationPage:
         try:
             handle = self.page.wait_for_function(expression, arg=arg, timeout=timeout, polling=50)
         except Exception as exc:
-            raise HeadlessError(f"page did not reach `{expression}` within {timeout / 1000:.0f} s; "
-                                f"state: {self._safe_state()}; console: {self.console[-8:]}") from exc
+            raise HeadlessError(
+                f"page did not reach `{expression}` within {timeout / 1000:.0f} s; "
+                f"state: {self._safe_state()}; console: {self.console[-8:]}"
+            ) from exc
         return handle.json_value()
 
     def wait_ready(self) -> None:
@@ -134,8 +142,11 @@ class AnnotationPage:
 
     def wait_request(self, request_id: str | None = None, timeout_s: float | None = None) -> dict[str, Any]:
         """Wait until the page shows a request (that one, if given) and has laid out its target."""
-        self.wait_js("(id) => { const s = window.mrguide.state(); return s.requestId && (!id || s.requestId === id) && s.target; }",
-                     request_id, timeout_s)
+        self.wait_js(
+            "(id) => { const s = window.mrguide.state(); return s.requestId && (!id || s.requestId === id) && s.target; }",
+            request_id,
+            timeout_s,
+        )
         return self.state()
 
     def wait_robot(self, timeout_s: float | None = None) -> dict[str, Any]:
@@ -217,14 +228,19 @@ class AnnotationPage:
         """Answer the next request with the mouse alone, as a person would: look at what it asks, click the
         part (a pick, or any phase up to the lift) or the goal (a place, transport), then click Submit. Returns
         {"id", "phase", "target", "actions" (clicks), "seconds" (from the request shown to the submit)}."""
-        self.wait_js("(id) => { const s = window.mrguide.state(); return s.requestId && s.requestId !== id && s.target; }",
-                     previous_id, timeout_s)
+        self.wait_js(
+            "(id) => { const s = window.mrguide.state(); return s.requestId && s.requestId !== id && s.target; }",
+            previous_id,
+            timeout_s,
+        )
         t0 = time.monotonic()
         req = self.page.evaluate("() => ({id: window.mrguide.state().requestId, phase: window.mrguide.state().phase})")
         shown = self.page.evaluate("() => window.mrguide.shown()")
         on_goal = shown["phase_index"] >= 3
         spot = list(shown["goal"]) if on_goal else list(shown["object"])
-        spot[2] = 0.001 if on_goal else spot[2] + 0.5 * shown["object_height"]  # the goal ring on the table, the part's top
+        spot[2] = (
+            0.001 if on_goal else spot[2] + 0.5 * shown["object_height"]
+        )  # the goal ring on the table, the part's top
         px = self.page.evaluate("(p) => window.mrguide.screenOf(p)", spot)
         self.page.mouse.click(px["x"], px["y"])
         self.wait_state(f"s.placedOn === '{'goal' if on_goal else 'object'}'")

@@ -83,23 +83,40 @@ class LiveExpert:
         obs = np.asarray(obs)
         _, orientation = self.env.scene.object_pose()
         req = AnnotationRequest(
-            phase=phase_from_progress(obs[4]), joints=self.env.scene.joint_positions(noisy=False), tcp=obs[0:3],
-            vacuum_on=bool(obs[3] > 0), object_position=obs[5:8], object_orientation=orientation, goal=obs[8:11], obs=obs,
-            remark=previous is not None, previous_target=None if previous is None else np.asarray(previous.target),
+            phase=phase_from_progress(obs[4]),
+            joints=self.env.scene.joint_positions(noisy=False),
+            tcp=obs[0:3],
+            vacuum_on=bool(obs[3] > 0),
+            object_position=obs[5:8],
+            object_orientation=orientation,
+            goal=obs[8:11],
+            obs=obs,
+            remark=previous is not None,
+            previous_target=None if previous is None else np.asarray(previous.target),
         )
         res = self.broker.request(req, self.timeout_s, acknowledge=False)
         if isinstance(res, LiveAnswer):
             self.counts.answers += 1
             self._unacknowledged[res.request_id] = res
-            return Annotation(res.target, 1.0 if res.vacuum else -1.0, "live",
-                              {"client": res.client, "client_id": res.client_id, "request": res.request_id,
-                               "latency_s": round(res.latency_s, 4)})
+            return Annotation(
+                res.target,
+                1.0 if res.vacuum else -1.0,
+                "live",
+                {
+                    "client": res.client,
+                    "client_id": res.client_id,
+                    "request": res.request_id,
+                    "latency_s": round(res.latency_s, 4),
+                },
+            )
         if res.reason == "timeout":
             self.counts.timeouts += 1
             if self.on_timeout == "oracle":
                 self.counts.fallbacks += 1
                 exact = self.oracle.annotate(obs)
-                return Annotation(exact.target, exact.grip, "oracle", {"request": res.request_id, "fallback": "timeout"})
+                return Annotation(
+                    exact.target, exact.grip, "oracle", {"request": res.request_id, "fallback": "timeout"}
+                )
         if res.reason in ("timeout", "skipped"):
             self.counts.skipped += 1
         log.info("annotation request %s ended without an answer: %s", res.request_id, res.reason)
@@ -155,8 +172,10 @@ class LiveSession:
             return "live annotation: no session"
         c, b = self.expert.counts, self.broker.stats
         refused = sum(b.refused.values())
-        return (f"live annotation: {c.answers} answers from clients, {c.fallbacks} oracle fallbacks, {c.skipped} "
-                f"demonstrations skipped ({c.timeouts} timeouts); {refused} client messages refused")
+        return (
+            f"live annotation: {c.answers} answers from clients, {c.fallbacks} oracle fallbacks, {c.skipped} "
+            f"demonstrations skipped ({c.timeouts} timeouts); {refused} client messages refused"
+        )
 
     def interrupt(self) -> None:
         """End the outstanding request (the trainer is stopping)."""
@@ -170,13 +189,23 @@ class LiveSession:
             self.server.stop()
 
 
-def hello_fields(spec: RobotSpec, task: TaskConfig, registration: dict[str, Any] | None = None,
-                 on_timeout: str = "wait") -> dict[str, Any]:
+def hello_fields(
+    spec: RobotSpec, task: TaskConfig, registration: dict[str, Any] | None = None, on_timeout: str = "wait"
+) -> dict[str, Any]:
     """What every client learns on connecting: the robot and its frame conventions, the task, the placement."""
     return {
-        "robot": {"name": spec.name, "frame": spec.base_frame, "tcp_frame": "tcp", "units": "m", "angles": "rad",
-                  "quaternion": "xyzw", "up": "z", "urdf_url": "/robot/robot.urdf", "joint_names": list(spec.joint_names),
-                  "workspace": {"lo": spec.workspace.lo.tolist(), "hi": spec.workspace.hi.tolist()}},
+        "robot": {
+            "name": spec.name,
+            "frame": spec.base_frame,
+            "tcp_frame": "tcp",
+            "units": "m",
+            "angles": "rad",
+            "quaternion": "xyzw",
+            "up": "z",
+            "urdf_url": "/robot/robot.urdf",
+            "joint_names": list(spec.joint_names),
+            "workspace": {"lo": spec.workspace.lo.tolist(), "hi": spec.workspace.hi.tolist()},
+        },
         "task": asdict(task),
         "registration": registration,
         "on_timeout": on_timeout,
@@ -189,5 +218,8 @@ def _load_registration(path: str) -> dict[str, Any]:
         record = load_calibration(Path(path))
     except CalibrationError as exc:
         raise ConfigError(f"--registration: {exc}") from exc
-    return {"T_base_hmd": np.asarray(record.T_base_hmd, dtype=float).tolist(), "method": record.method,
-            "rms_residual_m": record.rms_residual_m}
+    return {
+        "T_base_hmd": np.asarray(record.T_base_hmd, dtype=float).tolist(),
+        "method": record.method,
+        "rms_residual_m": record.rms_residual_m,
+    }

@@ -33,13 +33,13 @@ def _resolve(spec: str, importer: Path, web_dir: Path, imports: dict[str, str]) 
         return _from_url(imports[spec], web_dir)
     for prefix, url in imports.items():
         if prefix.endswith("/") and spec.startswith(prefix):
-            return _from_url(url + spec[len(prefix):], web_dir)
+            return _from_url(url + spec[len(prefix) :], web_dir)
     return None
 
 
 def _from_url(url: str, web_dir: Path) -> Path | None:
     if url.startswith("/static/"):
-        return (web_dir / url[len("/static/"):]).resolve()
+        return (web_dir / url[len("/static/") :]).resolve()
     if url.startswith(f"/{MODULES}/"):
         return (web_dir / url.lstrip("/")).resolve()
     return None
@@ -51,8 +51,12 @@ def module_files(web_dir: Path) -> list[Path]:
     file that an import needs and that is not there (`npm ci` not run)."""
     web_dir = web_dir.resolve()
     imports = import_map(web_dir)
-    todo = [p for p in web_dir.glob("*.js")] + [f for spec in imports for f in [_resolve(spec, web_dir / "index.html", web_dir, imports)]
-                                               if f is not None and not spec.endswith("/")]
+    todo = [p for p in web_dir.glob("*.js")] + [
+        f
+        for spec in imports
+        for f in [_resolve(spec, web_dir / "index.html", web_dir, imports)]
+        if f is not None and not spec.endswith("/")
+    ]
     seen: set[Path] = set()
     while todo:
         path = todo.pop()

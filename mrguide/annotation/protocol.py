@@ -33,9 +33,24 @@ REMARK_PROMPT = "The arm did not reach your last mark for this step. Mark it aga
 
 #: Why a client message is refused: the `code` of its `ack`, and the keys of the refusal counts in `status`
 #: (a fixed set, whatever a client sends).
-REFUSALS = ("malformed", "too_large", "binary", "not_an_object", "no_type", "unknown_type", "no_id", "bad_hello",
-            "unsupported_protocol", "stale", "claimed", "bad_target", "not_finite", "outside_workspace", "bad_vacuum",
-            "internal")
+REFUSALS = (
+    "malformed",
+    "too_large",
+    "binary",
+    "not_an_object",
+    "no_type",
+    "unknown_type",
+    "no_id",
+    "bad_hello",
+    "unsupported_protocol",
+    "stale",
+    "claimed",
+    "bad_target",
+    "not_finite",
+    "outside_workspace",
+    "bad_vacuum",
+    "internal",
+)
 #: The most digits a number may have (a longer one is refused before Python turns it into an int).
 MAX_DIGITS = 18
 #: Reasons are cut to this many characters (they may quote a piece of the message).
@@ -69,17 +84,24 @@ class AnnotationRequest:
     def to_message(self, request_id: str, timeout_s: float | None, claimed_by: str | None) -> dict[str, Any]:
         """The `request` message (JSON-ready)."""
         return {
-            "type": "request", "id": request_id, "phase": PHASES[self.phase], "phase_index": self.phase,
+            "type": "request",
+            "id": request_id,
+            "phase": PHASES[self.phase],
+            "phase_index": self.phase,
             "ask": ["target", "vacuum"],
             "prompt": (REMARK_PROMPT if self.remark else "") + PROMPTS[self.phase],
-            "suggested_vacuum": G_REQUIRED[self.phase] > 0, "remark": self.remark,
+            "suggested_vacuum": G_REQUIRED[self.phase] > 0,
+            "remark": self.remark,
             "previous_target": _floats(self.previous_target) if self.previous_target is not None else None,
             "state": {
-                "joints": _floats(self.joints), "tcp": _floats(self.tcp), "vacuum_on": bool(self.vacuum_on),
+                "joints": _floats(self.joints),
+                "tcp": _floats(self.tcp),
+                "vacuum_on": bool(self.vacuum_on),
                 "object": {"position": _floats(self.object_position), "orientation": _floats(self.object_orientation)},
                 "goal": _floats(self.goal),
             },
-            "timeout_s": timeout_s, "claimed_by": claimed_by,
+            "timeout_s": timeout_s,
+            "claimed_by": claimed_by,
         }
 
 
@@ -127,8 +149,10 @@ def parse_hello(msg: dict[str, Any]) -> tuple[str, str]:
     connection."""
     version = msg.get("protocol")
     if isinstance(version, bool) or not isinstance(version, int) or version != PROTOCOL_VERSION:
-        raise ProtocolError("unsupported_protocol",
-                            f"protocol {repr(version)[:20]} not supported: this server speaks {PROTOCOL_VERSION}")
+        raise ProtocolError(
+            "unsupported_protocol",
+            f"protocol {repr(version)[:20]} not supported: this server speaks {PROTOCOL_VERSION}",
+        )
     kind = msg.get("client", "unknown")
     name = msg.get("name", kind)
     if not isinstance(kind, str) or not isinstance(name, str):
@@ -152,7 +176,11 @@ def parse_answer(msg: dict[str, Any], workspace: Workspace) -> tuple[np.ndarray,
     p = np.array(target, dtype=float)
     for i, axis in enumerate("xyz"):
         if p[i] < workspace.lo[i]:
-            raise ProtocolError("outside_workspace", f"target outside the workspace box: {axis} = {p[i]:.4f} < {workspace.lo[i]:.4f}")
+            raise ProtocolError(
+                "outside_workspace", f"target outside the workspace box: {axis} = {p[i]:.4f} < {workspace.lo[i]:.4f}"
+            )
         if p[i] > workspace.hi[i]:
-            raise ProtocolError("outside_workspace", f"target outside the workspace box: {axis} = {p[i]:.4f} > {workspace.hi[i]:.4f}")
+            raise ProtocolError(
+                "outside_workspace", f"target outside the workspace box: {axis} = {p[i]:.4f} > {workspace.hi[i]:.4f}"
+            )
     return p, vacuum

@@ -56,14 +56,24 @@ class ServerError(ConfigError):
 class AnnotationServer:
     """Serve `broker` to browsers, headsets and bots; `start()` returns the URL to open."""
 
-    def __init__(self, broker: AnnotationBroker, robot: RobotSpec, host: str = "127.0.0.1", port: int = 8765,
-                 cert: str | Path | None = None, key: str | Path | None = None, token: str | None = None,
-                 web_dir: Path | None = None):
+    def __init__(
+        self,
+        broker: AnnotationBroker,
+        robot: RobotSpec,
+        host: str = "127.0.0.1",
+        port: int = 8765,
+        cert: str | Path | None = None,
+        key: str | Path | None = None,
+        token: str | None = None,
+        web_dir: Path | None = None,
+    ):
         self.broker, self.robot = broker, robot
         self.host, self.port = host, port
         if token is not None and (len(token) < MIN_TOKEN_LENGTH or not token.isascii() or not token.isprintable()):
-            raise ServerError(f"the access token must be at least {MIN_TOKEN_LENGTH} printable ASCII characters "
-                              f"(got {len(token)}); leave --token out for a random one")
+            raise ServerError(
+                f"the access token must be at least {MIN_TOKEN_LENGTH} printable ASCII characters "
+                f"(got {len(token)}); leave --token out for a random one"
+            )
         self.token = token or secrets.token_urlsafe(16)
         self.web_dir = web_dir or WEB_DIR
         self._ssl = _ssl_context(cert, key)
@@ -97,8 +107,10 @@ class AnnotationServer:
             raise ServerError(f"the annotation page is not installed: {self.web_dir / 'index.html'} is missing")
         why = page_assets.missing(self.web_dir)
         if why is not None:
-            raise ServerError(f"{why}: the page's scripts come from npm. In a checkout run `npm ci` in {self.web_dir} "
-                              "(./run.sh does); an installed mrguide was built without npm: install Node.js and reinstall")
+            raise ServerError(
+                f"{why}: the page's scripts come from npm. In a checkout run `npm ci` in {self.web_dir} "
+                "(./run.sh does); an installed mrguide was built without npm: install Node.js and reinstall"
+            )
         ready = threading.Event()
         failure: list[BaseException] = []
 
@@ -181,7 +193,9 @@ class AnnotationServer:
 
     async def _page(self, request: web.Request) -> web.StreamResponse:
         if not self._authorized(request):
-            raise web.HTTPForbidden(text="access token missing or wrong, or another site's page: open the URL that mrguide printed\n")
+            raise web.HTTPForbidden(
+                text="access token missing or wrong, or another site's page: open the URL that mrguide printed\n"
+            )
         return web.FileResponse(self.web_dir / "index.html", headers={"Cache-Control": "no-store"})
 
     async def _static_file(self, request: web.Request) -> web.StreamResponse:
@@ -289,7 +303,9 @@ def reachable_address() -> str:
 
 
 def _no_password() -> str:
-    raise ServerError("the TLS key is encrypted: give a key without a passphrase (openssl rsa -in key.pem -out plain.pem)")
+    raise ServerError(
+        "the TLS key is encrypted: give a key without a passphrase (openssl rsa -in key.pem -out plain.pem)"
+    )
 
 
 def _ssl_context(cert: str | Path | None, key: str | Path | None) -> ssl.SSLContext | None:

@@ -37,13 +37,15 @@ def occlude(image: np.ndarray, region: np.ndarray, fraction: float, grey: int = 
     out = image.copy()
     x0, y0 = np.floor(region.min(axis=0)).astype(int)
     x1, y1 = np.ceil(region.max(axis=0)).astype(int)
-    xe = x0 + int(round(fraction * (x1 - x0)))
+    xe = x0 + round(fraction * (x1 - x0))
     h, w = image.shape[:2]
-    out[max(y0, 0):min(y1 + 1, h), max(x0, 0):min(xe, w)] = grey
+    out[max(y0, 0) : min(y1 + 1, h), max(x0, 0) : min(xe, w)] = grey
     return out
 
 
-def degrade(image: np.ndarray, d: Degradation, rng: np.random.Generator, region: np.ndarray | None = None) -> np.ndarray:
+def degrade(
+    image: np.ndarray, d: Degradation, rng: np.random.Generator, region: np.ndarray | None = None
+) -> np.ndarray:
     """Occlusion (of `region`, default the whole image), then blur, then noise."""
     out = image
     if d.occlusion > 0:

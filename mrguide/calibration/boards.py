@@ -89,17 +89,20 @@ def single_marker_corners(size_m: float) -> np.ndarray:
     return np.array([[-s, s, 0.0], [s, s, 0.0], [s, -s, 0.0], [-s, -s, 0.0]])
 
 
-def printable_marker(dictionary: cv2.aruco.Dictionary, marker_id: int, size_m: float, quiet_zone_m: float,
-                     px_per_m: float) -> np.ndarray:
+def printable_marker(
+    dictionary: cv2.aruco.Dictionary, marker_id: int, size_m: float, quiet_zone_m: float, px_per_m: float
+) -> np.ndarray:
     """uint8 image of one marker with a white quiet zone, `px_per_m` pixels per metre.
 
     The image spans the marker square grown by `quiet_zone_m` on every side; its top-left pixel edge is the
     marker-frame point (-size/2 - quiet, size/2 + quiet).
     """
     if not 0 <= marker_id < dictionary.bytesList.shape[0]:
-        raise CalibrationError(f"marker id {marker_id} is not in the dictionary (0..{dictionary.bytesList.shape[0] - 1})")
-    side = int(round(size_m * px_per_m))
-    pad = int(round(quiet_zone_m * px_per_m))
+        raise CalibrationError(
+            f"marker id {marker_id} is not in the dictionary (0..{dictionary.bytesList.shape[0] - 1})"
+        )
+    side = round(size_m * px_per_m)
+    pad = round(quiet_zone_m * px_per_m)
     if side < dictionary.markerSize + 2 or pad < 1:
         raise CalibrationError(f"printable_marker: {px_per_m} px/m is too coarse for a {size_m} m marker")
     img = cv2.aruco.generateImageMarker(dictionary, marker_id, side, borderBits=1)
@@ -117,8 +120,10 @@ def printable_board(board: Board, px_per_m: float) -> np.ndarray:
     lengths = (c.marker_size_m, c.margin_m, c.separation_m if c.kind == "grid" else c.square_size_m)
     off = max(abs(v * px_per_m - round(v * px_per_m)) for v in lengths)
     if off > 0.01:
-        log.warning("printable_board: at %g px/m the board's elements are not whole pixels (off by %.2f px)", px_per_m, off)
+        log.warning(
+            "printable_board: at %g px/m the board's elements are not whole pixels (off by %.2f px)", px_per_m, off
+        )
     w, h = board.size_m
-    margin = int(round(board.cfg.margin_m * px_per_m))
-    size = (int(round(w * px_per_m)) + 2 * margin, int(round(h * px_per_m)) + 2 * margin)
+    margin = round(board.cfg.margin_m * px_per_m)
+    size = (round(w * px_per_m) + 2 * margin, round(h * px_per_m) + 2 * margin)
     return board.board.generateImage(size, marginSize=margin, borderBits=1)

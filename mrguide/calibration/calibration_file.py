@@ -26,8 +26,24 @@ FORMAT = "mrguide-calibration"
 VERSION = 1
 METHODS = ("board", "markers", "board+markers", "hand-eye")
 #: Every key of a calibration file.
-KEYS = frozenset({"format", "version", "T_base_hmd", "dictionary", "marker_size_m", "method", "rms_residual_m",
-                  "max_residual_m", "n_frames", "n_points", "created", "camera", "board", "extra"})
+KEYS = frozenset(
+    {
+        "format",
+        "version",
+        "T_base_hmd",
+        "dictionary",
+        "marker_size_m",
+        "method",
+        "rms_residual_m",
+        "max_residual_m",
+        "n_frames",
+        "n_points",
+        "created",
+        "camera",
+        "board",
+        "extra",
+    }
+)
 #: Plausibility bounds of the numbers in a calibration file (m, counts).
 MAX_MARKER_SIZE_M = 2.0
 MAX_RESIDUAL_M = 1.0
@@ -82,8 +98,9 @@ def save_calibration(record: CalibrationRecord, path: str | Path) -> Path:
     return path
 
 
-def load_calibration(path: str | Path, expect_dictionary: str | None = None,
-                     expect_marker_size_m: float | None = None) -> CalibrationRecord:
+def load_calibration(
+    path: str | Path, expect_dictionary: str | None = None, expect_marker_size_m: float | None = None
+) -> CalibrationRecord:
     """Read and validate a calibration file; with `expect_*`, also check it matches the current setup."""
     path = Path(path)
     if not path.is_file():
@@ -93,9 +110,11 @@ def load_calibration(path: str | Path, expect_dictionary: str | None = None,
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise CalibrationFileError(f"{path}: not valid JSON ({exc})") from exc
     if not isinstance(data, dict) or data.get("format") != FORMAT:
-        raise CalibrationFileError(f"{path}: not an mrguide calibration file (missing \"format\": \"{FORMAT}\")")
+        raise CalibrationFileError(f'{path}: not an mrguide calibration file (missing "format": "{FORMAT}")')
     if data.get("version") != VERSION:
-        raise CalibrationFileError(f"{path}: calibration format version {data.get('version')!r}, this code reads {VERSION}")
+        raise CalibrationFileError(
+            f"{path}: calibration format version {data.get('version')!r}, this code reads {VERSION}"
+        )
     record = _record_from_json(data, path)
     if expect_dictionary is not None and record.dictionary != canonical_dictionary_name(expect_dictionary):
         raise CalibrationFileError(
@@ -124,8 +143,10 @@ def _record_from_json(data: dict[str, Any], path: Path) -> CalibrationRecord:
     def number(key: str, low: float, high: float, integer: bool = False) -> Any:
         value = need(key, int if integer else (int, float))
         if not (math.isfinite(value) and low <= value <= high):
-            raise CalibrationFileError(f"{path}: {key!r} = {value!r}: expected {'an integer' if integer else 'a finite number'} "
-                                       f"in [{low:g}, {high:g}]")
+            raise CalibrationFileError(
+                f"{path}: {key!r} = {value!r}: expected {'an integer' if integer else 'a finite number'} "
+                f"in [{low:g}, {high:g}]"
+            )
         return value
 
     matrix = need("T_base_hmd", list)
@@ -134,7 +155,9 @@ def _record_from_json(data: dict[str, Any], path: Path) -> CalibrationRecord:
     except (TypeError, ValueError) as exc:
         raise CalibrationFileError(f"{path}: 'T_base_hmd' is not a numeric 4x4 matrix") from exc
     if not is_rigid(T, tol=1e-5):
-        raise CalibrationFileError(f"{path}: 'T_base_hmd' is not a rigid 4x4 transform (finite, orthonormal, last row 0 0 0 1)")
+        raise CalibrationFileError(
+            f"{path}: 'T_base_hmd' is not a rigid 4x4 transform (finite, orthonormal, last row 0 0 0 1)"
+        )
     name = need("dictionary", str)
     try:
         dictionary = canonical_dictionary_name(name)

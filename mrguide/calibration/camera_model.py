@@ -31,10 +31,14 @@ class CameraModel:
     dist: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
-        if not all(isinstance(v, int) and not isinstance(v, bool) and 0 < v <= MAX_IMAGE_SIDE
-                   for v in (self.width, self.height)):
-            raise CalibrationError(f"camera intrinsics: width and height must be whole pixels in [1, {MAX_IMAGE_SIDE}], "
-                                   f"got {self.width!r} x {self.height!r}")
+        if not all(
+            isinstance(v, int) and not isinstance(v, bool) and 0 < v <= MAX_IMAGE_SIDE
+            for v in (self.width, self.height)
+        ):
+            raise CalibrationError(
+                f"camera intrinsics: width and height must be whole pixels in [1, {MAX_IMAGE_SIDE}], "
+                f"got {self.width!r} x {self.height!r}"
+            )
         if not np.all(np.isfinite([self.fx, self.fy, self.cx, self.cy, *self.dist])):
             raise CalibrationError(f"camera intrinsics: non-finite values in {self}")
         if self.fx <= 0 or self.fy <= 0:
@@ -55,7 +59,7 @@ class CameraModel:
         return np.asarray(self.dist, dtype=float) if self.dist else np.zeros(5)
 
     @classmethod
-    def from_pinhole(cls, intrinsics: Any) -> "CameraModel":
+    def from_pinhole(cls, intrinsics: Any) -> CameraModel:
         """From any object with width, height, fx, fy, cx, cy (e.g. the twin camera's `Intrinsics`)."""
         k = intrinsics
         return cls(int(k.width), int(k.height), float(k.fx), float(k.fy), float(k.cx), float(k.cy))
@@ -76,8 +80,15 @@ class CameraModel:
         return uv.reshape(-1, 2)
 
     def to_dict(self) -> dict[str, Any]:
-        return {"width": self.width, "height": self.height, "fx": self.fx, "fy": self.fy,
-                "cx": self.cx, "cy": self.cy, "dist": list(self.dist)}
+        return {
+            "width": self.width,
+            "height": self.height,
+            "fx": self.fx,
+            "fy": self.fy,
+            "cx": self.cx,
+            "cy": self.cy,
+            "dist": list(self.dist),
+        }
 
 
 def load_camera_model(path: str | Path) -> CameraModel:
@@ -152,6 +163,11 @@ def camera_from_dict(data: Any, where: str) -> CameraModel:
 
 def _pixels(value: Any, key: str, where: str) -> int:
     """A whole number of pixels (an integral float from OpenCV's FileStorage is fine; 640.5 or inf is not)."""
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value != int(value):
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, (int, float))
+        or not math.isfinite(value)
+        or value != int(value)
+    ):
         raise CalibrationError(f"{where}: intrinsics {key} = {value!r}: expected a whole number of pixels")
     return int(value)

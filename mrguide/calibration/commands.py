@@ -26,8 +26,10 @@ log = logging.getLogger(__name__)
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
 
 
-def add_calibrate_command(subparsers: argparse._SubParsersAction,
-                          twin_calibration: Callable[[Path | None, CalibrationConfig], tuple[CalibrationRun, np.ndarray]]) -> None:
+def add_calibrate_command(
+    subparsers: argparse._SubParsersAction,
+    twin_calibration: Callable[[Path | None, CalibrationConfig], tuple[CalibrationRun, np.ndarray]],
+) -> None:
     """Add `calibrate` to the top-level parser; its handler returns the exit code. `twin_calibration(config,
     cfg)` renders the targets with the twin's HMD and calibrates (handed in by the twin: calibration does not
     import it) and returns the run and the true T_base_hmd."""
@@ -42,9 +44,12 @@ def add_calibrate_command(subparsers: argparse._SubParsersAction,
     src.add_argument("--images", type=Path, metavar="DIR", help="folder of images of the targets")
     src.add_argument("--twin", action="store_true", help="render the targets with the twin's simulated HMD")
     p.add_argument("--intrinsics", type=Path, help="camera intrinsics (.json/.toml/.yaml/.xml); required with --images")
-    p.add_argument("--poses", type=Path,
-                   help="JSON {image file name: 4x4 T_hmd_cam} from head tracking; without it the camera frame "
-                   "is the registered frame (a fixed camera)")
+    p.add_argument(
+        "--poses",
+        type=Path,
+        help="JSON {image file name: 4x4 T_hmd_cam} from head tracking; without it the camera frame "
+        "is the registered frame (a fixed camera)",
+    )
     p.add_argument("--config", type=Path, help="TOML with [calibration] (and [calibration_twin] for --twin)")
     p.add_argument("--out", type=Path, default=Path("out/calibration.json"), help="calibration file to write")
     p.add_argument("--overlay", type=Path, default=Path("out/calibration_overlay.png"), help="overlay PNG to write")
@@ -64,7 +69,9 @@ def run_calibrate(args: argparse.Namespace) -> int:
         frames = _image_frames(args.images, camera, args.poses)
         run, truth = calibrate_frames(tqdm(frames, desc="frames", disable=not sys.stderr.isatty()), cfg, camera), None
     _report(run, truth)
-    write_files_atomically({args.out: run.record.encode(), args.overlay: encode_image(mosaic(run.overlays), args.overlay)})
+    write_files_atomically(
+        {args.out: run.record.encode(), args.overlay: encode_image(mosaic(run.overlays), args.overlay)}
+    )
     print(f"wrote {args.out} and {args.overlay}")
     return 0
 
@@ -74,8 +81,9 @@ def _check_outputs(out: Path, overlay: Path) -> None:
     check_output_file(out, "--out")
     check_output_file(overlay, "--overlay")
     if not can_write_image(overlay):
-        raise CalibrationError(f"--overlay {overlay}: OpenCV cannot write images with extension {overlay.suffix!r} "
-                               "(use .png)")
+        raise CalibrationError(
+            f"--overlay {overlay}: OpenCV cannot write images with extension {overlay.suffix!r} (use .png)"
+        )
     if out.resolve() == overlay.resolve():
         raise CalibrationError(f"--out and --overlay are the same file: {out}")
 
@@ -130,12 +138,16 @@ def _report(run: CalibrationRun, truth: np.ndarray | None) -> None:
             print(f"{f.label:<24}{f.n_markers:>8}{np.sqrt(np.mean(r**2)):>9.2f}{r.max():>9.2f}  used")
         else:
             print(f"{f.label:<24}{f.n_markers:>8}{'-':>9}{'-':>9}  rejected: {reg.frames_rejected.get(f.label, '')}")
-    print(f"registration: {len(reg.frames_used)} frames, {len(reg.residuals_m)} points, "
-          f"rms {reg.rms_m * 1e3:.2f} mm, max {reg.max_m * 1e3:.2f} mm")
+    print(
+        f"registration: {len(reg.frames_used)} frames, {len(reg.residuals_m)} points, "
+        f"rms {reg.rms_m * 1e3:.2f} mm, max {reg.max_m * 1e3:.2f} mm"
+    )
     with np.printoptions(precision=5, suppress=True):
         print(f"T_base_hmd =\n{T}")
     if truth is not None:
         centre = np.array([0.475, 0.1, 0.0])  # workspace centre
-        print(f"twin ground truth: translation error {np.linalg.norm(T[:3, 3] - truth[:3, 3]) * 1e3:.2f} mm, "
-              f"rotation error {rotation_angle_deg(truth[:3, :3], T[:3, :3]):.3f} deg, "
-              f"error at the workspace centre {np.linalg.norm(apply(T @ invert(truth), centre) - centre) * 1e3:.2f} mm")
+        print(
+            f"twin ground truth: translation error {np.linalg.norm(T[:3, 3] - truth[:3, 3]) * 1e3:.2f} mm, "
+            f"rotation error {rotation_angle_deg(truth[:3, :3], T[:3, :3]):.3f} deg, "
+            f"error at the workspace centre {np.linalg.norm(apply(T @ invert(truth), centre) - centre) * 1e3:.2f} mm"
+        )

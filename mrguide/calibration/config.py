@@ -151,12 +151,20 @@ class HmdNoiseConfig:
     tracking_noise_deg: float = 0.0  # std per axis of the head-tracked camera rotation vector, per frame
     calibration_error_m: float = 0.0  # fixed offset (norm) added to T_base_hmd, random direction
     calibration_error_deg: float = 0.0  # fixed rotation (angle) added to T_base_hmd about `pivot`, random axis
-    pivot: tuple[float, float, float] = (0.475, 0.1, 0.0)  # base point the rotation error turns about (workspace centre)
+    pivot: tuple[float, float, float] = (
+        0.475,
+        0.1,
+        0.0,
+    )  # base point the rotation error turns about (workspace centre)
     seed: int = 0
 
     def __post_init__(self) -> None:
-        for name, high, unit in (("tracking_noise_m", 0.1, " m"), ("tracking_noise_deg", 10.0, " deg"),
-                                 ("calibration_error_m", 0.5, " m"), ("calibration_error_deg", 45.0, " deg")):
+        for name, high, unit in (
+            ("tracking_noise_m", 0.1, " m"),
+            ("tracking_noise_deg", 10.0, " deg"),
+            ("calibration_error_m", 0.5, " m"),
+            ("calibration_error_deg", 45.0, " deg"),
+        ):
             check_number(f"calibration.hmd.{name}", getattr(self, name), 0.0, high, unit)
         check_number("calibration.hmd.seed", self.seed, 0, 2**32 - 1, integer=True)
 

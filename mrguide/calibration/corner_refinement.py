@@ -67,8 +67,9 @@ def _undistort(points: np.ndarray, camera: CameraModel) -> np.ndarray:
     return cv2.undistortPoints(points.reshape(-1, 1, 2), camera.K, camera.dist_coeffs, P=camera.K).reshape(-1, 2)
 
 
-def refine_marker_corners(gray: np.ndarray, corners: np.ndarray, bits: int,
-                          camera: CameraModel | None = None, passes: int = 2) -> np.ndarray:
+def refine_marker_corners(
+    gray: np.ndarray, corners: np.ndarray, bits: int, camera: CameraModel | None = None, passes: int = 2
+) -> np.ndarray:
     """Corners (4, 2) re-estimated from the marker's four outer edges; the input corners when a side is
     too short or too few clean edge samples are found. `bits` is the marker's cells per side (with border).
 
@@ -79,7 +80,9 @@ def refine_marker_corners(gray: np.ndarray, corners: np.ndarray, bits: int,
     out = c
     for _ in range(passes):
         refined = _refine_once(gray, out, bits, camera)
-        if refined is None or np.max(np.linalg.norm(refined - c, axis=1)) > 3.0:  # lines met far off: keep the detector's
+        if (
+            refined is None or np.max(np.linalg.norm(refined - c, axis=1)) > 3.0
+        ):  # lines met far off: keep the detector's
             return out
         out = refined
     return out

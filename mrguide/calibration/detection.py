@@ -75,7 +75,7 @@ class Detections:
             return None
         return self.corners[hits[0]]
 
-    def only(self, ids: set[int] | np.ndarray) -> "Detections":
+    def only(self, ids: set[int] | np.ndarray) -> Detections:
         """The detections whose id is in `ids`."""
         keep = np.isin(self.ids, list(ids))
         return Detections(self.corners[keep], self.ids[keep], self.rejected)
@@ -86,7 +86,7 @@ class Detections:
         return corners, self.ids.reshape(-1, 1).astype(np.int32)
 
     @classmethod
-    def from_opencv(cls, corners, ids, rejected=()) -> "Detections":
+    def from_opencv(cls, corners, ids, rejected=()) -> Detections:
         if ids is None or len(ids) == 0:
             return cls(np.zeros((0, 4, 2)), np.zeros(0, dtype=int), tuple(rejected))
         c = np.asarray(corners, dtype=float).reshape(-1, 4, 2)

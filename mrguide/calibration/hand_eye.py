@@ -12,8 +12,8 @@ wheels lack the binding (opencv/opencv#29565, fixed by #29584), and then the sam
 from __future__ import annotations
 
 import logging
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import cv2
 import numpy as np
@@ -54,8 +54,11 @@ class HandEyeResult:
             n_frames=len(self.translation_residuals_m),
             n_points=len(self.translation_residuals_m),
             camera=camera,
-            extra={"T_tcp_marker": self.T_tcp_marker.tolist(), "solver": self.solver,
-                   "rotation_residuals_deg": self.rotation_residuals_deg.tolist()},
+            extra={
+                "T_tcp_marker": self.T_tcp_marker.tolist(),
+                "solver": self.solver,
+                "rotation_residuals_deg": self.rotation_residuals_deg.tolist(),
+            },
         )
 
 
@@ -83,8 +86,10 @@ def _opencv(A: list[np.ndarray], B: list[np.ndarray]) -> tuple[np.ndarray, np.nd
     world2cam = [invert(b) for b in B]  # T_marker_hmd
     base2gripper = [invert(a) for a in A]  # T_tcp_base
     R_b2w, t_b2w, R_g2c, t_g2c = cv2.calibrateRobotWorldHandEye(
-        [m[:3, :3] for m in world2cam], [m[:3, 3] for m in world2cam],
-        [m[:3, :3] for m in base2gripper], [m[:3, 3] for m in base2gripper],
+        [m[:3, :3] for m in world2cam],
+        [m[:3, 3] for m in world2cam],
+        [m[:3, :3] for m in base2gripper],
+        [m[:3, 3] for m in base2gripper],
         method=cv2.CALIB_ROBOT_WORLD_HAND_EYE_SHAH,
     )
     return invert(make_T(R_g2c, t_g2c.reshape(3))), invert(make_T(R_b2w, t_b2w.reshape(3)))
@@ -109,10 +114,15 @@ def solve_robot_world_hand_eye(T_base_tcp: Sequence[np.ndarray], T_hmd_marker: S
     res = HandEyeResult(
         T_base_hmd=Z,
         T_tcp_marker=X,
-        translation_residuals_m=np.array([np.linalg.norm(l[:3, 3] - r[:3, 3]) for l, r in zip(lhs, rhs)]),
-        rotation_residuals_deg=np.array([rotation_angle_deg(l[:3, :3], r[:3, :3]) for l, r in zip(lhs, rhs)]),
+        translation_residuals_m=np.array([np.linalg.norm(a[:3, 3] - b[:3, 3]) for a, b in zip(lhs, rhs)]),
+        rotation_residuals_deg=np.array([rotation_angle_deg(a[:3, :3], b[:3, :3]) for a, b in zip(lhs, rhs)]),
         solver=solver,
     )
-    log.info("hand-eye (%s): %d poses, rms %.2f mm, max rotation residual %.2f deg",
-             solver, len(A), res.rms_m * 1e3, float(res.rotation_residuals_deg.max()))
+    log.info(
+        "hand-eye (%s): %d poses, rms %.2f mm, max rotation residual %.2f deg",
+        solver,
+        len(A),
+        res.rms_m * 1e3,
+        float(res.rotation_residuals_deg.max()),
+    )
     return res

@@ -7,8 +7,8 @@ robot base frame as `T_base_hmd @ T_hmd_cam @ p`.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 

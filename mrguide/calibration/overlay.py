@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Sequence
 
 import cv2
 import numpy as np
@@ -14,8 +14,13 @@ from mrguide.calibration.pose import PoseEstimate
 from mrguide.calibration.se3 import to_rvec_tvec
 
 
-def draw_overlay(image: np.ndarray, detections: Detections, poses: Sequence[tuple[PoseEstimate, float]],
-                 camera: CameraModel, caption: str = "") -> np.ndarray:
+def draw_overlay(
+    image: np.ndarray,
+    detections: Detections,
+    poses: Sequence[tuple[PoseEstimate, float]],
+    camera: CameraModel,
+    caption: str = "",
+) -> np.ndarray:
     """BGR copy of an RGB/gray image with marker outlines and ids, and x/y/z axes (red/green/blue) per pose."""
     out = cv2.cvtColor(image, cv2.COLOR_GRAY2BGR) if image.ndim == 2 else cv2.cvtColor(image, cv2.COLOR_RGB2BGR)
     if len(detections):
@@ -38,7 +43,7 @@ def mosaic(images: Sequence[np.ndarray], max_width: int = 1920) -> np.ndarray:
     size = (int(w * scale), int(h * scale))
     tiles = [cv2.resize(im, size, interpolation=cv2.INTER_AREA) for im in images]
     tiles += [np.zeros_like(tiles[0])] * (-len(tiles) % cols)
-    return np.vstack([np.hstack(tiles[i:i + cols]) for i in range(0, len(tiles), cols)])
+    return np.vstack([np.hstack(tiles[i : i + cols]) for i in range(0, len(tiles), cols)])
 
 
 def encode_image(image: np.ndarray, path: str | Path) -> bytes:

@@ -33,8 +33,9 @@ def _rms(obj: np.ndarray, img: np.ndarray, rvec: np.ndarray, tvec: np.ndarray, c
     return float(np.sqrt(np.mean(np.sum((proj.reshape(-1, 2) - img.reshape(-1, 2)) ** 2, axis=1))))
 
 
-def _candidates(obj: np.ndarray, img: np.ndarray, camera: CameraModel, flags: int,
-                z_toward_camera: bool) -> list[tuple[np.ndarray, np.ndarray, float]]:
+def _candidates(
+    obj: np.ndarray, img: np.ndarray, camera: CameraModel, flags: int, z_toward_camera: bool
+) -> list[tuple[np.ndarray, np.ndarray, float]]:
     """PnP solutions (rvec, tvec, rms px), best first, that are finite and show the printed side to the camera.
 
     Besides the IPPE solutions, SQPnP's global solution is a candidate: IPPE returns garbage (tens of px
@@ -52,8 +53,13 @@ def _candidates(obj: np.ndarray, img: np.ndarray, camera: CameraModel, flags: in
     return sorted(out, key=lambda s: s[2])
 
 
-def estimate_marker_pose(corners: np.ndarray, size_m: float, camera: CameraModel, ambiguity_ratio: float = 0.6,
-                         normal_hint_cam: np.ndarray | None = None) -> PoseEstimate:
+def estimate_marker_pose(
+    corners: np.ndarray,
+    size_m: float,
+    camera: CameraModel,
+    ambiguity_ratio: float = 0.6,
+    normal_hint_cam: np.ndarray | None = None,
+) -> PoseEstimate:
     """T_cam_marker of one square marker from its 4 corners (px), marker frame as in `single_marker_corners`.
 
     IPPE gives two poses for a square; they differ by a flip of the marker plane and fit almost equally
@@ -90,8 +96,9 @@ class BoardPoseEstimator:
             self._charuco_params = cv2.aruco.CharucoParameters()
             self._charuco = cv2.aruco.CharucoDetector(board.board, self._charuco_params, detector.params)
 
-    def estimate(self, image: np.ndarray, camera: CameraModel, detections: Detections | None = None,
-                 where: str = "image") -> tuple[PoseEstimate, Detections]:
+    def estimate(
+        self, image: np.ndarray, camera: CameraModel, detections: Detections | None = None, where: str = "image"
+    ) -> tuple[PoseEstimate, Detections]:
         """Board pose in the camera frame and the board markers used (detected, or recovered by refinement)."""
         gray = to_gray(image, where)
         det = detections if detections is not None else self.detector.detect(gray, where, camera)
@@ -129,7 +136,9 @@ class BoardPoseEstimator:
         ch_corners, ch_ids, _, _ = self._charuco.detectBoard(gray, markerCorners=corners, markerIds=ids)
         n = 0 if ch_ids is None else len(ch_ids)
         if n < 4 or self.board.board.checkCharucoCornersCollinear(ch_ids):
-            raise NotEnoughMarkersError(f"{where}: only {n} ChArUco corners found (or all on one line); need 4 spread ones")
+            raise NotEnoughMarkersError(
+                f"{where}: only {n} ChArUco corners found (or all on one line); need 4 spread ones"
+            )
         return self.board.board.matchImagePoints(ch_corners, ch_ids)
 
     @staticmethod

@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 
@@ -40,9 +40,16 @@ class MarkerPoseSource:
     frame (`normal_hint_base`, up for a marker on top of the object) settles IPPE's two-fold ambiguity.
     """
 
-    def __init__(self, frames: FrameProvider | None, detector: MarkerDetector, camera: CameraModel, T_base_hmd: np.ndarray,
-                 marker_id: int, offset_marker_to_object: np.ndarray | tuple[float, float, float] = (0.0, 0.0, 0.0),
-                 normal_hint_base: np.ndarray | tuple[float, float, float] | None = (0.0, 0.0, 1.0)):
+    def __init__(
+        self,
+        frames: FrameProvider | None,
+        detector: MarkerDetector,
+        camera: CameraModel,
+        T_base_hmd: np.ndarray,
+        marker_id: int,
+        offset_marker_to_object: np.ndarray | tuple[float, float, float] = (0.0, 0.0, 0.0),
+        normal_hint_base: np.ndarray | tuple[float, float, float] | None = (0.0, 0.0, 1.0),
+    ):
         self.frames, self.detector, self.camera = frames, detector, camera
         self.T_base_hmd = np.asarray(T_base_hmd, dtype=float)
         self.marker_id = marker_id
@@ -51,10 +58,15 @@ class MarkerPoseSource:
         self.last_pose: PoseEstimate | None = None
 
     @classmethod
-    def from_calibration(cls, frames: FrameProvider, detector: MarkerDetector, camera: CameraModel,
-                         calibration: CalibrationRecord, marker_id: int,
-                         offset_marker_to_object: np.ndarray | tuple[float, float, float] = (0.0, 0.0, 0.0),
-                         ) -> "MarkerPoseSource":
+    def from_calibration(
+        cls,
+        frames: FrameProvider,
+        detector: MarkerDetector,
+        camera: CameraModel,
+        calibration: CalibrationRecord,
+        marker_id: int,
+        offset_marker_to_object: np.ndarray | tuple[float, float, float] = (0.0, 0.0, 0.0),
+    ) -> MarkerPoseSource:
         """As the constructor, after checking that the calibration used the detector's dictionary."""
         if canonical_dictionary_name(calibration.dictionary) != canonical_dictionary_name(detector.cfg.dictionary):
             raise CalibrationError(
@@ -72,13 +84,15 @@ class MarkerPoseSource:
         T_base_cam = self.T_base_hmd @ frame.T_hmd_cam
         hint = None if self.normal_hint_base is None else invert(T_base_cam)[:3, :3] @ self.normal_hint_base
         try:
-            pose = estimate_marker_pose(corners, self.detector.marker_size_m, self.camera,
-                                        self.detector.cfg.ambiguity_ratio, hint)
+            pose = estimate_marker_pose(
+                corners, self.detector.marker_size_m, self.camera, self.detector.cfg.ambiguity_ratio, hint
+            )
         except NotEnoughMarkersError as exc:  # no PnP solution shows the marker's front
             return MarkerObservation(detections, None, None, f"marker {self.marker_id}: {exc}")
         if pose.ambiguous:
-            return MarkerObservation(detections, pose, None,
-                                     f"marker {self.marker_id}: pose ambiguous (two IPPE solutions fit equally)")
+            return MarkerObservation(
+                detections, pose, None, f"marker {self.marker_id}: pose ambiguous (two IPPE solutions fit equally)"
+            )
         self.last_pose = pose
         return MarkerObservation(detections, pose, apply(T_base_cam @ pose.T_cam_target, self.offset))
 

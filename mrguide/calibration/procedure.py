@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+from collections.abc import Iterable
 from dataclasses import dataclass
-from typing import Iterable
 
 import numpy as np
 
@@ -30,8 +30,9 @@ class CalibrationRun:
     overlays: tuple[np.ndarray, ...]  # BGR, one per frame
 
 
-def calibrate_frames(frames: Iterable[tuple[str, np.ndarray, np.ndarray]], cfg: CalibrationConfig,
-                     camera: CameraModel) -> CalibrationRun:
+def calibrate_frames(
+    frames: Iterable[tuple[str, np.ndarray, np.ndarray]], cfg: CalibrationConfig, camera: CameraModel
+) -> CalibrationRun:
     """Register the HMD frame to the robot base from (label, image, T_hmd_cam) frames of the configured targets."""
     detector = MarkerDetector(cfg.detector)
     layout = layout_from_config(cfg, detector)
@@ -43,7 +44,9 @@ def calibrate_frames(frames: Iterable[tuple[str, np.ndarray, np.ndarray]], cfg: 
         overlays.append(draw_overlay(image, det, poses, camera, f"{label}: {corr.n_markers} target markers"))
         log.info("%s: %d markers detected, %d target markers used", label, len(det), corr.n_markers)
     reg = register(observed, cfg.registration)
-    method = "+".join(name for name, used in (("board", layout.board is not None), ("markers", bool(layout.markers))) if used)
+    method = "+".join(
+        name for name, used in (("board", layout.board is not None), ("markers", bool(layout.markers))) if used
+    )
     record = CalibrationRecord(
         T_base_hmd=reg.T_base_hmd,
         dictionary=canonical_dictionary_name(cfg.detector.dictionary),
@@ -55,7 +58,10 @@ def calibrate_frames(frames: Iterable[tuple[str, np.ndarray, np.ndarray]], cfg: 
         n_points=len(reg.residuals_m),
         camera=camera.to_dict(),
         board=dataclasses.asdict(cfg.board) if layout.board is not None else None,
-        extra={"frames_used": list(reg.frames_used), "frames_rejected": reg.frames_rejected,
-               "targets": dataclasses.asdict(cfg.targets)},
+        extra={
+            "frames_used": list(reg.frames_used),
+            "frames_rejected": reg.frames_rejected,
+            "targets": dataclasses.asdict(cfg.targets),
+        },
     )
     return CalibrationRun(record, reg, tuple(observed), tuple(overlays))

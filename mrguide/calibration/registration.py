@@ -9,8 +9,8 @@ T_base_hmd and the per-point residuals.
 from __future__ import annotations
 
 import logging
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Sequence
 
 import numpy as np
 
@@ -92,9 +92,7 @@ def register(frames: Sequence[Correspondences], cfg: RegistrationConfig = Regist
             usable.append(f)
     if len(usable) < cfg.min_frames:
         detail = "; ".join(f"{k}: {v}" for k, v in rejected.items()) or "no frames given"
-        raise NotEnoughMarkersError(
-            f"registration: {len(usable)} usable frames, {cfg.min_frames} required ({detail})"
-        )
+        raise NotEnoughMarkersError(f"registration: {len(usable)} usable frames, {cfg.min_frames} required ({detail})")
     fits = [fit_rigid(f.points_hmd, f.points_base, f"frame {f.label}") for f in usable]
     inliers = _consistent(usable, fits, cfg, rejected)
     if len(inliers) < cfg.min_frames:
@@ -102,18 +100,30 @@ def register(frames: Sequence[Correspondences], cfg: RegistrationConfig = Regist
             f"registration: only {len(inliers)} of {len(usable)} frames agree with each other "
             f"({cfg.min_frames} required): " + "; ".join(f"{k}: {v}" for k, v in rejected.items())
         )
-    fit = fit_rigid(np.vstack([f.points_hmd for f in inliers]), np.vstack([f.points_base for f in inliers]), "registration")
+    fit = fit_rigid(
+        np.vstack([f.points_hmd for f in inliers]), np.vstack([f.points_base for f in inliers]), "registration"
+    )
     reg = Registration(fit.T_dst_src, fit.residuals_m, tuple(f.label for f in inliers), rejected)
-    log.info("registration: %d frames, %d points, rms %.2f mm, max %.2f mm, %d frames rejected",
-             len(inliers), len(fit.residuals_m), reg.rms_m * 1e3, reg.max_m * 1e3, len(rejected))
+    log.info(
+        "registration: %d frames, %d points, rms %.2f mm, max %.2f mm, %d frames rejected",
+        len(inliers),
+        len(fit.residuals_m),
+        reg.rms_m * 1e3,
+        reg.max_m * 1e3,
+        len(rejected),
+    )
     if reg.rms_m > cfg.max_rms_residual_m:
-        log.warning("registration rms residual %.1f mm exceeds %.1f mm: check the target placement and the images",
-                    reg.rms_m * 1e3, cfg.max_rms_residual_m * 1e3)
+        log.warning(
+            "registration rms residual %.1f mm exceeds %.1f mm: check the target placement and the images",
+            reg.rms_m * 1e3,
+            cfg.max_rms_residual_m * 1e3,
+        )
     return reg
 
 
-def _consistent(frames: list[Correspondences], fits: list[RigidFit], cfg: RegistrationConfig,
-                rejected: dict[str, str]) -> list[Correspondences]:
+def _consistent(
+    frames: list[Correspondences], fits: list[RigidFit], cfg: RegistrationConfig, rejected: dict[str, str]
+) -> list[Correspondences]:
     """The frames whose own fit lies near the robust centre of all fits (median translation, medoid rotation)."""
     if len(fits) < 3:  # with one or two frames there is no majority to judge by
         return frames
@@ -123,7 +133,7 @@ def _consistent(frames: list[Correspondences], fits: list[RigidFit], cfg: Regist
     angles = np.array([[rotation_angle_deg(a, b) for b in Rs] for a in Rs])
     R_ref = Rs[int(np.argmin(np.median(angles, axis=1)))]
     keep = []
-    for f, fit, ti, Ri in zip(frames, fits, t, Rs):
+    for f, _fit, ti, Ri in zip(frames, fits, t, Rs):
         dt, dr = float(np.linalg.norm(ti - t_med)), rotation_angle_deg(Ri, R_ref)
         if dt > cfg.outlier_translation_m or dr > cfg.outlier_rotation_deg:
             rejected[f.label] = f"outlier: {dt * 1e3:.1f} mm / {dr:.2f} deg from the other frames"

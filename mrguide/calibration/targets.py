@@ -13,7 +13,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from mrguide.calibration.boards import Board, board_pose_on_table, make_board, marker_pose_on_table, single_marker_corners
+from mrguide.calibration.boards import (
+    Board,
+    board_pose_on_table,
+    make_board,
+    marker_pose_on_table,
+    single_marker_corners,
+)
 from mrguide.calibration.camera_model import CameraModel
 from mrguide.calibration.config import CalibrationConfig
 from mrguide.calibration.detection import Detections, MarkerDetector
@@ -36,7 +42,9 @@ class TargetLayout:
 
     def __post_init__(self) -> None:
         if self.board is not None and set(self.markers) & set(self.board.ids.tolist()):
-            raise CalibrationError(f"calibration targets: single marker ids {sorted(self.markers)} overlap the board's ids")
+            raise CalibrationError(
+                f"calibration targets: single marker ids {sorted(self.markers)} overlap the board's ids"
+            )
         if self.board is None and not self.markers:
             raise CalibrationError("calibration targets: no board and no markers")
 
@@ -75,8 +83,9 @@ class TargetObserver:
         self.layout, self.detector, self.camera = layout, detector, camera
         self.board_estimator = None if layout.board is None else BoardPoseEstimator(layout.board, detector, min_markers)
 
-    def observe(self, image: np.ndarray, T_hmd_cam: np.ndarray,
-                label: str) -> tuple[Correspondences, Detections, list[tuple[PoseEstimate, float]]]:
+    def observe(
+        self, image: np.ndarray, T_hmd_cam: np.ndarray, label: str
+    ) -> tuple[Correspondences, Detections, list[tuple[PoseEstimate, float]]]:
         """Correspondences of one frame (n_markers: the target markers used), plus the detections and the
         poses (with an axis length) for drawing."""
         self.camera.check_image(image, label)
@@ -94,20 +103,29 @@ class TargetObserver:
                 base_pts.append(apply(self.layout.T_base_board, pts))
                 poses.append((board_pose, 0.5 * min(self.layout.board.size_m)))
                 n_markers += len(used)
-        R_cam_base = None if board_pose is None else (board_pose.T_cam_target @ invert(self.layout.T_base_board))[:3, :3]
+        R_cam_base = (
+            None if board_pose is None else (board_pose.T_cam_target @ invert(self.layout.T_base_board))[:3, :3]
+        )
         n_markers += self._single_markers(det, T_hmd_cam, R_cam_base, hmd_pts, base_pts, poses)
         if not hmd_pts:
             return Correspondences(label, np.zeros((0, 3)), np.zeros((0, 3)), n_markers), det, poses
         return Correspondences(label, np.vstack(hmd_pts), np.vstack(base_pts), n_markers), det, poses
 
-    def _single_markers(self, det: Detections, T_hmd_cam: np.ndarray, R_cam_base: np.ndarray | None,
-                        hmd_pts: list, base_pts: list, poses: list) -> int:
+    def _single_markers(
+        self,
+        det: Detections,
+        T_hmd_cam: np.ndarray,
+        R_cam_base: np.ndarray | None,
+        hmd_pts: list,
+        base_pts: list,
+        poses: list,
+    ) -> int:
         """Adds each visible single marker's corners; an IPPE-ambiguous marker is settled by the table normal
         seen through the board or the other markers, or left out."""
         size = self.layout.marker_size_m
         obj = single_marker_corners(size)
         found = {}
-        for mid, T_base_marker in self.layout.markers.items():
+        for mid in self.layout.markers:
             corners = det.corners_of(mid)
             if corners is not None:
                 found[mid] = estimate_marker_pose(corners, size, self.camera, self.detector.cfg.ambiguity_ratio)
@@ -123,8 +141,13 @@ class TargetObserver:
                 if R_cam_base is None:
                     log.info("marker %d: pose ambiguous and no reference to settle it; left out", mid)
                     continue
-                pose = estimate_marker_pose(det.corners_of(mid), size, self.camera, self.detector.cfg.ambiguity_ratio,
-                                            R_cam_base @ T_base_marker[:3, 2])
+                pose = estimate_marker_pose(
+                    det.corners_of(mid),
+                    size,
+                    self.camera,
+                    self.detector.cfg.ambiguity_ratio,
+                    R_cam_base @ T_base_marker[:3, 2],
+                )
             hmd_pts.append(apply(T_hmd_cam @ pose.T_cam_target, obj))
             base_pts.append(apply(T_base_marker, obj))
             poses.append((pose, 0.75 * size))

@@ -59,8 +59,10 @@ class CameraSourceConfig:
 
     def __post_init__(self) -> None:
         if isinstance(self.source, bool) or (isinstance(self.source, int) and not 0 <= self.source <= 1000):
-            raise ConfigError(f"deploy.camera.source = {self.source!r}: expected a device index in [0, 1000], "
-                              "a stream URL, or a folder of images")
+            raise ConfigError(
+                f"deploy.camera.source = {self.source!r}: expected a device index in [0, 1000], "
+                "a stream URL, or a folder of images"
+            )
         if isinstance(self.source, str) and not self.source.strip():
             raise ConfigError("deploy.camera.source must not be empty")
         check_number("deploy.camera.marker_id", self.marker_id, 0, 999, integer=True)
@@ -114,23 +116,37 @@ class CameraStats:
         return self.poses / self.frames if self.frames else 0.0
 
     def as_dict(self) -> dict:
-        return {"frames": self.frames, "poses": self.poses, "detection_rate": self.detection_rate,
-                "grab_failures": self.grab_failures, "poses_per_s": self.poses_per_s,
-                "latency_median_ms": self.latency_median_ms, "latency_p95_ms": self.latency_p95_ms, "lost": self.lost}
+        return {
+            "frames": self.frames,
+            "poses": self.poses,
+            "detection_rate": self.detection_rate,
+            "grab_failures": self.grab_failures,
+            "poses_per_s": self.poses_per_s,
+            "latency_median_ms": self.latency_median_ms,
+            "latency_p95_ms": self.latency_p95_ms,
+            "lost": self.lost,
+        }
 
     def text(self) -> str:
-        line = (f"camera: {self.frames} frames, {self.poses} poses ({self.detection_rate:.0%} detected), "
-                f"{self.poses_per_s:.1f} poses/s, capture->pose latency median {self.latency_median_ms:.0f} ms, "
-                f"p95 {self.latency_p95_ms:.0f} ms, failed grabs {self.grab_failures}")
+        line = (
+            f"camera: {self.frames} frames, {self.poses} poses ({self.detection_rate:.0%} detected), "
+            f"{self.poses_per_s:.1f} poses/s, capture->pose latency median {self.latency_median_ms:.0f} ms, "
+            f"p95 {self.latency_p95_ms:.0f} ms, failed grabs {self.grab_failures}"
+        )
         return line + (f"; stopped: {self.lost}" if self.lost else "")
 
 
 class CameraPoseSource(ObjectPoseSource):
     """The newest object pose from a capture thread over `frames` (started here; `close()` stops it)."""
 
-    def __init__(self, frames: FrameSource, pipeline: MarkerPoseSource, max_pose_age_s: float,
-                 clock: Callable[[], float] = time.monotonic,
-                 on_frame: Callable[[Frame, MarkerObservation], None] | None = None):
+    def __init__(
+        self,
+        frames: FrameSource,
+        pipeline: MarkerPoseSource,
+        max_pose_age_s: float,
+        clock: Callable[[], float] = time.monotonic,
+        on_frame: Callable[[Frame, MarkerObservation], None] | None = None,
+    ):
         self.frames, self.pipeline, self.max_age, self.clock = frames, pipeline, max_pose_age_s, clock
         self.on_frame = on_frame  # called in the capture thread after each processed frame
         self._lock = threading.Lock()
@@ -216,8 +232,10 @@ class CameraPoseSource(ObjectPoseSource):
             if latest is not None and latest.t_capture > after:
                 return latest
             if lost or self.clock() > end:
-                raise PoseUnavailable(f"no camera pose of marker {self.pipeline.marker_id} within {timeout} s"
-                                      + (f" ({lost})" if lost else ""))
+                raise PoseUnavailable(
+                    f"no camera pose of marker {self.pipeline.marker_id} within {timeout} s"
+                    + (f" ({lost})" if lost else "")
+                )
             time.sleep(0.01)
 
     def running(self) -> bool:
@@ -233,9 +251,15 @@ class CameraPoseSource(ObjectPoseSource):
             lat = np.array(self._latency) * 1e3
             span = (self._latest.t_capture - self._t_first) if self._latest and self._t_first is not None else 0.0
             rate = (self._poses - 1) / span if span > 0 else 0.0
-            return CameraStats(self._frames, self._poses, self._failures, rate,
-                               float(np.median(lat)) if len(lat) else float("nan"),
-                               float(np.percentile(lat, 95)) if len(lat) else float("nan"), self._lost)
+            return CameraStats(
+                self._frames,
+                self._poses,
+                self._failures,
+                rate,
+                float(np.median(lat)) if len(lat) else float("nan"),
+                float(np.percentile(lat, 95)) if len(lat) else float("nan"),
+                self._lost,
+            )
 
     def close(self) -> None:
         self._stop.set()
@@ -243,10 +267,15 @@ class CameraPoseSource(ObjectPoseSource):
         self.frames.close()
 
 
-def open_camera_source(cfg: CameraSourceConfig, base_dir: Path,
-                       on_frame: Callable[[Frame, MarkerObservation], None] | None = None) -> CameraPoseSource:
+def open_camera_source(
+    cfg: CameraSourceConfig, base_dir: Path, on_frame: Callable[[Frame, MarkerObservation], None] | None = None
+) -> CameraPoseSource:
     """The configured camera, opened and capturing (files are checked before the device is opened)."""
     pipeline = load_marker_pipeline(cfg, base_dir)
     size = (pipeline.camera.width, pipeline.camera.height)
-    return CameraPoseSource(open_frames(cfg.source, base_dir, cfg.frame_rate, cfg.loop, size), pipeline,
-                            cfg.max_pose_age_s, on_frame=on_frame)
+    return CameraPoseSource(
+        open_frames(cfg.source, base_dir, cfg.frame_rate, cfg.loop, size),
+        pipeline,
+        cfg.max_pose_age_s,
+        on_frame=on_frame,
+    )

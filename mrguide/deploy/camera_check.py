@@ -28,10 +28,13 @@ def add_camera_command(subparsers: argparse._SubParsersAction) -> None:
     """Add `camera check` to the top-level parser; its handler returns the exit code."""
     p = subparsers.add_parser("camera", help="the deploy camera: `camera check` shows detection rate, latency, pose")
     sub = p.add_subparsers(dest="camera_command", required=True)
-    c = sub.add_parser("check", help="run the [deploy.camera] source for N frames; rate, latency, pose, overlay PNG",
-                       description="Open the camera of [deploy.camera] (device, stream or image folder), run N frames "
-                       "through the marker pipeline, print each frame's result and the detection rate, capture->pose "
-                       "latency and poses/s, and write an overlay PNG of the last frame with a pose.")
+    c = sub.add_parser(
+        "check",
+        help="run the [deploy.camera] source for N frames; rate, latency, pose, overlay PNG",
+        description="Open the camera of [deploy.camera] (device, stream or image folder), run N frames "
+        "through the marker pipeline, print each frame's result and the detection rate, capture->pose "
+        "latency and poses/s, and write an overlay PNG of the last frame with a pose.",
+    )
     c.add_argument("--config", type=Path, help="TOML with [deploy.camera]")
     c.add_argument("--frames", type=positive_int, default=60, help="frames to process (default 60)")
     c.add_argument("--timeout", type=positive_float, default=60.0, help="give up after this many seconds (default 60)")
@@ -43,8 +46,9 @@ def run_camera_check(args: argparse.Namespace) -> int:
     """Exit 0 when at least one pose was found, 1 when none was, 2 on bad input."""
     check_output_file(args.overlay, "--overlay")
     if not can_write_image(args.overlay):
-        raise CameraError(f"--overlay {args.overlay}: OpenCV cannot write images with extension "
-                          f"{args.overlay.suffix!r} (use .png)")
+        raise CameraError(
+            f"--overlay {args.overlay}: OpenCV cannot write images with extension {args.overlay.suffix!r} (use .png)"
+        )
     cfg = load_section(DeployConfig, args.config, "deploy").camera
     base = args.config.parent if args.config else Path.cwd()
     done, shown = threading.Event(), {"n": 0, "view": None}
@@ -81,8 +85,13 @@ def _report(source: CameraPoseSource, view: tuple[Frame, MarkerObservation] | No
     frame, seen = view
     position = np.round(seen.position, 4).tolist()
     print(f"object (marker {source.pipeline.marker_id}) in the robot frame: {position} m")
-    image = draw_overlay(frame.image, seen.detections, [(seen.pose, 0.75 * source.pipeline.detector.marker_size_m)],
-                         source.pipeline.camera, f"object {position} m, {stats.detection_rate:.0%} detected")
+    image = draw_overlay(
+        frame.image,
+        seen.detections,
+        [(seen.pose, 0.75 * source.pipeline.detector.marker_size_m)],
+        source.pipeline.camera,
+        f"object {position} m, {stats.detection_rate:.0%} detected",
+    )
     write_files_atomically({overlay: encode_image(image, overlay)})
     print(f"wrote {overlay}")
     return 0

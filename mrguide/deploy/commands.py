@@ -28,8 +28,19 @@ class DryRunBackend(Protocol):
 
     def camera(self, camera_cfg: Any, base: Path, object_height: float) -> Any: ...
 
-    def run(self, policy_path: str, policy: Any, bus: Any, episodes: int, seed: int, run_log: Any, safety: Any,
-            runtime: Any, tick: Any, camera: Any) -> Any: ...
+    def run(
+        self,
+        policy_path: str,
+        policy: Any,
+        bus: Any,
+        episodes: int,
+        seed: int,
+        run_log: Any,
+        safety: Any,
+        runtime: Any,
+        tick: Any,
+        camera: Any,
+    ) -> Any: ...
 
 
 def add_deploy_command(sub: argparse._SubParsersAction, dry_run_factory: Callable[[str | None], DryRunBackend]) -> None:
@@ -37,7 +48,9 @@ def add_deploy_command(sub: argparse._SubParsersAction, dry_run_factory: Callabl
     sp = sub.add_parser("deploy", help="run an exported policy on the cobot, or --dry-run it against the simulated bus")
     sp.add_argument("--policy", required=True, help="exported policy file (.npz) from `mrguide train`")
     sp.add_argument("--config", help="TOML config ([deploy], [safety], [robot], [task]; [twin] for dry runs)")
-    sp.add_argument("--dry-run", action="store_true", help="virtual CAN bus + simulated drives on a twin with reality gap")
+    sp.add_argument(
+        "--dry-run", action="store_true", help="virtual CAN bus + simulated drives on a twin with reality gap"
+    )
     sp.add_argument("--enable-drives", action="store_true", help="confirm enabling the real drives (real bus only)")
     sp.add_argument("--episodes", type=positive_int, help="default: [deploy] episodes")
     sp.add_argument("--seed", type=nonnegative_int, help="dry run: object/goal layouts; default: [deploy] seed")
@@ -87,17 +100,32 @@ def cmd_deploy(args: argparse.Namespace) -> int:
         if bus.bus.interface == "virtual" and not ALLOW_VIRTUAL_REAL_BUS:
             raise ConfigError("the bus config names the virtual interface; use --dry-run, or configure the real bus")
         if not args.enable_drives:
-            raise InputError(f"this will enable the drives on {bus.bus.interface}:{bus.bus.channel} and move the arm. "
-                              "Clear the cell, keep the E-stop at hand, and re-run with --enable-drives to confirm.")
+            raise InputError(
+                f"this will enable the drives on {bus.bus.interface}:{bus.bus.channel} and move the arm. "
+                "Clear the cell, keep the E-stop at hand, and re-run with --enable-drives to confirm."
+            )
     log_path, where = _log_path(args, dcfg)
-    header = {"command": "deploy", "dry_run": args.dry_run, "policy": str(args.policy), "config": args.config,
-              "bus": f"{bus.bus.interface}:{bus.bus.channel}", "episodes": episodes, "seed": seed if args.dry_run else None,
-              "decision_period": policy.decision_period, "pose_source": dcfg.pose_source,
-              "started": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
+    header = {
+        "command": "deploy",
+        "dry_run": args.dry_run,
+        "policy": str(args.policy),
+        "config": args.config,
+        "bus": f"{bus.bus.interface}:{bus.bus.channel}",
+        "episodes": episodes,
+        "seed": seed if args.dry_run else None,
+        "decision_period": policy.decision_period,
+        "pose_source": dcfg.pose_source,
+        "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+    }
     camera = _camera(args, dcfg, task, dry if args.dry_run else None)
     try:
-        with RunLog(log_path, header, where) as run_log, \
-                tqdm(total=episodes, desc="deploy" + (" (dry run)" if args.dry_run else ""), unit="ep", disable=args.quiet) as bar:
+        with (
+            RunLog(log_path, header, where) as run_log,
+            tqdm(
+                total=episodes, desc="deploy" + (" (dry run)" if args.dry_run else ""), unit="ep", disable=args.quiet
+            ) as bar,
+        ):
+
             def tick(report) -> None:
                 bar.update(1)
                 bar.set_postfix(last=report.outcome, decisions=report.decisions)
@@ -119,11 +147,13 @@ def _log_path(args: argparse.Namespace, dcfg) -> tuple[Path, str]:
     """The run log's path and how to name its origin in an error."""
     if args.log:
         return Path(args.log), "--log"
-    return (Path(dcfg.log_dir) / f"deploy-{time.strftime('%Y%m%d-%H%M%S')}.jsonl",
-            f"{args.config or 'default'} [deploy] log_dir:")
+    return (
+        Path(dcfg.log_dir) / f"deploy-{time.strftime('%Y%m%d-%H%M%S')}.jsonl",
+        f"{args.config or 'default'} [deploy] log_dir:",
+    )
 
 
-def _camera(args: argparse.Namespace, dcfg, task, dry: "DryRunBackend | None"):
+def _camera(args: argparse.Namespace, dcfg, task, dry: DryRunBackend | None):
     """With `pose_source = "camera"`: the camera source (a dry run: the twin-rendered one), opened before the run
     log so that bad files or a camera that does not open are refused first; otherwise None."""
     if dcfg.pose_source != "camera":

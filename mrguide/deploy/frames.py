@@ -85,8 +85,14 @@ class CaptureFrames:
 class ReplayFrames:
     """`count` images from `load(k)` in order at `rate_hz` (0: as fast as they are read), once or looped."""
 
-    def __init__(self, count: int, load: Callable[[int], np.ndarray], rate_hz: float, loop: bool = False,
-                 clock: Callable[[], float] = time.monotonic):
+    def __init__(
+        self,
+        count: int,
+        load: Callable[[int], np.ndarray],
+        rate_hz: float,
+        loop: bool = False,
+        clock: Callable[[], float] = time.monotonic,
+    ):
         self.count, self.load, self.rate, self.loop, self.clock = count, load, rate_hz, loop, clock
         self.dropped = 0
         self._next = 0
@@ -137,8 +143,9 @@ def folder_frames(folder: Path, rate_hz: float, loop: bool = False) -> ReplayFra
     return ReplayFrames(len(files), load, rate_hz, loop)
 
 
-def open_frames(source: int | str, base_dir: Path, rate_hz: float, loop: bool,
-                size: tuple[int, int] | None = None) -> FrameSource:
+def open_frames(
+    source: int | str, base_dir: Path, rate_hz: float, loop: bool, size: tuple[int, int] | None = None
+) -> FrameSource:
     """A device index, a URL (with "://"), or a folder of images / a video file (relative to `base_dir`)."""
     if isinstance(source, int):
         return CaptureFrames(source, size)

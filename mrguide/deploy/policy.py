@@ -23,8 +23,19 @@ import numpy as np
 from mrguide.config import ConfigError, to_dict
 from mrguide.errors import InputError
 from mrguide.robot import RobotSpec, Workspace
-from mrguide.task import (ACT_DIM, ACT_LAYOUT, N_PHASES, OBS_DIM, OBS_GOAL, OBS_LAYOUT, OBS_OBJECT, OBS_PROGRESS, PHASES, TaskConfig,
-                          progress)
+from mrguide.task import (
+    ACT_DIM,
+    ACT_LAYOUT,
+    N_PHASES,
+    OBS_DIM,
+    OBS_GOAL,
+    OBS_LAYOUT,
+    OBS_OBJECT,
+    OBS_PROGRESS,
+    PHASES,
+    TaskConfig,
+    progress,
+)
 
 FORMAT = "mrguide-policy"
 FORMAT_VERSION = 1
@@ -57,7 +68,9 @@ class OffsetHead:
     anchor_switch: float
 
     def __call__(self, obs: np.ndarray, y: np.ndarray) -> np.ndarray:
-        base = np.where(obs[:, OBS_PROGRESS:OBS_PROGRESS + 1] > self.anchor_switch, obs[:, OBS_GOAL], obs[:, OBS_OBJECT])
+        base = np.where(
+            obs[:, OBS_PROGRESS : OBS_PROGRESS + 1] > self.anchor_switch, obs[:, OBS_GOAL], obs[:, OBS_OBJECT]
+        )
         pos = np.clip((base + self.max_offset * y[:, :3] - self.centre) / self.half, -1.0, 1.0)
         return np.column_stack([pos, y[:, 3:]])
 
@@ -99,12 +112,16 @@ class ExportedPolicy:
         for i, (W, b, act) in enumerate(zip(self.weights, self.biases, self.activations)):
             pre = x @ W.T + b
             if i == 0:
-                pre = np.where(obs[:, OBS_PROGRESS:OBS_PROGRESS + 1] > self.carry.progress, x @ self.carry.W.T + self.carry.b, pre)
+                pre = np.where(
+                    obs[:, OBS_PROGRESS : OBS_PROGRESS + 1] > self.carry.progress,
+                    x @ self.carry.W.T + self.carry.b,
+                    pre,
+                )
             x = ACTIVATIONS[act](pre)
         return self.head(obs, x).astype(np.float32)
 
     @classmethod
-    def load(cls, path: str | Path, robot: RobotSpec | None = None, task: TaskConfig | None = None) -> "ExportedPolicy":
+    def load(cls, path: str | Path, robot: RobotSpec | None = None, task: TaskConfig | None = None) -> ExportedPolicy:
         """Read and validate a policy file; with `robot`/`task`, also require its arm, workspace and task to match."""
         path = Path(path)
         if not path.is_file():
@@ -121,7 +138,9 @@ class ExportedPolicy:
         width = OBS_DIM
         for i, (W, b) in enumerate(zip(weights, biases)):
             if W.ndim != 2 or W.shape[1] != width or b.shape != (W.shape[0],):
-                raise PolicyFileError(f"{path}: layer {i} has weights {W.shape} and bias {b.shape}; expected input width {width}")
+                raise PolicyFileError(
+                    f"{path}: layer {i} has weights {W.shape} and bias {b.shape}; expected input width {width}"
+                )
             if not (np.all(np.isfinite(W)) and np.all(np.isfinite(b))):
                 raise PolicyFileError(f"{path}: layer {i} holds NaN or inf")
             width = W.shape[0]
@@ -131,7 +150,9 @@ class ExportedPolicy:
         if robot is not None:
             ws = robot.workspace
             if not (np.allclose(trained.lo, ws.lo) and np.allclose(trained.hi, ws.hi)):
-                raise PolicyFileError(f"{path}: trained for workspace {meta['workspace']}, the robot is configured for low={ws.low} high={ws.high}")
+                raise PolicyFileError(
+                    f"{path}: trained for workspace {meta['workspace']}, the robot is configured for low={ws.low} high={ws.high}"
+                )
             check_arm(path, meta, robot)
         if task is not None:
             theirs, ours = meta["task"], to_dict(task)
@@ -145,17 +166,21 @@ class ExportedPolicy:
         return policy
 
 
-def check_decision_period(policy: ExportedPolicy, path: str | Path, control_period: float,
-                          configured: float | None = None) -> None:
+def check_decision_period(
+    policy: ExportedPolicy, path: str | Path, control_period: float, configured: float | None = None
+) -> None:
     """PolicyFileError unless the policy's decision period is `configured` (when given) and a whole number of
     control periods (s): the runtime acts at the rate the policy was trained for, or not at all."""
     period = policy.decision_period
     if configured is not None and abs(period - configured) > 1e-9:
-        raise PolicyFileError(f"{path}: trained with a {period} s decision period, the configuration runs {configured} s")
+        raise PolicyFileError(
+            f"{path}: trained with a {period} s decision period, the configuration runs {configured} s"
+        )
     ratio = period / control_period
     if ratio < 1 - 1e-9 or abs(ratio - round(ratio)) > 1e-6:
-        raise PolicyFileError(f"{path}: decision period {period} s is not a whole number of control periods "
-                              f"({control_period} s)")
+        raise PolicyFileError(
+            f"{path}: decision period {period} s is not a whole number of control periods ({control_period} s)"
+        )
 
 
 def check_arm(path: str | Path, meta: dict[str, Any], robot: RobotSpec) -> None:
@@ -164,19 +189,27 @@ def check_arm(path: str | Path, meta: dict[str, Any], robot: RobotSpec) -> None:
     arm = meta.get("robot")
     if arm is None:
         if robot.name != LEGACY_ARM:
-            raise PolicyFileError(f"{path}: records no arm (exported before arms were recorded, so for the {LEGACY_ARM}); "
-                                  f"the configuration drives {robot.name!r}: train and export a policy for this arm")
-        log.warning("%s: records no arm; taken for the %s it was trained on. Re-export it to record the arm", path, LEGACY_ARM)
+            raise PolicyFileError(
+                f"{path}: records no arm (exported before arms were recorded, so for the {LEGACY_ARM}); "
+                f"the configuration drives {robot.name!r}: train and export a policy for this arm"
+            )
+        log.warning(
+            "%s: records no arm; taken for the %s it was trained on. Re-export it to record the arm", path, LEGACY_ARM
+        )
         return
     if not isinstance(arm, dict) or not isinstance(arm.get("name"), str) or not isinstance(arm.get("fingerprint"), str):
         raise PolicyFileError(f"{path}: metadata robot {arm!r} is not an object with a name and a fingerprint")
     if arm["name"] != robot.name:
-        raise PolicyFileError(f"{path}: exported for arm {arm['name']!r}, the configuration drives arm {robot.name!r} "
-                              f"({robot.arm_file}); a policy runs only on the arm it was trained for")
+        raise PolicyFileError(
+            f"{path}: exported for arm {arm['name']!r}, the configuration drives arm {robot.name!r} "
+            f"({robot.arm_file}); a policy runs only on the arm it was trained for"
+        )
     if arm["fingerprint"] != robot.fingerprint:
-        raise PolicyFileError(f"{path}: exported for arm {arm['name']!r} with fingerprint {arm['fingerprint']}, the configured "
-                              f"{robot.name!r} has {robot.fingerprint}: its joints, frames, TCP offset, workspace box or URDF "
-                              "kinematics differ from the training arm's")
+        raise PolicyFileError(
+            f"{path}: exported for arm {arm['name']!r} with fingerprint {arm['fingerprint']}, the configured "
+            f"{robot.name!r} has {robot.fingerprint}: its joints, frames, TCP offset, workspace box or URDF "
+            "kinematics differ from the training arm's"
+        )
 
 
 def _metadata(path: Path, arrays: dict[str, np.ndarray]) -> dict[str, Any]:
@@ -190,12 +223,18 @@ def _metadata(path: Path, arrays: dict[str, np.ndarray]) -> dict[str, Any]:
     if not isinstance(meta, dict):
         raise PolicyFileError(f"{path}: metadata is a JSON {type(meta).__name__}, expected an object")
     if meta.get("format") != FORMAT or meta.get("format_version") != FORMAT_VERSION:
-        raise PolicyFileError(f"{path}: format {meta.get('format')!r} v{meta.get('format_version')!r}, expected {FORMAT} v{FORMAT_VERSION}")
+        raise PolicyFileError(
+            f"{path}: format {meta.get('format')!r} v{meta.get('format_version')!r}, expected {FORMAT} v{FORMAT_VERSION}"
+        )
     if meta.get("obs_layout") != list(OBS_LAYOUT) or meta.get("act_layout") != list(ACT_LAYOUT):
-        raise PolicyFileError(f"{path}: observation/action layout {meta.get('obs_layout')!r} / {meta.get('act_layout')!r} differs from this stack's {OBS_LAYOUT} / {ACT_LAYOUT}")
+        raise PolicyFileError(
+            f"{path}: observation/action layout {meta.get('obs_layout')!r} / {meta.get('act_layout')!r} differs from this stack's {OBS_LAYOUT} / {ACT_LAYOUT}"
+        )
     period = meta.get("decision_period")
     if isinstance(period, bool) or not isinstance(period, (int, float)) or not 0 < period <= MAX_DECISION_PERIOD:
-        raise PolicyFileError(f"{path}: metadata lacks a decision_period in (0, {MAX_DECISION_PERIOD:g}] s (got {period!r})")
+        raise PolicyFileError(
+            f"{path}: metadata lacks a decision_period in (0, {MAX_DECISION_PERIOD:g}] s (got {period!r})"
+        )
     acts = meta.get("activations")
     if not isinstance(acts, list) or not acts or any(not isinstance(a, str) or a not in ACTIVATIONS for a in acts):
         raise PolicyFileError(f"{path}: activations {acts!r} not understood (a list of {sorted(ACTIVATIONS)})")
@@ -210,13 +249,20 @@ def _head(path: Path, meta: dict[str, Any], trained: Workspace) -> OffsetHead:
     head = meta.get("head", {"kind": "absolute"})  # files without the field came before the output heads
     kind = head.get("kind") if isinstance(head, dict) else None
     if kind in RETIRED_HEADS:
-        raise PolicyFileError(f"{path}: exported with the {kind!r} output head, which this version no longer runs (retired "
-                              f"in mrguide {RETIRED_IN}); train and export the policy again")
+        raise PolicyFileError(
+            f"{path}: exported with the {kind!r} output head, which this version no longer runs (retired "
+            f"in mrguide {RETIRED_IN}); train and export the policy again"
+        )
     offset, switch = (head.get(k) if isinstance(head, dict) else None for k in ("max_offset", "carry_progress"))
-    if kind != HEAD_KIND or any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in (offset, switch)) \
-            or not (0 < offset < 100 and 0 < switch < 1):
-        raise PolicyFileError(f"{path}: metadata head {head!r} not understood ({HEAD_KIND} with a max_offset in m and a "
-                              "carry_progress in (0, 1))")
+    if (
+        kind != HEAD_KIND
+        or any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in (offset, switch))
+        or not (0 < offset < 100 and 0 < switch < 1)
+    ):
+        raise PolicyFileError(
+            f"{path}: metadata head {head!r} not understood ({HEAD_KIND} with a max_offset in m and a "
+            "carry_progress in (0, 1))"
+        )
     return OffsetHead(float(offset), 0.5 * (trained.lo + trained.hi), 0.5 * (trained.hi - trained.lo), float(switch))
 
 
@@ -224,7 +270,9 @@ def _carry_layer(path: Path, meta: dict[str, Any], arrays: dict[str, np.ndarray]
     """W0_carry and b0_carry, shaped and checked as layer 0."""
     W, b = _layer_array(path, arrays, "W0_carry"), _layer_array(path, arrays, "b0_carry")
     if W.shape != W0.shape or b.shape != (W0.shape[0],):
-        raise PolicyFileError(f"{path}: carry layer has weights {W.shape} and bias {b.shape}; expected those of layer 0, {W0.shape}")
+        raise PolicyFileError(
+            f"{path}: carry layer has weights {W.shape} and bias {b.shape}; expected those of layer 0, {W0.shape}"
+        )
     if not (np.all(np.isfinite(W)) and np.all(np.isfinite(b))):
         raise PolicyFileError(f"{path}: carry layer holds NaN or inf")
     return CarryLayer(W, b, float(meta["head"]["carry_progress"]))
@@ -270,8 +318,9 @@ def _refuse_non_finite_output(path: Path, policy: ExportedPolicy, workspace: Wor
     bad = np.flatnonzero(~np.all(np.isfinite(actions), axis=1))
     if bad.size:
         o = obs[bad[0]]
-        phase = int(round(o[4] * N_PHASES))
+        phase = round(o[4] * N_PHASES)
         raise PolicyFileError(
             f"{path}: non-finite action for {bad.size} of {len(obs)} probe observations spanning the workspace, "
             f"e.g. {actions[bad[0]].tolist()} at tcp {np.round(o[:3], 3).tolist()}, g = {o[3]:+.0f}, "
-            f"phase {phase} ({PHASES[phase]}), object {np.round(o[5:8], 3).tolist()}, goal {np.round(o[8:], 3).tolist()}")
+            f"phase {phase} ({PHASES[phase]}), object {np.round(o[5:8], 3).tolist()}, goal {np.round(o[8:], 3).tolist()}"
+        )

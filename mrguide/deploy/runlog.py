@@ -56,7 +56,7 @@ class RunLog:
                 self.path.unlink(missing_ok=True)
             raise RunLogError(f"{where} {self.path}: cannot write the run log: {exc.strerror or exc}") from exc
 
-    def __enter__(self) -> "RunLog":
+    def __enter__(self) -> RunLog:
         return self
 
     def __exit__(self, *exc: object) -> None:

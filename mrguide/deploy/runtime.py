@@ -64,7 +64,9 @@ class RuntimeConfig:
     def __post_init__(self) -> None:
         check_number("deploy.runtime.home_tolerance", self.home_tolerance, 1e-4, 0.5, " rad")
         check_number("deploy.runtime.max_pose_misses", self.max_pose_misses, 0, 1000, integer=True)
-        check_number("deploy.runtime.max_pose_misses_before_grasp", self.max_pose_misses_before_grasp, 0, 1000, integer=True)
+        check_number(
+            "deploy.runtime.max_pose_misses_before_grasp", self.max_pose_misses_before_grasp, 0, 1000, integer=True
+        )
 
 
 @dataclass
@@ -119,7 +121,7 @@ class Runtime:
         ratio = decision_period / period
         if abs(ratio - round(ratio)) > 1e-6 or ratio < 1:
             raise ValueError(f"decision period {decision_period} s is not a multiple of the control period {period} s")
-        self.cycles = int(round(ratio))
+        self.cycles = round(ratio)
         self.decision = DecisionStep(spec, task, period)
         self.kin, self.streamer = self.decision.kin, self.decision.streamer
         self.supervisor = Supervisor(spec, safety or SafetyConfig(), self._on_event)
@@ -132,7 +134,7 @@ class Runtime:
         self._carried: np.ndarray | None = None  # where the part hung under the cup, last seen
 
     # -- lifecycle ----------------------------------------------------------------------------------
-    def __enter__(self) -> "Runtime":
+    def __enter__(self) -> Runtime:
         self.cobot.add_cycle_observer(self.following)
         self.watchdog.start()
         return self
@@ -203,8 +205,10 @@ class Runtime:
             self.watchdog.arm(False)
         if self._home_error() > self.cfg.home_tolerance:
             q = self.cobot.joint_state().positions
-            raise RunStopped(f"arm did not reach home within {HOME_SETTLE_S:g} s of its last setpoint: "
-                             f"{np.round(q - self.spec.q_home, 4).tolist()} rad off")
+            raise RunStopped(
+                f"arm did not reach home within {HOME_SETTLE_S:g} s of its last setpoint: "
+                f"{np.round(q - self.spec.q_home, 4).tolist()} rad off"
+            )
 
     def _home_error(self) -> float:
         return float(np.max(np.abs(self.cobot.joint_state().positions - self.spec.q_home)))
@@ -252,8 +256,14 @@ class Runtime:
             self.watchdog.arm(False)
             report.events = dict(self._episode_events)
             report.wall_s = time.perf_counter() - t0
-            self.log.write("episode_end", episode=index, outcome=report.outcome, decisions=report.decisions,
-                           events=report.events, wall_s=report.wall_s)
+            self.log.write(
+                "episode_end",
+                episode=index,
+                outcome=report.outcome,
+                decisions=report.decisions,
+                events=report.events,
+                wall_s=report.wall_s,
+            )
             self.log.sync()
         return report
 
@@ -267,30 +277,54 @@ class Runtime:
             g = 1 if vac.vacuum_on else -1
             obj = self._object_position(tcp, vac)
             if obj is None:
-                self.log.write("decision", t=t, tcp=tcp, g=g, phase=self.decision.phase, outcome=Outcome.POSE_LOST.value)
+                self.log.write(
+                    "decision", t=t, tcp=tcp, g=g, phase=self.decision.phase, outcome=Outcome.POSE_LOST.value
+                )
                 return Outcome.POSE_LOST
             reward = None
             if t > 0:
                 res = self.decision.judge(tcp, g, vac.part_gripped, obj, goal)
                 reward = res.reward
                 if res.outcome is Outcome.DROPPED:
-                    self.supervisor.report(Event.VACUUM_LOST, f"part lost in phase {res.phase} (vacuum {vac.level_kpa:.0f} kPa)")
+                    self.supervisor.report(
+                        Event.VACUUM_LOST, f"part lost in phase {res.phase} (vacuum {vac.level_kpa:.0f} kPa)"
+                    )
                 if res.outcome is not None:
-                    self.log.write("decision", t=t, tcp=tcp, g=g, phase=res.phase, reward=reward, outcome=res.outcome.value)
+                    self.log.write(
+                        "decision", t=t, tcp=tcp, g=g, phase=res.phase, reward=reward, outcome=res.outcome.value
+                    )
                     return res.outcome
             ended = self._decide(t, t_read, js, vac, self.decision.observe(tcp, g, obj, goal), index, reward, report)
             if ended is not None:
                 return ended
         raise AssertionError("the task model ends every episode at its horizon")  # pragma: no cover
 
-    def _decide(self, t: int, t_read: float, js: JointState, vac: VacuumState, obs: np.ndarray, index: int,
-                reward: float | None, report: EpisodeReport) -> Outcome | None:
+    def _decide(
+        self,
+        t: int,
+        t_read: float,
+        js: JointState,
+        vac: VacuumState,
+        obs: np.ndarray,
+        index: int,
+        reward: float | None,
+        report: EpisodeReport,
+    ) -> Outcome | None:
         """Policy → decision step → one decision period streamed; an outcome if the supervisor ends the episode."""
         t_inf = time.perf_counter()
         action = self.policy(obs)
         inference_ms = (time.perf_counter() - t_inf) * 1e3
-        record = {"episode": index, "t": t, "obs": obs, "action": action, "phase": self.decision.phase, "reward": reward,
-                  "q": js.positions, "vacuum_kpa": vac.level_kpa, "part": vac.part_gripped}
+        record = {
+            "episode": index,
+            "t": t,
+            "obs": obs,
+            "action": action,
+            "phase": self.decision.phase,
+            "reward": reward,
+            "q": js.positions,
+            "vacuum_kpa": vac.level_kpa,
+            "part": vac.part_gripped,
+        }
         try:
             cmd = self.decision.act(action, js.positions)
         except ActionError as exc:
@@ -299,8 +333,11 @@ class Runtime:
             self.log.write("decision", **record)
             return Outcome.ABORTED
         if cmd.clamped:
-            self.supervisor.report(Event.WORKSPACE, f"action {np.asarray(action)[:3].tolist()} outside [-1, 1]: "
-                                                    f"target clamped to {np.round(cmd.target, 4).tolist()}")
+            self.supervisor.report(
+                Event.WORKSPACE,
+                f"action {np.asarray(action)[:3].tolist()} outside [-1, 1]: "
+                f"target clamped to {np.round(cmd.target, 4).tolist()}",
+            )
         record["target"] = cmd.target
         if cmd.q_target is None:
             if self.supervisor.ik_result(False, cmd.ik_error or "") is Reaction.ABORT:
@@ -341,11 +378,15 @@ class Runtime:
             self._pose_misses += 1
             allowed = self.cfg.max_pose_misses_before_grasp if self.decision.phase <= 1 else self.cfg.max_pose_misses
             if self._pose_misses > allowed:
-                self.supervisor.report(Event.POSE_LOST, f"no object pose for {self._pose_misses} decisions in a row "
-                                                        f"(at most {allowed} may use the last one): {exc}")
+                self.supervisor.report(
+                    Event.POSE_LOST,
+                    f"no object pose for {self._pose_misses} decisions in a row "
+                    f"(at most {allowed} may use the last one): {exc}",
+                )
                 return None
-            self.supervisor.report(Event.POSE_UNAVAILABLE, f"{exc}; using the last pose "
-                                                           f"({self._pose_misses} of at most {allowed})")
+            self.supervisor.report(
+                Event.POSE_UNAVAILABLE, f"{exc}; using the last pose ({self._pose_misses} of at most {allowed})"
+            )
             return self._last_obj
         self._last_obj, self._pose_misses = obj, 0
         return obj

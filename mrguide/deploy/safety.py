@@ -93,7 +93,9 @@ class SafetyConfig:
 class Supervisor:
     """Counts and logs events and says how to react; `check_setpoint` guards every streamed setpoint."""
 
-    def __init__(self, spec: RobotSpec, cfg: SafetyConfig, on_event: Callable[[Event, Reaction, str], None] | None = None):
+    def __init__(
+        self, spec: RobotSpec, cfg: SafetyConfig, on_event: Callable[[Event, Reaction, str], None] | None = None
+    ):
         self.spec, self.cfg = spec, cfg
         self.counts: Counter[str] = Counter()
         self.on_event = on_event
@@ -102,7 +104,9 @@ class Supervisor:
     def report(self, event: Event, detail: str) -> Reaction:
         reaction = REACTIONS[event]
         self.counts[event.value] += 1
-        (log.info if reaction in (Reaction.CLAMP, Reaction.LAST_KNOWN) else log.warning)("safety: %s -> %s: %s", event.value, reaction.value, detail)
+        (log.info if reaction in (Reaction.CLAMP, Reaction.LAST_KNOWN) else log.warning)(
+            "safety: %s -> %s: %s", event.value, reaction.value, detail
+        )
         if self.on_event:
             self.on_event(event, reaction, detail)
         return reaction

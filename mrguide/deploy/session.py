@@ -93,14 +93,20 @@ class DeploySummary:
 
     def text(self) -> str:
         n = len(self.episodes)
-        lines = [f"episodes: {n}, successes: {self.successes} ({self.successes / max(n, 1):.0%})",
-                 f"outcomes: {dict(self.outcomes())}",
-                 f"safety events: {dict(self.events()) or 'none'}"]
+        lines = [
+            f"episodes: {n}, successes: {self.successes} ({self.successes / max(n, 1):.0%})",
+            f"outcomes: {dict(self.outcomes())}",
+            f"safety events: {dict(self.events()) or 'none'}",
+        ]
         lat, inf = self.latency_ms(), self.inference_ms()
         if len(lat):
-            lines.append(f"decision latency p50/p99: {np.percentile(lat, 50):.2f} / {np.percentile(lat, 99):.2f} ms; "
-                         f"policy inference median {np.median(inf):.3f} ms")
-        lines.append(f"control cycle lateness p99: {self.cycle_lateness_p99_ms:.2f} ms, missed cycles: {self.missed_cycles}")
+            lines.append(
+                f"decision latency p50/p99: {np.percentile(lat, 50):.2f} / {np.percentile(lat, 99):.2f} ms; "
+                f"policy inference median {np.median(inf):.3f} ms"
+            )
+        lines.append(
+            f"control cycle lateness p99: {self.cycle_lateness_p99_ms:.2f} ms, missed cycles: {self.missed_cycles}"
+        )
         if self.recoveries:
             lines.append(f"safety stops recovered from (fault reset, next episode): {self.recoveries}")
         if self.stopped:

@@ -20,16 +20,28 @@ from canopen.sdo.exceptions import SdoError
 from mrguide.config import ConfigError
 from mrguide.drivers import supervision
 from mrguide.drivers.bus import BusReceiver, open_bus
-from mrguide.drivers.cia402 import (FAULT_STATES, OPERATION_ENABLED, QUICK_STOP_ACTIVE, SWITCH_ON_DISABLED,
-                                    Cia402Drive, PowerCommand)
+from mrguide.drivers.cia402 import (
+    FAULT_STATES,
+    OPERATION_ENABLED,
+    QUICK_STOP_ACTIVE,
+    SWITCH_ON_DISABLED,
+    Cia402Drive,
+    PowerCommand,
+)
 from mrguide.drivers.cobot_core import CobotCore
 from mrguide.drivers.config import eds_path
 from mrguide.drivers.control_loop import ControlLoop
 from mrguide.drivers.conversion import JointConversion
 from mrguide.drivers.errors import BootError, BusError, NotReadyError
 from mrguide.drivers.heartbeat import OPERATIONAL, HeartbeatConsumer, nmt_state_name
-from mrguide.drivers.nmt import (NMT_RESET_COMMUNICATION, NMT_START, close_network, send_nmt, set_master_consumer,
-                                 sign_off)
+from mrguide.drivers.nmt import (
+    NMT_RESET_COMMUNICATION,
+    NMT_START,
+    close_network,
+    send_nmt,
+    set_master_consumer,
+    sign_off,
+)
 from mrguide.drivers.vacuum import BLOW_OFF_BIT, VACUUM_ON_BIT, VacuumGenerator
 
 logger = logging.getLogger(__name__)
@@ -69,8 +81,12 @@ def connect(core: CobotCore, loop: ControlLoop) -> None:
     except BaseException:
         teardown(core, loop)
         raise
-    logger.info("cobot connected on %s: %d drives + vacuum generator, %.1f ms cycle", core.bus_name(),
-                len(core.drives), core.period * 1000)
+    logger.info(
+        "cobot connected on %s: %d drives + vacuum generator, %.1f ms cycle",
+        core.bus_name(),
+        len(core.drives),
+        core.period * 1000,
+    )
 
 
 def _open(core: CobotCore) -> None:
@@ -81,8 +97,10 @@ def _open(core: CobotCore) -> None:
     network = canopen.Network(open_bus(cfg.bus))
     receiver = BusReceiver(network, "master", cfg.timing.realtime_priority)
     hb = HeartbeatConsumer(cfg.timing.heartbeat_timeout)
-    core.drives = [Cia402Drive(node, name, JointConversion.from_config(joint), cfg.drives, core.current_sync)
-                   for node, name, joint in zip(nodes, core.joint_names, cfg.joints)]
+    core.drives = [
+        Cia402Drive(node, name, JointConversion.from_config(joint), cfg.drives, core.current_sync)
+        for node, name, joint in zip(nodes, core.joint_names, cfg.joints)
+    ]
     core.vacuum = VacuumGenerator(vacuum_node, cfg.vacuum, core.current_sync)
     receiver.expect(0x000, (2,))  # NMT commands from another master: legal, canopen tracks them
     for node in [*nodes, vacuum_node]:
@@ -106,8 +124,10 @@ def _boot(core: CobotCore) -> None:
     missing = hb.wait_bootup(timing.boot_timeout)
     if missing:
         labels = ", ".join(core.label(n) for n in missing)
-        raise BootError(f"no boot-up message from {labels} within {timing.boot_timeout} s after NMT reset "
-                        f"communication on {core.bus_name()}; check power, wiring, node IDs and bit rate")
+        raise BootError(
+            f"no boot-up message from {labels} within {timing.boot_timeout} s after NMT reset "
+            f"communication on {core.bus_name()}; check power, wiring, node IDs and bit rate"
+        )
     for dev in devices:
         for cob_id, length in dev.configure(timing).items():
             receiver.expect(cob_id, (length,))
@@ -115,8 +135,10 @@ def _boot(core: CobotCore) -> None:
             try:
                 set_master_consumer(dev.node, core.config.master.node_id, timing.heartbeat_timeout_ms)
             except SdoError as exc:
-                raise BootError(f"{dev.label}: cannot make it consume the master's heartbeat (0x1016:01): {exc}; "
-                                "set [master] heartbeat = false for devices without 0x1016") from exc
+                raise BootError(
+                    f"{dev.label}: cannot make it consume the master's heartbeat (0x1016:01): {exc}; "
+                    "set [master] heartbeat = false for devices without 0x1016"
+                ) from exc
     vacuum.vacuum_on, vacuum.blow_off = _vacuum_command_on_device(vacuum)
     hb.arm()
     for dev in devices:
@@ -146,7 +168,7 @@ def disconnect(core: CobotCore, loop: ControlLoop) -> None:
         return
     try:
         _stop_and_disable(core, loop)
-    except Exception:  # noqa: BLE001 - the teardown below must happen whatever went wrong
+    except Exception:
         logger.exception("disconnect: stopping and disabling the drives failed; tearing down anyway")
     finally:
         teardown(core, loop)

@@ -147,12 +147,28 @@ class BusReceiver:
 
     def _reject(self, why: str, msg: can.Message, count: int) -> None:
         level = logging.WARNING if count <= 10 or count % _LOG_EVERY == 0 else logging.DEBUG
-        logger.log(level, "%s: ignored frame 0x%X [%d] %s: %s (%d so far)", self.label, msg.arbitration_id,
-                   len(msg.data), bytes(msg.data).hex(" "), why, count)
+        logger.log(
+            level,
+            "%s: ignored frame 0x%X [%d] %s: %s (%d so far)",
+            self.label,
+            msg.arbitration_id,
+            len(msg.data),
+            bytes(msg.data).hex(" "),
+            why,
+            count,
+        )
 
     def stats(self) -> ReceiverStats:
-        return ReceiverStats(self._frames_rx, self._bits_rx, self._unknown_id, self._bad_length, self._remote,
-                             self._error_frames, self._handler_errors, self._bus_off)
+        return ReceiverStats(
+            self._frames_rx,
+            self._bits_rx,
+            self._unknown_id,
+            self._bad_length,
+            self._remote,
+            self._error_frames,
+            self._handler_errors,
+            self._bus_off,
+        )
 
     @property
     def bus_off(self) -> bool:

@@ -20,11 +20,36 @@ from mrguide.config import ConfigError
 
 #: Keys read from `**kwargs` by python-can 4.x bus classes (their docstrings list them).
 KWARGS_READ: dict[str, tuple[str, ...]] = {
-    "kvaser": ("tseg1", "tseg2", "sjw", "no_samp", "driver_mode", "single_handle", "receive_own_messages",
-               "exclusive", "override_exclusive", "accept_virtual", "no_init_access", "fd", "data_bitrate",
-               "fd_non_iso"),
-    "pcan": ("fd", "f_clock", "f_clock_mhz", "nom_brp", "nom_tseg1", "nom_tseg2", "nom_sjw", "data_brp",
-             "data_tseg1", "data_tseg2", "data_sjw", "auto_reset"),
+    "kvaser": (
+        "tseg1",
+        "tseg2",
+        "sjw",
+        "no_samp",
+        "driver_mode",
+        "single_handle",
+        "receive_own_messages",
+        "exclusive",
+        "override_exclusive",
+        "accept_virtual",
+        "no_init_access",
+        "fd",
+        "data_bitrate",
+        "fd_non_iso",
+    ),
+    "pcan": (
+        "fd",
+        "f_clock",
+        "f_clock_mhz",
+        "nom_brp",
+        "nom_tseg1",
+        "nom_tseg2",
+        "nom_sjw",
+        "data_brp",
+        "data_tseg1",
+        "data_tseg2",
+        "data_sjw",
+        "auto_reset",
+    ),
     "slcan": ("btr",),
 }
 _NOT_OPTIONS = frozenset({"self", "channel", "bitrate", "timing", "can_filters"})
@@ -40,8 +65,10 @@ def check_bus_options(interface: str, options: dict[str, object]) -> None:
     accepted = accepted_options(interface)
     unknown = sorted(set(options) - accepted)
     if unknown:
-        raise ConfigError(f"bus.options: {', '.join(map(repr, unknown))} not taken by python-can's {interface!r} interface; "
-                          f"it takes: {', '.join(sorted(accepted)) or 'no options'}")
+        raise ConfigError(
+            f"bus.options: {', '.join(map(repr, unknown))} not taken by python-can's {interface!r} interface; "
+            f"it takes: {', '.join(sorted(accepted)) or 'no options'}"
+        )
 
 
 @functools.cache
@@ -54,8 +81,10 @@ def accepted_options(interface: str) -> frozenset[str]:
     try:
         bus_class = getattr(importlib.import_module(module_name), class_name)
     except Exception as exc:  # a missing vendor package or a Windows-only backend
-        raise ConfigError(f"bus.options: cannot check options for interface {interface!r}, its python-can backend "
-                          f"does not load here ({type(exc).__name__}: {exc})") from exc
+        raise ConfigError(
+            f"bus.options: cannot check options for interface {interface!r}, its python-can backend "
+            f"does not load here ({type(exc).__name__}: {exc})"
+        ) from exc
     finally:
         can_log.setLevel(level)
     params = inspect.signature(bus_class.__init__).parameters.values()

@@ -86,7 +86,9 @@ def controlword_for(state: str, command: PowerCommand, previous: int) -> int:
     if command is PowerCommand.ENABLE:
         return _ENABLE_STEP.get(state, State402.CW_DISABLE_VOLTAGE)
     if command is PowerCommand.QUICK_STOP:
-        return State402.CW_QUICK_STOP if state in (OPERATION_ENABLED, QUICK_STOP_ACTIVE) else State402.CW_DISABLE_VOLTAGE
+        return (
+            State402.CW_QUICK_STOP if state in (OPERATION_ENABLED, QUICK_STOP_ACTIVE) else State402.CW_DISABLE_VOLTAGE
+        )
     if command is PowerCommand.FAULT_RESET and state == "FAULT":
         return State402.CW_DISABLE_VOLTAGE if previous & FAULT_RESET_BIT else FAULT_RESET_BIT
     return State402.CW_DISABLE_VOLTAGE
@@ -123,8 +125,14 @@ class DriveFeedback:
 class Cia402Drive:
     """One joint drive on the bus, seen from the master."""
 
-    def __init__(self, node: RemoteNode, name: str, conversion: JointConversion, config: DriveConfig,
-                 sync_index: Callable[[], int]) -> None:
+    def __init__(
+        self,
+        node: RemoteNode,
+        name: str,
+        conversion: JointConversion,
+        config: DriveConfig,
+        sync_index: Callable[[], int],
+    ) -> None:
         self.node = node
         self.name = name
         self.conversion = conversion
@@ -178,13 +186,18 @@ class Cia402Drive:
         if 2 in tx:
             (self._vel_var,) = tx[2]
             self.node.tpdo[2].add_callback(self._on_velocity_pdo)
-        logger.info("%s configured: CSP, heartbeat %d ms, %s", self.label, timing.heartbeat_ms,
-                    "status+position+velocity TPDOs" if 2 in tx else "status+position TPDO")
+        logger.info(
+            "%s configured: CSP, heartbeat %d ms, %s",
+            self.label,
+            timing.heartbeat_ms,
+            "status+position+velocity TPDOs" if 2 in tx else "status+position TPDO",
+        )
         return {self.node.tpdo[n].cob_id: len(self.node.tpdo[n].data) for n in tx}
 
     def _on_status_pdo(self, pdo_map: PdoMap) -> None:
-        self.feedback = DriveFeedback(self._sw_var.raw, self._pos_var.raw, self._velocity, self._sync_index(),
-                                      time.monotonic())
+        self.feedback = DriveFeedback(
+            self._sw_var.raw, self._pos_var.raw, self._velocity, self._sync_index(), time.monotonic()
+        )
         self.rx_count += 1
 
     def _on_velocity_pdo(self, pdo_map: PdoMap) -> None:

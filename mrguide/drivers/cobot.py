@@ -94,9 +94,11 @@ class Cobot:
             core.raise_fault()
             if core.motion:
                 return
-            outside = [f"{n} at {x:.4f} rad (limits {lo:.3f}..{hi:.3f})" for n, x, lo, hi in
-                       zip(self.joint_names, core.positions(), self.limits.q_lower, self.limits.q_upper)
-                       if not lo <= x <= hi]
+            outside = [
+                f"{n} at {x:.4f} rad (limits {lo:.3f}..{hi:.3f})"
+                for n, x, lo, hi in zip(self.joint_names, core.positions(), self.limits.q_lower, self.limits.q_upper)
+                if not lo <= x <= hi
+            ]
             if outside:
                 raise NotReadyError(f"cannot enable: joints outside their limits: {'; '.join(outside)}")
             core.command = PowerCommand.ENABLE
@@ -155,8 +157,9 @@ class Cobot:
             core.require_connected()
             assert core.vacuum is not None
             fault = core.fault
-            if isinstance(fault, BusError) or (isinstance(fault, NodeLostError)
-                                               and fault.node_id == self.config.vacuum.node_id):
+            if isinstance(fault, BusError) or (
+                isinstance(fault, NodeLostError) and fault.node_id == self.config.vacuum.node_id
+            ):
                 raise fault
             core.vacuum.vacuum_on, core.vacuum.blow_off = bool(on), bool(blow_off)
 
@@ -172,8 +175,10 @@ class Cobot:
         if supervision.quick_stop(self._core):
             logger.info("quick stop commanded")
         else:
-            logger.error("quick stop requested, but the control thread has held the driver lock for %.1f s: "
-                         "it is hung", self._core.lock.timeout)
+            logger.error(
+                "quick stop requested, but the control thread has held the driver lock for %.1f s: it is hung",
+                self._core.lock.timeout,
+            )
 
     def reset_faults(self, timeout: float | None = None) -> None:
         """Fault reset (controlword bit 7) on faulted drives, disable the others; clears the latched fault.
@@ -191,15 +196,24 @@ class Cobot:
             supervision.halt(core)
         hb, ids = core.hb, self.config.node_ids
         assert hb is not None
-        done = core.wait_for(lambda: all(core.state(d) == SWITCH_ON_DISABLED for d in core.drives)
-                             and not hb.expired() and hb.all_in_state(OPERATIONAL, ids), timeout)
+        done = core.wait_for(
+            lambda: (
+                all(core.state(d) == SWITCH_ON_DISABLED for d in core.drives)
+                and not hb.expired()
+                and hb.all_in_state(OPERATIONAL, ids)
+            ),
+            timeout,
+        )
         with core.lock.bounded():
             if not done:
                 core.command = PowerCommand.DISABLE
                 problems = [f"{d.label}: {core.state(d)}" for d in core.drives if core.state(d) != SWITCH_ON_DISABLED]
                 problems += [f"{core.label(n)}: no heartbeat for {age:.2f} s" for n, age in hb.expired()]
-                problems += [f"{core.label(n)}: NMT {nmt_state_name(hb.state(n))} (reconnect)"
-                             for n in ids if hb.state(n) != OPERATIONAL]
+                problems += [
+                    f"{core.label(n)}: NMT {nmt_state_name(hb.state(n))} (reconnect)"
+                    for n in ids
+                    if hb.state(n) != OPERATIONAL
+                ]
                 raise DriverError(f"fault reset did not complete within {timeout} s: {'; '.join(problems)}")
             if core.fault is not None:
                 logger.info("fault cleared: %s", core.fault)
@@ -252,8 +266,14 @@ class Cobot:
             fb = vac.feedback
             if fb is None:
                 raise NotReadyError("no vacuum feedback yet")
-            return VacuumState(fb.level_kpa, fb.part_gripped, fb.part_lost, vac.vacuum_on, vac.blow_off,
-                               time.monotonic() - fb.received_at)
+            return VacuumState(
+                fb.level_kpa,
+                fb.part_gripped,
+                fb.part_lost,
+                vac.vacuum_on,
+                vac.blow_off,
+                time.monotonic() - fb.received_at,
+            )
 
     def status(self) -> CobotStatus:
         """Everything a supervisor or a report wants to know, in one snapshot."""
@@ -276,13 +296,21 @@ class Cobot:
         cyc = core.cycle_stats.summary()
         rx = core.receiver.stats() if core.receiver else None
         return DriverStats(
-            cycles=cyc.cycles, missed_cycles=cyc.missed, lateness_p50=cyc.lateness_p50,
-            lateness_p99=cyc.lateness_p99, lateness_max=cyc.lateness_max,
-            frames_tx=core.frames_tx, bits_tx=core.bits_tx,
-            frames_rx=rx.frames_rx if rx else 0, bits_rx=rx.bits_rx if rx else 0,
-            lost_feedback=core.lost_feedback, underruns=core.underruns, refused_setpoints=core.refused,
+            cycles=cyc.cycles,
+            missed_cycles=cyc.missed,
+            lateness_p50=cyc.lateness_p50,
+            lateness_p99=cyc.lateness_p99,
+            lateness_max=cyc.lateness_max,
+            frames_tx=core.frames_tx,
+            bits_tx=core.bits_tx,
+            frames_rx=rx.frames_rx if rx else 0,
+            bits_rx=rx.bits_rx if rx else 0,
+            lost_feedback=core.lost_feedback,
+            underruns=core.underruns,
+            refused_setpoints=core.refused,
             unknown_frames=rx.unknown_id + rx.remote_frames if rx else 0,
-            bad_length_frames=rx.bad_length if rx else 0, error_frames=rx.error_frames if rx else 0,
+            bad_length_frames=rx.bad_length if rx else 0,
+            error_frames=rx.error_frames if rx else 0,
             emcy_received=core.emcy_count,
         )
 

@@ -36,35 +36,55 @@ DEMO_PERIOD = 2.0
 
 def add_bus_commands(subparsers: argparse._SubParsersAction) -> None:
     """Add `bus selftest` and `bus monitor` to the top-level `mrguide` parser."""
-    bus = subparsers.add_parser("bus", help="CAN bus of the cobot: self-test and traffic monitor",
-                                description="CAN bus of the cobot (CiA 402 joint drives + vacuum generator).")
+    bus = subparsers.add_parser(
+        "bus",
+        help="CAN bus of the cobot: self-test and traffic monitor",
+        description="CAN bus of the cobot (CiA 402 joint drives + vacuum generator).",
+    )
     commands = bus.add_subparsers(dest="bus_command", metavar="{selftest,monitor}", required=True)
 
     selftest = commands.add_parser(
-        "selftest", help="boot, enable, move each joint a little, toggle the vacuum, report",
+        "selftest",
+        help="boot, enable, move each joint a little, toggle the vacuum, report",
         description="Boot the cobot (simulated devices on the virtual bus, the real cobot otherwise), enable "
-                    "the drives, move each joint 0.05 rad and back, toggle the vacuum and print a report.")
+        "the drives, move each joint 0.05 rad and back, toggle the vacuum and print a report.",
+    )
     _add_config(selftest)
-    selftest.add_argument("--allow-motion", action="store_true",
-                          help="required on a real bus: confirms the arm may move each joint by 0.05 rad")
+    selftest.add_argument(
+        "--allow-motion",
+        action="store_true",
+        help="required on a real bus: confirms the arm may move each joint by 0.05 rad",
+    )
     selftest.set_defaults(func=_selftest_command, command_name="bus selftest")
 
-    mon = commands.add_parser("monitor", help="decode live CAN traffic into readable lines",
-                              description="Print NMT, SYNC, PDO, SDO, EMCY and heartbeat frames as readable lines.")
+    mon = commands.add_parser(
+        "monitor",
+        help="decode live CAN traffic into readable lines",
+        description="Print NMT, SYNC, PDO, SDO, EMCY and heartbeat frames as readable lines.",
+    )
     _add_config(mon)
     mon.add_argument("--duration", type=positive_float, default=2.0, help="seconds to monitor (default: 2)")
-    mon.add_argument("--simulate", action="store_true",
-                     help="virtual bus only: run the simulated cobot and a master streaming a small motion meanwhile")
+    mon.add_argument(
+        "--simulate",
+        action="store_true",
+        help="virtual bus only: run the simulated cobot and a master streaming a small motion meanwhile",
+    )
     mon.set_defaults(func=_monitor_command, command_name="bus monitor")
 
 
 def _add_config(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--config", type=Path, default=None,
-                        help="bus description TOML, e.g. configs/cobot_bus.toml (default: built-in defaults, "
-                             "virtual bus)")
-    parser.add_argument("--robot", default="",
-                        help="the arm whose drives are on the bus: a shipped arm's name (ur5, ur10) or an arm file "
-                             "(.toml); it gives the node IDs, the number of drives and the limits (default: ur5)")
+    parser.add_argument(
+        "--config",
+        type=Path,
+        default=None,
+        help="bus description TOML, e.g. configs/cobot_bus.toml (default: built-in defaults, virtual bus)",
+    )
+    parser.add_argument(
+        "--robot",
+        default="",
+        help="the arm whose drives are on the bus: a shipped arm's name (ur5, ur10) or an arm file "
+        "(.toml); it gives the node IDs, the number of drives and the limits (default: ur5)",
+    )
 
 
 def _robot(args: argparse.Namespace) -> RobotSpec:
@@ -77,8 +97,10 @@ def _selftest_command(args: argparse.Namespace) -> int:
     robot = _robot(args)
     config = load_cobot_bus_config(args.config, robot)
     if config.bus.interface != "virtual" and not args.allow_motion:
-        raise ConfigError(f"bus interface {config.bus.interface!r} is a real bus: the selftest moves every "
-                          "joint; pass --allow-motion to confirm")
+        raise ConfigError(
+            f"bus interface {config.bus.interface!r} is a real bus: the selftest moves every "
+            "joint; pass --allow-motion to confirm"
+        )
     return 0 if run_selftest(config, robot, print) else EXIT_FAILED
 
 

@@ -47,8 +47,6 @@ def _check_node_id(node_id: int, where: str) -> None:
         raise ConfigError(f"{where}: CANopen node ID must be 1..127, got {node_id}")
 
 
-
-
 @dataclass(frozen=True)
 class BusConfig:
     """python-can bus: interface, channel and bit rate ([bus])."""
@@ -109,11 +107,18 @@ class TimingConfig:
             raise ConfigError(f"timing.heartbeat_period = {self.heartbeat_period}: must be whole ms")
         if self.heartbeat_period < 2 * self.control_period:
             raise ConfigError("timing.heartbeat_period must be at least two control periods")
-        check_number("timing.heartbeat_timeout_factor", self.heartbeat_timeout_factor, MIN_HEARTBEAT_FACTOR,
-                     MAX_HEARTBEAT_FACTOR, " (consumer time / producer time: one lost heartbeat plus jitter at least)")
+        check_number(
+            "timing.heartbeat_timeout_factor",
+            self.heartbeat_timeout_factor,
+            MIN_HEARTBEAT_FACTOR,
+            MAX_HEARTBEAT_FACTOR,
+            " (consumer time / producer time: one lost heartbeat plus jitter at least)",
+        )
         if self.heartbeat_timeout_ms > 0xFFFF:
-            raise ConfigError("timing: heartbeat_period x heartbeat_timeout_factor must fit 65.535 s (the devices "
-                              "consume the master's heartbeat with this time)")
+            raise ConfigError(
+                "timing: heartbeat_period x heartbeat_timeout_factor must fit 65.535 s (the devices "
+                "consume the master's heartbeat with this time)"
+            )
         check_number("timing.boot_timeout", self.boot_timeout, 0.01, 60.0, " s")
         check_number("timing.enable_timeout", self.enable_timeout, 0.01, 60.0, " s")
         check_number("timing.sdo_timeout", self.sdo_timeout, 0.001, 10.0, " s")
@@ -181,10 +186,13 @@ class DriveConfig:
     velocity_tpdo: bool = True
 
     def __post_init__(self) -> None:
-        check_eds(eds_path(self.eds), DRIVE_OBJECTS + (VELOCITY_TPDO_OBJECTS if self.velocity_tpdo else ()), "drives.eds")
+        check_eds(
+            eds_path(self.eds), DRIVE_OBJECTS + (VELOCITY_TPDO_OBJECTS if self.velocity_tpdo else ()), "drives.eds"
+        )
         check_number("drives.following_error_window", self.following_error_window, 1e-4, 1.0, " rad")
-        check_number("drives.following_error_timeout_ms", self.following_error_timeout_ms, 0, 65535, " ms",
-                     integer=True)
+        check_number(
+            "drives.following_error_timeout_ms", self.following_error_timeout_ms, 0, 65535, " ms", integer=True
+        )
         if self.quick_stop_option not in (1, 2, 5, 6):
             raise ConfigError(f"drives.quick_stop_option: {self.quick_stop_option} not supported (1, 2, 5 or 6)")
         check_number("drives.quick_stop_deceleration", self.quick_stop_deceleration, 0.1, 1000.0, " rad/s^2")
@@ -277,10 +285,14 @@ def load_cobot_bus_config(path: str | Path | None, robot: RobotSpec | None = Non
         raise ConfigError(f"{where}: joints must be [[joints]] tables, one per joint of the arm")
     for i, entry in enumerate(entries):
         if "node_id" in entry:
-            raise ConfigError(f"{where}: joints[{i}].node_id: node IDs come from the arm file's can_nodes "
-                              f"({robot.arm_file}), not from the bus config")
+            raise ConfigError(
+                f"{where}: joints[{i}].node_id: node IDs come from the arm file's can_nodes "
+                f"({robot.arm_file}), not from the bus config"
+            )
     if len(entries) != robot.dof:
-        raise ConfigError(f"{where}: joints: {len(entries)} drives configured, robot {robot.name} has {robot.dof} joints")
+        raise ConfigError(
+            f"{where}: joints: {len(entries)} drives configured, robot {robot.name} has {robot.dof} joints"
+        )
     data = {**data, "joints": [{"node_id": n, **e} for n, e in zip(robot.node_ids, entries)]}
     config = from_dict(CobotBusConfig, data, where=where)
     try:

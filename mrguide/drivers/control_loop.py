@@ -142,8 +142,9 @@ class ControlLoop:
                 elif core.moving:
                     core.moving = False
                     core.underruns += 1
-                    logger.warning("setpoint queue ran dry while moving: holding the last setpoint (%d so far)",
-                                   core.underruns)
+                    logger.warning(
+                        "setpoint queue ran dry while moving: holding the last setpoint (%d so far)", core.underruns
+                    )
             return command, setpoint, core.hold if core.motion else None
 
     def _send_commands(self) -> np.ndarray | None:
@@ -152,22 +153,41 @@ class ControlLoop:
         assert core.vacuum is not None
         command, setpoint, targets = self._next_target()
         fbs = [d.feedback for d in core.drives]
-        wanted = targets if targets is not None else np.array(
-            [np.nan if fb is None else d.conversion.to_rad(fb.position) for d, fb in zip(core.drives, fbs)])
-        plan = plan_rpdos([None if fb is None else fb.state for fb in fbs], command,
-                          [d.last_controlword for d in core.drives], wanted,
-                          np.array([d.last_target for d in core.drives]), core.limits, core.joint_names)
+        wanted = (
+            targets
+            if targets is not None
+            else np.array(
+                [np.nan if fb is None else d.conversion.to_rad(fb.position) for d, fb in zip(core.drives, fbs)]
+            )
+        )
+        plan = plan_rpdos(
+            [None if fb is None else fb.state for fb in fbs],
+            command,
+            [d.last_controlword for d in core.drives],
+            wanted,
+            np.array([d.last_target for d in core.drives]),
+            core.limits,
+            core.joint_names,
+        )
         if plan.refused:
             drive = core.drives[plan.refused[0]]
             source = "held setpoint" if targets is not None else "measured position"
-            supervision.latch(core, DeviceFaultError(f"{drive.label}: {source} refused as RPDO target: {plan.problem}",
-                                                     drive.node.id, drive.name, None))
+            supervision.latch(
+                core,
+                DeviceFaultError(
+                    f"{drive.label}: {source} refused as RPDO target: {plan.problem}", drive.node.id, drive.name, None
+                ),
+            )
         for drive, rpdo in zip(core.drives, plan.frames):
             if rpdo is not None and not self._send_frame(partial(drive.send, rpdo.controlword, rpdo.target)):
                 return setpoint
         self._send_frame(core.vacuum.send)
-        if command is PowerCommand.ENABLE and targets is None and not plan.refused and all(
-                core.state(d) == OPERATION_ENABLED for d in core.drives):
+        if (
+            command is PowerCommand.ENABLE
+            and targets is None
+            and not plan.refused
+            and all(core.state(d) == OPERATION_ENABLED for d in core.drives)
+        ):
             with core.lock:
                 if core.command is PowerCommand.ENABLE and core.fault is None:
                     core.hold = wanted.copy()  # the measured positions this cycle's guard accepted
@@ -186,5 +206,6 @@ class ControlLoop:
                 observer(sample)
             except Exception as exc:  # observers are safety monitors: one that fails must not fail open
                 logger.exception("cycle observer %r failed", observer)
-                supervision.latch(core, DriverError(f"cycle observer {getattr(observer, '__qualname__', observer)!r} "
-                                                    f"failed: {exc!r}"))
+                supervision.latch(
+                    core, DriverError(f"cycle observer {getattr(observer, '__qualname__', observer)!r} failed: {exc!r}")
+                )

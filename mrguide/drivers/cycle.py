@@ -26,8 +26,9 @@ class Tick:
 class CycleTimer:
     """Waits for successive absolute deadlines `t0 + k * period` of a monotonic clock."""
 
-    def __init__(self, period: float, clock: Callable[[], float] = time.monotonic,
-                 sleep: Callable[[float], None] = time.sleep) -> None:
+    def __init__(
+        self, period: float, clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep
+    ) -> None:
         if period <= 0:
             raise ValueError(f"cycle period must be > 0, got {period}")
         self.period = period

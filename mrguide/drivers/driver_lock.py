@@ -48,8 +48,10 @@ class DriverLock:
     def bounded(self) -> Iterator[None]:
         """The lock for a call from the application: a DriverError after `timeout`, never a hang."""
         if not self._lock.acquire(timeout=self.timeout):
-            raise DriverError(f"the control thread has held the driver lock for {self.timeout} s: it is hung "
-                              "(devices consuming the master's heartbeat disable themselves); reconnect")
+            raise DriverError(
+                f"the control thread has held the driver lock for {self.timeout} s: it is hung "
+                "(devices consuming the master's heartbeat disable themselves); reconnect"
+            )
         try:
             yield
         finally:

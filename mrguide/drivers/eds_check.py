@@ -17,8 +17,20 @@ from mrguide.config import ConfigError
 #: RPDO1 and TPDO1 communication and mapping parameters.
 _COMMON = (0x1000, 0x1016, 0x1017, 0x1400, 0x1600, 0x1800, 0x1A00)
 #: Objects of a CiA 402 joint drive used by `cia402.py` (TPDO2 for the velocity, when mapped, is added).
-DRIVE_OBJECTS = _COMMON + (0x6040, 0x6041, 0x605A, 0x6060, 0x6061, 0x6064, 0x6065, 0x6066, 0x607A, 0x6085,
-                           0x60C2, 0x6502)
+DRIVE_OBJECTS = _COMMON + (
+    0x6040,
+    0x6041,
+    0x605A,
+    0x6060,
+    0x6061,
+    0x6064,
+    0x6065,
+    0x6066,
+    0x607A,
+    0x6085,
+    0x60C2,
+    0x6502,
+)
 VELOCITY_TPDO_OBJECTS = (0x1801, 0x1A01, 0x606C)
 #: Objects of the vacuum generator used by `vacuum.py`.
 VACUUM_OBJECTS = _COMMON + (0x2000, 0x2001, 0x2003, 0x2020, 0x2100, 0x2101)

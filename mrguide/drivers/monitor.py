@@ -14,7 +14,7 @@ import can
 import canopen
 from canopen.emcy import EMCY_STRUCT, EmcyError
 from canopen.nmt import NMT_COMMANDS
-from canopen.objectdictionary import ODRecord, ODArray, ODVariable
+from canopen.objectdictionary import ODArray, ODRecord, ODVariable
 
 from mrguide.drivers import vacuum as vac
 from mrguide.drivers.bus import open_bus
@@ -25,10 +25,24 @@ from mrguide.drivers.heartbeat import nmt_state_name
 from mrguide.drivers.pdo_setup import PdoEntries
 
 _NMT_NAMES = {code: name for name, code in NMT_COMMANDS.items() if name != "INITIALISING"}
-_SDO_CLIENT = {0: "download segment", 1: "download", 2: "upload", 3: "upload segment", 4: "abort",
-               5: "block upload", 6: "block download"}
-_SDO_SERVER = {0: "upload segment", 1: "download segment", 2: "upload", 3: "download", 4: "abort",
-               5: "block download", 6: "block upload"}
+_SDO_CLIENT = {
+    0: "download segment",
+    1: "download",
+    2: "upload",
+    3: "upload segment",
+    4: "abort",
+    5: "block upload",
+    6: "block download",
+}
+_SDO_SERVER = {
+    0: "upload segment",
+    1: "download segment",
+    2: "upload",
+    3: "download",
+    4: "abort",
+    5: "block download",
+    6: "block upload",
+}
 #: SDO command byte bits: expedited transfer, size indicated.
 _EXPEDITED, _SIZE_SPECIFIED = 0x02, 0x01
 
@@ -73,12 +87,19 @@ class FrameDecoder:
             od = self._ods[joint.node_id] = canopen.import_od(str(eds_path(config.drives.eds)), joint.node_id)
             conv = JointConversion.from_config(joint)
             self._add_pdos(od, joint.node_id, RPDO_LAYOUT, tpdo_layout(config.drives.velocity_tpdo), conv)
-        od = self._ods[config.vacuum.node_id] = canopen.import_od(str(eds_path(config.vacuum.eds)),
-                                                                  config.vacuum.node_id)
+        od = self._ods[config.vacuum.node_id] = canopen.import_od(
+            str(eds_path(config.vacuum.eds)), config.vacuum.node_id
+        )
         self._add_pdos(od, config.vacuum.node_id, vac.RPDO_LAYOUT, vac.TPDO_LAYOUT, None)
 
-    def _add_pdos(self, od: canopen.ObjectDictionary, node_id: int, rx: dict[int, PdoEntries],
-                  tx: dict[int, PdoEntries], conv: JointConversion | None) -> None:
+    def _add_pdos(
+        self,
+        od: canopen.ObjectDictionary,
+        node_id: int,
+        rx: dict[int, PdoEntries],
+        tx: dict[int, PdoEntries],
+        conv: JointConversion | None,
+    ) -> None:
         for layouts, base, kind in ((rx, 0x200, "RPDO"), (tx, 0x180, "TPDO")):
             for number, entries in layouts.items():
                 fields = []
@@ -138,7 +159,7 @@ class FrameDecoder:
             return f"{kind} {self._node(node_id)}: bad length {len(data)}, expected {size} [{data.hex(' ')}]"
         parts, offset = [], 0
         for f in fields:
-            parts.append(f.format(data[offset:offset + f.size]))
+            parts.append(f.format(data[offset : offset + f.size]))
             offset += f.size
         return f"{kind} {self._node(node_id)}: {' '.join(parts)}"
 
@@ -156,7 +177,7 @@ class FrameDecoder:
         carries_value = spec == ("download" if request else "upload")
         if carries_value and data[0] & _EXPEDITED:
             size = 4 - ((data[0] >> 2) & 3) if data[0] & _SIZE_SPECIFIED else 4
-            text += f" value={self._sdo_value(node_id, index, subindex, data[4:4 + size])}"
+            text += f" value={self._sdo_value(node_id, index, subindex, data[4 : 4 + size])}"
         return text
 
     def _sdo_value(self, node_id: int, index: int, subindex: int, raw: bytes) -> int | str:
@@ -169,8 +190,13 @@ class FrameDecoder:
         return int.from_bytes(raw, "little")
 
 
-def monitor(config: CobotBusConfig, joint_names: Sequence[str], duration: float,
-            write: Callable[[str], None], listening: Callable[[], None] | None = None) -> Counter[str]:
+def monitor(
+    config: CobotBusConfig,
+    joint_names: Sequence[str],
+    duration: float,
+    write: Callable[[str], None],
+    listening: Callable[[], None] | None = None,
+) -> Counter[str]:
     """Print every frame on the configured bus for `duration` seconds; returns frames per traffic class.
 
     `listening` is called once the bus is open (e.g. to start traffic that should be seen from its start).

@@ -50,8 +50,9 @@ def sign_off(devices: Iterable[Cia402Drive | VacuumGenerator], hb: HeartbeatCons
             logger.warning("%s: could not switch off its supervision of the master's heartbeat: %s", dev.label, exc)
 
 
-def close_network(network: canopen.Network, node_ids: Iterable[int], hb: HeartbeatConsumer | None,
-                  receiver: BusReceiver | None) -> None:
+def close_network(
+    network: canopen.Network, node_ids: Iterable[int], hb: HeartbeatConsumer | None, receiver: BusReceiver | None
+) -> None:
     """Disarm heartbeat supervision, stop the receive thread, NMT pre-operational to every node, close the bus.
 
     Every step is attempted whatever the previous ones raised (logged).
@@ -61,13 +62,15 @@ def close_network(network: canopen.Network, node_ids: Iterable[int], hb: Heartbe
     if receiver is not None:
         _best_effort("stopping the CAN receive thread", receiver.stop)
     for node_id in node_ids:
-        _best_effort(f"NMT pre-operational to node {node_id}",
-                     lambda node_id=node_id: send_nmt(network, NMT_PRE_OPERATIONAL, node_id))
+        _best_effort(
+            f"NMT pre-operational to node {node_id}",
+            lambda node_id=node_id: send_nmt(network, NMT_PRE_OPERATIONAL, node_id),
+        )
     _best_effort("closing the CAN bus", network.disconnect)
 
 
 def _best_effort(what: str, action: Callable[[], object]) -> None:
     try:
         action()
-    except Exception as exc:  # noqa: BLE001 - a teardown must never be cut short
+    except Exception as exc:
         logger.warning("%s failed: %r", what, exc)

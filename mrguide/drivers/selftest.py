@@ -35,15 +35,19 @@ def run_selftest(config: CobotBusConfig, robot: RobotSpec, write: Callable[[str]
     simulate = bus.interface == "virtual"
     if simulate:
         config = shared_pc_config(config)
-    write(f"mrguide bus selftest on {bus.interface}:{bus.channel} at {bus.bitrate // 1000} kbit/s, "
-          f"control period {config.timing.control_period * 1000:g} ms")
+    write(
+        f"mrguide bus selftest on {bus.interface}:{bus.channel} at {bus.bitrate // 1000} kbit/s, "
+        f"control period {config.timing.control_period * 1000:g} ms"
+    )
     sim, plant = None, None
     if simulate:
         plant = FirstOrderPlant(robot.q_home)
         sim = SimulatedCobot(config, plant)
         sim.start()
-        write(f"  simulated devices: drives {[j.node_id for j in config.joints]}, vacuum generator "
-              f"{config.vacuum.node_id}, first-order plant")
+        write(
+            f"  simulated devices: drives {[j.node_id for j in config.joints]}, vacuum generator "
+            f"{config.vacuum.node_id}, first-order plant"
+        )
     cobot = Cobot(config, robot)
     passed = True
     try:
@@ -59,9 +63,11 @@ def run_selftest(config: CobotBusConfig, robot: RobotSpec, write: Callable[[str]
             passed &= _move_joint(cobot, robot, recorder, i, f"{name} (node {joint.node_id})", write)
         passed &= _toggle_vacuum(cobot, plant, write)
         stats = cobot.stats()
-        write(f"  cycles {stats.cycles}, missed {stats.missed_cycles}, SYNC lateness p50/p99/max "
-              f"{stats.lateness_p50 * 1e3:.2f}/{stats.lateness_p99 * 1e3:.2f}/{stats.lateness_max * 1e3:.2f} ms, "
-              f"lost feedback {stats.lost_feedback}, frames tx/rx {stats.frames_tx}/{stats.frames_rx}")
+        write(
+            f"  cycles {stats.cycles}, missed {stats.missed_cycles}, SYNC lateness p50/p99/max "
+            f"{stats.lateness_p50 * 1e3:.2f}/{stats.lateness_p99 * 1e3:.2f}/{stats.lateness_max * 1e3:.2f} ms, "
+            f"lost feedback {stats.lost_feedback}, frames tx/rx {stats.frames_tx}/{stats.frames_rx}"
+        )
     finally:
         cobot.disconnect()
         if sim is not None:
@@ -70,8 +76,9 @@ def run_selftest(config: CobotBusConfig, robot: RobotSpec, write: Callable[[str]
     return passed
 
 
-def _move_joint(cobot: Cobot, robot: RobotSpec, recorder: TrackingRecorder, i: int, label: str,
-                write: Callable[[str], None]) -> bool:
+def _move_joint(
+    cobot: Cobot, robot: RobotSpec, recorder: TrackingRecorder, i: int, label: str, write: Callable[[str], None]
+) -> bool:
     start = cobot.setpoint
     step = MOVE if start[i] + MOVE <= cobot.limits.q_upper[i] else -MOVE
     goal = start.copy()
@@ -84,8 +91,10 @@ def _move_joint(cobot: Cobot, robot: RobotSpec, recorder: TrackingRecorder, i: i
     final = float(np.max(np.abs(cobot.joint_state().positions - start)))
     worst = float(recorder.max_error.max())
     ok = worst <= MAX_TRACKING_ERROR and final <= MAX_FINAL_ERROR
-    write(f"  {label:32s} {step:+.3f} rad and back: max tracking error {worst:.4f} rad, "
-          f"final error {final:.5f} rad   {'OK' if ok else 'FAIL'}")
+    write(
+        f"  {label:32s} {step:+.3f} rad and back: max tracking error {worst:.4f} rad, "
+        f"final error {final:.5f} rad   {'OK' if ok else 'FAIL'}"
+    )
     return ok
 
 
@@ -101,8 +110,10 @@ def _toggle_vacuum(cobot: Cobot, plant: FirstOrderPlant | None, write: Callable[
     off = cobot.vacuum_state()
     if plant is not None:
         ok = on.part_gripped and not off.part_gripped and not plant.part_present()
-        detail = f"part gripped: {on.part_gripped}; after blow-off {off.level_kpa:.1f} kPa, part released: " \
-                 f"{not plant.part_present()}"
+        detail = (
+            f"part gripped: {on.part_gripped}; after blow-off {off.level_kpa:.1f} kPa, part released: "
+            f"{not plant.part_present()}"
+        )
     else:
         ok = on.level_kpa >= OPEN_CUP_MIN_KPA
         detail = f"part gripped: {on.part_gripped} (no part expected); after blow-off {off.level_kpa:.1f} kPa"

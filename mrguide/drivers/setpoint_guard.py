@@ -32,8 +32,9 @@ def setpoint_array(q: object) -> np.ndarray:
     return np.array(a, dtype=float)
 
 
-def setpoint_problem(q: np.ndarray, reference: np.ndarray, limits: JointLimits, period: float,
-                     names: Sequence[str]) -> str | None:
+def setpoint_problem(
+    q: np.ndarray, reference: np.ndarray, limits: JointLimits, period: float, names: Sequence[str]
+) -> str | None:
     """Why joint setpoint `q` (rad) may not follow `reference` one control period later, or None."""
     if q.shape != (len(names),):
         return f"shape {q.shape}, expected ({len(names)},) joint positions in rad"
@@ -44,15 +45,21 @@ def setpoint_problem(q: np.ndarray, reference: np.ndarray, limits: JointLimits, 
     if out.any():
         return "outside joint limits: " + "; ".join(
             f"{names[i]} = {q[i]:.4f} rad not in [{limits.q_lower[i]:.3f}, {limits.q_upper[i]:.3f}]"
-            for i in np.flatnonzero(out))
+            for i in np.flatnonzero(out)
+        )
     max_step = limits.v_max * period
     step = np.abs(q - reference)
     too_far = ~(step <= max_step * (1 + STEP_SLACK) + 1e-12)
     if too_far.any():
-        return "step per cycle exceeds v_max * period: " + "; ".join(
-            f"{names[i]} moves {step[i]:.5f} rad > {max_step[i]:.5f} rad "
-            f"({limits.v_max[i]} rad/s x {period * 1000:g} ms)" for i in np.flatnonzero(too_far)
-        ) + "; start trajectories at the last setpoint or joint_state().positions"
+        return (
+            "step per cycle exceeds v_max * period: "
+            + "; ".join(
+                f"{names[i]} moves {step[i]:.5f} rad > {max_step[i]:.5f} rad "
+                f"({limits.v_max[i]} rad/s x {period * 1000:g} ms)"
+                for i in np.flatnonzero(too_far)
+            )
+            + "; start trajectories at the last setpoint or joint_state().positions"
+        )
     return None
 
 
@@ -77,8 +84,15 @@ class RpdoPlan:
     problem: str | None
 
 
-def plan_rpdos(states: Sequence[str | None], command: PowerCommand, previous: Sequence[int],
-               wanted: np.ndarray, last_sent: np.ndarray, limits: JointLimits, names: Sequence[str]) -> RpdoPlan:
+def plan_rpdos(
+    states: Sequence[str | None],
+    command: PowerCommand,
+    previous: Sequence[int],
+    wanted: np.ndarray,
+    last_sent: np.ndarray,
+    limits: JointLimits,
+    names: Sequence[str],
+) -> RpdoPlan:
     """Controlword and target of every drive's RPDO for this cycle.
 
     `states`: each drive's CiA 402 state (None before its first feedback). `previous`: last controlwords.
@@ -95,11 +109,17 @@ def plan_rpdos(states: Sequence[str | None], command: PowerCommand, previous: Se
     if refused:
         command = PowerCommand.QUICK_STOP
     frames = tuple(
-        None if state is None else Rpdo(controlword_for(state, command, previous[i]),
-                                        float(wanted[i]) if ok[i] else _safe_target(wanted[i], last_sent[i], lo[i], hi[i]))
-        for i, state in enumerate(states))
-    problem = "; ".join(f"{names[i]} target {wanted[i]:.4f} rad not in [{lo[i]:.3f}, {hi[i]:.3f}]"
-                        for i in refused) or None
+        None
+        if state is None
+        else Rpdo(
+            controlword_for(state, command, previous[i]),
+            float(wanted[i]) if ok[i] else _safe_target(wanted[i], last_sent[i], lo[i], hi[i]),
+        )
+        for i, state in enumerate(states)
+    )
+    problem = (
+        "; ".join(f"{names[i]} target {wanted[i]:.4f} rad not in [{lo[i]:.3f}, {hi[i]:.3f}]" for i in refused) or None
+    )
     return RpdoPlan(frames, refused, problem)
 
 

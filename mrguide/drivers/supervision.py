@@ -17,8 +17,14 @@ from canopen.emcy import EmcyError
 
 from mrguide.drivers.cia402 import FAULT_STATES, OPERATION_ENABLED, PowerCommand
 from mrguide.drivers.cobot_core import CobotCore
-from mrguide.drivers.errors import (BusOffError, DeviceFaultError, DriverError, FeedbackLostError, HeartbeatLostError,
-                                    NodeLostError)
+from mrguide.drivers.errors import (
+    BusOffError,
+    DeviceFaultError,
+    DriverError,
+    FeedbackLostError,
+    HeartbeatLostError,
+    NodeLostError,
+)
 from mrguide.drivers.heartbeat import OPERATIONAL, nmt_state_name
 
 logger = logging.getLogger(__name__)
@@ -80,8 +86,12 @@ def check_feedback(core: CobotCore) -> None:
         core.lost_feedback += 1
         core.misses[node_id] = core.misses.get(node_id, 0) + 1
         if core.misses[node_id] == limit:
-            latch(core, FeedbackLostError(f"{core.label(node_id)}: no TPDO for {limit} consecutive SYNC cycles",
-                                          node_id, core.name(node_id)))
+            latch(
+                core,
+                FeedbackLostError(
+                    f"{core.label(node_id)}: no TPDO for {limit} consecutive SYNC cycles", node_id, core.name(node_id)
+                ),
+            )
 
 
 def supervise(core: CobotCore) -> None:
@@ -94,14 +104,26 @@ def supervise(core: CobotCore) -> None:
     for node_id, age in expired.items():
         if node_id not in core.lost_logged:
             core.lost_logged.add(node_id)
-            latch(core, HeartbeatLostError(
-                f"heartbeat of {core.label(node_id)} lost: none for {age * 1000:.0f} ms "
-                f"(consumer time {core.hb.timeout * 1000:.0f} ms)", node_id, core.name(node_id)))
+            latch(
+                core,
+                HeartbeatLostError(
+                    f"heartbeat of {core.label(node_id)} lost: none for {age * 1000:.0f} ms "
+                    f"(consumer time {core.hb.timeout * 1000:.0f} ms)",
+                    node_id,
+                    core.name(node_id),
+                ),
+            )
     for node_id in core.config.node_ids:
         state = core.hb.state(node_id)
         if state is not None and state != OPERATIONAL:
-            latch(core, NodeLostError(f"{core.label(node_id)} left NMT OPERATIONAL: reports {nmt_state_name(state)}",
-                                      node_id, core.name(node_id)))
+            latch(
+                core,
+                NodeLostError(
+                    f"{core.label(node_id)} left NMT OPERATIONAL: reports {nmt_state_name(state)}",
+                    node_id,
+                    core.name(node_id),
+                ),
+            )
     for drive in core.drives:
         state = core.state(drive)
         if state in FAULT_STATES:

@@ -77,8 +77,10 @@ class VacuumGenerator:
         try:
             device_type = sdo[0x1000].raw
             if device_type != expected_type:
-                raise BootError(f"{self.label}: device type 0x{device_type:08X}, EDS "
-                                f"{self.config.eds} expects 0x{expected_type:08X}")
+                raise BootError(
+                    f"{self.label}: device type 0x{device_type:08X}, EDS "
+                    f"{self.config.eds} expects 0x{expected_type:08X}"
+                )
             sdo[0x1017].raw = timing.heartbeat_ms
             sdo[0x2100].raw = round(self.config.grip_threshold_kpa / LEVEL_UNIT_KPA)
             sdo[0x2101].raw = round(self.config.grip_hysteresis_kpa / LEVEL_UNIT_KPA)
@@ -90,14 +92,23 @@ class VacuumGenerator:
         (self._cmd_var,) = rx[1]
         self._level_var, self._gripped_var, self._lost_var = tx[1]
         self.node.tpdo[1].add_callback(self._on_status_pdo)
-        logger.info("%s configured: heartbeat %d ms, L1 %.1f kPa, h1 %.1f kPa", self.label, timing.heartbeat_ms,
-                    self.config.grip_threshold_kpa, self.config.grip_hysteresis_kpa)
+        logger.info(
+            "%s configured: heartbeat %d ms, L1 %.1f kPa, h1 %.1f kPa",
+            self.label,
+            timing.heartbeat_ms,
+            self.config.grip_threshold_kpa,
+            self.config.grip_hysteresis_kpa,
+        )
         return {self.node.tpdo[1].cob_id: len(self.node.tpdo[1].data)}
 
     def _on_status_pdo(self, pdo_map: PdoMap) -> None:
-        self.feedback = VacuumFeedback(self._level_var.raw * LEVEL_UNIT_KPA,
-                                       bool(self._gripped_var.raw & MODULE0_BIT),
-                                       bool(self._lost_var.raw & MODULE0_BIT), self._sync_index(), time.monotonic())
+        self.feedback = VacuumFeedback(
+            self._level_var.raw * LEVEL_UNIT_KPA,
+            bool(self._gripped_var.raw & MODULE0_BIT),
+            bool(self._lost_var.raw & MODULE0_BIT),
+            self._sync_index(),
+            time.monotonic(),
+        )
         self.rx_count += 1
 
     def send(self) -> int:

@@ -27,7 +27,15 @@ from mrguide.shipped_configs import shipped_config
 
 #: The three sim-to-real conditions (run by mrguide.experiments.sim2real; named here to check them without PyBullet).
 CONDITIONS = ("sim", "real_exact", "real_hmd")
-GAP_PARAMS = ("object_mass", "object_friction", "suction_break_force", "actuator_latency", "actuator_lag", "joint_noise", "vacuum_noise")
+GAP_PARAMS = (
+    "object_mass",
+    "object_friction",
+    "suction_break_force",
+    "actuator_latency",
+    "actuator_lag",
+    "joint_noise",
+    "vacuum_noise",
+)
 #: Swept parameters that take whole numbers (control periods).
 INTEGER_PARAMS = ("actuator_latency",)
 HMD_PARAMS = ("tracking_noise_m", "tracking_noise_deg", "calibration_error_m", "calibration_error_deg")
@@ -52,30 +60,71 @@ def _experiments() -> dict[str, Experiment]:
     from mrguide.experiments import generalization as gen
     from mrguide.experiments import learning_curves as lc
     from mrguide.experiments import noise_robustness as nr
-    from mrguide.experiments import peers
-    from mrguide.experiments import person
+    from mrguide.experiments import peers, person
     from mrguide.experiments import sim2real_runs as s2r
 
     return {
-        "learning-curves": Experiment(lc.CurvesConfig, "learning_curves.toml", "runs/learning-curves", lc.runs,
-                                      lambda c, b, r, e: lc.learning_curves_report(c, lc.records(c, b, r, e))),
-        "long-baseline": Experiment(lc.CurvesConfig, "long_baseline.toml", "runs/long-baseline", lc.runs,
-                                    lambda c, b, r, e: lc.long_baseline_report(c, lc.records(c, b, r, e))),
-        "noise-robustness": Experiment(nr.NoiseConfig, "noise_robustness.toml", "runs/noise-robustness", nr.runs,
-                                       lambda c, b, r, e: nr.noise_report(c, nr.records(c, b, r, e))),
-        "generalization": Experiment(gen.GeneralizationConfig, "generalization.toml", "runs/generalization", gen.runs,
-                                     lambda c, b, r, e: gen.generalization_report(c, r, gen.runs(c, b)), gen.evaluate,
-                                     lambda run, root: run.directory(root) / "goals.csv"),
-        "person": Experiment(person.PersonConfig, "person.toml", "runs/person", person.runs,
-                             lambda c, b, r, e: person.person_report(c, r, person.runs(c, b), e), person.evaluate, person.fresh_path),
-        "peers": Experiment(peers.PeersConfig, "peers.toml", "runs/peers", peers.runs,
-                            lambda c, b, r, e: peers.peers_report(c, peers.records(c, b, r, e))),
-        "sim2real": Experiment(s2r.Sim2RealConfig, "sim2real.toml", "runs/sim2real-experiment", s2r.runs,
-                               lambda c, b, r, e: s2r.sim2real_report(c, r, s2r.runs(c, b)), s2r.evaluate, s2r.outcomes_path),
+        "learning-curves": Experiment(
+            lc.CurvesConfig,
+            "learning_curves.toml",
+            "runs/learning-curves",
+            lc.runs,
+            lambda c, b, r, e: lc.learning_curves_report(c, lc.records(c, b, r, e)),
+        ),
+        "long-baseline": Experiment(
+            lc.CurvesConfig,
+            "long_baseline.toml",
+            "runs/long-baseline",
+            lc.runs,
+            lambda c, b, r, e: lc.long_baseline_report(c, lc.records(c, b, r, e)),
+        ),
+        "noise-robustness": Experiment(
+            nr.NoiseConfig,
+            "noise_robustness.toml",
+            "runs/noise-robustness",
+            nr.runs,
+            lambda c, b, r, e: nr.noise_report(c, nr.records(c, b, r, e)),
+        ),
+        "generalization": Experiment(
+            gen.GeneralizationConfig,
+            "generalization.toml",
+            "runs/generalization",
+            gen.runs,
+            lambda c, b, r, e: gen.generalization_report(c, r, gen.runs(c, b)),
+            gen.evaluate,
+            lambda run, root: run.directory(root) / "goals.csv",
+        ),
+        "person": Experiment(
+            person.PersonConfig,
+            "person.toml",
+            "runs/person",
+            person.runs,
+            lambda c, b, r, e: person.person_report(c, r, person.runs(c, b), e),
+            person.evaluate,
+            person.fresh_path,
+        ),
+        "peers": Experiment(
+            peers.PeersConfig,
+            "peers.toml",
+            "runs/peers",
+            peers.runs,
+            lambda c, b, r, e: peers.peers_report(c, peers.records(c, b, r, e)),
+        ),
+        "sim2real": Experiment(
+            s2r.Sim2RealConfig,
+            "sim2real.toml",
+            "runs/sim2real-experiment",
+            s2r.runs,
+            lambda c, b, r, e: s2r.sim2real_report(c, r, s2r.runs(c, b)),
+            s2r.evaluate,
+            s2r.outcomes_path,
+        ),
     }
 
 
-def _evaluate(exp: Experiment, cfg: Any, base: str | None, out: Path, workers: int, address: str | None, show_progress: bool) -> None:
+def _evaluate(
+    exp: Experiment, cfg: Any, base: str | None, out: Path, workers: int, address: str | None, show_progress: bool
+) -> None:
     """Every trained run not evaluated yet, one Ray task each (Fig. 6: the goal grid; sim-to-real: three conditions)."""
     from mrguide.experiments.execution import map_tasks
 
@@ -91,7 +140,9 @@ def add_experiment_command(sub: argparse._SubParsersAction) -> None:
     esub = p.add_subparsers(dest="experiment", required=True)
     for name in NAMES:
         e = esub.add_parser(name, help=f"{name}: train what is not done yet, then report")
-        e.add_argument("--config", help=f"experiment TOML ([experiment]); default the shipped configs/experiments/<{name}>.toml")
+        e.add_argument(
+            "--config", help=f"experiment TOML ([experiment]); default the shipped configs/experiments/<{name}>.toml"
+        )
         e.add_argument("--out", help="experiment directory (one subdirectory per run); default runs/<name>")
         e.add_argument("--seeds", type=positive_int, help="override experiment.seeds")
         e.add_argument("--steps", type=positive_int, help="override experiment.steps")
@@ -148,10 +199,16 @@ def cmd_experiment(args: argparse.Namespace) -> int:
 
 def cmd_report(args: argparse.Namespace) -> int:
     exp, cfg, base, out = _setup(args)
-    missing = [r.name for r in exp.runs(cfg, base) if not (r.directory(out) / "done").exists()
-               or (exp.evaluated is not None and not exp.evaluated(r, out).exists())]
+    missing = [
+        r.name
+        for r in exp.runs(cfg, base)
+        if not (r.directory(out) / "done").exists()
+        or (exp.evaluated is not None and not exp.evaluated(r, out).exists())
+    ]
     if missing:
-        raise ConfigError(f"{out}: {len(missing)} runs are not finished (e.g. {missing[0]}); run the experiment to finish them")
+        raise ConfigError(
+            f"{out}: {len(missing)} runs are not finished (e.g. {missing[0]}); run the experiment to finish them"
+        )
     return _write_report(exp, cfg, base, out)
 
 
@@ -170,18 +227,34 @@ def add_sim2real_command(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("sim2real", help="the three sim-to-real conditions of the paper (Fig. 8) for one policy")
     p.add_argument("--policy", required=True)
     p.add_argument("--config", default=None, help="TOML of the training twin (condition 1); default: built-in defaults")
-    p.add_argument("--real-config", default=None,
-                   help="TOML of the 'real' cell: [twin.reality_gap], [deploy] bus_config, [calibration.hmd] (conditions 2, 3)")
+    p.add_argument(
+        "--real-config",
+        default=None,
+        help="TOML of the 'real' cell: [twin.reality_gap], [deploy] bus_config, [calibration.hmd] (conditions 2, 3)",
+    )
     p.add_argument("--seeds", type=positive_int, default=3)
     p.add_argument("--episodes", type=positive_int, default=10, help="episodes per seed and condition")
-    p.add_argument("--conditions", type=conditions_arg, default=list(CONDITIONS),
-                   help=f"comma-separated, from {', '.join(CONDITIONS)} (default: all)")
-    p.add_argument("--sweep", type=sweep_arg, action="append", default=[], metavar="PARAM=v1,v2,...",
-                   help=f"instead of the three conditions, success vs one parameter; reality gap ({', '.join(GAP_PARAMS)}) "
-                        f"runs condition 2, HMD ({', '.join(HMD_PARAMS)}) condition 3; repeatable")
-    p.add_argument("--no-recovery", action="store_true",
-                   help="a safety stop ends the seed's run (its remaining episodes fail); default: fault reset, "
-                        "the stopped episode fails, the next one runs")
+    p.add_argument(
+        "--conditions",
+        type=conditions_arg,
+        default=list(CONDITIONS),
+        help=f"comma-separated, from {', '.join(CONDITIONS)} (default: all)",
+    )
+    p.add_argument(
+        "--sweep",
+        type=sweep_arg,
+        action="append",
+        default=[],
+        metavar="PARAM=v1,v2,...",
+        help=f"instead of the three conditions, success vs one parameter; reality gap ({', '.join(GAP_PARAMS)}) "
+        f"runs condition 2, HMD ({', '.join(HMD_PARAMS)}) condition 3; repeatable",
+    )
+    p.add_argument(
+        "--no-recovery",
+        action="store_true",
+        help="a safety stop ends the seed's run (its remaining episodes fail); default: fault reset, "
+        "the stopped episode fails, the next one runs",
+    )
     p.add_argument("--out", default="runs/sim2real")
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(func=cmd_sim2real)
@@ -202,7 +275,8 @@ def sweep_arg(text: str) -> tuple[str, list[float]]:
     name, _, values = text.partition("=")
     if name not in GAP_PARAMS + HMD_PARAMS or not values:
         raise argparse.ArgumentTypeError(
-            f"expected PARAM=v1,v2,... with PARAM one of {', '.join(GAP_PARAMS + HMD_PARAMS)}, got {text!r}")
+            f"expected PARAM=v1,v2,... with PARAM one of {', '.join(GAP_PARAMS + HMD_PARAMS)}, got {text!r}"
+        )
     try:
         numbers = [float(v) for v in values.split(",")]
     except ValueError:
@@ -229,8 +303,13 @@ def cmd_sim2real(args: argparse.Namespace) -> int:
     real_cfg, real_path, bus, hmd = cell.env, cell.path, cell.bus, cell.hmd
     policy = s2r.load_policy(args.policy, train_cfg, cell)
     _check_sweeps(args.sweep, real_cfg, hmd)
-    runs = [(c, None, None) for c in args.conditions] if not args.sweep else [
-        ("real_hmd" if name in HMD_PARAMS else "real_exact", name, v) for name, values in args.sweep for v in values]
+    runs = (
+        [(c, None, None) for c in args.conditions]
+        if not args.sweep
+        else [
+            ("real_hmd" if name in HMD_PARAMS else "real_exact", name, v) for name, values in args.sweep for v in values
+        ]
+    )
     out.mkdir(parents=True, exist_ok=True)
     total = len(runs) * args.seeds * args.episodes
     with tqdm(total=total, desc="sim2real", unit="ep", disable=args.quiet) as bar:
@@ -245,10 +324,19 @@ def cmd_sim2real(args: argparse.Namespace) -> int:
                     continue
                 cfg = s2r.replace_gap(real_cfg, **{name: value}) if name in GAP_PARAMS else real_cfg
                 res.outcomes[seed] = s2r.run_real(
-                    Path(args.policy), cfg, bus, seed, args.episodes,
+                    Path(args.policy),
+                    cfg,
+                    bus,
+                    seed,
+                    args.episodes,
                     out / f"log-{cond}-{name or 'default'}-{value}-seed{seed}-{time.strftime('%H%M%S')}.jsonl",
-                    real_path, cell.safety, on_episode=lambda o: bar.update(1), use_hmd=cond == "real_hmd",
-                    hmd_overrides={name: value} if name in HMD_PARAMS else None, recover=not args.no_recovery)
+                    real_path,
+                    cell.safety,
+                    on_episode=lambda o: bar.update(1),
+                    use_hmd=cond == "real_hmd",
+                    hmd_overrides={name: value} if name in HMD_PARAMS else None,
+                    recover=not args.no_recovery,
+                )
             results.append(res)
     md = s2r.write_report(results, out, s2r.gap_description(real_cfg, real_path))
     print(md.read_text())

@@ -27,8 +27,9 @@ class ExperimentError(RuntimeError):
     """One or more runs failed; the message names them and their errors."""
 
 
-def run_all(runs: list[TrainRun], root: Path, workers: int = 2, address: str | None = None,
-            show_progress: bool = True) -> list[RunResult]:
+def run_all(
+    runs: list[TrainRun], root: Path, workers: int = 2, address: str | None = None, show_progress: bool = True
+) -> list[RunResult]:
     """Train every run not done yet (in parallel on Ray) and return the results of all of them."""
     import ray
 
@@ -40,8 +41,14 @@ def run_all(runs: list[TrainRun], root: Path, workers: int = 2, address: str | N
     return [finished(r, root) for r in runs]
 
 
-def map_tasks(fn: Callable[..., Any], calls: list[tuple], workers: int = 2, address: str | None = None,
-              desc: str = "tasks", show_progress: bool = True) -> list[Any]:
+def map_tasks(
+    fn: Callable[..., Any],
+    calls: list[tuple],
+    workers: int = 2,
+    address: str | None = None,
+    desc: str = "tasks",
+    show_progress: bool = True,
+) -> list[Any]:
     """`fn(*args)` for every args tuple of `calls`, one Ray task each (1 CPU); results in order."""
     import ray
 

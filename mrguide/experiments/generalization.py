@@ -49,12 +49,16 @@ class GeneralizationConfig:
         check_number("experiment.bin_width", self.bin_width, 0.005, 1.0, " m")
         check_number("experiment.episodes", self.episodes, 1, 10_000, integer=True)
         if not all(h > lo for lo, h in zip(self.workspace_low, self.workspace_high)):
-            raise ConfigError(f"experiment.workspace_high {self.workspace_high} must exceed workspace_low {self.workspace_low}")
+            raise ConfigError(
+                f"experiment.workspace_high {self.workspace_high} must exceed workspace_low {self.workspace_low}"
+            )
 
 
 def runs(cfg: GeneralizationConfig, base_config: str | None) -> list[TrainRun]:
     box = {"robot.workspace": {"low": list(cfg.workspace_low), "high": list(cfg.workspace_high)}}
-    return [TrainRun(f"guided/seed{s}", s, cfg.steps, True, base_config, {**cfg.overrides, **box}) for s in range(cfg.seeds)]
+    return [
+        TrainRun(f"guided/seed{s}", s, cfg.steps, True, base_config, {**cfg.overrides, **box}) for s in range(cfg.seeds)
+    ]
 
 
 def region_distance(xy: np.ndarray, low: tuple[float, float], high: tuple[float, float]) -> float:
@@ -121,13 +125,25 @@ def bins(cfg: GeneralizationConfig, goal_rows: list[dict[str, str]]) -> list[dic
     table = []
     for b in range(n_bins):
         lo, hi = b * cfg.bin_width, (b + 1) * cfg.bin_width
-        sel = [r for r in goal_rows if (lo <= float(r["distance_m"]) < hi) or (b == n_bins - 1 and float(r["distance_m"]) == hi)]
+        sel = [
+            r
+            for r in goal_rows
+            if (lo <= float(r["distance_m"]) < hi) or (b == n_bins - 1 and float(r["distance_m"]) == hi)
+        ]
         episodes = sum(int(r["episodes"]) for r in sel)
         wins = sum(int(r["successes"]) for r in sel)
         ci = wilson(wins, episodes)
-        table.append({"bin_low_m": round(lo, 3), "bin_high_m": round(hi, 3), "targets": len({(r["x"], r["y"]) for r in sel}),
-                      "episodes": episodes, "success": round(wins / episodes, 3) if episodes else None,
-                      "ci_low": round(ci[0], 3), "ci_high": round(ci[1], 3)})
+        table.append(
+            {
+                "bin_low_m": round(lo, 3),
+                "bin_high_m": round(hi, 3),
+                "targets": len({(r["x"], r["y"]) for r in sel}),
+                "episodes": episodes,
+                "success": round(wins / episodes, 3) if episodes else None,
+                "ci_low": round(ci[0], 3),
+                "ci_high": round(ci[1], 3),
+            }
+        )
     return table
 
 
@@ -137,15 +153,28 @@ def generalization_report(cfg: GeneralizationConfig, root: Path, run_list: list[
         with (run.directory(root) / "goals.csv").open() as fh:
             goal_rows += [{**r, "seed": run.seed} for r in csv.DictReader(fh)]
     table = bins(cfg, goal_rows)
-    md = (f"Generalization: {cfg.seeds} guided seeds × {cfg.steps} steps (workspace low={list(cfg.workspace_low)} "
-          f"high={list(cfg.workspace_high)}), {cfg.episodes} episodes per target per seed, targets on a {cfg.grid_step} m "
-          f"grid binned by distance to the training goal region; 95 % Wilson intervals. Paper: > 90 % near the region, "
-          f"< 20 % at 0.18 m.\n\n" + report.markdown(table, [("bin_low_m", "from (m)"), ("bin_high_m", "to (m)"),
-                                                             ("targets", "targets"), ("episodes", "episodes"),
-                                                             ("success", "success"), ("ci_low", "95 % CI low"),
-                                                             ("ci_high", "95 % CI high")]))
+    md = (
+        f"Generalization: {cfg.seeds} guided seeds × {cfg.steps} steps (workspace low={list(cfg.workspace_low)} "
+        f"high={list(cfg.workspace_high)}), {cfg.episodes} episodes per target per seed, targets on a {cfg.grid_step} m "
+        f"grid binned by distance to the training goal region; 95 % Wilson intervals. Paper: > 90 % near the region, "
+        f"< 20 % at 0.18 m.\n\n"
+        + report.markdown(
+            table,
+            [
+                ("bin_low_m", "from (m)"),
+                ("bin_high_m", "to (m)"),
+                ("targets", "targets"),
+                ("episodes", "episodes"),
+                ("success", "success"),
+                ("ci_low", "95 % CI low"),
+                ("ci_high", "95 % CI high"),
+            ],
+        )
+    )
     return {
-        "summary.csv": report.csv_bytes(table, ["bin_low_m", "bin_high_m", "targets", "episodes", "success", "ci_low", "ci_high"]),
+        "summary.csv": report.csv_bytes(
+            table, ["bin_low_m", "bin_high_m", "targets", "episodes", "success", "ci_low", "ci_high"]
+        ),
         "goals.csv": report.csv_bytes(goal_rows, ["seed", "x", "y", "distance_m", "episodes", "successes"]),
         "summary.md": md.encode(),
         "fig6_generalization.png": _figure(table),
@@ -153,13 +182,22 @@ def generalization_report(cfg: GeneralizationConfig, root: Path, run_list: list[
 
 
 def _figure(table: list[dict[str, Any]]) -> bytes:
-    fig, ax = report.figure("Generalization vs distance from the training region (Fig. 6)",
-                            "distance of the goal from the training goal region (m)", "success rate")
+    fig, ax = report.figure(
+        "Generalization vs distance from the training region (Fig. 6)",
+        "distance of the goal from the training goal region (m)",
+        "success rate",
+    )
     mid = np.array([(t["bin_low_m"] + t["bin_high_m"]) / 2 for t in table])
     p = np.array([t["success"] if t["success"] is not None else np.nan for t in table])
     ax.plot(mid, p, "o-", color="tab:red", label="ours")
-    ax.fill_between(mid, [t["ci_low"] for t in table], [t["ci_high"] for t in table], color="tab:red", alpha=0.2,
-                    label="95 % Wilson CI")
+    ax.fill_between(
+        mid,
+        [t["ci_low"] for t in table],
+        [t["ci_high"] for t in table],
+        color="tab:red",
+        alpha=0.2,
+        label="95 % Wilson CI",
+    )
     for m, t in zip(mid, table):
         ax.annotate(f"n={t['targets']}", (m, 0.02), ha="center", fontsize=7)
     ax.plot([mid[0]], [PAPER_NEAR], "^", color=report.PAPER_COLOR, label="paper: > 90 % near the region")

@@ -41,11 +41,16 @@ class CurvesConfig:
 
 
 def runs(cfg: CurvesConfig, base_config: str | None) -> list[TrainRun]:
-    return [TrainRun(f"{v}/seed{s}", s, cfg.steps, v == "guided", base_config, dict(cfg.overrides))
-            for v in cfg.variants for s in range(cfg.seeds)]
+    return [
+        TrainRun(f"{v}/seed{s}", s, cfg.steps, v == "guided", base_config, dict(cfg.overrides))
+        for v in cfg.variants
+        for s in range(cfg.seeds)
+    ]
 
 
-def records(cfg: CurvesConfig, base_config: str | None, root: Path, episodes_per_eval: int) -> dict[str, list[RunRecord]]:
+def records(
+    cfg: CurvesConfig, base_config: str | None, root: Path, episodes_per_eval: int
+) -> dict[str, list[RunRecord]]:
     by_variant: dict[str, list[RunRecord]] = {v: [] for v in cfg.variants}
     for run in runs(cfg, base_config):
         by_variant[run.name.split("/")[0]].append(read_run(run, root, episodes_per_eval))
@@ -53,10 +58,20 @@ def records(cfg: CurvesConfig, base_config: str | None, root: Path, episodes_per
 
 
 def per_run_rows(recs: dict[str, list[RunRecord]]) -> list[dict[str, Any]]:
-    return [{"variant": v, "seed": r.run.seed, "convergence_step": r.converged.step, "reached_at_end": int(r.converged.at_end),
-             "annotations_until_convergence": r.annotations_until_convergence, "annotations_total": r.annotations_total,
-             "final_eval_success": float(r.eval_rates[-1]), "wall_s": r.wall_s}
-            for v, rs in recs.items() for r in rs]
+    return [
+        {
+            "variant": v,
+            "seed": r.run.seed,
+            "convergence_step": r.converged.step,
+            "reached_at_end": int(r.converged.at_end),
+            "annotations_until_convergence": r.annotations_until_convergence,
+            "annotations_total": r.annotations_total,
+            "final_eval_success": float(r.eval_rates[-1]),
+            "wall_s": r.wall_s,
+        }
+        for v, rs in recs.items()
+        for r in rs
+    ]
 
 
 def learning_curves_report(cfg: CurvesConfig, recs: dict[str, list[RunRecord]]) -> dict[str, bytes]:
@@ -65,31 +80,66 @@ def learning_curves_report(cfg: CurvesConfig, recs: dict[str, list[RunRecord]]) 
     for v, rs in recs.items():
         conv = [r.converged.step for r in rs if r.converged.step is not None]
         ann = [r.annotations_until_convergence for r in rs if r.converged.step is not None]
-        table.append({"variant": v, "seeds": len(rs), "converged_4k": sum(c <= 4000 for c in conv),
-                      "converged_5k": sum(c <= 5000 for c in conv), "converged_20k": sum(c <= 20_000 for c in conv),
-                      "median_step": int(np.median(conv)) if conv else None,
-                      "median_annotations": int(np.median(ann)) if ann and v == "guided" else None,
-                      "median_person_minutes": person_minutes(float(np.median(ann))) if ann and v == "guided" else None,
-                      "reached_at_end": sum(r.converged.at_end for r in rs),
-                      "final_eval_success": round(float(np.mean([r.eval_rates[-1] for r in rs])), 3)})
-    md = (f"Learning curves: {cfg.seeds} seeds × {cfg.steps} steps per variant. Convergence: the evaluation success over "
-          f"the last {WINDOW_EPISODES} deterministic episodes reaches {CONVERGENCE_THRESHOLD:.0%} (ours) and stays there to "
-          "the end; a window first reached at the final evaluation is counted as 'reached at the end', not converged.\n\n"
-          + report.markdown(table, [("variant", "variant"), ("seeds", "seeds"), ("converged_4k", "converged ≤ 4k"),
-                                    ("converged_5k", "converged ≤ 5k"), ("converged_20k", "converged ≤ 20k"),
-                                    ("median_step", "median convergence step"),
-                                    ("median_annotations", "annotations until convergence (median)"),
-                                    ("median_person_minutes", f"person-minutes until convergence (median, {PERSON_SECONDS_PER_MARK:.0f} s a mark)"),
-                                    ("reached_at_end", "reached only at the end"), ("final_eval_success", "final eval success")]))
+        table.append(
+            {
+                "variant": v,
+                "seeds": len(rs),
+                "converged_4k": sum(c <= 4000 for c in conv),
+                "converged_5k": sum(c <= 5000 for c in conv),
+                "converged_20k": sum(c <= 20_000 for c in conv),
+                "median_step": int(np.median(conv)) if conv else None,
+                "median_annotations": int(np.median(ann)) if ann and v == "guided" else None,
+                "median_person_minutes": person_minutes(float(np.median(ann))) if ann and v == "guided" else None,
+                "reached_at_end": sum(r.converged.at_end for r in rs),
+                "final_eval_success": round(float(np.mean([r.eval_rates[-1] for r in rs])), 3),
+            }
+        )
+    md = (
+        f"Learning curves: {cfg.seeds} seeds × {cfg.steps} steps per variant. Convergence: the evaluation success over "
+        f"the last {WINDOW_EPISODES} deterministic episodes reaches {CONVERGENCE_THRESHOLD:.0%} (ours) and stays there to "
+        "the end; a window first reached at the final evaluation is counted as 'reached at the end', not converged.\n\n"
+        + report.markdown(
+            table,
+            [
+                ("variant", "variant"),
+                ("seeds", "seeds"),
+                ("converged_4k", "converged ≤ 4k"),
+                ("converged_5k", "converged ≤ 5k"),
+                ("converged_20k", "converged ≤ 20k"),
+                ("median_step", "median convergence step"),
+                ("median_annotations", "annotations until convergence (median)"),
+                (
+                    "median_person_minutes",
+                    f"person-minutes until convergence (median, {PERSON_SECONDS_PER_MARK:.0f} s a mark)",
+                ),
+                ("reached_at_end", "reached only at the end"),
+                ("final_eval_success", "final eval success"),
+            ],
+        )
+    )
     grid = _grid(cfg.steps)
     files = {
-        "summary.csv": report.csv_bytes(table, ["variant", "seeds", "converged_4k", "converged_5k", "converged_20k",
-                                                "median_step", "median_annotations", "median_person_minutes"]),
+        "summary.csv": report.csv_bytes(
+            table,
+            [
+                "variant",
+                "seeds",
+                "converged_4k",
+                "converged_5k",
+                "converged_20k",
+                "median_step",
+                "median_annotations",
+                "median_person_minutes",
+            ],
+        ),
         "runs.csv": report.csv_bytes(per_run_rows(recs), list(per_run_rows(recs)[0])),
         "summary.md": md.encode(),
-        "fig3_learning_curves.png": _fig_returns(recs, grid, "Learning curves (Fig. 3)",
-                                                 "guided converges within ≈ 5k steps; baseline far from it at 20k"),
-        "fig5_convergence.png": _fig_convergence(recs, cfg.steps, "guided: nearly all seeds early; baseline: delayed, unreliable"),
+        "fig3_learning_curves.png": _fig_returns(
+            recs, grid, "Learning curves (Fig. 3)", "guided converges within ≈ 5k steps; baseline far from it at 20k"
+        ),
+        "fig5_convergence.png": _fig_convergence(
+            recs, cfg.steps, "guided: nearly all seeds early; baseline: delayed, unreliable"
+        ),
     }
     if "guided" in recs:
         files["fig9_expert_effort.png"] = _fig_effort(recs["guided"], grid)
@@ -101,19 +151,41 @@ def long_baseline_report(cfg: CurvesConfig, recs: dict[str, list[RunRecord]]) ->
     table = []
     for v, rs in recs.items():
         conv = [r.converged.step for r in rs if r.converged.step is not None]
-        table.append({"variant": v, "seeds": len(rs), "steps": cfg.steps, "converged": len(conv),
-                      "median_step": int(np.median(conv)) if conv else None,
-                      "reached_at_end": sum(r.converged.at_end for r in rs)})
-    md = (f"Long-horizon run: {cfg.seeds} seeds × {cfg.steps} steps (paper Fig. 4: 2 of 10 baseline seeds converged "
-          "before 100k).\n\n" + report.markdown(table, [("variant", "variant"), ("seeds", "seeds"), ("steps", "steps"),
-                                                     ("converged", "converged"), ("median_step", "median convergence step"),
-                                                     ("reached_at_end", "reached only at the end")]))
+        table.append(
+            {
+                "variant": v,
+                "seeds": len(rs),
+                "steps": cfg.steps,
+                "converged": len(conv),
+                "median_step": int(np.median(conv)) if conv else None,
+                "reached_at_end": sum(r.converged.at_end for r in rs),
+            }
+        )
+    md = (
+        f"Long-horizon run: {cfg.seeds} seeds × {cfg.steps} steps (paper Fig. 4: 2 of 10 baseline seeds converged "
+        "before 100k).\n\n"
+        + report.markdown(
+            table,
+            [
+                ("variant", "variant"),
+                ("seeds", "seeds"),
+                ("steps", "steps"),
+                ("converged", "converged"),
+                ("median_step", "median convergence step"),
+                ("reached_at_end", "reached only at the end"),
+            ],
+        )
+    )
     return {
         "summary.csv": report.csv_bytes(table, ["variant", "seeds", "steps", "converged", "median_step"]),
         "runs.csv": report.csv_bytes(per_run_rows(recs), list(per_run_rows(recs)[0])),
         "summary.md": md.encode(),
-        "fig4_long_baseline.png": _fig_returns(recs, _grid(cfg.steps), "Long-horizon baseline (Fig. 4)",
-                                               "return rises slowly; 2 of 10 seeds converge before 100k"),
+        "fig4_long_baseline.png": _fig_returns(
+            recs,
+            _grid(cfg.steps),
+            "Long-horizon baseline (Fig. 4)",
+            "return rises slowly; 2 of 10 seeds converge before 100k",
+        ),
         "fig5_convergence.png": _fig_convergence(recs, cfg.steps, "2 of 10 baseline seeds by 100k"),
     }
 
@@ -126,7 +198,9 @@ def _grid(steps: int, step: int = 1000) -> np.ndarray:
 def _ci95(x: np.ndarray) -> np.ndarray:
     """Half-width of the 95 % confidence interval of the mean over axis 0 (Student t)."""
     n = x.shape[0]
-    return scipy_stats.t.ppf(0.975, n - 1) * np.nanstd(x, axis=0, ddof=1) / np.sqrt(n) if n > 1 else np.zeros(x.shape[1])
+    return (
+        scipy_stats.t.ppf(0.975, n - 1) * np.nanstd(x, axis=0, ddof=1) / np.sqrt(n) if n > 1 else np.zeros(x.shape[1])
+    )
 
 
 def _fig_returns(recs: dict[str, list[RunRecord]], grid: np.ndarray, title: str, paper: str) -> bytes:
@@ -143,8 +217,11 @@ def _fig_returns(recs: dict[str, list[RunRecord]], grid: np.ndarray, title: str,
 
 
 def _fig_convergence(recs: dict[str, list[RunRecord]], steps: int, paper: str) -> bytes:
-    fig, ax = report.figure(f"Convergence (last {WINDOW_EPISODES} eval episodes ≥ {CONVERGENCE_THRESHOLD:.0%} to the end)",
-                            "normalized training progress", "convergence probability")
+    fig, ax = report.figure(
+        f"Convergence (last {WINDOW_EPISODES} eval episodes ≥ {CONVERGENCE_THRESHOLD:.0%} to the end)",
+        "normalized training progress",
+        "convergence probability",
+    )
     x = np.linspace(0, 1, 101)
     for v, rs in recs.items():
         cs = [r.converged.step / steps if r.converged.step is not None else np.inf for r in rs]
@@ -157,7 +234,9 @@ def _fig_convergence(recs: dict[str, list[RunRecord]], steps: int, paper: str) -
 
 def _fig_effort(rs: list[RunRecord], grid: np.ndarray) -> bytes:
     """Fig. 9: expert effort and the realized expert ratio of the guided runs."""
-    fig, ax = report.figure("Expert effort and sampling schedule (Fig. 9)", "training step", "annotations asked (cumulative)")
+    fig, ax = report.figure(
+        "Expert effort and sampling schedule (Fig. 9)", "training step", "annotations asked (cumulative)"
+    )
     a = np.array([r.asked_on(grid) for r in rs])
     ax.plot(grid, a.mean(0), color="tab:red", label="cumulative annotations asked")
     ax.fill_between(grid, a.min(0), a.max(0), color="tab:red", alpha=0.2)

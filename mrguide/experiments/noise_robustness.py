@@ -58,19 +58,26 @@ def _noise(reading: str, sigma: float) -> dict[str, Any]:
 
 def runs(cfg: NoiseConfig, base_config: str | None) -> list[TrainRun]:
     """Seed by seed, every σ within: an experiment stopped early still covers every noise level."""
-    return [TrainRun(_name(sigma, s), s, cfg.steps, True, base_config, {**cfg.overrides, **_noise(cfg.reading, sigma)})
-            for s in range(cfg.seeds) for sigma in cfg.sigmas]
+    return [
+        TrainRun(_name(sigma, s), s, cfg.steps, True, base_config, {**cfg.overrides, **_noise(cfg.reading, sigma)})
+        for s in range(cfg.seeds)
+        for sigma in cfg.sigmas
+    ]
 
 
 def _name(sigma: float, seed: int) -> str:
     return f"sigma_{sigma:.3f}/seed{seed}"
 
 
-def records(cfg: NoiseConfig, base_config: str | None, root: Path, episodes_per_eval: int) -> dict[float, list[RunRecord]]:
+def records(
+    cfg: NoiseConfig, base_config: str | None, root: Path, episodes_per_eval: int
+) -> dict[float, list[RunRecord]]:
     """Run records grouped by σ."""
     by_name = {r.name: r for r in runs(cfg, base_config)}
-    return {sigma: [read_run(by_name[_name(sigma, s)], root, episodes_per_eval) for s in range(cfg.seeds)]
-            for sigma in cfg.sigmas}
+    return {
+        sigma: [read_run(by_name[_name(sigma, s)], root, episodes_per_eval) for s in range(cfg.seeds)]
+        for sigma in cfg.sigmas
+    }
 
 
 def noise_report(cfg: NoiseConfig, recs: dict[float, list[RunRecord]]) -> dict[str, bytes]:
@@ -80,25 +87,57 @@ def noise_report(cfg: NoiseConfig, recs: dict[float, list[RunRecord]]) -> dict[s
         conv = [r for r in rs if r.converged.step is not None]
         lo, hi = wilson(len(conv), len(rs))
         ann = [r.annotations_until_convergence for r in conv]
-        table.append({"sigma_m": sigma, "seeds": len(rs), "converged": len(conv), "probability": round(len(conv) / len(rs), 3),
-                      "median_annotations": int(np.median(ann)) if ann else None,
-                      "median_person_minutes": person_minutes(float(np.median(ann))) if ann else None, "ci_low": round(lo, 3), "ci_high": round(hi, 3),
-                      "median_step": int(np.median([r.converged.step for r in conv])) if conv else None,
-                      "reached_at_end": sum(r.converged.at_end for r in rs)})
-    runs_rows = [{"sigma_m": s, "seed": r.run.seed, "convergence_step": r.converged.step, "reached_at_end": int(r.converged.at_end),
-                  "annotations_until_convergence": r.annotations_until_convergence, "annotations_total": r.annotations_total,
-                  "final_eval_success": float(r.eval_rates[-1])} for s, rs in recs.items() for r in rs]
-    md = (f"Noise robustness (reading: {cfg.reading}): {cfg.seeds} guided seeds × {cfg.steps} steps per σ; convergence "
-          "within the horizon with the learning-curves rule; 95 % Wilson intervals. Paper: 75–85 % up to 0.05 m, more than "
-          "two thirds at 0.07 m.\n\n"
-          + report.markdown(table, [("sigma_m", "σ (m)"), ("seeds", "seeds"), ("converged", "converged"), ("probability", "probability"),
-                                    ("ci_low", "95 % CI low"), ("ci_high", "95 % CI high"), ("median_step", "median step"),
-                                    ("median_annotations", "annotations until convergence (median)"),
-                                    ("median_person_minutes", "person-minutes until convergence (median)"),
-                                    ("reached_at_end", "reached only at the end")]))
+        table.append(
+            {
+                "sigma_m": sigma,
+                "seeds": len(rs),
+                "converged": len(conv),
+                "probability": round(len(conv) / len(rs), 3),
+                "median_annotations": int(np.median(ann)) if ann else None,
+                "median_person_minutes": person_minutes(float(np.median(ann))) if ann else None,
+                "ci_low": round(lo, 3),
+                "ci_high": round(hi, 3),
+                "median_step": int(np.median([r.converged.step for r in conv])) if conv else None,
+                "reached_at_end": sum(r.converged.at_end for r in rs),
+            }
+        )
+    runs_rows = [
+        {
+            "sigma_m": s,
+            "seed": r.run.seed,
+            "convergence_step": r.converged.step,
+            "reached_at_end": int(r.converged.at_end),
+            "annotations_until_convergence": r.annotations_until_convergence,
+            "annotations_total": r.annotations_total,
+            "final_eval_success": float(r.eval_rates[-1]),
+        }
+        for s, rs in recs.items()
+        for r in rs
+    ]
+    md = (
+        f"Noise robustness (reading: {cfg.reading}): {cfg.seeds} guided seeds × {cfg.steps} steps per σ; convergence "
+        "within the horizon with the learning-curves rule; 95 % Wilson intervals. Paper: 75–85 % up to 0.05 m, more than "
+        "two thirds at 0.07 m.\n\n"
+        + report.markdown(
+            table,
+            [
+                ("sigma_m", "σ (m)"),
+                ("seeds", "seeds"),
+                ("converged", "converged"),
+                ("probability", "probability"),
+                ("ci_low", "95 % CI low"),
+                ("ci_high", "95 % CI high"),
+                ("median_step", "median step"),
+                ("median_annotations", "annotations until convergence (median)"),
+                ("median_person_minutes", "person-minutes until convergence (median)"),
+                ("reached_at_end", "reached only at the end"),
+            ],
+        )
+    )
     return {
-        "summary.csv": report.csv_bytes(table, ["sigma_m", "seeds", "converged", "probability", "median_annotations",
-                                                "median_person_minutes"]),
+        "summary.csv": report.csv_bytes(
+            table, ["sigma_m", "seeds", "converged", "probability", "median_annotations", "median_person_minutes"]
+        ),
         "runs.csv": report.csv_bytes(runs_rows, list(runs_rows[0])),
         "summary.md": md.encode(),
         "fig7_noise_robustness.png": _figure(table, cfg.reading),
@@ -106,15 +145,27 @@ def noise_report(cfg: NoiseConfig, recs: dict[float, list[RunRecord]]) -> dict[s
 
 
 def _figure(table: list[dict[str, Any]], reading: str) -> bytes:
-    fig, ax = report.figure(f"Convergence under noisy expert actions (Fig. 7, reading: {reading})",
-                            "noise σ per axis (m)", "convergence probability")
+    fig, ax = report.figure(
+        f"Convergence under noisy expert actions (Fig. 7, reading: {reading})",
+        "noise σ per axis (m)",
+        "convergence probability",
+    )
     x = np.array([t["sigma_m"] for t in table])
     p = np.array([t["probability"] for t in table])
-    ax.errorbar(x, p, yerr=[p - [t["ci_low"] for t in table], [t["ci_high"] for t in table] - p], fmt="o-", color="tab:red",
-                capsize=3, label="ours, 95 % Wilson CI")
+    ax.errorbar(
+        x,
+        p,
+        yerr=[p - [t["ci_low"] for t in table], [t["ci_high"] for t in table] - p],
+        fmt="o-",
+        color="tab:red",
+        capsize=3,
+        label="ours, 95 % Wilson CI",
+    )
     lo, hi, up_to = PAPER_BAND
     ax.fill_between([0.0, up_to], lo, hi, color=report.PAPER_COLOR, alpha=0.2, label="paper: 75–85 % up to 0.05 m")
-    ax.plot([0.07], [PAPER_AT_007], marker="^", color=report.PAPER_COLOR, linestyle="none", label="paper: > 2/3 at 0.07 m")
+    ax.plot(
+        [0.07], [PAPER_AT_007], marker="^", color=report.PAPER_COLOR, linestyle="none", label="paper: > 2/3 at 0.07 m"
+    )
     ax.set_ylim(-0.02, 1.02)
     ax.legend(loc="lower left")
     return report.png_bytes(fig)

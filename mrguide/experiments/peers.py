@@ -48,11 +48,16 @@ class PeersConfig:
 
 def runs(cfg: PeersConfig, base_config: str | None) -> list[TrainRun]:
     """Seed by seed, every learner within: an experiment stopped early still compares both."""
-    return [TrainRun(f"{learner}/seed{s}", s, cfg.steps, True, base_config, {**cfg.overrides, "train.learner": learner})
-            for s in range(cfg.seeds) for learner in cfg.learners]
+    return [
+        TrainRun(f"{learner}/seed{s}", s, cfg.steps, True, base_config, {**cfg.overrides, "train.learner": learner})
+        for s in range(cfg.seeds)
+        for learner in cfg.learners
+    ]
 
 
-def records(cfg: PeersConfig, base_config: str | None, root: Path, episodes_per_eval: int) -> dict[str, list[RunRecord]]:
+def records(
+    cfg: PeersConfig, base_config: str | None, root: Path, episodes_per_eval: int
+) -> dict[str, list[RunRecord]]:
     by_learner: dict[str, list[RunRecord]] = {v: [] for v in cfg.learners}
     for run in runs(cfg, base_config):
         by_learner[run.name.split("/")[0]].append(read_run(run, root, episodes_per_eval))
@@ -78,12 +83,20 @@ def peers_report(cfg: PeersConfig, recs: dict[str, list[RunRecord]]) -> dict[str
     rows, table = [], []
     for learner, rs in recs.items():
         for r in rs:
-            rows.append({"learner": learner, "seed": r.run.seed, "convergence_step": r.converged.step,
-                         "marks_until_convergence": r.annotations_until_convergence,
-                         "wall_s_until_convergence": wall_until_convergence(r), "marks_total": r.annotations_total,
-                         f"success_at_{cfg.marks_budget}_marks": success_at(r, r.asked, cfg.marks_budget),
-                         f"success_at_{cfg.time_budget_s:g}_s": success_at(r, r.row_wall, cfg.time_budget_s),
-                         "final_eval_success": float(r.eval_rates[-1]), "wall_s": r.wall_s})
+            rows.append(
+                {
+                    "learner": learner,
+                    "seed": r.run.seed,
+                    "convergence_step": r.converged.step,
+                    "marks_until_convergence": r.annotations_until_convergence,
+                    "wall_s_until_convergence": wall_until_convergence(r),
+                    "marks_total": r.annotations_total,
+                    f"success_at_{cfg.marks_budget}_marks": success_at(r, r.asked, cfg.marks_budget),
+                    f"success_at_{cfg.time_budget_s:g}_s": success_at(r, r.row_wall, cfg.time_budget_s),
+                    "final_eval_success": float(r.eval_rates[-1]),
+                    "wall_s": r.wall_s,
+                }
+            )
         mine = [row for row in rows if row["learner"] == learner]
         conv = [row for row in mine if row["convergence_step"] is not None]
         marks = [row["marks_until_convergence"] for row in conv]
@@ -91,17 +104,30 @@ def peers_report(cfg: PeersConfig, recs: dict[str, list[RunRecord]]) -> dict[str
         def median(key: str, of: list[dict[str, Any]]) -> float | None:
             return float(np.median([row[key] for row in of])) if of else None
 
-        table.append({"learner": learner, "seeds": len(mine), "converged": len(conv),
-                      "median_step": median("convergence_step", conv), "median_marks": median("marks_until_convergence", conv),
-                      "median_person_minutes": person_minutes(float(np.median(marks))) if marks else None,
-                      "median_wall_s_until_convergence": median("wall_s_until_convergence", conv),
-                      f"mean_success_at_{cfg.marks_budget}_marks": round(float(np.mean([r[f"success_at_{cfg.marks_budget}_marks"] for r in mine])), 3),
-                      f"mean_success_at_{cfg.time_budget_s:g}_s": round(float(np.mean([r[f"success_at_{cfg.time_budget_s:g}_s"] for r in mine])), 3),
-                      "median_wall_s_per_run": median("wall_s", mine),
-                      "final_eval_success": round(float(np.mean([r["final_eval_success"] for r in mine])), 3)})
-    md = (f"Peers: {', '.join(cfg.learners)}, {cfg.seeds} seeds × {cfg.steps} steps each, the same expert source and threshold "
-          f"activation; success compared after {cfg.marks_budget} marks and after {cfg.time_budget_s:g} s of training.\n\n"
-          + report.markdown(table, [(k, k.replace("_", " ")) for k in table[0]]))
+        table.append(
+            {
+                "learner": learner,
+                "seeds": len(mine),
+                "converged": len(conv),
+                "median_step": median("convergence_step", conv),
+                "median_marks": median("marks_until_convergence", conv),
+                "median_person_minutes": person_minutes(float(np.median(marks))) if marks else None,
+                "median_wall_s_until_convergence": median("wall_s_until_convergence", conv),
+                f"mean_success_at_{cfg.marks_budget}_marks": round(
+                    float(np.mean([r[f"success_at_{cfg.marks_budget}_marks"] for r in mine])), 3
+                ),
+                f"mean_success_at_{cfg.time_budget_s:g}_s": round(
+                    float(np.mean([r[f"success_at_{cfg.time_budget_s:g}_s"] for r in mine])), 3
+                ),
+                "median_wall_s_per_run": median("wall_s", mine),
+                "final_eval_success": round(float(np.mean([r["final_eval_success"] for r in mine])), 3),
+            }
+        )
+    md = (
+        f"Peers: {', '.join(cfg.learners)}, {cfg.seeds} seeds × {cfg.steps} steps each, the same expert source and threshold "
+        f"activation; success compared after {cfg.marks_budget} marks and after {cfg.time_budget_s:g} s of training.\n\n"
+        + report.markdown(table, [(k, k.replace("_", " ")) for k in table[0]])
+    )
     return {
         "summary.csv": report.csv_bytes(table, list(table[0])),
         "runs.csv": report.csv_bytes(rows, list(rows[0])),
@@ -111,11 +137,21 @@ def peers_report(cfg: PeersConfig, recs: dict[str, list[RunRecord]]) -> dict[str
 
 
 def _figure(recs: dict[str, list[RunRecord]], cfg: PeersConfig) -> bytes:
-    fig, axes = report.figure("Peers: guided DDPG against RLPD-style SAC", "marks asked (cumulative)", "evaluation success",
-                              size=(10.0, 4.0), columns=2)
+    fig, axes = report.figure(
+        "Peers: guided DDPG against RLPD-style SAC",
+        "marks asked (cumulative)",
+        "evaluation success",
+        size=(10.0, 4.0),
+        columns=2,
+    )
     for learner, rs in recs.items():
-        for ax, (column, limit) in zip(axes, (("asked", max(r.annotations_total for rs_ in recs.values() for r in rs_)),
-                                              ("row_wall", max(r.wall_s for rs_ in recs.values() for r in rs_)))):
+        for ax, (column, limit) in zip(
+            axes,
+            (
+                ("asked", max(r.annotations_total for rs_ in recs.values() for r in rs_)),
+                ("row_wall", max(r.wall_s for rs_ in recs.values() for r in rs_)),
+            ),
+        ):
             grid = np.linspace(0, limit, 60)
             curves = np.array([[success_at(r, getattr(r, column), g) for g in grid] for r in rs])
             ax.plot(grid, curves.mean(0), color=COLORS[learner], label=f"{learner}, mean of {len(rs)} seeds")

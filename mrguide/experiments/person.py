@@ -64,7 +64,9 @@ def evaluate(run: TrainRun, root: str, cfg: PersonConfig) -> str:
         summary = run_episodes(env, policy, range(FRESH_SEED_BASE, FRESH_SEED_BASE + cfg.episodes))
     finally:
         env.close()
-    rows = [{"seed": e.seed, "outcome": e.outcome, "return": round(e.ret, 4), "steps": e.steps} for e in summary.episodes]
+    rows = [
+        {"seed": e.seed, "outcome": e.outcome, "return": round(e.ret, 4), "steps": e.steps} for e in summary.episodes
+    ]
     report.write_report(out.parent, {out.name: report.csv_bytes(rows, ["seed", "outcome", "return", "steps"])})
     return str(out)
 
@@ -78,32 +80,61 @@ def person_report(cfg: PersonConfig, root: Path, run_list: list[TrainRun], episo
     """summary.csv, runs.csv, summary.md and a figure of evaluation success against the marks asked."""
     recs = [read_run(r, root, episodes_per_eval) for r in run_list]
     fresh = [fresh_success(r, root) for r in run_list]
-    rows = [{"seed": rec.run.seed, "convergence_step": rec.converged.step, "reached_at_end": int(rec.converged.at_end),
-             "marks_until_convergence": rec.annotations_until_convergence,
-             "person_minutes_until_convergence": person_minutes(rec.annotations_until_convergence),
-             "marks_total": rec.annotations_total, "final_eval_success": float(rec.eval_rates[-1]),
-             f"fresh_success_{cfg.episodes}": f, "wall_s": rec.wall_s} for rec, f in zip(recs, fresh)]
+    rows = [
+        {
+            "seed": rec.run.seed,
+            "convergence_step": rec.converged.step,
+            "reached_at_end": int(rec.converged.at_end),
+            "marks_until_convergence": rec.annotations_until_convergence,
+            "person_minutes_until_convergence": person_minutes(rec.annotations_until_convergence),
+            "marks_total": rec.annotations_total,
+            "final_eval_success": float(rec.eval_rates[-1]),
+            f"fresh_success_{cfg.episodes}": f,
+            "wall_s": rec.wall_s,
+        }
+        for rec, f in zip(recs, fresh)
+    ]
     conv = [r for r in recs if r.converged.step is not None]
     marks = [r.annotations_until_convergence for r in conv]
     lo, hi = wilson(len(conv), len(recs))
-    summary = [{"seeds": len(recs), "converged": len(conv), "ci_low": round(lo, 3), "ci_high": round(hi, 3),
-                "median_step": int(np.median([r.converged.step for r in conv])) if conv else None,
-                "median_marks": int(np.median(marks)) if marks else None,
-                "median_person_minutes": person_minutes(float(np.median(marks))) if marks else None,
-                "median_marks_total": int(np.median([r.annotations_total for r in recs])),
-                "fresh_success_median": round(float(np.median(fresh)), 3), "fresh_success_min": round(min(fresh), 3),
-                "fresh_success_max": round(max(fresh), 3)}]
-    md = (f"A person's marks over the wire (the annotation bot): {cfg.seeds} seeds × {cfg.steps} steps; "
-          f"convergence with the learning-curves rule; person-minutes at {PERSON_SECONDS_PER_MARK:.0f} s per mark; every final "
-          f"policy on {cfg.episodes} fresh start states.\n\n"
-          + report.markdown(summary, [("seeds", "seeds"), ("converged", "converged"), ("ci_low", "95 % CI low"),
-                                      ("ci_high", "95 % CI high"), ("median_step", "median convergence step"),
-                                      ("median_marks", "marks until convergence (median)"),
-                                      ("median_person_minutes", "person-minutes until convergence (median)"),
-                                      ("median_marks_total", "marks per run (median)"),
-                                      ("fresh_success_median", f"fresh success, median of {cfg.seeds}"),
-                                      ("fresh_success_min", "min"), ("fresh_success_max", "max")])
-          + "\n\n" + report.markdown(rows, [(k, k.replace("_", " ")) for k in rows[0]]))
+    summary = [
+        {
+            "seeds": len(recs),
+            "converged": len(conv),
+            "ci_low": round(lo, 3),
+            "ci_high": round(hi, 3),
+            "median_step": int(np.median([r.converged.step for r in conv])) if conv else None,
+            "median_marks": int(np.median(marks)) if marks else None,
+            "median_person_minutes": person_minutes(float(np.median(marks))) if marks else None,
+            "median_marks_total": int(np.median([r.annotations_total for r in recs])),
+            "fresh_success_median": round(float(np.median(fresh)), 3),
+            "fresh_success_min": round(min(fresh), 3),
+            "fresh_success_max": round(max(fresh), 3),
+        }
+    ]
+    md = (
+        f"A person's marks over the wire (the annotation bot): {cfg.seeds} seeds × {cfg.steps} steps; "
+        f"convergence with the learning-curves rule; person-minutes at {PERSON_SECONDS_PER_MARK:.0f} s per mark; every final "
+        f"policy on {cfg.episodes} fresh start states.\n\n"
+        + report.markdown(
+            summary,
+            [
+                ("seeds", "seeds"),
+                ("converged", "converged"),
+                ("ci_low", "95 % CI low"),
+                ("ci_high", "95 % CI high"),
+                ("median_step", "median convergence step"),
+                ("median_marks", "marks until convergence (median)"),
+                ("median_person_minutes", "person-minutes until convergence (median)"),
+                ("median_marks_total", "marks per run (median)"),
+                ("fresh_success_median", f"fresh success, median of {cfg.seeds}"),
+                ("fresh_success_min", "min"),
+                ("fresh_success_max", "max"),
+            ],
+        )
+        + "\n\n"
+        + report.markdown(rows, [(k, k.replace("_", " ")) for k in rows[0]])
+    )
     return {
         "summary.csv": report.csv_bytes(summary, list(summary[0])),
         "runs.csv": report.csv_bytes(rows, list(rows[0])),
@@ -115,10 +146,11 @@ def person_report(cfg: PersonConfig, root: Path, run_list: list[TrainRun], episo
 def _figure(recs: list[RunRecord]) -> bytes:
     """Evaluation success (left) and the marks asked (right) by training step, one line per seed; a dot where a
     run converged."""
-    fig, (success, marks) = report.figure("A person's marks over the wire", "training step", "evaluation success",
-                                          size=(11.0, 4.0), columns=2)
+    fig, (success, marks) = report.figure(
+        "A person's marks over the wire", "training step", "evaluation success", size=(11.0, 4.0), columns=2
+    )
     for rec in recs:
-        line, = success.plot(rec.eval_steps, rec.eval_rates, alpha=0.7, label=f"seed {rec.run.seed}")
+        (line,) = success.plot(rec.eval_steps, rec.eval_rates, alpha=0.7, label=f"seed {rec.run.seed}")
         marks.plot(rec.row_steps, rec.asked, color=line.get_color(), alpha=0.7)
         if rec.converged.step is not None:
             marks.plot([rec.converged.step], [rec.annotations_until_convergence], "o", color=line.get_color())

@@ -8,13 +8,13 @@ import io
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import matplotlib
+import numpy as np
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402  (after choosing the non-interactive backend)
+import matplotlib.pyplot as plt
 
-from mrguide.output_files import write_files_atomically  # noqa: E402
+from mrguide.output_files import write_files_atomically
 
 PAPER_COLOR = "0.35"
 
@@ -68,5 +68,14 @@ def png_bytes(fig) -> bytes:
 
 def paper_note(ax, text: str) -> None:
     """The paper's figure for this plot, as a boxed note in the corner (when it gives no curve to draw)."""
-    ax.text(0.99, 0.02, f"paper: {text}", transform=ax.transAxes, ha="right", va="bottom", fontsize=8,
-            color=PAPER_COLOR, bbox={"boxstyle": "round", "fc": "white", "ec": PAPER_COLOR, "alpha": 0.9})
+    ax.text(
+        0.99,
+        0.02,
+        f"paper: {text}",
+        transform=ax.transAxes,
+        ha="right",
+        va="bottom",
+        fontsize=8,
+        color=PAPER_COLOR,
+        bbox={"boxstyle": "round", "fc": "white", "ec": PAPER_COLOR, "alpha": 0.9},
+    )

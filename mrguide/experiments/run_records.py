@@ -49,7 +49,9 @@ class RunRecord:
 
     def at_evaluations(self, per_row: np.ndarray) -> np.ndarray:
         """A metrics column (e.g. `asked`, `row_wall`) as it stood at each evaluation (its last row at or before it)."""
-        return np.array([per_row[self.row_steps <= s][-1] if (self.row_steps <= s).any() else 0 for s in self.eval_steps])
+        return np.array(
+            [per_row[self.row_steps <= s][-1] if (self.row_steps <= s).any() else 0 for s in self.eval_steps]
+        )
 
     def asked_on(self, grid: np.ndarray) -> np.ndarray:
         return np.array([self.asked[self.row_steps <= g].max(initial=0) for g in grid], dtype=float)
@@ -69,8 +71,14 @@ def read_run(run: TrainRun, root: Path, episodes_per_eval: int) -> RunRecord:
     steps = np.array([int(r["step"]) for r in ev])
     rates = np.array([float(r["success_rate"]) for r in ev])
     return RunRecord(
-        run, steps, rates, np.array([float(r["mean_return"]) for r in ev]),
-        np.array([int(r["step"]) for r in rows]), np.array([int(r["asked"]) for r in rows]),
-        np.array([float(r["expert_ratio"]) for r in rows]), np.array([float(r["wall_s"]) for r in rows]),
-        convergence(steps.tolist(), rates.tolist(), episodes_per_eval), finished(run, root).wall_s,
+        run,
+        steps,
+        rates,
+        np.array([float(r["mean_return"]) for r in ev]),
+        np.array([int(r["step"]) for r in rows]),
+        np.array([int(r["asked"]) for r in rows]),
+        np.array([float(r["expert_ratio"]) for r in rows]),
+        np.array([float(r["wall_s"]) for r in rows]),
+        convergence(steps.tolist(), rates.tolist(), episodes_per_eval),
+        finished(run, root).wall_s,
     )

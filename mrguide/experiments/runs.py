@@ -59,7 +59,9 @@ def configs(run: TrainRun, where: str = "experiment"):
     for key, value in run.overrides.items():
         section, _, path = key.partition(".")
         if section not in SECTIONS or not path:
-            raise ConfigError(f"{where}: override {key!r}: expected '<section>.<key>' with section one of {', '.join(SECTIONS)}")
+            raise ConfigError(
+                f"{where}: override {key!r}: expected '<section>.<key>' with section one of {', '.join(SECTIONS)}"
+            )
         if section == "train":
             tc = replace_path(tc, path, value, where)
         elif section == "ddpg":
@@ -138,10 +140,19 @@ def train(run: TrainRun, root: str, on_episode: Callable[[dict], None] | None = 
         if bot and bot.error:
             raise RuntimeError(f"{run.name}: the annotation bot stopped: {bot.error}")
         tr.save_checkpoint()
-        export_actor(tr.agent.policy_actor, out / "policy.npz", tr.env.robot_spec, tr.env.task_cfg, tr.env.twin_cfg.decision_period,
-                     {"trained": {"steps": tr.step, "seed": run.seed, "guidance": run.guided, "run": run.name}})
+        export_actor(
+            tr.agent.policy_actor,
+            out / "policy.npz",
+            tr.env.robot_spec,
+            tr.env.task_cfg,
+            tr.env.twin_cfg.decision_period,
+            {"trained": {"steps": tr.step, "seed": run.seed, "guidance": run.guided, "run": run.name}},
+        )
         tmp = out / "done.tmp"
-        tmp.write_text(json.dumps({"wall_s": round(tr.wall_s(), 1), "update_ms": round(tr.update_ms(), 3), "steps": tr.step}) + "\n")
+        tmp.write_text(
+            json.dumps({"wall_s": round(tr.wall_s(), 1), "update_ms": round(tr.update_ms(), 3), "steps": tr.step})
+            + "\n"
+        )
         tmp.replace(out / "done")
     finally:
         tr.close()

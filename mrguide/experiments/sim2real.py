@@ -40,7 +40,11 @@ from mrguide.twin.visual_arm import ArmDrawing
 
 log = logging.getLogger(__name__)
 
-LABELS = {"sim": "simulation,\nexact poses", "real_exact": "'real' robot,\nexact poses", "real_hmd": "'real' robot,\nHMD poses"}
+LABELS = {
+    "sim": "simulation,\nexact poses",
+    "real_exact": "'real' robot,\nexact poses",
+    "real_hmd": "'real' robot,\nHMD poses",
+}
 #: Failure causes as reported: the task model's failures, and "safety_stop" for every episode the deploy
 #: runtime's supervisor ended (safety stops, aborted episodes, a lost object pose).
 CAUSES = tuple(o.value for o in Outcome if o.from_task and o is not Outcome.SUCCESS) + (Outcome.SAFETY_STOP.value,)
@@ -78,7 +82,9 @@ def load_real_cell(path: str | Path) -> RealCell:
 def load_policy(policy_path: str | Path, train_cfg: EnvConfig, cell: RealCell) -> ExportedPolicy:
     """The exported policy, checked against the training twin and the 'real' cell (arm, workspace, task, timing)."""
     policy = ExportedPolicy.load(policy_path, load_robot(train_cfg.robot), train_cfg.task)
-    check_arm(policy_path, policy.metadata, load_robot(cell.env.robot))  # the "real" cell's arm must be the training arm
+    check_arm(
+        policy_path, policy.metadata, load_robot(cell.env.robot)
+    )  # the "real" cell's arm must be the training arm
     check_decision_period(policy, policy_path, train_cfg.twin.control_period, train_cfg.twin.decision_period)
     check_decision_period(policy, policy_path, cell.bus.timing.control_period, cell.env.twin.decision_period)
     return policy
@@ -98,9 +104,16 @@ class ConditionResult:
         total = sum(pooled.values())
         lo, hi = wilson(pooled.get("success", 0), total)
         rates = self.rates()
-        return {"condition": self.condition, "seeds": len(rates), "episodes": total,
-                "success_rate": pooled.get("success", 0) / max(total, 1), "ci95_low": lo, "ci95_high": hi,
-                "seed_std": float(rates.std(ddof=1)) if len(rates) > 1 else 0.0, **{c: pooled.get(c, 0) for c in CAUSES}}
+        return {
+            "condition": self.condition,
+            "seeds": len(rates),
+            "episodes": total,
+            "success_rate": pooled.get("success", 0) / max(total, 1),
+            "ci95_low": lo,
+            "ci95_high": hi,
+            "seed_std": float(rates.std(ddof=1)) if len(rates) > 1 else 0.0,
+            **{c: pooled.get(c, 0) for c in CAUSES},
+        }
 
 
 def _cause(outcome: str) -> str:
@@ -124,9 +137,21 @@ def run_sim(policy: ExportedPolicy, env_cfg: EnvConfig, seed: int, episodes: int
     return out
 
 
-def run_real(policy_path: Path, real_cfg: EnvConfig, bus_cfg: CobotBusConfig, seed: int, episodes: int, log_path: Path,
-             hmd_config: Path | None, safety: SafetyConfig | None, on_episode: Callable[[str], None] | None = None,
-             use_hmd: bool = False, hmd_overrides: dict | None = None, policy=None, recover: bool = True) -> list[str]:
+def run_real(
+    policy_path: Path,
+    real_cfg: EnvConfig,
+    bus_cfg: CobotBusConfig,
+    seed: int,
+    episodes: int,
+    log_path: Path,
+    hmd_config: Path | None,
+    safety: SafetyConfig | None,
+    on_episode: Callable[[str], None] | None = None,
+    use_hmd: bool = False,
+    hmd_overrides: dict | None = None,
+    policy=None,
+    recover: bool = True,
+) -> list[str]:
     """Conditions 2 and 3 (`use_hmd`): a dry run whose outcomes are re-judged on the twin's ground truth.
 
     `hmd_config` is the TOML with `[calibration]` (and its `[calibration.hmd]` noise) for the HMD; `policy`
@@ -137,14 +162,23 @@ def run_real(policy_path: Path, real_cfg: EnvConfig, bus_cfg: CobotBusConfig, se
     outcomes: list[str] = []
     goals = [g for _, g in episode_layouts(real_cfg, episodes, seed)]
     task = real_cfg.task
-    header = {"command": "sim2real", "condition": "real_hmd" if use_hmd else "real_exact", "policy": str(policy_path),
-              "seed": seed, "episodes": episodes, "hmd_overrides": hmd_overrides or {},
-              "reality_gap": to_dict(real_cfg.twin.reality_gap)}
+    header = {
+        "command": "sim2real",
+        "condition": "real_hmd" if use_hmd else "real_exact",
+        "policy": str(policy_path),
+        "seed": seed,
+        "episodes": episodes,
+        "hmd_overrides": hmd_overrides or {},
+        "reality_gap": to_dict(real_cfg.twin.reality_gap),
+    }
     # the HMD process calibrates (seconds of rendering) before the simulated cell's control loop starts
     arm = ArmDrawing.of(load_robot(real_cfg.robot))
     try:
-        streams = [HmdPoseStream(None, hmd_config, task.object_height, arm, noise_seed=seed,
-                                 hmd_overrides=hmd_overrides)] if use_hmd else []
+        streams = (
+            [HmdPoseStream(None, hmd_config, task.object_height, arm, noise_seed=seed, hmd_overrides=hmd_overrides)]
+            if use_hmd
+            else []
+        )
     except HmdStartError as exc:  # e.g. too much tracking noise to calibrate: no episode can run, none is lost
         return _unplayed(log_path, header, episodes, f"the HMD could not start: {exc}", on_episode)
 
@@ -170,9 +204,20 @@ def run_real(policy_path: Path, real_cfg: EnvConfig, bus_cfg: CobotBusConfig, se
 
     try:
         with RunLog(log_path, header) as run_log:
-            summary = dry_run(policy_path, real_cfg, bus_cfg, episodes, seed, run_log, safety,
-                              pose_factory=pose_factory, after_episode=judge, on_placed=refresh, policy=policy,
-                              max_recoveries=episodes if recover else 0)
+            summary = dry_run(
+                policy_path,
+                real_cfg,
+                bus_cfg,
+                episodes,
+                seed,
+                run_log,
+                safety,
+                pose_factory=pose_factory,
+                after_episode=judge,
+                on_placed=refresh,
+                policy=policy,
+                max_recoveries=episodes if recover else 0,
+            )
     finally:
         for s in streams:
             s.close()
@@ -185,8 +230,9 @@ def run_real(policy_path: Path, real_cfg: EnvConfig, bus_cfg: CobotBusConfig, se
     return outcomes
 
 
-def _unplayed(log_path: Path, header: dict, episodes: int, reason: str,
-              on_episode: Callable[[str], None] | None) -> list[str]:
+def _unplayed(
+    log_path: Path, header: dict, episodes: int, reason: str, on_episode: Callable[[str], None] | None
+) -> list[str]:
     """A seed whose run could not start: its episodes count as safety stops (as a run stopped early does), and
     the run log says why."""
     with RunLog(log_path, header) as run_log:
@@ -213,31 +259,59 @@ def report_files(results: list[ConditionResult], gap_text: str) -> dict[str, byt
     w = csv.DictWriter(table, list(rows[0]))
     w.writeheader()
     w.writerows(rows)
-    lines = ["| condition | seeds × episodes | success | 95 % CI (Wilson) | std over seeds | " + " | ".join(CAUSES) + " |",
-             "| --- | --- | --- | --- | --- | " + " | ".join("---" for _ in CAUSES) + " |"]
+    lines = [
+        "| condition | seeds × episodes | success | 95 % CI (Wilson) | std over seeds | " + " | ".join(CAUSES) + " |",
+        "| --- | --- | --- | --- | --- | " + " | ".join("---" for _ in CAUSES) + " |",
+    ]
     for r in rows:
-        lines.append(f"| {r['condition']} | {r['seeds']} × {r['episodes'] // max(r['seeds'], 1)} | {100 * r['success_rate']:.0f} % | "
-                     f"{100 * r['ci95_low']:.0f}–{100 * r['ci95_high']:.0f} % | {100 * r['seed_std']:.0f} % | "
-                     + " | ".join(str(r[c]) for c in CAUSES) + " |")
+        lines.append(
+            f"| {r['condition']} | {r['seeds']} × {r['episodes'] // max(r['seeds'], 1)} | {100 * r['success_rate']:.0f} % | "
+            f"{100 * r['ci95_low']:.0f}–{100 * r['ci95_high']:.0f} % | {100 * r['seed_std']:.0f} % | "
+            + " | ".join(str(r[c]) for c in CAUSES)
+            + " |"
+        )
     lines += ["", gap_text]
-    return {"sim2real.csv": table.getvalue().encode(), "sim2real.md": ("\n".join(lines) + "\n").encode(),
-            "fig8_sim2real.png": _figure(rows)}
+    return {
+        "sim2real.csv": table.getvalue().encode(),
+        "sim2real.md": ("\n".join(lines) + "\n").encode(),
+        "fig8_sim2real.png": _figure(rows),
+    }
 
 
 def _figure(rows: list[dict]) -> bytes:
     fig, ax = report.figure("Sim-to-real (Fig. 8; pooled episodes, 95 % Wilson CI)", "", "success rate (%)", (6.0, 4.0))
     x = np.arange(len(rows))
-    err = np.clip(np.array([[r["success_rate"] - r["ci95_low"], r["ci95_high"] - r["success_rate"]] for r in rows]).T * 100, 0, None)
-    ax.bar(x, [100 * r["success_rate"] for r in rows], yerr=err, color=["tab:blue", "tab:green", "tab:orange"][: len(rows)], capsize=6)
+    err = np.clip(
+        np.array([[r["success_rate"] - r["ci95_low"], r["ci95_high"] - r["success_rate"]] for r in rows]).T * 100,
+        0,
+        None,
+    )
+    ax.bar(
+        x,
+        [100 * r["success_rate"] for r in rows],
+        yerr=err,
+        color=["tab:blue", "tab:green", "tab:orange"][: len(rows)],
+        capsize=6,
+    )
     ax.set_xticks(x, [LABELS.get(r["condition"], r["condition"]) for r in rows])
     ax.set_ylim(0, 105)
     for i, r in enumerate(rows):
         ax.text(i, 2, f"{100 * r['success_rate']:.0f}%", ha="center", color="white", fontweight="bold")
         if r["condition"] in TARGETS:
-            ax.plot([i - 0.4, i + 0.4], [100 * TARGETS[r["condition"]]] * 2, ":", color="black",
-                    label="our target" if i == 0 else None)
-            ax.plot([i + 0.25], [100 * PAPER[r["condition"]]], "D", color=report.PAPER_COLOR,
-                    label="paper (real_hmd: 86 ± 10 %)" if i == 0 else None)
+            ax.plot(
+                [i - 0.4, i + 0.4],
+                [100 * TARGETS[r["condition"]]] * 2,
+                ":",
+                color="black",
+                label="our target" if i == 0 else None,
+            )
+            ax.plot(
+                [i + 0.25],
+                [100 * PAPER[r["condition"]]],
+                "D",
+                color=report.PAPER_COLOR,
+                label="paper (real_hmd: 86 ± 10 %)" if i == 0 else None,
+            )
     if any(r["condition"] in TARGETS for r in rows):
         ax.legend(loc="lower right", fontsize=7)
     return report.png_bytes(fig)
@@ -256,10 +330,12 @@ def gap_description(real_cfg: EnvConfig, hmd_config: Path | None) -> str:
     g, cup = real_cfg.twin.reality_gap, real_cfg.twin.cup
     h = load_calibration_config(hmd_config).hmd
     mounting = f"cup on a {cup.stroke * 1e3:.0f} mm level-compensator" if cup.stroke > 0 else "rigid cup"
-    return (f"Reality gap of the 'real' twin: object {g.object_mass} kg, friction {g.object_friction}, suction break "
-            f"force {g.suction_break_force} N, actuator latency {g.actuator_latency} cycles, lag {g.actuator_lag * 1e3:.0f} ms, "
-            f"joint noise {g.joint_noise} rad, vacuum noise {g.vacuum_noise} kPa, {mounting}. HMD: tracking noise {h.tracking_noise_m * 1e3:.1f} mm / "
-            f"{h.tracking_noise_deg}° per frame, calibration error {h.calibration_error_m * 1e3:.1f} mm / {h.calibration_error_deg}°.")
+    return (
+        f"Reality gap of the 'real' twin: object {g.object_mass} kg, friction {g.object_friction}, suction break "
+        f"force {g.suction_break_force} N, actuator latency {g.actuator_latency} cycles, lag {g.actuator_lag * 1e3:.0f} ms, "
+        f"joint noise {g.joint_noise} rad, vacuum noise {g.vacuum_noise} kPa, {mounting}. HMD: tracking noise {h.tracking_noise_m * 1e3:.1f} mm / "
+        f"{h.tracking_noise_deg}° per frame, calibration error {h.calibration_error_m * 1e3:.1f} mm / {h.calibration_error_deg}°."
+    )
 
 
 def replace_gap(cfg: EnvConfig, **changes) -> EnvConfig:

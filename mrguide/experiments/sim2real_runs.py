@@ -40,7 +40,9 @@ class Sim2RealConfig:
         check_number("experiment.episodes", self.episodes, 1, 10_000, integer=True)
         unknown = [c for c in self.conditions if c not in CONDITIONS]
         if not self.conditions or unknown or len(set(self.conditions)) != len(self.conditions):
-            raise ConfigError(f"experiment.conditions = {list(self.conditions)}: expected distinct names from {', '.join(CONDITIONS)}")
+            raise ConfigError(
+                f"experiment.conditions = {list(self.conditions)}: expected distinct names from {', '.join(CONDITIONS)}"
+            )
         if not self.real_config:
             raise ConfigError("experiment.real_config: give the TOML of the 'real' cell")
 
@@ -70,8 +72,17 @@ def evaluate(run: TrainRun, root: str, cfg: Sim2RealConfig) -> str:
             if cond == "sim":
                 outcomes = s2r.run_sim(policy, train_cfg, seed, cfg.episodes)
             else:
-                outcomes = s2r.run_real(policy_file, cell.env, cell.bus, seed, cfg.episodes, path.parent / f"log-{cond}-seed{seed}.jsonl",
-                                        cell.path, cell.safety, use_hmd=cond == "real_hmd")
+                outcomes = s2r.run_real(
+                    policy_file,
+                    cell.env,
+                    cell.bus,
+                    seed,
+                    cfg.episodes,
+                    path.parent / f"log-{cond}-seed{seed}.jsonl",
+                    cell.path,
+                    cell.safety,
+                    use_hmd=cond == "real_hmd",
+                )
             rows += [{"condition": cond, "eval_seed": seed, "episode": i, "outcome": o} for i, o in enumerate(outcomes)]
     report.write_report(path.parent, {path.name: report.csv_bytes(rows, OUTCOME_FIELDS)})
     return str(path)
@@ -89,11 +100,18 @@ def sim2real_report(cfg: Sim2RealConfig, root: Path, run_list: list[TrainRun]) -
             res.outcomes[run.seed] = [r["outcome"] for r in rows]
             all_rows += [{"train_seed": run.seed, **r} for r in rows]
         results.append(res)
-    files = s2r.report_files(results, s2r.gap_description(s2r.load_real_cell(cfg.real_config).env, Path(cfg.real_config)))
-    intro = (f"Sim-to-real: {cfg.seeds} guided training seeds × {cfg.steps} steps, each policy under every condition for "
-             f"{cfg.eval_seeds} evaluation seeds × {cfg.episodes} episodes; success pooled over all episodes (95 % Wilson "
-             "interval), spread = std over training seeds. Targets (ours): sim ≥ 98 %, real_exact ≥ 95 %, real_hmd ≥ 90 %; "
-             "paper: 100 %, 100 %, 86 ± 10 %.\n\n")
-    return {"summary.csv": files["sim2real.csv"], "summary.md": intro.encode() + files["sim2real.md"],
-            "fig8_sim2real.png": files["fig8_sim2real.png"],
-            "outcomes.csv": report.csv_bytes(all_rows, ["train_seed", *OUTCOME_FIELDS])}
+    files = s2r.report_files(
+        results, s2r.gap_description(s2r.load_real_cell(cfg.real_config).env, Path(cfg.real_config))
+    )
+    intro = (
+        f"Sim-to-real: {cfg.seeds} guided training seeds × {cfg.steps} steps, each policy under every condition for "
+        f"{cfg.eval_seeds} evaluation seeds × {cfg.episodes} episodes; success pooled over all episodes (95 % Wilson "
+        "interval), spread = std over training seeds. Targets (ours): sim ≥ 98 %, real_exact ≥ 95 %, real_hmd ≥ 90 %; "
+        "paper: 100 %, 100 %, 86 ± 10 %.\n\n"
+    )
+    return {
+        "summary.csv": files["sim2real.csv"],
+        "summary.md": intro.encode() + files["sim2real.md"],
+        "fig8_sim2real.png": files["fig8_sim2real.png"],
+        "outcomes.csv": report.csv_bytes(all_rows, ["train_seed", *OUTCOME_FIELDS]),
+    }

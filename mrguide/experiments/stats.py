@@ -31,8 +31,9 @@ def wilson(successes: int, n: int, z: float = 1.959964) -> tuple[float, float]:
     return max(0.0, centre - half), min(1.0, centre + half)
 
 
-def bootstrap(values: Sequence[float], statistic: Callable[[np.ndarray], float] = np.mean, resamples: int = 10_000,
-              seed: int = 0) -> tuple[float, float]:
+def bootstrap(
+    values: Sequence[float], statistic: Callable[[np.ndarray], float] = np.mean, resamples: int = 10_000, seed: int = 0
+) -> tuple[float, float]:
     """95 % percentile-bootstrap interval of `statistic` over `values` (seeded: the same data, the same interval)."""
     x = np.asarray(values, dtype=float)
     if x.size == 0:
@@ -54,11 +55,16 @@ class Convergence:
     at_end: bool
 
 
-def convergence(steps: Sequence[int], rates: Sequence[float], episodes_per_eval: int,
-                threshold: float = CONVERGENCE_THRESHOLD, window: int = WINDOW_EPISODES) -> Convergence:
+def convergence(
+    steps: Sequence[int],
+    rates: Sequence[float],
+    episodes_per_eval: int,
+    threshold: float = CONVERGENCE_THRESHOLD,
+    window: int = WINDOW_EPISODES,
+) -> Convergence:
     """The convergence rule over a run's evaluations (success rates at training steps)."""
     k = max(1, -(-window // episodes_per_eval))  # evaluations per window
-    moving = [float(np.mean(rates[i - k + 1: i + 1])) for i in range(k - 1, len(rates))]
+    moving = [float(np.mean(rates[i - k + 1 : i + 1])) for i in range(k - 1, len(rates))]
     for i in range(len(moving)):
         if min(moving[i:]) >= threshold:
             if i == len(moving) - 1:

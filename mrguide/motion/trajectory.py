@@ -89,8 +89,10 @@ class JointStreamer:
             try:
                 return self._otg.update(self._inp, self._out)
             except RuckigError as exc:
-                raise TrajectoryError(f"Ruckig cannot plan from {np.round(self._inp.current_position, 4).tolist()} "
-                                      f"to {np.round(self._inp.target_position, 4).tolist()}: {exc}") from exc
+                raise TrajectoryError(
+                    f"Ruckig cannot plan from {np.round(self._inp.current_position, 4).tolist()} "
+                    f"to {np.round(self._inp.target_position, 4).tolist()}: {exc}"
+                ) from exc
             finally:
                 self._inp.max_jerk = jerk
 
@@ -102,8 +104,13 @@ class JointStreamer:
     def snapshot(self) -> tuple[list[float], ...]:
         """Full streamer state (current and target), for save/restore."""
         i = self._inp
-        return (list(i.current_position), list(i.current_velocity), list(i.current_acceleration), list(i.target_position),
-                [float(i.control_interface == ControlInterface.Velocity)])
+        return (
+            list(i.current_position),
+            list(i.current_velocity),
+            list(i.current_acceleration),
+            list(i.target_position),
+            [float(i.control_interface == ControlInterface.Velocity)],
+        )
 
     def restore(self, snap: tuple[list[float], ...]) -> None:
         q, dq, ddq, target, braking = snap
@@ -119,7 +126,10 @@ class JointStreamer:
             raise TrajectoryError(f"Ruckig failed with {result}")
         out = self._out
         sp = JointSetpoint(
-            np.array(out.new_position), np.array(out.new_velocity), np.array(out.new_acceleration), result == Result.Finished
+            np.array(out.new_position),
+            np.array(out.new_velocity),
+            np.array(out.new_acceleration),
+            result == Result.Finished,
         )
         out.pass_to_input(self._inp)
         return sp

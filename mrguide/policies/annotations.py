@@ -50,7 +50,9 @@ class Annotation:
         if t.shape != (3,) or not np.all(np.isfinite(t)):
             raise AnnotationError(f"annotation target must be 3 finite numbers (m), got {self.target!r}")
         if isinstance(self.grip, bool) or not isinstance(self.grip, (int, float)) or not math.isfinite(self.grip):
-            raise AnnotationError(f"annotation gripper command must be a finite number (+1 on, -1 off), got {self.grip!r}")
+            raise AnnotationError(
+                f"annotation gripper command must be a finite number (+1 on, -1 off), got {self.grip!r}"
+            )
 
 
 @dataclass(frozen=True)
@@ -98,7 +100,9 @@ class AnnotationCache:
         i = int(np.argmin(diff))
         return CacheHit(i, self._values[i]) if diff[i] <= self.tolerance else None
 
-    def insert(self, obs: np.ndarray, annotation: Annotation, supersedes: int | None = None, persist: bool = True) -> int:
+    def insert(
+        self, obs: np.ndarray, annotation: Annotation, supersedes: int | None = None, persist: bool = True
+    ) -> int:
         """Add an annotation (replacing record `supersedes`); it is on disk when this returns. Returns its index."""
         index = len(self._keys)
         if supersedes is not None:
@@ -108,8 +112,15 @@ class AnnotationCache:
         self._values.append(annotation)
         self._matrix = None
         if persist and self.path is not None:
-            record = {"id": index, "obs": np.asarray(obs, float).tolist(), "target": np.asarray(annotation.target, float).tolist(),
-                      "grip": float(annotation.grip), "source": annotation.source, **annotation.info, "supersedes": supersedes}
+            record = {
+                "id": index,
+                "obs": np.asarray(obs, float).tolist(),
+                "target": np.asarray(annotation.target, float).tolist(),
+                "grip": float(annotation.grip),
+                "source": annotation.source,
+                **annotation.info,
+                "supersedes": supersedes,
+            }
             with self.path.open("a") as fh:
                 fh.write(json.dumps(record) + "\n")
                 fh.flush()

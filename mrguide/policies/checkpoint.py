@@ -21,7 +21,17 @@ from mrguide.errors import InputError
 MAGIC = b"MRGUIDE-CHECKPOINT"
 FORMAT = 6  # 2: critics as one ensemble; 3: update counter; 4: evaluation counter; 5: digest header, re-marks;
 # 6: the 0.2 learner (anchored actor, LayerNorm critics, the SAC peer)
-REQUIRED = ("config", "agent", "agent_pool", "expert_pool", "rng", "torch_rng", "annotator_rng", "expert_noise_rng", "counters")
+REQUIRED = (
+    "config",
+    "agent",
+    "agent_pool",
+    "expert_pool",
+    "rng",
+    "torch_rng",
+    "annotator_rng",
+    "expert_noise_rng",
+    "counters",
+)
 
 
 class CheckpointError(InputError):
@@ -55,9 +65,13 @@ def read_checkpoint(path: Path) -> dict[str, Any]:
     header, _, payload = raw.partition(b"\n")
     parts = header.split(b" ")
     if len(parts) != 3 or parts[0] != MAGIC:
-        raise CheckpointError(f"{path}: not an mrguide checkpoint (or one written before format {FORMAT}, which had no digest)")
+        raise CheckpointError(
+            f"{path}: not an mrguide checkpoint (or one written before format {FORMAT}, which had no digest)"
+        )
     if parts[1] != str(FORMAT).encode():
-        raise CheckpointError(f"{path}: checkpoint format {parts[1].decode(errors='replace')}, this version reads {FORMAT}")
+        raise CheckpointError(
+            f"{path}: checkpoint format {parts[1].decode(errors='replace')}, this version reads {FORMAT}"
+        )
     if hashlib.sha256(payload).hexdigest().encode() != parts[2]:
         raise CheckpointError(f"{path}: corrupt: the SHA-256 digest of its contents does not match its header")
     try:

@@ -52,17 +52,27 @@ def add_train_command(sub: argparse._SubParsersAction, live: LivePlugin | None =
     p.add_argument("--out", default="runs/train", help="run directory: checkpoint, metrics, annotations, policy")
     p.add_argument("--steps", type=positive_int, help="override train.total_steps")
     p.add_argument("--seed", type=nonnegative_int, help="override train.seed")
-    p.add_argument("--stop-after", type=positive_int, metavar="N",
-                   help="stop (checkpoint, export) after N steps, keeping the schedule of total_steps; --resume continues")
+    p.add_argument(
+        "--stop-after",
+        type=positive_int,
+        metavar="N",
+        help="stop (checkpoint, export) after N steps, keeping the schedule of total_steps; --resume continues",
+    )
     p.add_argument("--no-guidance", action="store_true", help="baseline DDPG (guidance.enabled = false)")
-    p.add_argument("--expert", choices=EXPERTS if live else EXPERTS[:-1],
-                   help="override guidance.source: the scripted oracle, the simulated MR annotator, a recorded "
-                        "annotation file (guidance.annotation_file), or a person through the live annotation page")
+    p.add_argument(
+        "--expert",
+        choices=EXPERTS if live else EXPERTS[:-1],
+        help="override guidance.source: the scripted oracle, the simulated MR annotator, a recorded "
+        "annotation file (guidance.annotation_file), or a person through the live annotation page",
+    )
     p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
-    p.add_argument("--tensorboard", action="store_true",
-                   help="also write TensorBoard event files to OUT/tensorboard/: losses, Q, BC term, λ_t, expert ratio, "
-                        "annotation counters, evaluations (needs the tensorboard package: pip install 'mrguide[tensorboard]')")
+    p.add_argument(
+        "--tensorboard",
+        action="store_true",
+        help="also write TensorBoard event files to OUT/tensorboard/: losses, Q, BC term, λ_t, expert ratio, "
+        "annotation counters, evaluations (needs the tensorboard package: pip install 'mrguide[tensorboard]')",
+    )
     if live is not None:
         live.add_arguments(p)
     p.set_defaults(func=partial(cmd_train, live=live))
@@ -88,12 +98,15 @@ def cmd_train(args: argparse.Namespace, live: LivePlugin | None = None) -> int:
     refusal = _output_refusal(out, args.resume)
     if refusal:
         return _refuse(refusal)
-    bar = tqdm(total=min(tc.total_steps, args.stop_after or tc.total_steps), desc="train", unit="step", disable=args.quiet)
+    bar = tqdm(
+        total=min(tc.total_steps, args.stop_after or tc.total_steps), desc="train", unit="step", disable=args.quiet
+    )
     session = None
     if gc.enabled and gc.source == "live":
         assert live is not None
-        session = live.open_session(args, lambda waiting: bar.set_description_str(
-            "train | waiting for an annotation" if waiting else "train"))
+        session = live.open_session(
+            args, lambda waiting: bar.set_description_str("train | waiting for an annotation" if waiting else "train")
+        )
     try:
         tr = Trainer(tc, dc, gc, ec, out, session.source_factory if session else None, load_sac_config(args.config))
     except BaseException:
@@ -139,8 +152,11 @@ def _interrupted(tr, out: Path, bar: tqdm) -> int:
     """Ctrl-C: checkpoint where training stopped, say how to continue, exit status 130."""
     tr.save_checkpoint()
     bar.close()
-    print(f"interrupted at step {tr.step}: checkpoint {out / 'checkpoint.pt'} written; "
-          f"`mrguide train --out {out} --resume` continues", file=sys.stderr)
+    print(
+        f"interrupted at step {tr.step}: checkpoint {out / 'checkpoint.pt'} written; "
+        f"`mrguide train --out {out} --resume` continues",
+        file=sys.stderr,
+    )
     return 130
 
 
@@ -166,8 +182,10 @@ def _output_refusal(out: Path, resume: bool) -> str | None:
         return f"{out} already holds a run; use --resume or another --out"
     leftovers = [n for n in ("metrics.csv", "eval.csv", "annotations.jsonl") if (out / n).exists()]
     if leftovers:
-        return (f"{out} holds {', '.join(leftovers)} of a run that never checkpointed: use another --out, or move "
-                "them away (a recorded annotations.jsonl replays with guidance.source = 'file')")
+        return (
+            f"{out} holds {', '.join(leftovers)} of a run that never checkpointed: use another --out, or move "
+            "them away (a recorded annotations.jsonl replays with guidance.source = 'file')"
+        )
     return None
 
 
@@ -175,16 +193,30 @@ def _run(tr, stop_after: int | None, bar: tqdm, session: LiveSessionLike | None)
     recent: deque[int] = deque(maxlen=20)
 
     def status() -> dict:
-        return {"step": tr.step, "total_steps": tr.cfg.total_steps, "episode": tr.episode, "lambda": round(tr.lam(), 4),
-                "success_rate": sum(recent) / len(recent) if recent else None, "asked": tr.cache.asked,
-                "reused": tr.cache.reused, "remarks": tr.expert.remarks, "skipped": tr.skipped, "interventions": tr.interventions,
-                "person_interventions": tr.person_interventions}
+        return {
+            "step": tr.step,
+            "total_steps": tr.cfg.total_steps,
+            "episode": tr.episode,
+            "lambda": round(tr.lam(), 4),
+            "success_rate": sum(recent) / len(recent) if recent else None,
+            "asked": tr.cache.asked,
+            "reused": tr.cache.reused,
+            "remarks": tr.expert.remarks,
+            "skipped": tr.skipped,
+            "interventions": tr.interventions,
+            "person_interventions": tr.person_interventions,
+        }
 
     def progress(row: dict) -> None:
         recent.append(row["success"])
         bar.update(row["step"] - bar.n)
-        bar.set_postfix(ret=f"{row['return']:.1f}", succ20=f"{sum(recent) / len(recent):.0%}",
-                        lam=f"{row['lambda']:.2f}", interv=tr.interventions, asked=row["asked"])
+        bar.set_postfix(
+            ret=f"{row['return']:.1f}",
+            succ20=f"{sum(recent) / len(recent):.0%}",
+            lam=f"{row['lambda']:.2f}",
+            interv=tr.interventions,
+            asked=row["asked"],
+        )
         if session:
             session.publish(**status())
 
@@ -197,11 +229,19 @@ def _finish(tr, tc, gc, out: Path) -> None:
     from mrguide.policies.export import export_actor
 
     final = tr.last_eval or tr.evaluate()
-    policy = export_actor(tr.agent.policy_actor, out / "policy.npz", tr.env.robot_spec, tr.env.task_cfg, tr.env.twin_cfg.decision_period,
-                          {"trained": {"steps": tr.step, "seed": tc.seed, "guidance": gc.enabled}})
-    print(f"trained {tr.step} steps in {tr.wall_s():.0f} s ({tr.step / max(tr.wall_s(), 1e-9):.0f} steps/s); "
-          f"expert interventions {tr.interventions}, annotations asked {tr.cache.asked} / reused {tr.cache.reused}"
-          f" / re-marked {tr.expert.remarks}, demonstrations skipped {tr.skipped}")
+    policy = export_actor(
+        tr.agent.policy_actor,
+        out / "policy.npz",
+        tr.env.robot_spec,
+        tr.env.task_cfg,
+        tr.env.twin_cfg.decision_period,
+        {"trained": {"steps": tr.step, "seed": tc.seed, "guidance": gc.enabled}},
+    )
+    print(
+        f"trained {tr.step} steps in {tr.wall_s():.0f} s ({tr.step / max(tr.wall_s(), 1e-9):.0f} steps/s); "
+        f"expert interventions {tr.interventions}, annotations asked {tr.cache.asked} / reused {tr.cache.reused}"
+        f" / re-marked {tr.expert.remarks}, demonstrations skipped {tr.skipped}"
+    )
     print(f"deterministic evaluation: {final['success_rate']:.0%} success over {tc.eval_episodes} episodes")
     print(f"policy: {policy}   metrics: {out / 'metrics.csv'}   checkpoint: {out / 'checkpoint.pt'}")
 

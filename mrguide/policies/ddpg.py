@@ -45,7 +45,9 @@ class DDPGConfig:
     bc_weight: float = 20.0
 
     def __post_init__(self) -> None:
-        if not self.hidden or any(isinstance(h, bool) or not isinstance(h, int) or not 1 <= h <= 4096 for h in self.hidden):
+        if not self.hidden or any(
+            isinstance(h, bool) or not isinstance(h, int) or not 1 <= h <= 4096 for h in self.hidden
+        ):
             raise ConfigError(f"ddpg.hidden = {list(self.hidden)!r}: expected one or more layer widths in [1, 4096]")
         check_number("ddpg.lr_actor", self.lr_actor, 1e-8, 1.0)
         check_number("ddpg.lr_critic", self.lr_critic, 1e-8, 1.0)
@@ -103,7 +105,9 @@ class DDPG:
             a = a + rng.normal(0.0, self.cfg.exploration_noise, a.shape)
         return np.clip(a, -1.0, 1.0).astype(np.float32)
 
-    def learn(self, replay: TaggedReplay, lam: float, batch_size: int, rng: np.random.Generator) -> tuple[dict[str, float], float]:
+    def learn(
+        self, replay: TaggedReplay, lam: float, batch_size: int, rng: np.random.Generator
+    ) -> tuple[dict[str, float], float]:
         """One environment step's learning: one update on a minibatch mixed by λ (Eq. 9); (statistics, expert share)."""
         batch = replay.sample(batch_size, lam, rng)
         return self.update(batch), batch.expert_ratio
@@ -141,7 +145,12 @@ class DDPG:
             for params, targets in self._soft_pairs:
                 torch._foreach_lerp_(targets, params, self.cfg.tau)
             q1 = q[0]
-            return dict(zip(self.CRITIC_STATS + self.ACTOR_STATS, torch.stack([critic_loss, q1.mean(), q1.max(), *actor_stats]).tolist()))
+            return dict(
+                zip(
+                    self.CRITIC_STATS + self.ACTOR_STATS,
+                    torch.stack([critic_loss, q1.mean(), q1.max(), *actor_stats]).tolist(),
+                )
+            )
 
     @torch.no_grad()
     def td_target(self, rew: torch.Tensor, next_obs: torch.Tensor, done: torch.Tensor) -> torch.Tensor:

@@ -127,6 +127,8 @@ class FileExpert:
     def annotate(self, obs: np.ndarray, previous: Annotation | None = None) -> Annotation:
         hit = self._cache.lookup(obs)
         if hit is None:
-            raise AnnotationError(f"{self.path}: no recorded annotation within {self._cache.tolerance} m of this observation")
+            raise AnnotationError(
+                f"{self.path}: no recorded annotation within {self._cache.tolerance} m of this observation"
+            )
         ann = hit.annotation
         return Annotation(ann.target, ann.grip, "file", {"replayed_from": ann.source})

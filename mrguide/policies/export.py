@@ -19,7 +19,12 @@ from mrguide.task import ACT_LAYOUT, OBS_LAYOUT, TaskConfig
 
 
 def export_actor(
-    actor: Actor, path: str | Path, robot: RobotSpec, task: TaskConfig, decision_period: float, extra: dict[str, Any] | None = None
+    actor: Actor,
+    path: str | Path,
+    robot: RobotSpec,
+    task: TaskConfig,
+    decision_period: float,
+    extra: dict[str, Any] | None = None,
 ) -> Path:
     """Write the actor's linear layers and metadata to `path` (npz), atomically. The metadata names the arm
     (`robot`: name, fingerprint, joints), which `ExportedPolicy.load` requires of the configured arm."""

@@ -48,7 +48,9 @@ def bounded_projection(mr: np.ndarray, reference: np.ndarray, delta: float) -> n
     mr = np.asarray(mr, dtype=float)
     reference = np.asarray(reference, dtype=float)
     if mr.shape != reference.shape or not np.all(np.isfinite(mr)) or not np.all(np.isfinite(reference)):
-        raise AnnotationError(f"annotation {mr.tolist()} / reference {reference.tolist()} must be finite and of one shape")
+        raise AnnotationError(
+            f"annotation {mr.tolist()} / reference {reference.tolist()} must be finite and of one shape"
+        )
     if not delta > 0:
         raise ValueError(f"Δ must be > 0, got {delta}")
     diff = mr - reference
@@ -109,7 +111,9 @@ class GuidanceConfig:
     lam_max: float = 0.9  # λ_max (Table I)
     lam_min: float = 0.1  # λ_min (Table I)
     delta: float = 0.05  # Δ of Eq. 13, m (ours)
-    reference: str = "nominal"  # a^e of Eq. 13: "nominal" (the task model's target) or "running_median" (no ground truth)
+    reference: str = (
+        "nominal"  # a^e of Eq. 13: "nominal" (the task model's target) or "running_median" (no ground truth)
+    )
     cache_tolerance: float = 0.005  # m; observations this close reuse a cached annotation
     reask_after: int = 15  # expert steps on one waypoint without reaching it before it is asked again (0: never; ours)
     #: What a person marks per demonstration. "pick_place" (ours): the grasp point and the set-down point, each

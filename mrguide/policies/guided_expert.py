@@ -12,7 +12,15 @@ from mrguide.policies.annotations import AnnotationCache
 from mrguide.policies.experts import ANNOTATOR_SEED_OFFSET, ExpertSource, FileExpert, OracleExpert, SimulatedAnnotator
 from mrguide.policies.guidance import GuidanceConfig, ReferencePose, bounded_projection
 from mrguide.policies.mark_fusion import KINDS, MarkFusion, anchor
-from mrguide.task import G_REQUIRED, TaskConfig, annotation_action, mark_phase, phase_from_progress, progress, waypoint_from_mark
+from mrguide.task import (
+    G_REQUIRED,
+    TaskConfig,
+    annotation_action,
+    mark_phase,
+    phase_from_progress,
+    progress,
+    waypoint_from_mark,
+)
 from mrguide.twin.env import PickPlaceEnv
 
 ACTION_NOISE_SEED_OFFSET = 104_729  # the expert-action noise of training seed s draws from RNG seed s + this
@@ -42,8 +50,19 @@ class GuidedExpert:
     re-mark it, and the new mark supersedes the old one in the cache.
     """
 
-    def __init__(self, source: ExpertSource, reference: ReferencePose, cache: AnnotationCache, delta: float, task: TaskConfig,
-                 to_normalized, reask_after: int = 0, action_noise: float = 0.0, seed: int = 0, marks: str = "pick_place"):
+    def __init__(
+        self,
+        source: ExpertSource,
+        reference: ReferencePose,
+        cache: AnnotationCache,
+        delta: float,
+        task: TaskConfig,
+        to_normalized,
+        reask_after: int = 0,
+        action_noise: float = 0.0,
+        seed: int = 0,
+        marks: str = "pick_place",
+    ):
         self.source, self.reference, self.cache = source, reference, cache
         self.action_noise = action_noise
         self.rng = np.random.default_rng(seed + ACTION_NOISE_SEED_OFFSET)  # draws only when action_noise > 0
@@ -55,7 +74,10 @@ class GuidedExpert:
         self.fusion = MarkFusion()
         self.projected = 0  # annotations moved onto the Δ-sphere
         self.remarks = 0  # waypoints asked again because the arm did not reach them
-        self._streak = (-1, 0)  # phases: (cache index in use, consecutive expert steps on it); pick_place: (phase, steps)
+        self._streak = (
+            -1,
+            0,
+        )  # phases: (cache index in use, consecutive expert steps on it); pick_place: (phase, steps)
         self._plan: dict[int, tuple[int, np.ndarray]] = {}  # pick_place: mark phase → (cache index, fused mark in m)
 
     def begin_demonstration(self) -> None:

@@ -10,6 +10,8 @@ and `mrguide.deploy.policy` applies it with numpy.
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import torch
 from torch import nn
@@ -83,11 +85,13 @@ class Actor(nn.Module):
         """The MLP's input: the scaled observation through the phase's feature map."""
         x = self.scaler(obs)
         inputs = x @ self.features.T
-        return torch.where(obs[..., OBS_PROGRESS:OBS_PROGRESS + 1] > CARRY_PROGRESS, x @ self.carry_features.T, inputs)
+        return torch.where(
+            obs[..., OBS_PROGRESS : OBS_PROGRESS + 1] > CARRY_PROGRESS, x @ self.carry_features.T, inputs
+        )
 
     def output(self, obs: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
         """The action for the MLP's output y ∈ [-1, 1]^act_dim: the offset added to the phase's anchor."""
-        carry = obs[..., OBS_PROGRESS:OBS_PROGRESS + 1] > CARRY_PROGRESS
+        carry = obs[..., OBS_PROGRESS : OBS_PROGRESS + 1] > CARRY_PROGRESS
         base = torch.where(carry, obs[..., OBS_GOAL], obs[..., OBS_OBJECT])
         target = base + MAX_OFFSET * y[..., :3]  # m
         normalized = (target - self.scaler.offset[:3]) * self.scaler.scale[:3]  # the workspace's [-1, 1] box
@@ -110,18 +114,22 @@ class CriticEnsemble(nn.Module):
         sizes = [len(scaler.offset) + act_dim, *hidden, 1]
         self.weights = nn.ParameterList()
         self.biases = nn.ParameterList()
-        for fan_in, fan_out in zip(sizes[:-1], sizes[1:]):
+        for fan_in, fan_out in itertools.pairwise(sizes):
             bound = 1.0 / fan_in**0.5
             self.weights.append(nn.Parameter(torch.empty(n, fan_in, fan_out).uniform_(-bound, bound)))
             self.biases.append(nn.Parameter(torch.empty(n, 1, fan_out).uniform_(-bound, bound)))
         self.norm_gains = nn.ParameterList([nn.Parameter(torch.ones(n, 1, h)) for h in hidden])
         self.norm_biases = nn.ParameterList([nn.Parameter(torch.zeros(n, 1, h)) for h in hidden])
 
-    def forward(self, obs: torch.Tensor, act: torch.Tensor, members: slice | torch.Tensor = slice(None)) -> torch.Tensor:
+    def forward(
+        self, obs: torch.Tensor, act: torch.Tensor, members: slice | torch.Tensor = slice(None)
+    ) -> torch.Tensor:
         """Q values of the selected members (a slice or an index tensor), shape (members, batch)."""
         x = torch.cat([self.scaler(obs), act], dim=-1)
         params = [list(self.weights), list(self.biases), list(self.norm_gains), list(self.norm_biases)]
-        if not (isinstance(members, slice) and members == slice(None)):  # no slicing: its backward would copy every weight gradient once more
+        if not (
+            isinstance(members, slice) and members == slice(None)
+        ):  # no slicing: its backward would copy every weight gradient once more
             params = [[p[members] for p in group] for group in params]
         ws, bs, gains, shifts = params
         h = x.expand(ws[0].shape[0], *x.shape)

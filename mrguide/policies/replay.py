@@ -40,7 +40,9 @@ class RingBuffer:
 
     def state(self) -> dict[str, np.ndarray]:
         """The filled part in insertion order (oldest first), for checkpoints."""
-        order = np.arange(self.size) if self.size < self.capacity else (np.arange(self.capacity) + self.pos) % self.capacity
+        order = (
+            np.arange(self.size) if self.size < self.capacity else (np.arange(self.capacity) + self.pos) % self.capacity
+        )
         return {f: getattr(self, f)[order] for f in self.FIELDS}
 
     def load(self, state: dict[str, np.ndarray]) -> None:
@@ -50,7 +52,9 @@ class RingBuffer:
         for f in self.FIELDS:
             arr = getattr(self, f)
             if state[f].shape[1:] != arr.shape[1:]:
-                raise ValueError(f"checkpoint field {f} has shape {state[f].shape}, buffer expects (*, {arr.shape[1:]})")
+                raise ValueError(
+                    f"checkpoint field {f} has shape {state[f].shape}, buffer expects (*, {arr.shape[1:]})"
+                )
             arr[:n] = state[f]
         self.size, self.pos = n, n % self.capacity
 

@@ -31,7 +31,10 @@ INITIAL_TEMPERATURE = 0.01  # HIL-SERL's temperature_init
 class SACConfig:
     """[sac] of a training config; used when train.learner = "sac"."""
 
-    hidden: tuple[int, ...] = (128, 128)  # RLPD: 256; ours for the CPU (a 20k-step run at 256 takes ~20 min on one core)
+    hidden: tuple[int, ...] = (
+        128,
+        128,
+    )  # RLPD: 256; ours for the CPU (a 20k-step run at 256 takes ~20 min on one core)
     lr: float = 3e-4  # actor, critics and temperature (RLPD)
     gamma: float = 0.99
     tau: float = 0.005
@@ -41,7 +44,9 @@ class SACConfig:
     expert_fraction: float = 0.5  # share of every batch drawn from the expert pool (RLPD's offline_ratio)
 
     def __post_init__(self) -> None:
-        if not self.hidden or any(isinstance(h, bool) or not isinstance(h, int) or not 1 <= h <= 4096 for h in self.hidden):
+        if not self.hidden or any(
+            isinstance(h, bool) or not isinstance(h, int) or not 1 <= h <= 4096 for h in self.hidden
+        ):
             raise ConfigError(f"sac.hidden = {list(self.hidden)!r}: expected one or more layer widths in [1, 4096]")
         check_number("sac.lr", self.lr, 1e-8, 1.0)
         check_number("sac.gamma", self.gamma, 0.0, 1.0)
@@ -119,9 +124,11 @@ class SAC:
             a, _ = self.actor.sample(o, torch.as_tensor(rng.normal(size=(1, self.act_dim)), dtype=torch.float32))
         return np.clip(a.squeeze(0).numpy(), -1.0, 1.0).astype(np.float32)
 
-    def learn(self, replay: TaggedReplay, lam: float, batch_size: int, rng: np.random.Generator) -> tuple[dict[str, float], float]:
+    def learn(
+        self, replay: TaggedReplay, lam: float, batch_size: int, rng: np.random.Generator
+    ) -> tuple[dict[str, float], float]:
         """`utd` critic steps and one actor and temperature step; (statistics, realized expert share). `lam` unused."""
-        n_expert = int(round(self.cfg.expert_fraction * batch_size))
+        n_expert = round(self.cfg.expert_fraction * batch_size)
         stats: list[torch.Tensor] = []
         for _ in range(self.cfg.utd):
             batch = replay.sample_split(batch_size, n_expert, rng)
@@ -132,7 +139,9 @@ class SAC:
             return dict(zip(self.CRITIC_STATS + self.ACTOR_STATS, torch.stack(stats).tolist())), batch.expert_ratio
 
     def _critic_step(self, batch) -> list[torch.Tensor]:
-        obs, act, rew, next_obs, done = (torch.as_tensor(x) for x in (batch.obs, batch.act, batch.rew, batch.next_obs, batch.done))
+        obs, act, rew, next_obs, done = (
+            torch.as_tensor(x) for x in (batch.obs, batch.act, batch.rew, batch.next_obs, batch.done)
+        )
         with torch.no_grad():
             next_act, next_logp = self.actor.sample(next_obs, torch.randn(len(rew), self.act_dim))
             pair = torch.randperm(self.cfg.n_critics)[: self.cfg.n_min]
@@ -164,9 +173,14 @@ class SAC:
 
     def state_dict(self) -> dict:
         return {
-            "actor": self.actor.state_dict(), "critic": self.critic.state_dict(), "critic_target": self.critic_target.state_dict(),
-            "log_temperature": self.log_temperature.detach().clone(), "actor_opt": self.actor_opt.state_dict(),
-            "critic_opt": self.critic_opt.state_dict(), "temperature_opt": self.temperature_opt.state_dict(), "updates": self.updates,
+            "actor": self.actor.state_dict(),
+            "critic": self.critic.state_dict(),
+            "critic_target": self.critic_target.state_dict(),
+            "log_temperature": self.log_temperature.detach().clone(),
+            "actor_opt": self.actor_opt.state_dict(),
+            "critic_opt": self.critic_opt.state_dict(),
+            "temperature_opt": self.temperature_opt.state_dict(),
+            "updates": self.updates,
         }
 
     def load_state_dict(self, state: dict) -> None:

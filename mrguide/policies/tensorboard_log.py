@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import ClassVar
 
 from mrguide.policies.train import UPDATE_FIELDS
 
@@ -24,9 +25,12 @@ class TensorBoardLog:
     checkpoint (those episodes run again), as metrics.csv drops those rows. Close it when done.
     """
 
-    ROW_TAGS = {k: f"train/{k}" for k in (*UPDATE_FIELDS, "expert_ratio")}
-    PER_STEP_TAGS = {"lambda": "train/lambda", **{k: f"annotations/{k}" for k in ("asked", "reused", "remarks", "skipped")}}
-    EVAL_TAGS = {"success_rate": "eval/success_rate", "mean_return": "eval/mean_return"}
+    ROW_TAGS: ClassVar[dict[str, str]] = {k: f"train/{k}" for k in (*UPDATE_FIELDS, "expert_ratio")}
+    PER_STEP_TAGS: ClassVar[dict[str, str]] = {
+        "lambda": "train/lambda",
+        **{k: f"annotations/{k}" for k in ("asked", "reused", "remarks", "skipped")},
+    }
+    EVAL_TAGS: ClassVar[dict[str, str]] = {"success_rate": "eval/success_rate", "mean_return": "eval/mean_return"}
 
     def __init__(self, log_dir: str | Path, purge_step: int | None = None):
         self.writer = summary_writer_class()(log_dir=str(log_dir), purge_step=purge_step)

@@ -32,13 +32,19 @@ from mrguide.config import ConfigError, check_number, load_section, to_dict
 from mrguide.policies.annotations import AnnotationCache
 from mrguide.policies.checkpoint import CheckpointError, read_checkpoint, with_defaults, write_checkpoint
 from mrguide.policies.ddpg import DDPG, DDPGConfig
-from mrguide.policies.networks import obs_scaling
 from mrguide.policies.experts import ExpertSource
-from mrguide.policies.guidance import (GuidanceConfig, NominalReference, ReferencePose, RunningMedianReference,
-                                       ThresholdTrigger, expert_ratio)
+from mrguide.policies.guidance import (
+    GuidanceConfig,
+    NominalReference,
+    ReferencePose,
+    RunningMedianReference,
+    ThresholdTrigger,
+    expert_ratio,
+)
 from mrguide.policies.guided_expert import GuidedExpert, make_expert_source
+from mrguide.policies.networks import obs_scaling
 from mrguide.policies.replay import TaggedReplay
-from mrguide.policies.sac import SACConfig, SAC
+from mrguide.policies.sac import SAC, SACConfig
 from mrguide.robot import RobotSpec
 from mrguide.task import ACT_DIM, OBS_DIM, phase_from_progress
 from mrguide.twin.env import EnvConfig, PickPlaceEnv
@@ -95,14 +101,29 @@ def load_train_config(path: str | Path | None) -> tuple[TrainConfig, DDPGConfig,
 def _arm_record(spec: RobotSpec) -> dict[str, Any]:
     """The arm a run trains, resolved from its arm file and overrides, in the form checkpoints recorded before
     arm files (the [robot] values then), so a UR5 run checkpointed before them still resumes."""
-    values = {k: tuple(float(v) for v in getattr(spec, k)) for k in ("q_lower", "q_upper", "v_max", "a_max", "j_max", "q_home")}
-    return {"name": spec.name, "tool_offset": float(spec.T_flange_tcp[2, 3]), **values, "workspace": to_dict(spec.workspace)}
+    values = {
+        k: tuple(float(v) for v in getattr(spec, k))
+        for k in ("q_lower", "q_upper", "v_max", "a_max", "j_max", "q_home")
+    }
+    return {
+        "name": spec.name,
+        "tool_offset": float(spec.T_flange_tcp[2, 3]),
+        **values,
+        "workspace": to_dict(spec.workspace),
+    }
 
 
-def _fingerprint(tc: TrainConfig, dc: DDPGConfig, gc: GuidanceConfig, ec: EnvConfig, arm: dict[str, Any], sc: SACConfig) -> dict:
+def _fingerprint(
+    tc: TrainConfig, dc: DDPGConfig, gc: GuidanceConfig, ec: EnvConfig, arm: dict[str, Any], sc: SACConfig
+) -> dict:
     """The configuration a checkpoint must match to be resumed (the run's length and cadences may change)."""
-    return {"train": {k: v for k, v in to_dict(tc).items() if k not in ("total_steps", "checkpoint_every", "eval_every")},
-            "ddpg": to_dict(dc), "guidance": to_dict(gc), "env": {**to_dict(ec), "robot": arm}, "sac": to_dict(sc)}
+    return {
+        "train": {k: v for k, v in to_dict(tc).items() if k not in ("total_steps", "checkpoint_every", "eval_every")},
+        "ddpg": to_dict(dc),
+        "guidance": to_dict(gc),
+        "env": {**to_dict(ec), "robot": arm},
+        "sac": to_dict(sc),
+    }
 
 
 EVAL_SEED_BASE = 1_000_000  # evaluation env seeds start here (training seeds come from the run's RNG)
@@ -111,8 +132,25 @@ EVAL_SEED_BASE = 1_000_000  # evaluation env seeds start here (training seeds co
 #: since the previous one (before learning_starts; the agent row of a triggered episode, which follows
 #: its expert row); the actor's are also empty when no actor step fell in the row (policy_delay > 1).
 UPDATE_FIELDS = ("critic_loss", "actor_loss", "q_mean", "q_max", "bc_loss", "temperature")
-METRIC_FIELDS = ("step", "episode", "kind", "return", "success", "outcome", "length", "triggered", "lambda", "expert_ratio",
-                 "asked", "reused", "remarks", "skipped", "wall_s", *UPDATE_FIELDS, "intervened")  # new columns go at the end
+METRIC_FIELDS = (
+    "step",
+    "episode",
+    "kind",
+    "return",
+    "success",
+    "outcome",
+    "length",
+    "triggered",
+    "lambda",
+    "expert_ratio",
+    "asked",
+    "reused",
+    "remarks",
+    "skipped",
+    "wall_s",
+    *UPDATE_FIELDS,
+    "intervened",
+)  # new columns go at the end
 EVAL_FIELDS = ("step", "success_rate", "mean_return")
 
 
@@ -137,8 +175,16 @@ def _append_csv(path: Path, fields: tuple[str, ...], row: dict) -> None:
 class Trainer:
     """One seed's training run, resumable from its checkpoint."""
 
-    def __init__(self, cfg: TrainConfig, ddpg_cfg: DDPGConfig, guidance: GuidanceConfig, env_cfg: EnvConfig, out_dir: str | Path,
-                 source_factory: Callable[[PickPlaceEnv], ExpertSource] | None = None, sac_cfg: SACConfig | None = None):
+    def __init__(
+        self,
+        cfg: TrainConfig,
+        ddpg_cfg: DDPGConfig,
+        guidance: GuidanceConfig,
+        env_cfg: EnvConfig,
+        out_dir: str | Path,
+        source_factory: Callable[[PickPlaceEnv], ExpertSource] | None = None,
+        sac_cfg: SACConfig | None = None,
+    ):
         """`source_factory` builds the expert source from the env (a live annotation session); default: the config's.
         `sac_cfg` configures the peer learner (train.learner = "sac")."""
         self.cfg, self.ddpg_cfg, self.guidance, self.env_cfg = cfg, ddpg_cfg, guidance, env_cfg
@@ -148,17 +194,32 @@ class Trainer:
         torch.set_num_threads(cfg.torch_threads)
         self.env = PickPlaceEnv(env_cfg)
         scaling = obs_scaling(self.env.workspace)
-        self.agent: DDPG | SAC = (SAC(*scaling, ACT_DIM, self.sac_cfg, seed=cfg.seed) if cfg.learner == "sac"
-                                  else DDPG(*scaling, ACT_DIM, ddpg_cfg, seed=cfg.seed))
+        self.agent: DDPG | SAC = (
+            SAC(*scaling, ACT_DIM, self.sac_cfg, seed=cfg.seed)
+            if cfg.learner == "sac"
+            else DDPG(*scaling, ACT_DIM, ddpg_cfg, seed=cfg.seed)
+        )
         self.replay = TaggedReplay(cfg.buffer_size, OBS_DIM, ACT_DIM)
         self.rng = np.random.default_rng(cfg.seed)
         self.source = source_factory(self.env) if source_factory else make_expert_source(guidance, self.env, cfg.seed)
         reference: ReferencePose = (
-            NominalReference(self.env.task_cfg) if guidance.reference == "nominal" else RunningMedianReference(self.env.task_cfg)
+            NominalReference(self.env.task_cfg)
+            if guidance.reference == "nominal"
+            else RunningMedianReference(self.env.task_cfg)
         )
         self.cache = AnnotationCache(guidance.cache_tolerance, self.out / "annotations.jsonl")
-        self.expert = GuidedExpert(self.source, reference, self.cache, guidance.delta, self.env.task_cfg, self.env.workspace.to_normalized,
-                                   guidance.reask_after, guidance.action_noise, cfg.seed, guidance.marks)
+        self.expert = GuidedExpert(
+            self.source,
+            reference,
+            self.cache,
+            guidance.delta,
+            self.env.task_cfg,
+            self.env.workspace.to_normalized,
+            guidance.reask_after,
+            guidance.action_noise,
+            cfg.seed,
+            guidance.marks,
+        )
         self.trigger = ThresholdTrigger(guidance.r_threshold)
         self.step = 0
         self.episode = 0
@@ -208,9 +269,12 @@ class Trainer:
     def _intake_open(self) -> bool:
         return self.guidance.enabled and self.step < self.guidance.intake_steps
 
-
     def lam(self) -> float:
-        return expert_ratio(self.step, self.cfg.total_steps, self.guidance.lam_max, self.guidance.lam_min) if self.guidance.enabled else 0.0
+        return (
+            expert_ratio(self.step, self.cfg.total_steps, self.guidance.lam_max, self.guidance.lam_min)
+            if self.guidance.enabled
+            else 0.0
+        )
 
     def _env_step(self, action: np.ndarray, zeta: int | None, obs: np.ndarray, stored: np.ndarray | None = None):
         """Execute `action`; store the transition with `stored` as its action (default: the executed one), tagged
@@ -272,7 +336,9 @@ class Trainer:
                 self.env.discard(start)
         self.episode += 1
         success = bool(info["is_success"]) and not triggered
-        return self._row("agent", ret, success, info["outcome"] if not triggered else "guided", length, triggered, stepped_in)
+        return self._row(
+            "agent", ret, success, info["outcome"] if not triggered else "guided", length, triggered, stepped_in
+        )
 
     def _expert_episode(self, obs: np.ndarray, end: int) -> None:
         """The expert demonstrates from `obs` (ζ = 1); a waypoint nobody annotates ends the demonstration there.
@@ -312,18 +378,32 @@ class Trainer:
     def wall_s(self) -> float:
         return self._wall_before + time.perf_counter() - self._t0
 
-    def _row(self, kind: str, ret: float, success: bool, outcome, length: int, triggered: bool, intervened: bool = False) -> dict:
+    def _row(
+        self, kind: str, ret: float, success: bool, outcome, length: int, triggered: bool, intervened: bool = False
+    ) -> dict:
         """A metrics row; `expert_ratio` and the UPDATE_FIELDS are means over the updates since the last row."""
         ratio = self._ratio_sum / self._ratio_n if self._ratio_n else self.last_ratio
         self._ratio_sum, self._ratio_n = 0.0, 0
         means = {k: float(f"{self._stat_sum[k] / n:.6g}") for k, n in self._stat_n.items()}
         self._stat_sum, self._stat_n = {}, {}
         return {
-            "step": self.step, "episode": self.episode, "kind": kind, "return": round(ret, 4), "success": int(success),
-            "outcome": outcome, "length": length, "triggered": int(triggered), "lambda": round(self.lam(), 4),
-            "expert_ratio": round(ratio, 4), "asked": self.cache.asked, "reused": self.cache.reused,
-            "remarks": self.expert.remarks, "skipped": self.skipped, "wall_s": round(self.wall_s(), 2),
-            **{k: means.get(k, "") for k in UPDATE_FIELDS}, "intervened": int(intervened),
+            "step": self.step,
+            "episode": self.episode,
+            "kind": kind,
+            "return": round(ret, 4),
+            "success": int(success),
+            "outcome": outcome,
+            "length": length,
+            "triggered": int(triggered),
+            "lambda": round(self.lam(), 4),
+            "expert_ratio": round(ratio, 4),
+            "asked": self.cache.asked,
+            "reused": self.cache.reused,
+            "remarks": self.expert.remarks,
+            "skipped": self.skipped,
+            "wall_s": round(self.wall_s(), 2),
+            **{k: means.get(k, "") for k in UPDATE_FIELDS},
+            "intervened": int(intervened),
         }
 
     def _log(self, row: dict) -> None:
@@ -361,22 +441,37 @@ class Trainer:
 
     # -- checkpoints -----------------------------------------------------------------------------
     def _fingerprint(self) -> dict:
-        return _fingerprint(self.cfg, self.ddpg_cfg, self.guidance, self.env_cfg, _arm_record(self.env.robot_spec), self.sac_cfg)
+        return _fingerprint(
+            self.cfg, self.ddpg_cfg, self.guidance, self.env_cfg, _arm_record(self.env.robot_spec), self.sac_cfg
+        )
 
     def save_checkpoint(self) -> Path:
         """Everything to resume: networks, optimizers, both pools, RNG states, counters. Written atomically."""
         state = {
-            "version": __version__, "config": self._fingerprint(),
-            "agent": self.agent.state_dict(), "agent_pool": self.replay.agent.state(), "expert_pool": self.replay.expert.state(),
-            "rng": self.rng.bit_generator.state, "torch_rng": torch.get_rng_state(),
+            "version": __version__,
+            "config": self._fingerprint(),
+            "agent": self.agent.state_dict(),
+            "agent_pool": self.replay.agent.state(),
+            "expert_pool": self.replay.expert.state(),
+            "rng": self.rng.bit_generator.state,
+            "torch_rng": torch.get_rng_state(),
             "annotator_rng": getattr(self.source, "rng", None) and self.source.rng.bit_generator.state,
             "expert_noise_rng": self.expert.rng.bit_generator.state,
             "counters": {
-                "step": self.step, "episode": self.episode, "interventions": self.interventions,
-                "person_interventions": self.person_interventions, "asked": self.cache.asked,
-                "reused": self.cache.reused, "projected": self.expert.projected, "remarks": self.expert.remarks,
-                "skipped": self.skipped, "last_ratio": self.last_ratio,
-                "next_eval": self._next_eval, "evaluations": self.evaluations, "wall_s": self.wall_s(), "update_s": self.update_s,
+                "step": self.step,
+                "episode": self.episode,
+                "interventions": self.interventions,
+                "person_interventions": self.person_interventions,
+                "asked": self.cache.asked,
+                "reused": self.cache.reused,
+                "projected": self.expert.projected,
+                "remarks": self.expert.remarks,
+                "skipped": self.skipped,
+                "last_ratio": self.last_ratio,
+                "next_eval": self._next_eval,
+                "evaluations": self.evaluations,
+                "wall_s": self.wall_s(),
+                "update_s": self.update_s,
             },
         }
         return write_checkpoint(self.out / "checkpoint.pt", state)
@@ -385,11 +480,15 @@ class Trainer:
         """Resume from a checkpoint; a corrupt or mismatched file raises CheckpointError."""
         path = Path(path) if path else self.out / "checkpoint.pt"
         state = read_checkpoint(path)
-        defaults = _fingerprint(TrainConfig(), DDPGConfig(), GuidanceConfig(), EnvConfig(), _arm_record(self.env.robot_spec), SACConfig())
+        defaults = _fingerprint(
+            TrainConfig(), DDPGConfig(), GuidanceConfig(), EnvConfig(), _arm_record(self.env.robot_spec), SACConfig()
+        )
         stored = with_defaults(state["config"], defaults)
         if stored != self._fingerprint():
             diff = [k for k in stored if stored[k] != self._fingerprint().get(k)]
-            raise CheckpointError(f"{path}: written with a different configuration (sections differ: {', '.join(diff)})")
+            raise CheckpointError(
+                f"{path}: written with a different configuration (sections differ: {', '.join(diff)})"
+            )
         try:
             self.agent.load_state_dict(state["agent"])
             self.replay.agent.load(state["agent_pool"])

@@ -82,7 +82,9 @@ _ROW_OFFSET = 1.0
 class Camera:
     """Renders RGB (and depth) images of a PyBullet scene from a fixed pose."""
 
-    def __init__(self, client: int, T_base_cam: np.ndarray, intrinsics: Intrinsics, near: float = 0.05, far: float = 5.0):
+    def __init__(
+        self, client: int, T_base_cam: np.ndarray, intrinsics: Intrinsics, near: float = 0.05, far: float = 5.0
+    ):
         self.client = client
         self.T_base_cam = np.asarray(T_base_cam, dtype=float)
         self.intrinsics = intrinsics
@@ -92,8 +94,14 @@ class Camera:
         self._proj = self._projection().T.reshape(-1).tolist()
 
     @classmethod
-    def from_config(cls, client: int, cfg: CameraConfig) -> "Camera":
-        return cls(client, look_at(np.array(cfg.eye), np.array(cfg.target), np.array(cfg.up)), cfg.intrinsics, cfg.near, cfg.far)
+    def from_config(cls, client: int, cfg: CameraConfig) -> Camera:
+        return cls(
+            client,
+            look_at(np.array(cfg.eye), np.array(cfg.target), np.array(cfg.up)),
+            cfg.intrinsics,
+            cfg.near,
+            cfg.far,
+        )
 
     def _projection(self) -> np.ndarray:
         k, n, f = self.intrinsics, self.near, self.far

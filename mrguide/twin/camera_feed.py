@@ -37,18 +37,22 @@ RENDER_NICENESS = 10
 START_TIMEOUT_S = 120.0
 
 
-def marked_object_scene(client: int, object_size: float, dictionary: str, marker_id: int,
-                        marker_size_m: float) -> tuple[int, MarkerOnBody]:
+def marked_object_scene(
+    client: int, object_size: float, dictionary: str, marker_id: int, marker_size_m: float
+) -> tuple[int, MarkerOnBody]:
     """A visual-only table and cube with the object marker on its top face (5 mm quiet zone); (cube, marker)."""
-    vis = pb.createVisualShape(pb.GEOM_BOX, halfExtents=TABLE_HALF_EXTENTS, rgbaColor=(0.75, 0.72, 0.66, 1),
-                               physicsClientId=client)
+    vis = pb.createVisualShape(
+        pb.GEOM_BOX, halfExtents=TABLE_HALF_EXTENTS, rgbaColor=(0.75, 0.72, 0.66, 1), physicsClientId=client
+    )
     pb.createMultiBody(0, -1, vis, TABLE_CENTER, physicsClientId=client)
     h = object_size / 2
-    cube_vis = pb.createVisualShape(pb.GEOM_BOX, halfExtents=(h, h, h), rgbaColor=(0.85, 0.1, 0.1, 1),
-                                    physicsClientId=client)
+    cube_vis = pb.createVisualShape(
+        pb.GEOM_BOX, halfExtents=(h, h, h), rgbaColor=(0.85, 0.1, 0.1, 1), physicsClientId=client
+    )
     cube = pb.createMultiBody(0, -1, cube_vis, (0.5, -0.1, h), physicsClientId=client)
-    marker = MarkerOnBody(client, cube, marker_on_cube_top(object_size), dictionary, marker_id, marker_size_m,
-                          quiet_zone_m=0.005)
+    marker = MarkerOnBody(
+        client, cube, marker_on_cube_top(object_size), dictionary, marker_id, marker_size_m, quiet_zone_m=0.005
+    )
     return cube, marker
 
 
@@ -56,8 +60,15 @@ def _pinhole(camera: CameraModel) -> Intrinsics:
     return Intrinsics(camera.width, camera.height, camera.fx, camera.fy, camera.cx, camera.cy)
 
 
-def render_marked_object(T_base_cam: np.ndarray, camera: CameraModel, poses: Sequence[tuple], object_size: float,
-                         dictionary: str, marker_id: int, marker_size_m: float) -> list[np.ndarray]:
+def render_marked_object(
+    T_base_cam: np.ndarray,
+    camera: CameraModel,
+    poses: Sequence[tuple],
+    object_size: float,
+    dictionary: str,
+    marker_id: int,
+    marker_size_m: float,
+) -> list[np.ndarray]:
     """RGB images of the marked cube at each (position, quaternion xyzw), seen from `T_base_cam`."""
     client = pb.connect(pb.DIRECT)
     try:
@@ -73,8 +84,16 @@ def render_marked_object(T_base_cam: np.ndarray, camera: CameraModel, poses: Seq
         pb.disconnect(client)
 
 
-def _feed_worker(conn, T_base_cam: np.ndarray, camera: dict, object_size: float, dictionary: str, marker_id: int,
-                 marker_size_m: float, arm: ArmDrawing) -> None:
+def _feed_worker(
+    conn,
+    T_base_cam: np.ndarray,
+    camera: dict,
+    object_size: float,
+    dictionary: str,
+    marker_id: int,
+    marker_size_m: float,
+    arm: ArmDrawing,
+) -> None:
     """Runs in the render process: answer each (object pose, joints) with the camera's image of the cell."""
     os.nice(RENDER_NICENESS)
     try:
@@ -100,14 +119,34 @@ class TwinCameraFeed:
     The process starts here, before the simulated cell runs (starting it beside a running control loop stalled
     the loop); `view` (`TwinPlant.view` of the twin playing the robot) is set when there is one."""
 
-    def __init__(self, T_base_cam: np.ndarray, camera: CameraModel, object_size: float, dictionary: str,
-                 marker_id: int, marker_size_m: float, arm: ArmDrawing):
+    def __init__(
+        self,
+        T_base_cam: np.ndarray,
+        camera: CameraModel,
+        object_size: float,
+        dictionary: str,
+        marker_id: int,
+        marker_size_m: float,
+        arm: ArmDrawing,
+    ):
         self.view: Callable[[], tuple[np.ndarray, np.ndarray, np.ndarray]] | None = None
         ctx = mp.get_context("spawn")
         self._conn, child = ctx.Pipe()
-        self._proc = ctx.Process(target=_feed_worker, name="twin-camera", daemon=True, args=(
-            child, np.asarray(T_base_cam, dtype=float), camera.to_dict(), object_size, dictionary, marker_id,
-            marker_size_m, arm))
+        self._proc = ctx.Process(
+            target=_feed_worker,
+            name="twin-camera",
+            daemon=True,
+            args=(
+                child,
+                np.asarray(T_base_cam, dtype=float),
+                camera.to_dict(),
+                object_size,
+                dictionary,
+                marker_id,
+                marker_size_m,
+                arm,
+            ),
+        )
         self._proc.start()
         end = time.monotonic() + START_TIMEOUT_S
         while not self._conn.poll(0.1):
@@ -140,8 +179,9 @@ class TwinCameraPoses:
     def __init__(self, cfg: CameraSourceConfig, base_dir: Path, object_size: float, arm: ArmDrawing):
         self.cfg = cfg
         self.pipeline = p = load_marker_pipeline(cfg, base_dir)  # bad files refused before the cell starts
-        self.feed = TwinCameraFeed(p.T_base_hmd, p.camera, object_size, p.detector.cfg.dictionary, p.marker_id,
-                                   p.detector.marker_size_m, arm)
+        self.feed = TwinCameraFeed(
+            p.T_base_hmd, p.camera, object_size, p.detector.cfg.dictionary, p.marker_id, p.detector.marker_size_m, arm
+        )
         self.sources: list[CameraPoseSource] = []
 
     def __call__(self, cell) -> CameraPoseSource:

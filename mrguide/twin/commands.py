@@ -30,18 +30,25 @@ def cmd_expert(args: argparse.Namespace) -> int:
     env = PickPlaceEnv(EnvConfig.load(args.config))
     try:
         with tqdm(total=args.episodes, desc="scripted expert", unit="ep", disable=args.quiet) as bar:
+
             def tick(res):
                 bar.update(1)
                 bar.set_postfix(last=res.outcome)
 
-            summary = run_episodes(env, lambda obs: env.expert_action(), range(args.seed, args.seed + args.episodes), tick)
+            summary = run_episodes(
+                env, lambda obs: env.expert_action(), range(args.seed, args.seed + args.episodes), tick
+            )
     finally:
         env.close()
     sim_s = summary.decisions * env.twin_cfg.decision_period
-    print(f"scripted expert: {summary.success_rate:.1%} success over {len(summary.episodes)} episodes "
-          f"(seeds {args.seed}..{args.seed + args.episodes - 1}); outcomes {dict(summary.outcomes())}")
-    print(f"timing: {summary.decisions} decisions in {summary.wall_s:.1f} s wall = "
-          f"{summary.decisions / summary.wall_s:.0f} decisions/s, {sim_s / summary.wall_s:.1f}x real time")
+    print(
+        f"scripted expert: {summary.success_rate:.1%} success over {len(summary.episodes)} episodes "
+        f"(seeds {args.seed}..{args.seed + args.episodes - 1}); outcomes {dict(summary.outcomes())}"
+    )
+    print(
+        f"timing: {summary.decisions} decisions in {summary.wall_s:.1f} s wall = "
+        f"{summary.decisions / summary.wall_s:.0f} decisions/s, {sim_s / summary.wall_s:.1f}x real time"
+    )
     return 0
 
 
@@ -63,13 +70,35 @@ class TwinDryRun:
 
         return TwinCameraPoses(camera_cfg, base, object_height, ArmDrawing.of(load_robot(self.env_cfg.robot)))
 
-    def run(self, policy_path: str, policy: Any, bus: Any, episodes: int, seed: int, run_log: Any, safety: Any,
-            runtime: Any, tick: Any, camera: Any) -> Any:
+    def run(
+        self,
+        policy_path: str,
+        policy: Any,
+        bus: Any,
+        episodes: int,
+        seed: int,
+        run_log: Any,
+        safety: Any,
+        runtime: Any,
+        tick: Any,
+        camera: Any,
+    ) -> Any:
         from mrguide.twin.dry_run import dry_run
 
-        return dry_run(policy_path, self.env_cfg, bus, episodes, seed, run_log, safety, after_episode=tick, policy=policy,
-                       runtime_cfg=runtime, pose_factory=camera,
-                       on_placed=camera.refresh if camera else None)
+        return dry_run(
+            policy_path,
+            self.env_cfg,
+            bus,
+            episodes,
+            seed,
+            run_log,
+            safety,
+            after_episode=tick,
+            policy=policy,
+            runtime_cfg=runtime,
+            pose_factory=camera,
+            on_placed=camera.refresh if camera else None,
+        )
 
 
 def run_twin_calibration(config: Path | None, cfg: Any) -> tuple[Any, np.ndarray]:
@@ -84,8 +113,9 @@ def run_twin_calibration(config: Path | None, cfg: Any) -> tuple[Any, np.ndarray
     twin = load_section(TwinCalibrationConfig, config, "calibration_twin")
     client = pb.connect(pb.DIRECT)
     try:
-        table = pb.createVisualShape(pb.GEOM_BOX, halfExtents=[0.55, 0.6, 0.02], rgbaColor=[0.75, 0.72, 0.66, 1],
-                                     physicsClientId=client)
+        table = pb.createVisualShape(
+            pb.GEOM_BOX, halfExtents=[0.55, 0.6, 0.02], rgbaColor=[0.75, 0.72, 0.66, 1], physicsClientId=client
+        )
         pb.createMultiBody(0, -1, table, [0.45, 0.1, -0.02], physicsClientId=client)
         first = look_at(np.array(twin.views[0]), np.array(twin.look_at), np.array([0.0, 0.0, 1.0]))
         hmd = TwinHmd(client, twin.T_base_hmd, first, twin.intrinsics, twin.supersample)

@@ -58,8 +58,10 @@ class VacuumConfig:
 
     def __post_init__(self) -> None:
         if not self.level_sealed < self.part_threshold < self.level_open <= 0:
-            raise ConfigError(f"twin.vacuum: need level_sealed < part_threshold < level_open <= 0 kPa, got "
-                              f"{self.level_sealed}, {self.part_threshold}, {self.level_open}")
+            raise ConfigError(
+                f"twin.vacuum: need level_sealed < part_threshold < level_open <= 0 kPa, got "
+                f"{self.level_sealed}, {self.part_threshold}, {self.level_open}"
+            )
         check_number("twin.vacuum.time_constant", self.time_constant, 1e-4, 10.0, " s")
         check_number("twin.vacuum.seal_distance", self.seal_distance, 1e-5, 0.1, " m")
 
@@ -104,4 +106,4 @@ class TwinConfig:
 
     @property
     def cycles_per_decision(self) -> int:
-        return int(round(self.decision_period / self.control_period))
+        return round(self.decision_period / self.control_period)

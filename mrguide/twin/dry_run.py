@@ -108,13 +108,28 @@ def dry_run(
         pose = pose_factory(cell) if pose_factory else TwinObjectPose(cell.plant)
         # Without a [safety] config the simulated cell allows 0.1 rad of following error (robot: 0.05):
         # on a loaded PC the simulated arm can fall behind for lack of CPU, not of torque.
-        runtime = Runtime(cell.cobot, policy, pose, spec, env_cfg.task, run_log, env_cfg.twin.decision_period, runtime_cfg,
-                          safety or SafetyConfig(following_error=0.1))
+        runtime = Runtime(
+            cell.cobot,
+            policy,
+            pose,
+            spec,
+            env_cfg.task,
+            run_log,
+            env_cfg.twin.decision_period,
+            runtime_cfg,
+            safety or SafetyConfig(following_error=0.1),
+        )
+
         def place(i: int) -> None:
             cell.plant.place_objects(*layouts[i])
             if on_placed:
                 on_placed()
 
         with runtime:
-            return run_session(runtime, [g for _, g in layouts], before_episode=place, after_episode=after_episode,
-                               max_recoveries=max_recoveries)
+            return run_session(
+                runtime,
+                [g for _, g in layouts],
+                before_episode=place,
+                after_episode=after_episode,
+                max_recoveries=max_recoveries,
+            )

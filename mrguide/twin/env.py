@@ -11,7 +11,7 @@ from __future__ import annotations
 import logging
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import gymnasium as gym
 import numpy as np
@@ -38,7 +38,7 @@ class EnvConfig:
     task: TaskConfig = field(default_factory=TaskConfig)
 
     @classmethod
-    def load(cls, path: str | Path | None) -> "EnvConfig":
+    def load(cls, path: str | Path | None) -> EnvConfig:
         return cls(
             robot=load_robot_config(path),
             twin=load_section(TwinConfig, path, "twin"),
@@ -63,7 +63,7 @@ def _sample(rng: np.random.Generator, region: Region) -> np.ndarray:
 class PickPlaceEnv(gym.Env):
     """Five-phase vacuum pick-and-place in the twin (observation and action as in DESIGN.md)."""
 
-    metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
+    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 10}
 
     def __init__(self, config: EnvConfig | None = None, render_mode: str | None = None, spec: RobotSpec | None = None):
         self.config = config or EnvConfig()

@@ -11,6 +11,7 @@ arm is drawn: the wearer calibrates with the arm parked out of view).
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import multiprocessing as mp
 import multiprocessing.connection
@@ -34,8 +35,9 @@ WATCH_TARGET = (0.50, -0.05, 0.0)
 OBJECT_MARKER_ID = 0
 
 
-def _hmd_worker(conn, calibration_path: str | None, object_size: float, noise_seed: int, hmd_overrides: dict,
-                arm: ArmDrawing) -> None:
+def _hmd_worker(
+    conn, calibration_path: str | None, object_size: float, noise_seed: int, hmd_overrides: dict, arm: ArmDrawing
+) -> None:
     """Runs in the HMD process: calibrate, then answer each true (object pose, joints) with the HMD's estimate."""
     import pybullet as pb
 
@@ -53,21 +55,35 @@ def _hmd_worker(conn, calibration_path: str | None, object_size: float, noise_se
     try:
         cfg = load_calibration_config(calibration_path)
         cfg = replace(cfg, hmd=replace(cfg.hmd, seed=noise_seed, **hmd_overrides))
-        twin_cfg = load_section(TwinCalibrationConfig, calibration_path, "calibration_twin") if calibration_path else TwinCalibrationConfig()
+        twin_cfg = (
+            load_section(TwinCalibrationConfig, calibration_path, "calibration_twin")
+            if calibration_path
+            else TwinCalibrationConfig()
+        )
         client = pb.connect(pb.DIRECT)
-        cube, marker = marked_object_scene(client, object_size, cfg.detector.dictionary, OBJECT_MARKER_ID,
-                                           cfg.detector.marker_size_m)
+        cube, marker = marked_object_scene(
+            client, object_size, cfg.detector.dictionary, OBJECT_MARKER_ID, cfg.detector.marker_size_m
+        )
         T_obj_marker = marker.T_body_marker
-        hmd = TwinHmd(client, twin_cfg.T_base_hmd, look_at(np.array(WATCH_EYE), np.array(WATCH_TARGET), np.array([0.0, 0.0, 1.0])),
-                      twin_cfg.intrinsics, twin_cfg.supersample, attached=[marker])
+        hmd = TwinHmd(
+            client,
+            twin_cfg.T_base_hmd,
+            look_at(np.array(WATCH_EYE), np.array(WATCH_TARGET), np.array([0.0, 0.0, 1.0])),
+            twin_cfg.intrinsics,
+            twin_cfg.supersample,
+            attached=[marker],
+        )
         run = calibrate_twin_hmd(hmd, cfg, twin_cfg.views, twin_cfg.look_at, cfg.hmd)
         hmd.look_from(WATCH_EYE, WATCH_TARGET)
         hmd.supersample = 1  # streaming: ~4x faster frames than the calibration shots
-        source = hmd_marker_pose_source(hmd, run.record.T_base_hmd, cfg.detector, OBJECT_MARKER_ID,
-                                        -T_obj_marker[:3, 3], noise=cfg.hmd)
+        source = hmd_marker_pose_source(
+            hmd, run.record.T_base_hmd, cfg.detector, OBJECT_MARKER_ID, -T_obj_marker[:3, 3], noise=cfg.hmd
+        )
         drawn = VisualArm(client, arm)
         err = float(np.linalg.norm(run.record.T_base_hmd[:3, 3] - twin_cfg.T_base_hmd[:3, 3]))
-        conn.send(("ready", {"rms_residual_m": float(run.record.rms_residual_m), "T_base_hmd_translation_error_m": err}))
+        conn.send(
+            ("ready", {"rms_residual_m": float(run.record.rms_residual_m), "T_base_hmd_translation_error_m": err})
+        )
     except Exception as exc:  # report start-up failures to the parent instead of dying silently
         conn.send(("error", f"{type(exc).__name__}: {exc}"))
         return
@@ -86,10 +102,8 @@ def _hmd_worker(conn, calibration_path: str | None, object_size: float, noise_se
 
 def stop_render_process(conn, proc) -> None:
     """Ask a render process to end (None on its pipe), wait 5 s, then kill it."""
-    try:
+    with contextlib.suppress(BrokenPipeError, OSError):
         conn.send(None)
-    except (BrokenPipeError, OSError):
-        pass
     proc.join(timeout=5)
     if proc.is_alive():
         proc.kill()
@@ -102,8 +116,17 @@ class HmdStartError(RuntimeError):
 class HmdPoseStream(ObjectPoseSource):
     """Latest object position from the HMD process; stale or missing estimates raise PoseUnavailable."""
 
-    def __init__(self, plant: TwinPlant | None, calibration_path: str | Path | None, object_size: float, arm: ArmDrawing,
-                 noise_seed: int = 0, hmd_overrides: dict | None = None, max_age: float = 3.0, start_timeout: float = 180.0):
+    def __init__(
+        self,
+        plant: TwinPlant | None,
+        calibration_path: str | Path | None,
+        object_size: float,
+        arm: ArmDrawing,
+        noise_seed: int = 0,
+        hmd_overrides: dict | None = None,
+        max_age: float = 3.0,
+        start_timeout: float = 180.0,
+    ):
         """Start the HMD process and wait until it has calibrated; with `plant`, start streaming at once. The
         process draws `arm` (posed as the plant's joints are).
 
@@ -113,8 +136,19 @@ class HmdPoseStream(ObjectPoseSource):
         self.max_age = max_age
         ctx = mp.get_context("spawn")
         self._conn, child = ctx.Pipe()
-        self._proc = ctx.Process(target=_hmd_worker, args=(child, str(calibration_path) if calibration_path else None, object_size, noise_seed, hmd_overrides or {}, arm),
-                                 name="hmd", daemon=True)
+        self._proc = ctx.Process(
+            target=_hmd_worker,
+            args=(
+                child,
+                str(calibration_path) if calibration_path else None,
+                object_size,
+                noise_seed,
+                hmd_overrides or {},
+                arm,
+            ),
+            name="hmd",
+            daemon=True,
+        )
         self._proc.start()
         self.calibration = self._wait_ready(start_timeout)
         self._latest: tuple[np.ndarray, float] | None = None
@@ -127,7 +161,7 @@ class HmdPoseStream(ObjectPoseSource):
         if plant is not None:
             self._thread.start()
 
-    def attach(self, plant: TwinPlant) -> "HmdPoseStream":
+    def attach(self, plant: TwinPlant) -> HmdPoseStream:
         """Stream the object of `plant` (once; the process was started and calibrated without it)."""
         if self.plant is not None:
             raise RuntimeError("the HMD stream already follows a twin")

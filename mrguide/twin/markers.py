@@ -13,9 +13,9 @@ import atexit
 import logging
 import shutil
 import tempfile
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Sequence
 
 import cv2
 import numpy as np
@@ -72,7 +72,7 @@ def _slab_mesh(corners: np.ndarray, thickness: float, tex_shape: tuple[int, int]
     """Vertices, indices, normals and uvs of a slab whose printed face is the quad `corners` (TL, TR, BR, BL of
     the image); the slab extends `thickness` behind the face. Only the printed face is textured; the other
     faces sample the image's top-left (white quiet-zone) texel."""
-    tl, tr, br, bl = corners
+    tl, tr, _br, bl = corners
     n = np.cross(bl - tl, tr - tl)
     n /= np.linalg.norm(n)
     back = corners - n * max(thickness, 1e-5)
@@ -97,24 +97,34 @@ def _slab_mesh(corners: np.ndarray, thickness: float, tex_shape: tuple[int, int]
     return vertices, indices, normals, uvs
 
 
-def add_textured_slab(client: int, image: np.ndarray, T_base_face: np.ndarray, corners_face: np.ndarray,
-                      thickness: float, name: str) -> int:
+def add_textured_slab(
+    client: int, image: np.ndarray, T_base_face: np.ndarray, corners_face: np.ndarray, thickness: float, name: str
+) -> int:
     """A static, visual-only body showing `image` on the quad `corners_face` (TL, TR, BR, BL of the image,
     in the face frame placed at `T_base_face`); returns its body id."""
     vertices, indices, normals, uvs = _slab_mesh(np.asarray(corners_face, dtype=float), thickness, image.shape[:2])
-    vis = pb.createVisualShape(pb.GEOM_MESH, vertices=vertices, indices=indices, normals=normals, uvs=uvs,
-                               physicsClientId=client)
-    body = pb.createMultiBody(0, -1, vis, T_base_face[:3, 3].tolist(), _quat_xyzw(T_base_face[:3, :3]),
-                              physicsClientId=client)
+    vis = pb.createVisualShape(
+        pb.GEOM_MESH, vertices=vertices, indices=indices, normals=normals, uvs=uvs, physicsClientId=client
+    )
+    body = pb.createMultiBody(
+        0, -1, vis, T_base_face[:3, 3].tolist(), _quat_xyzw(T_base_face[:3, :3]), physicsClientId=client
+    )
     rgb = cv2.cvtColor(image, cv2.COLOR_GRAY2BGR) if image.ndim == 2 else image
     tex = pb.loadTexture(_texture_path(rgb, name), physicsClientId=client)
     pb.changeVisualShape(body, -1, textureUniqueId=tex, rgbaColor=[1, 1, 1, 1], physicsClientId=client)
     return body
 
 
-def add_marker_plane(client: int, dictionary: str, marker_id: int, size_m: float, T_base_marker: np.ndarray,
-                     quiet_zone_m: float | None = None, thickness_m: float = MARKER_THICKNESS,
-                     px_per_m: float = 4000.0) -> int:
+def add_marker_plane(
+    client: int,
+    dictionary: str,
+    marker_id: int,
+    size_m: float,
+    T_base_marker: np.ndarray,
+    quiet_zone_m: float | None = None,
+    thickness_m: float = MARKER_THICKNESS,
+    px_per_m: float = 4000.0,
+) -> int:
     """A printed marker whose face has pose `T_base_marker` (marker frame: z out of the print, corner 0 at
     (-s/2, s/2)); the slab extends `thickness_m` behind the face. Returns the body id.
 
@@ -150,8 +160,17 @@ def marker_on_cube_top(cube_size: float, thickness_m: float = MARKER_THICKNESS) 
 class MarkerOnBody:
     """A marker that rides on a (moving) body: call `update()` before rendering to move it along."""
 
-    def __init__(self, client: int, body: int, T_body_marker: np.ndarray, dictionary: str, marker_id: int,
-                 size_m: float, quiet_zone_m: float | None = None, link: int = -1):
+    def __init__(
+        self,
+        client: int,
+        body: int,
+        T_body_marker: np.ndarray,
+        dictionary: str,
+        marker_id: int,
+        size_m: float,
+        quiet_zone_m: float | None = None,
+        link: int = -1,
+    ):
         self.client, self.body, self.link = client, body, link
         self.T_body_marker = np.asarray(T_body_marker, dtype=float)
         self.marker_body = add_marker_plane(client, dictionary, marker_id, size_m, self.T_base_marker(), quiet_zone_m)
@@ -160,7 +179,9 @@ class MarkerOnBody:
         if self.link < 0:
             pos, orn = pb.getBasePositionAndOrientation(self.body, physicsClientId=self.client)
         else:
-            pos, orn = pb.getLinkState(self.body, self.link, computeForwardKinematics=True, physicsClientId=self.client)[4:6]
+            pos, orn = pb.getLinkState(
+                self.body, self.link, computeForwardKinematics=True, physicsClientId=self.client
+            )[4:6]
         R = np.asarray(pb.getMatrixFromQuaternion(orn), dtype=float).reshape(3, 3)
         return make_T(R, pos)
 
@@ -169,8 +190,9 @@ class MarkerOnBody:
 
     def update(self) -> None:
         T = self.T_base_marker()
-        pb.resetBasePositionAndOrientation(self.marker_body, T[:3, 3].tolist(), _quat_xyzw(T[:3, :3]),
-                                           physicsClientId=self.client)
+        pb.resetBasePositionAndOrientation(
+            self.marker_body, T[:3, 3].tolist(), _quat_xyzw(T[:3, :3]), physicsClientId=self.client
+        )
 
 
 def render(camera: Camera, supersample: int = 2) -> np.ndarray:
@@ -191,9 +213,17 @@ class TwinHmd:
     `attached` markers (riding on moving bodies) are moved along before every frame.
     """
 
-    def __init__(self, client: int, T_base_hmd: np.ndarray, T_base_cam: np.ndarray,
-                 intrinsics: Intrinsics = HOLOLENS2_PV, supersample: int = 2, near: float = 0.05, far: float = 5.0,
-                 attached: Sequence[MarkerOnBody] = ()):
+    def __init__(
+        self,
+        client: int,
+        T_base_hmd: np.ndarray,
+        T_base_cam: np.ndarray,
+        intrinsics: Intrinsics = HOLOLENS2_PV,
+        supersample: int = 2,
+        near: float = 0.05,
+        far: float = 5.0,
+        attached: Sequence[MarkerOnBody] = (),
+    ):
         self.client = client
         self.attached = list(attached)
         self.T_base_hmd = np.asarray(T_base_hmd, dtype=float)
@@ -218,9 +248,14 @@ class TwinHmd:
         return HmdFrame(render(self.camera, self.supersample), self.T_hmd_cam())
 
 
-def hmd_marker_pose_source(hmd: TwinHmd, T_base_hmd_estimate: np.ndarray, detector_cfg: DetectorConfig,
-                           marker_id: int, offset_marker_to_object: np.ndarray,
-                           noise: HmdNoiseConfig = HmdNoiseConfig()) -> MarkerPoseSource:
+def hmd_marker_pose_source(
+    hmd: TwinHmd,
+    T_base_hmd_estimate: np.ndarray,
+    detector_cfg: DetectorConfig,
+    marker_id: int,
+    offset_marker_to_object: np.ndarray,
+    noise: HmdNoiseConfig = HmdNoiseConfig(),
+) -> MarkerPoseSource:
     """The object pose source of sim-to-real condition 3: the HMD camera sees the object's marker, head
     tracking (with `noise.tracking_*`) places the camera in the HMD frame, and the calibration estimate
     (moved by `noise.calibration_*`) maps it to the robot base frame."""
@@ -234,8 +269,9 @@ def hmd_marker_pose_source(hmd: TwinHmd, T_base_hmd_estimate: np.ndarray, detect
     )
 
 
-def annotations_of_body(client: int, body: int, T_base_hmd: np.ndarray, sigma_m: float,
-                        rng: np.random.Generator) -> Callable[[], np.ndarray]:
+def annotations_of_body(
+    client: int, body: int, T_base_hmd: np.ndarray, sigma_m: float, rng: np.random.Generator
+) -> Callable[[], np.ndarray]:
     """A simulated MR annotator: the body's position in the HMD frame, placed with N(0, sigma_m^2) error per axis."""
     T_hmd_base = invert(np.asarray(T_base_hmd, dtype=float))
 
@@ -253,7 +289,10 @@ class TwinCalibrationConfig:
     hmd_xyz: tuple[float, float, float] = (1.3, 0.4, 0.45)  # HMD world origin in the base frame (where it booted)
     hmd_rpy_deg: tuple[float, float, float] = (90.0, 0.0, 160.0)  # its orientation (HoloLens worlds are y-up)
     views: tuple[tuple[float, float, float], ...] = (  # camera positions (m, base frame), 0.6-0.9 m from the board
-        (0.95, 0.15, 0.55), (0.85, 0.55, 0.50), (0.80, -0.20, 0.55), (1.05, 0.35, 0.60),
+        (0.95, 0.15, 0.55),
+        (0.85, 0.55, 0.50),
+        (0.80, -0.20, 0.55),
+        (1.05, 0.35, 0.60),
     )
     look_at: tuple[float, float, float] = (0.48, 0.13, 0.0)  # where the wearer looks (the board centre)
     intrinsics: Intrinsics = HOLOLENS2_PV
@@ -278,12 +317,15 @@ def add_targets(client: int, cfg: CalibrationConfig) -> list[int]:
     if layout.board is not None:
         bodies.append(add_board(client, layout.board, layout.T_base_board))
     for marker_id, T_base_marker in layout.markers.items():
-        bodies.append(add_marker_plane(client, cfg.detector.dictionary, marker_id, cfg.detector.marker_size_m, T_base_marker))
+        bodies.append(
+            add_marker_plane(client, cfg.detector.dictionary, marker_id, cfg.detector.marker_size_m, T_base_marker)
+        )
     return bodies
 
 
-def calibrate_twin_hmd(hmd: TwinHmd, cfg: CalibrationConfig, views, look_at_point,
-                       noise: HmdNoiseConfig = HmdNoiseConfig()) -> CalibrationRun:
+def calibrate_twin_hmd(
+    hmd: TwinHmd, cfg: CalibrationConfig, views, look_at_point, noise: HmdNoiseConfig = HmdNoiseConfig()
+) -> CalibrationRun:
     """Run the calibration procedure in the twin: the targets are put on the table, the HMD looks at them
     from each view (tracking noise per `noise`), the frames are registered, and the targets are removed."""
     bodies = add_targets(hmd.client, cfg)

@@ -39,7 +39,9 @@ class RolloutSummary:
         return Counter(e.outcome for e in self.episodes)
 
 
-def run_episode(env: PickPlaceEnv, policy: Callable[[np.ndarray], np.ndarray], seed: int, options: dict | None = None) -> EpisodeResult:
+def run_episode(
+    env: PickPlaceEnv, policy: Callable[[np.ndarray], np.ndarray], seed: int, options: dict | None = None
+) -> EpisodeResult:
     """One episode from `env.reset(seed)` with actions from `policy(obs)`."""
     obs, _ = env.reset(seed=seed, options=options)
     ret, steps = 0.0, 0
@@ -52,7 +54,10 @@ def run_episode(env: PickPlaceEnv, policy: Callable[[np.ndarray], np.ndarray], s
 
 
 def run_episodes(
-    env: PickPlaceEnv, policy: Callable[[np.ndarray], np.ndarray], seeds: Iterable[int], progress: Callable | None = None
+    env: PickPlaceEnv,
+    policy: Callable[[np.ndarray], np.ndarray],
+    seeds: Iterable[int],
+    progress: Callable | None = None,
 ) -> RolloutSummary:
     """Episodes for each seed; `progress(result)` is called after each one."""
     summary = RolloutSummary()

@@ -35,7 +35,11 @@ def urdf_with_cup(spec: RobotSpec, stroke: float = 0.0) -> Path:
     """Path of a (content-addressed) URDF = the package's URDF + `suction_cup` and `tcp` links on the flange
     (the cup on a level-compensator of `stroke` m if > 0)."""
     text = urdf_with_tool(spec, f"{spec.package_dir.as_posix()}/", CUP_RADIUS, stroke)
-    out = Path(tempfile.gettempdir()) / "mrguide-urdf" / f"{spec.name}-cup-{hashlib.sha1(text.encode()).hexdigest()[:12]}.urdf"
+    out = (
+        Path(tempfile.gettempdir())
+        / "mrguide-urdf"
+        / f"{spec.name}-cup-{hashlib.sha1(text.encode()).hexdigest()[:12]}.urdf"
+    )
     if not out.exists():
         out.parent.mkdir(parents=True, exist_ok=True)
         tmp = out.with_suffix(f".{os.getpid()}.tmp")
@@ -68,11 +72,19 @@ class Scene:
         pb.setTimeStep(cfg.control_period, physicsClientId=c)
         pb.setPhysicsEngineParameter(deterministicOverlappingPairs=1, physicsClientId=c)
         table_col = pb.createCollisionShape(pb.GEOM_BOX, halfExtents=TABLE_HALF_EXTENTS, physicsClientId=c)
-        table_vis = pb.createVisualShape(pb.GEOM_BOX, halfExtents=TABLE_HALF_EXTENTS, rgbaColor=(0.75, 0.72, 0.66, 1), physicsClientId=c)
+        table_vis = pb.createVisualShape(
+            pb.GEOM_BOX, halfExtents=TABLE_HALF_EXTENTS, rgbaColor=(0.75, 0.72, 0.66, 1), physicsClientId=c
+        )
         self.table = pb.createMultiBody(0, table_col, table_vis, TABLE_CENTER, physicsClientId=c)
         self.robot = pb.loadURDF(str(urdf_with_cup(spec, cfg.cup.stroke)), useFixedBase=True, physicsClientId=c)
-        links = {pb.getJointInfo(self.robot, j, physicsClientId=c)[12].decode(): j for j in range(pb.getNumJoints(self.robot, physicsClientId=c))}
-        joints = {pb.getJointInfo(self.robot, j, physicsClientId=c)[1].decode(): j for j in range(pb.getNumJoints(self.robot, physicsClientId=c))}
+        links = {
+            pb.getJointInfo(self.robot, j, physicsClientId=c)[12].decode(): j
+            for j in range(pb.getNumJoints(self.robot, physicsClientId=c))
+        }
+        joints = {
+            pb.getJointInfo(self.robot, j, physicsClientId=c)[1].decode(): j
+            for j in range(pb.getNumJoints(self.robot, physicsClientId=c))
+        }
         self.joint_ids = [joints[name] for name in spec.joint_names]
         self.tcp_link = links["tcp"]
         self.cup_link = links["suction_cup"]
@@ -84,18 +96,31 @@ class Scene:
             pb.setCollisionFilterPair(self.table, self.robot, -1, link, 0, physicsClientId=c)
         efforts = [pb.getJointInfo(self.robot, j, physicsClientId=c)[10] for j in self.joint_ids]
         self._motor_args = {  # the servo call's constant arguments, built once (it runs every 4 ms period)
-            "forces": efforts, "positionGains": [0.6] * spec.dof, "velocityGains": [1.0] * spec.dof,
+            "forces": efforts,
+            "positionGains": [0.6] * spec.dof,
+            "velocityGains": [1.0] * spec.dof,
         }
         h = object_size / 2
         obj_col = pb.createCollisionShape(pb.GEOM_BOX, halfExtents=(h, h, h), physicsClientId=c)
-        obj_vis = pb.createVisualShape(pb.GEOM_BOX, halfExtents=(h, h, h), rgbaColor=(0.85, 0.1, 0.1, 1), physicsClientId=c)
+        obj_vis = pb.createVisualShape(
+            pb.GEOM_BOX, halfExtents=(h, h, h), rgbaColor=(0.85, 0.1, 0.1, 1), physicsClientId=c
+        )
         gap = cfg.reality_gap
         self.object = pb.createMultiBody(gap.object_mass, obj_col, obj_vis, (0.5, -0.1, h), physicsClientId=c)
-        pb.changeDynamics(self.object, -1, lateralFriction=gap.object_friction,
-                          activationState=pb.ACTIVATION_STATE_DISABLE_SLEEPING, physicsClientId=c)
-        goal_vis = pb.createVisualShape(pb.GEOM_CYLINDER, radius=0.03, length=0.002, rgbaColor=(0.1, 0.8, 0.2, 0.6), physicsClientId=c)
+        pb.changeDynamics(
+            self.object,
+            -1,
+            lateralFriction=gap.object_friction,
+            activationState=pb.ACTIVATION_STATE_DISABLE_SLEEPING,
+            physicsClientId=c,
+        )
+        goal_vis = pb.createVisualShape(
+            pb.GEOM_CYLINDER, radius=0.03, length=0.002, rgbaColor=(0.1, 0.8, 0.2, 0.6), physicsClientId=c
+        )
         self.goal_marker = pb.createMultiBody(0, -1, goal_vis, (0.5, 0.2, 0.001), physicsClientId=c)
-        self.suction = SuctionCup(c, self.robot, self.tcp_link, self.object, object_size, cfg.vacuum, cfg.control_period)
+        self.suction = SuctionCup(
+            c, self.robot, self.tcp_link, self.object, object_size, cfg.vacuum, cfg.control_period
+        )
         self.suction.break_force = gap.suction_break_force
         self.rng = np.random.default_rng(seed)
         self._applied = spec.q_home.copy()
@@ -157,8 +182,13 @@ class Scene:
     def _servo(self, q: np.ndarray, dq: np.ndarray) -> None:
         self._last_servo = (q, dq)
         pb.setJointMotorControlArray(
-            self.robot, self.joint_ids, pb.POSITION_CONTROL, targetPositions=q.tolist(), targetVelocities=np.asarray(dq).tolist(),
-            physicsClientId=self.client, **self._motor_args,
+            self.robot,
+            self.joint_ids,
+            pb.POSITION_CONTROL,
+            targetPositions=q.tolist(),
+            targetVelocities=np.asarray(dq).tolist(),
+            physicsClientId=self.client,
+            **self._motor_args,
         )
 
     def set_vacuum(self, on: bool) -> None:
@@ -168,9 +198,13 @@ class Scene:
         """Advance one control period."""
         if self._compensator is not None:
             cup = self.cfg.cup
-            pb.setJointMotorControl2(self.robot, self._compensator, pb.TORQUE_CONTROL,
-                                     force=cup.preload + cup.spring_rate * self.cup_compression(),
-                                     physicsClientId=self.client)
+            pb.setJointMotorControl2(
+                self.robot,
+                self._compensator,
+                pb.TORQUE_CONTROL,
+                force=cup.preload + cup.spring_rate * self.cup_compression(),
+                physicsClientId=self.client,
+            )
         pb.stepSimulation(physicsClientId=self.client)
         self.suction.update()
 
@@ -204,7 +238,9 @@ class Scene:
 
     def tcp_pose_pybullet(self) -> tuple[np.ndarray, np.ndarray]:
         """TCP position and quaternion (x, y, z, w) as PyBullet computes them (for cross-checks)."""
-        pos, orn = pb.getLinkState(self.robot, self.tcp_link, computeForwardKinematics=True, physicsClientId=self.client)[4:6]
+        pos, orn = pb.getLinkState(
+            self.robot, self.tcp_link, computeForwardKinematics=True, physicsClientId=self.client
+        )[4:6]
         return np.array(pos), np.array(orn)
 
     def camera(self) -> Camera:
@@ -214,8 +250,11 @@ class Scene:
     def snapshot(self) -> SceneSnapshot:
         """Capture the whole scene; release it with `discard` when no longer needed."""
         return SceneSnapshot(
-            pb.saveState(physicsClientId=self.client), self.suction.snapshot(), self._applied.copy(),
-            [p.copy() for p in self._pending], (self._last_servo[0].copy(), np.asarray(self._last_servo[1]).copy()),
+            pb.saveState(physicsClientId=self.client),
+            self.suction.snapshot(),
+            self._applied.copy(),
+            [p.copy() for p in self._pending],
+            (self._last_servo[0].copy(), np.asarray(self._last_servo[1]).copy()),
             self.rng.bit_generator.state,
         )
 

@@ -71,7 +71,9 @@ class SuctionCup:
 
     def _tcp_in_object(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
         """Cup pose in the object frame (position, quaternion x y z w); called every period while the vacuum is on."""
-        tcp_pos, tcp_orn = pb.getLinkState(self.robot, self.cup_link, computeForwardKinematics=True, physicsClientId=self.client)[4:6]
+        tcp_pos, tcp_orn = pb.getLinkState(
+            self.robot, self.cup_link, computeForwardKinematics=True, physicsClientId=self.client
+        )[4:6]
         obj_pos, obj_orn = pb.getBasePositionAndOrientation(self.obj, physicsClientId=self.client)
         inv_pos, inv_orn = pb.invertTransform(obj_pos, obj_orn)
         return pb.multiplyTransforms(inv_pos, inv_orn, tcp_pos, tcp_orn)
@@ -96,9 +98,16 @@ class SuctionCup:
 
     def _create(self, obj_in_tcp_pos, obj_in_tcp_orn) -> None:
         self._cid = pb.createConstraint(
-            self.robot, self.cup_link, self.obj, -1, pb.JOINT_FIXED, (0, 0, 0),
-            parentFramePosition=obj_in_tcp_pos, childFramePosition=(0, 0, 0),
-            parentFrameOrientation=obj_in_tcp_orn, childFrameOrientation=(0, 0, 0, 1),
+            self.robot,
+            self.cup_link,
+            self.obj,
+            -1,
+            pb.JOINT_FIXED,
+            (0, 0, 0),
+            parentFramePosition=obj_in_tcp_pos,
+            childFramePosition=(0, 0, 0),
+            parentFrameOrientation=obj_in_tcp_orn,
+            childFrameOrientation=(0, 0, 0, 1),
             physicsClientId=self.client,
         )
         pb.setCollisionFilterPair(self.robot, self.obj, self.cup_link, -1, 0, physicsClientId=self.client)

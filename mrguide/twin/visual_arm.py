@@ -23,7 +23,7 @@ class ArmDrawing:
     joints: tuple[str, ...]
 
     @classmethod
-    def of(cls, spec: RobotSpec) -> "ArmDrawing":
+    def of(cls, spec: RobotSpec) -> ArmDrawing:
         return cls(str(urdf_with_cup(spec)), tuple(spec.joint_names))
 
 
@@ -33,8 +33,10 @@ class VisualArm:
     def __init__(self, client: int, drawing: ArmDrawing):
         self.client = client
         self.body = pb.loadURDF(drawing.urdf, useFixedBase=True, physicsClientId=client)
-        by_name = {pb.getJointInfo(self.body, j, physicsClientId=client)[1].decode(): j
-                   for j in range(pb.getNumJoints(self.body, physicsClientId=client))}
+        by_name = {
+            pb.getJointInfo(self.body, j, physicsClientId=client)[1].decode(): j
+            for j in range(pb.getNumJoints(self.body, physicsClientId=client))
+        }
         self.joint_ids = [by_name[name] for name in drawing.joints]
 
     def set(self, q: np.ndarray) -> None:

@@ -23,18 +23,34 @@ OBJ = np.array([0.5, -0.08, 0.025])
 GOAL = np.array([0.48, 0.2, 0.025])
 
 
-def make_request(phase: int = 1, remark: bool = False, obj: np.ndarray = OBJ, goal: np.ndarray = GOAL,
-                 quat: np.ndarray = np.array([0, 0, 0, 1.0])) -> AnnotationRequest:
+def make_request(
+    phase: int = 1,
+    remark: bool = False,
+    obj: np.ndarray = OBJ,
+    goal: np.ndarray = GOAL,
+    quat: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0),
+) -> AnnotationRequest:
     """The arm at home (TCP by Pinocchio FK), an object and a goal on the table, in phase `phase`."""
     spec = load_robot()
     tcp = Kinematics(spec).tcp_position(spec.q_home)
     obs = observation(tcp, -1, progress(phase), obj, goal)
-    return AnnotationRequest(phase, spec.q_home.copy(), tcp, False, obj, quat, goal, obs, remark,
-                             np.array([0.5, -0.08, 0.06]) if remark else None)
+    return AnnotationRequest(
+        phase,
+        spec.q_home.copy(),
+        tcp,
+        False,
+        obj,
+        np.array(quat),
+        goal,
+        obs,
+        remark,
+        np.array([0.5, -0.08, 0.06]) if remark else None,
+    )
 
 
-def ask_in_thread(broker: AnnotationBroker, req: AnnotationRequest, timeout: float | None = None,
-                  acknowledge: bool = True) -> Future:
+def ask_in_thread(
+    broker: AnnotationBroker, req: AnnotationRequest, timeout: float | None = None, acknowledge: bool = True
+) -> Future:
     """broker.request in a thread (it blocks, as in the trainer); the result arrives in the future."""
     fut: Future = Future()
 
@@ -51,7 +67,9 @@ def ask_in_thread(broker: AnnotationBroker, req: AnnotationRequest, timeout: flo
 @pytest.fixture
 def broker() -> AnnotationBroker:
     spec = load_robot()
-    return AnnotationBroker(spec.workspace, {"robot": {"workspace": {"lo": spec.workspace.lo.tolist(), "hi": spec.workspace.hi.tolist()}}})
+    return AnnotationBroker(
+        spec.workspace, {"robot": {"workspace": {"lo": spec.workspace.lo.tolist(), "hi": spec.workspace.hi.tolist()}}}
+    )
 
 
 @pytest.fixture

@@ -29,7 +29,9 @@ SIGMA = 0.02
 
 def trainer(out: Path, source: str = "annotator", factory=None) -> Trainer:
     tc, dc, gc, ec = load_train_config(None)
-    tc = dataclasses.replace(tc, total_steps=600, learning_starts=64, batch_size=32, eval_every=10_000, checkpoint_every=10_000)
+    tc = dataclasses.replace(
+        tc, total_steps=600, learning_starts=64, batch_size=32, eval_every=10_000, checkpoint_every=10_000
+    )
     dc = dataclasses.replace(dc, hidden=(32, 32))
     gc = dataclasses.replace(gc, intake_steps=400, source=source, noise=AnnotatorNoise(sigma=SIGMA))
     return Trainer(tc, dc, gc, ec, out, factory)
@@ -106,14 +108,40 @@ async def _answer_requests(url: str, n: int, seen: list[dict]) -> None:
             s = req["state"]
             anchor = s["object"]["position"] if req["phase_index"] <= 2 else s["goal"]
             z = {0: 0.13, 1: 0.047, 2: 0.15, 3: 0.15, 4: 0.05}[req["phase_index"]]
-            await c.send({"type": "answer", "id": req["id"], "target": [anchor[0], anchor[1], z], "vacuum": req["suggested_vacuum"]})
+            await c.send(
+                {
+                    "type": "answer",
+                    "id": req["id"],
+                    "target": [anchor[0], anchor[1], z],
+                    "vacuum": req["suggested_vacuum"],
+                }
+            )
 
 
 def _start_train(out: Path, *extra: str) -> subprocess.Popen:
-    cmd = [sys.executable, "-m", "mrguide.cli", "train", "--expert", "live", "--port", "0", "--steps", "3000", "--quiet",
-           "--out", str(out), *extra]
-    return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            env={**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[2])})
+    cmd = [
+        sys.executable,
+        "-m",
+        "mrguide.cli",
+        "train",
+        "--expert",
+        "live",
+        "--port",
+        "0",
+        "--steps",
+        "3000",
+        "--quiet",
+        "--out",
+        str(out),
+        *extra,
+    ]
+    return subprocess.Popen(
+        cmd,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env={**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[2])},
+    )
 
 
 def _page_url(proc: subprocess.Popen) -> str:
@@ -130,7 +158,7 @@ def test_ctrl_c_while_waiting_checkpoints_and_resume_asks_nothing_twice(tmp_path
         seen: list[dict] = []
         asyncio.run(_answer_requests(_page_url(proc), 6, seen))  # 6 answered, the 7th left waiting
         proc.send_signal(signal.SIGINT)
-        stdout, stderr = proc.communicate(timeout=60)
+        _stdout, stderr = proc.communicate(timeout=60)
     finally:
         proc.kill()
     assert proc.returncode == 130, stderr
@@ -140,8 +168,13 @@ def test_ctrl_c_while_waiting_checkpoints_and_resume_asks_nothing_twice(tmp_path
     proc = _start_train(out, "--resume", "--stop-after", "600")
     try:
         url = _page_url(proc)
-        bot = subprocess.run([sys.executable, "-m", "mrguide.cli", "annotate", "bot", "--url", url], capture_output=True,
-                             text=True, timeout=240, env={**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[2])})
+        bot = subprocess.run(
+            [sys.executable, "-m", "mrguide.cli", "annotate", "bot", "--url", url],
+            capture_output=True,
+            text=True,
+            timeout=240,
+            env={**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[2])},
+        )
         proc.wait(timeout=240)
     finally:
         proc.kill()
@@ -162,7 +195,9 @@ def test_a_persons_marks_over_the_wire_in_pick_place_equal_the_in_process_person
 
     def person_trainer(out: Path, source: str, factory=None) -> Trainer:
         tc, dc, gc, ec = load_train_config(None)
-        tc = dataclasses.replace(tc, total_steps=600, learning_starts=64, batch_size=32, eval_every=10_000, checkpoint_every=10_000)
+        tc = dataclasses.replace(
+            tc, total_steps=600, learning_starts=64, batch_size=32, eval_every=10_000, checkpoint_every=10_000
+        )
         dc = dataclasses.replace(dc, hidden=(32, 32))
         gc = dataclasses.replace(gc, intake_steps=400, source=source, noise=PERSON, marks="pick_place")
         return Trainer(tc, dc, gc, ec, out, factory)
@@ -207,7 +242,9 @@ def test_annotate_bot_takes_its_error_model_from_a_training_config(tmp_path, cap
     from mrguide.cli import main
 
     seen = []
-    monkeypatch.setattr(bot_module.AnnotationBot, "run", lambda self: seen.append(self.options) or bot_module.BotReport(0, 0, []))
+    monkeypatch.setattr(
+        bot_module.AnnotationBot, "run", lambda self: seen.append(self.options) or bot_module.BotReport(0, 0, [])
+    )
     url = "http://127.0.0.1:1/?token=t"
     person = Path(__file__).resolve().parents[2] / "configs" / "person.toml"
     assert main(["annotate", "bot", "--url", url, "--config", str(person)]) == 0

@@ -27,7 +27,9 @@ def browser():
 
 def test_a_person_guides_a_short_run_with_two_clicks_per_mark(browser, tmp_path):
     tc, dc, gc, ec = load_train_config(None)
-    tc = dataclasses.replace(tc, total_steps=160, learning_starts=64, batch_size=32, eval_every=10_000, checkpoint_every=10_000)
+    tc = dataclasses.replace(
+        tc, total_steps=160, learning_starts=64, batch_size=32, eval_every=10_000, checkpoint_every=10_000
+    )
     gc = dataclasses.replace(gc, intake_steps=160)
     session = LiveSession(LiveOptions(port=0))
     trainer = Trainer(tc, dataclasses.replace(dc, hidden=(16, 16)), gc, ec, tmp_path, session.source_factory)
@@ -69,4 +71,6 @@ def test_a_person_guides_a_short_run_with_two_clicks_per_mark(browser, tmp_path)
         obs = np.array(rec["obs"])
         anchor = obs[5:8] if m["phase"] == "grasp" else obs[8:11]
         assert rec["client"] == "browser" and np.allclose(rec["target"], m["target"], atol=1e-9)
-        assert np.allclose(rec["target"][:2], anchor[:2], atol=1e-4) and rec["target"][2] == pytest.approx(ec.task.object_height)
+        assert np.allclose(rec["target"][:2], anchor[:2], atol=1e-4) and rec["target"][2] == pytest.approx(
+            ec.task.object_height
+        )

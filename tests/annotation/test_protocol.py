@@ -33,7 +33,14 @@ def test_hello_request_answer_ack_cancel(served):
             assert req["state"]["goal"] == pytest.approx([0.48, 0.2, 0.025]) and len(req["state"]["joints"]) == 6
             await c.send({"type": "answer", "id": req["id"], "target": [0.5, -0.08, 0.047], "vacuum": True})
             ack = await c.recv("ack")
-            assert ack == {"type": "ack", "for": "answer", "id": req["id"], "accepted": True, "reason": None, "code": None}
+            assert ack == {
+                "type": "ack",
+                "for": "answer",
+                "id": req["id"],
+                "accepted": True,
+                "reason": None,
+                "code": None,
+            }
             cancel = await c.recv("cancel")
             assert cancel["reason"] == "answered"
             return fut.result(5)
@@ -60,7 +67,10 @@ BAD = [
     ('{"type": "answer", "id": "ID", "target": [0.5, 0.0, 0.1], "vacuum": 1}', "'vacuum' must be true or false"),
     ('{"type": "hello", "protocol": 1, "client": 7}', "'client' and 'name' must be strings"),
     ('{"type": "answer", "id": "ID", "target": [0.5, 1' + "0" * 400 + ', 0.1], "vacuum": true}', "more than 18 digits"),
-    ('{"type": "answer", "id": "ID", "target": [0.5, 1' + "0" * 5000 + ', 0.1], "vacuum": true}', "more than 18 digits"),
+    (
+        '{"type": "answer", "id": "ID", "target": [0.5, 1' + "0" * 5000 + ', 0.1], "vacuum": true}',
+        "more than 18 digits",
+    ),
     ('{"type": "ping", "x": ' + "[" * 5000 + "]" * 5000 + "}", "nested too deeply"),
     ("x" * 70_000, "larger than"),
 ]
@@ -106,7 +116,9 @@ def test_a_hello_of_another_protocol_is_refused_and_the_connection_closed(served
 
     ack, closed = run(scenario())
     assert ack["accepted"] is False and ack["code"] == "unsupported_protocol" and "not supported" in ack["reason"]
-    assert closed.type in (aiohttp.WSMsgType.CLOSE, aiohttp.WSMsgType.CLOSED) and wait_until(lambda: broker.client_count == 0)
+    assert closed.type in (aiohttp.WSMsgType.CLOSE, aiohttp.WSMsgType.CLOSED) and wait_until(
+        lambda: broker.client_count == 0
+    )
 
 
 def test_two_clients_race_for_the_claim_first_wins(served):
@@ -213,7 +225,7 @@ def test_status_reaches_every_client(served):
 
 
 def test_token_is_required_to_watch_or_answer(served):
-    broker, server = served
+    _broker, server = served
     base = server.url.split("?")[0]
 
     async def scenario():
@@ -230,7 +242,9 @@ def test_token_is_required_to_watch_or_answer(served):
             mesh = re.search(r'filename="(/robot/pkg/[^"]+\.dae)"', text).group(1)
             assert (await http.get(base.rstrip("/") + mesh)).status == 200
             assert (await http.get(base + "robot/pkg/../../../../etc/passwd")).status == 404
-            assert (await http.get(base + "robot/pkg/example-robot-data/robots/ur_description/urdf/ur5_robot.urdf")).status == 404
+            assert (
+                await http.get(base + "robot/pkg/example-robot-data/robots/ur_description/urdf/ur5_robot.urdf")
+            ).status == 404
 
     run(scenario())
 

@@ -18,7 +18,12 @@ JSON = st.recursive(
 )
 MESSAGES = st.fixed_dictionaries(
     {"type": st.sampled_from(["hello", "claim", "answer", "skip", "ping", "bogus", 3, None])},
-    optional={"id": JSON, "target": JSON | st.lists(st.floats(), min_size=3, max_size=3), "vacuum": JSON, "protocol": JSON},
+    optional={
+        "id": JSON,
+        "target": JSON | st.lists(st.floats(), min_size=3, max_size=3),
+        "vacuum": JSON,
+        "protocol": JSON,
+    },
 )
 
 
@@ -26,14 +31,22 @@ MESSAGES = st.fixed_dictionaries(
 #: (Python refuses ints of more than 4,300 and overflows on converting ints of 400 to float), odd versions.
 HOSTILE = st.one_of(
     st.integers(1, 20_000).map(lambda depth: '{"type": "ping", "x": ' + "[" * depth + "]" * depth + "}"),
-    st.integers(19, 6_000).map(lambda n: '{"type": "answer", "id": "a", "target": [1' + "0" * n + ', 0, 0.1], "vacuum": true}'),
-    st.sampled_from(["true", '"1"', "1.0", "2", "null", "[]", "1e400", "-0"]).map(lambda v: '{"type": "hello", "protocol": ' + v + "}"),
-    st.text(alphabet=st.characters(codec="utf-8"), max_size=30).map(lambda t: json.dumps({"type": "answer", "id": t, "target": t})),
+    st.integers(19, 6_000).map(
+        lambda n: '{"type": "answer", "id": "a", "target": [1' + "0" * n + ', 0, 0.1], "vacuum": true}'
+    ),
+    st.sampled_from(["true", '"1"', "1.0", "2", "null", "[]", "1e400", "-0"]).map(
+        lambda v: '{"type": "hello", "protocol": ' + v + "}"
+    ),
+    st.text(alphabet=st.characters(codec="utf-8"), max_size=30).map(
+        lambda t: json.dumps({"type": "answer", "id": t, "target": t})
+    ),
 )
 
 
 @settings(max_examples=400, deadline=None)
-@given(st.one_of(st.text(max_size=200), JSON.map(json.dumps), MESSAGES.map(json.dumps), st.binary(max_size=50), HOSTILE))
+@given(
+    st.one_of(st.text(max_size=200), JSON.map(json.dumps), MESSAGES.map(json.dumps), st.binary(max_size=50), HOSTILE)
+)
 def test_parser_refuses_with_protocol_error_only(text):
     try:
         msg = parse_message(text)

@@ -15,7 +15,7 @@ from mrguide.annotation import server as server_module
 from mrguide.annotation.broker import AnnotationBroker, LiveAnswer
 from mrguide.annotation.server import AnnotationServer, ServerError
 from mrguide.robot import load_robot
-from tests.annotation.conftest import ask_in_thread, connect, make_request, wait_until
+from tests.annotation.conftest import ask_in_thread, connect, make_request
 
 
 def run(coro):
@@ -25,14 +25,31 @@ def run(coro):
 def _raw_get(server: AnnotationServer, target: bytes, headers: bytes = b"") -> int:
     """The status of a hand-written HTTP request (aiohttp's client would refuse to send most of these)."""
     with socket.create_connection(("127.0.0.1", server.port), timeout=5) as s:
-        s.sendall(b"GET " + target + b" HTTP/1.1\r\nHost: 127.0.0.1:%d\r\n" % server.port + headers + b"Connection: close\r\n\r\n")
+        s.sendall(
+            b"GET "
+            + target
+            + b" HTTP/1.1\r\nHost: 127.0.0.1:%d\r\n" % server.port
+            + headers
+            + b"Connection: close\r\n\r\n"
+        )
         reply = s.recv(4096)
     return int(reply.split(b" ", 2)[1])
 
 
-@pytest.mark.parametrize("target", [b"/?token=%C3%A9t%C3%A9", b"/ws?token=%F0%9F%A4%96", b"/?token=%ED%A0%80",
-                                    b"/robot/pkg/a%00b.dae", b"/robot/pkg/" + b"x" * 300 + b".dae", b"/static/index.html",
-                                    b"/static/package.json", b"/static/%2e%2e%2fserver.py", b"/static/app.js%00.js"])
+@pytest.mark.parametrize(
+    "target",
+    [
+        b"/?token=%C3%A9t%C3%A9",
+        b"/ws?token=%F0%9F%A4%96",
+        b"/?token=%ED%A0%80",
+        b"/robot/pkg/a%00b.dae",
+        b"/robot/pkg/" + b"x" * 300 + b".dae",
+        b"/static/index.html",
+        b"/static/package.json",
+        b"/static/%2e%2e%2fserver.py",
+        b"/static/app.js%00.js",
+    ],
+)
 def test_what_a_client_sends_never_reaches_a_500(served, target):
     _, server = served
     status = _raw_get(server, target)
@@ -68,7 +85,10 @@ def test_a_foreign_origin_or_host_is_refused(served):
     assert run(status({})) == 101  # a non-browser client (the bot) sends none
     assert run(status({"Origin": "http://evil.example"})) == 403
     assert run(status({"Origin": f"https://127.0.0.1:{server.port}"})) == 403  # another scheme is another origin
-    assert run(status({"Host": f"rebound.example:{server.port}", "Origin": f"http://rebound.example:{server.port}"})) == 403
+    assert (
+        run(status({"Host": f"rebound.example:{server.port}", "Origin": f"http://rebound.example:{server.port}"}))
+        == 403
+    )
     assert _raw_get(server, b"/?token=" + server.token.encode(), b"Origin: http://evil.example\r\n") == 403
 
 
@@ -169,8 +189,28 @@ def test_the_printed_url_names_a_reachable_host(broker):
 
 def test_an_encrypted_key_fails_at_once_instead_of_prompting(broker, tmp_path):
     key, cert = tmp_path / "key.pem", tmp_path / "cert.pem"
-    subprocess.run(["openssl", "req", "-x509", "-newkey", "rsa:2048", "-keyout", str(key), "-out", str(cert), "-days", "1",
-                    "-subj", "/CN=mrguide", "-passout", "pass:secret"], check=True, capture_output=True, stdin=subprocess.DEVNULL)
+    subprocess.run(
+        [
+            "openssl",
+            "req",
+            "-x509",
+            "-newkey",
+            "rsa:2048",
+            "-keyout",
+            str(key),
+            "-out",
+            str(cert),
+            "-days",
+            "1",
+            "-subj",
+            "/CN=mrguide",
+            "-passout",
+            "pass:secret",
+        ],
+        check=True,
+        capture_output=True,
+        stdin=subprocess.DEVNULL,
+    )
     t0 = time.monotonic()
     with pytest.raises(ServerError, match="the TLS key is encrypted"):
         AnnotationServer(broker, load_robot(), port=0, cert=cert, key=key)
@@ -184,8 +224,15 @@ def test_the_page_assets_are_the_module_graph_of_the_page():
     from mrguide.annotation.server import WEB_DIR
 
     files = {str(p.relative_to(WEB_DIR.resolve() / "node_modules")) for p in module_files(WEB_DIR)}
-    assert {"three/build/three.module.js", "three/build/three.core.js", "urdf-loader/src/URDFLoader.js",
-            "three/examples/jsm/controls/TransformControls.js", "three/examples/jsm/loaders/ColladaLoader.js",
-            "iwer/build/iwer.module.js", "three/LICENSE", "iwer/LICENSE"} <= files
+    assert {
+        "three/build/three.module.js",
+        "three/build/three.core.js",
+        "urdf-loader/src/URDFLoader.js",
+        "three/examples/jsm/controls/TransformControls.js",
+        "three/examples/jsm/loaders/ColladaLoader.js",
+        "iwer/build/iwer.module.js",
+        "three/LICENSE",
+        "iwer/LICENSE",
+    } <= files
     assert not any(f.endswith((".ts", ".md", ".json")) or "/test" in f for f in files) and len(files) < 40
     assert import_map(WEB_DIR)["three"] == "/node_modules/three/build/three.module.js"

@@ -30,8 +30,18 @@ def test_round_trip(tmp_path):
     path = save_calibration(RECORD, tmp_path / "sub" / "cal.json")
     back = load_calibration(path, expect_dictionary="4x4_50", expect_marker_size_m=0.04)
     assert np.array_equal(back.T_base_hmd, RECORD.T_base_hmd)
-    for key in ("dictionary", "marker_size_m", "method", "rms_residual_m", "max_residual_m", "n_frames",
-                "n_points", "created", "camera", "extra"):
+    for key in (
+        "dictionary",
+        "marker_size_m",
+        "method",
+        "rms_residual_m",
+        "max_residual_m",
+        "n_frames",
+        "n_points",
+        "created",
+        "camera",
+        "extra",
+    ):
         assert getattr(back, key) == getattr(RECORD, key), key
 
 
@@ -87,5 +97,5 @@ def test_corrupt_missing_and_mismatched_files(tmp_path):
     path = save_calibration(RECORD, tmp_path / "cal.json")
     with pytest.raises(CalibrationFileError, match="DICT_5X5_100"):
         load_calibration(path, expect_dictionary="DICT_5X5_100")
-    with pytest.raises(CalibrationFileError, match="0.05 m"):
+    with pytest.raises(CalibrationFileError, match=r"0.05 m"):
         load_calibration(path, expect_marker_size_m=0.05)

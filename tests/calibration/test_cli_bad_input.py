@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 
 from mrguide.calibration import commands
-from mrguide.twin import commands as twin_commands
 from mrguide.calibration.calibration_file import CalibrationRecord
 from mrguide.calibration.procedure import CalibrationRun
+from mrguide.twin import commands as twin_commands
 
 GOOD_K = {"width": 1280, "height": 720, "fx": 1011.0, "fy": 1011.0, "cx": 639.5, "cy": 359.5}
 CORRUPT_YAML = "%YAML:1.0\n---\nimage_width: [1, 2\ncamera_matrix: !!opencv-matrix\n  rows: 3\n"
@@ -51,41 +51,120 @@ def _intrinsics(path, text: str):
 
 CASES = [
     # (id, argv after "calibrate" given the tmp dir, words in the one stderr line)
-    ("width Infinity", lambda d: ["--images", d / "images", "--intrinsics",
-                                  _intrinsics(d / "k.json", json.dumps({**GOOD_K, "width": float("inf")}))],
-     ["k.json", "width = inf", "whole number of pixels"]),
-    ("width 640.5", lambda d: ["--images", d / "images", "--intrinsics",
-                               _intrinsics(d / "k.json", json.dumps({**GOOD_K, "width": 640.5}))],
-     ["k.json", "width = 640.5"]),
-    ("TOML width inf", lambda d: ["--images", d / "images", "--intrinsics",
-                                  _intrinsics(d / "k.toml", "width = inf\nheight = 720\nfx = 1.0\nfy = 1.0\ncx = 0.0\ncy = 0.0\n")],
-     ["k.toml", "width = inf"]),
-    ("fx nan", lambda d: ["--images", d / "images", "--intrinsics",
-                          _intrinsics(d / "k.json", json.dumps({**GOOD_K, "fx": float("nan")}))],
-     ["k.json", "non-finite"]),
-    ("corrupt YAML", lambda d: ["--images", d / "images", "--intrinsics", _intrinsics(d / "k.yaml", CORRUPT_YAML)],
-     ["k.yaml", "cannot parse intrinsics", "Parsing error"]),
-    ("--out under a file", lambda d: ["--twin", "--out", d / "afile" / "cal.json", "--overlay", d / "o.png"],
-     ["--out", "afile", "is not a directory"]),
-    ("--out is a directory", lambda d: ["--twin", "--out", d / "images", "--overlay", d / "o.png"],
-     ["--out", "images", "not a regular file"]),
-    ("--overlay under a file", lambda d: ["--twin", "--out", d / "cal.json", "--overlay", d / "afile" / "o.png"],
-     ["--overlay", "afile", "is not a directory"]),
-    ("--overlay not an image type", lambda d: ["--twin", "--out", d / "cal.json", "--overlay", d / "o.txt"],
-     ["--overlay", "o.txt", "'.txt'"]),
-    ("--overlay /dev/full", lambda d: ["--twin", "--out", d / "cal.json", "--overlay", "/dev/full"],
-     ["--overlay", "/dev/full", "not a regular file"]),
-    ("--out = --overlay", lambda d: ["--twin", "--out", d / "x.png", "--overlay", d / "x.png"],
-     ["--out and --overlay are the same file"]),
-    ("config marker size nan", lambda d: ["--twin", "--out", d / "cal.json", "--overlay", d / "o.png", "--config",
-                                          _intrinsics(d / "c.toml", "[calibration.detector]\nmarker_size_m = nan\n")],
-     ["c.toml", "[calibration]: detector.marker_size_m = nan"]),
-    ("config board columns 0", lambda d: ["--twin", "--out", d / "cal.json", "--overlay", d / "o.png", "--config",
-                                          _intrinsics(d / "c.toml", "[calibration.board]\ncolumns = 0\n")],
-     ["c.toml", "calibration.board.columns = 0"]),
-    ("twin supersample 100", lambda d: ["--twin", "--out", d / "cal.json", "--overlay", d / "o.png", "--config",
-                                        _intrinsics(d / "c.toml", "[calibration_twin]\nsupersample = 100\n")],
-     ["c.toml", "calibration_twin.supersample = 100"]),
+    (
+        "width Infinity",
+        lambda d: [
+            "--images",
+            d / "images",
+            "--intrinsics",
+            _intrinsics(d / "k.json", json.dumps({**GOOD_K, "width": float("inf")})),
+        ],
+        ["k.json", "width = inf", "whole number of pixels"],
+    ),
+    (
+        "width 640.5",
+        lambda d: [
+            "--images",
+            d / "images",
+            "--intrinsics",
+            _intrinsics(d / "k.json", json.dumps({**GOOD_K, "width": 640.5})),
+        ],
+        ["k.json", "width = 640.5"],
+    ),
+    (
+        "TOML width inf",
+        lambda d: [
+            "--images",
+            d / "images",
+            "--intrinsics",
+            _intrinsics(d / "k.toml", "width = inf\nheight = 720\nfx = 1.0\nfy = 1.0\ncx = 0.0\ncy = 0.0\n"),
+        ],
+        ["k.toml", "width = inf"],
+    ),
+    (
+        "fx nan",
+        lambda d: [
+            "--images",
+            d / "images",
+            "--intrinsics",
+            _intrinsics(d / "k.json", json.dumps({**GOOD_K, "fx": float("nan")})),
+        ],
+        ["k.json", "non-finite"],
+    ),
+    (
+        "corrupt YAML",
+        lambda d: ["--images", d / "images", "--intrinsics", _intrinsics(d / "k.yaml", CORRUPT_YAML)],
+        ["k.yaml", "cannot parse intrinsics", "Parsing error"],
+    ),
+    (
+        "--out under a file",
+        lambda d: ["--twin", "--out", d / "afile" / "cal.json", "--overlay", d / "o.png"],
+        ["--out", "afile", "is not a directory"],
+    ),
+    (
+        "--out is a directory",
+        lambda d: ["--twin", "--out", d / "images", "--overlay", d / "o.png"],
+        ["--out", "images", "not a regular file"],
+    ),
+    (
+        "--overlay under a file",
+        lambda d: ["--twin", "--out", d / "cal.json", "--overlay", d / "afile" / "o.png"],
+        ["--overlay", "afile", "is not a directory"],
+    ),
+    (
+        "--overlay not an image type",
+        lambda d: ["--twin", "--out", d / "cal.json", "--overlay", d / "o.txt"],
+        ["--overlay", "o.txt", "'.txt'"],
+    ),
+    (
+        "--overlay /dev/full",
+        lambda d: ["--twin", "--out", d / "cal.json", "--overlay", "/dev/full"],
+        ["--overlay", "/dev/full", "not a regular file"],
+    ),
+    (
+        "--out = --overlay",
+        lambda d: ["--twin", "--out", d / "x.png", "--overlay", d / "x.png"],
+        ["--out and --overlay are the same file"],
+    ),
+    (
+        "config marker size nan",
+        lambda d: [
+            "--twin",
+            "--out",
+            d / "cal.json",
+            "--overlay",
+            d / "o.png",
+            "--config",
+            _intrinsics(d / "c.toml", "[calibration.detector]\nmarker_size_m = nan\n"),
+        ],
+        ["c.toml", "[calibration]: detector.marker_size_m = nan"],
+    ),
+    (
+        "config board columns 0",
+        lambda d: [
+            "--twin",
+            "--out",
+            d / "cal.json",
+            "--overlay",
+            d / "o.png",
+            "--config",
+            _intrinsics(d / "c.toml", "[calibration.board]\ncolumns = 0\n"),
+        ],
+        ["c.toml", "calibration.board.columns = 0"],
+    ),
+    (
+        "twin supersample 100",
+        lambda d: [
+            "--twin",
+            "--out",
+            d / "cal.json",
+            "--overlay",
+            d / "o.png",
+            "--config",
+            _intrinsics(d / "c.toml", "[calibration_twin]\nsupersample = 100\n"),
+        ],
+        ["c.toml", "calibration_twin.supersample = 100"],
+    ),
 ]
 
 

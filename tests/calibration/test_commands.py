@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from mrguide.calibration.calibration_file import load_calibration
-from mrguide.cli import main
 from mrguide.calibration.se3 import invert, rotation_angle_deg
+from mrguide.cli import main
 from mrguide.twin.markers import TwinCalibrationConfig
 from tests.conftest import render_calibration_images
 
@@ -39,8 +39,20 @@ def test_twin_mode_writes_file_and_overlay(tmp_path, capsys):
 
 def test_images_mode_with_head_tracking_poses(image_folder, tmp_path, capsys):
     out = tmp_path / "cal.json"
-    code = _run(["--images", str(image_folder), "--intrinsics", str(tmp_path / "k.json"),
-                 "--poses", str(tmp_path / "poses.json"), "--out", str(out), "--overlay", str(tmp_path / "o.png")])
+    code = _run(
+        [
+            "--images",
+            str(image_folder),
+            "--intrinsics",
+            str(tmp_path / "k.json"),
+            "--poses",
+            str(tmp_path / "poses.json"),
+            "--out",
+            str(out),
+            "--overlay",
+            str(tmp_path / "o.png"),
+        ]
+    )
     assert code == 0, capsys.readouterr().err
     record = load_calibration(out)
     assert record.rms_residual_m < 0.003 and record.n_frames == 3
@@ -49,7 +61,11 @@ def test_images_mode_with_head_tracking_poses(image_folder, tmp_path, capsys):
 
 
 def test_bad_inputs_get_clear_messages(image_folder, tmp_path, capsys):
-    k, poses, out = tmp_path / "k.json", tmp_path / "poses.json", ["--out", str(tmp_path / "c.json"), "--overlay", str(tmp_path / "o.png")]
+    k, poses, out = (
+        tmp_path / "k.json",
+        tmp_path / "poses.json",
+        ["--out", str(tmp_path / "c.json"), "--overlay", str(tmp_path / "o.png")],
+    )
 
     def fails(argv, message):
         assert _run(argv + out) == 2
@@ -57,13 +73,21 @@ def test_bad_inputs_get_clear_messages(image_folder, tmp_path, capsys):
 
     fails(["--images", str(image_folder)], "--images needs --intrinsics")
     (tmp_path / "dict.toml").write_text('[calibration.detector]\ndictionary = "DICT_4X4_77"\n')
-    fails(["--images", str(image_folder), "--intrinsics", str(k), "--config", str(tmp_path / "dict.toml")],
-          "unknown ArUco dictionary 'DICT_4X4_77'")
-    (tmp_path / "small.json").write_text(json.dumps({"width": 640, "height": 480, "fx": 600, "fy": 600, "cx": 320, "cy": 240}))
-    fails(["--images", str(image_folder), "--intrinsics", str(tmp_path / "small.json")],
-          "image is 1280x720 but the intrinsics are for 640x480")
-    fails(["--images", str(image_folder), "--intrinsics", str(k), "--poses", str(tmp_path / "none.json")],
-          "cannot read the head-tracking poses")
+    fails(
+        ["--images", str(image_folder), "--intrinsics", str(k), "--config", str(tmp_path / "dict.toml")],
+        "unknown ArUco dictionary 'DICT_4X4_77'",
+    )
+    (tmp_path / "small.json").write_text(
+        json.dumps({"width": 640, "height": 480, "fx": 600, "fy": 600, "cx": 320, "cy": 240})
+    )
+    fails(
+        ["--images", str(image_folder), "--intrinsics", str(tmp_path / "small.json")],
+        "image is 1280x720 but the intrinsics are for 640x480",
+    )
+    fails(
+        ["--images", str(image_folder), "--intrinsics", str(k), "--poses", str(tmp_path / "none.json")],
+        "cannot read the head-tracking poses",
+    )
     empty = tmp_path / "empty"
     empty.mkdir()
     cv2.imwrite(str(empty / "table.png"), np.full((720, 1280, 3), 180, np.uint8))

@@ -24,20 +24,26 @@ def test_shipped_config_documents_every_setting_and_loads():
     load_section(TwinCalibrationConfig, CONFIG, "calibration_twin")
 
 
-@pytest.mark.parametrize("body, message", [
-    ('[calibration.detector]\ncorner_refinement = "magic"\n', "corner_refinement must be one of"),
-    ("[calibration.board]\nkind = 'charuco'\nsquare_size_m = 0.04\n", "must exceed marker_size_m"),
-    ("[calibration.targets]\nboard_touched_corners = [[0, 0, 0], [1, 0, 0]]\n", "3 or 4 points"),
-    ("[calibration.registration]\nmin_frame = 2\n", "min_frame"),
-    ("[calibration.hmd]\ntracking_noise_m = 1.0\n", "calibration.hmd.tracking_noise_m = 1.0"),
-    ("[calibration.hmd]\nseed = -1\n", "calibration.hmd.seed = -1"),
-    ("[calibration.targets]\nmarkers = [{ id = -2, xyz = [0.4, 0.0, 0.0] }]\n", "calibration.targets.markers.id = -2"),
-    ("[calibration.board]\nrows = 1000\n", "calibration.board.rows = 1000"),
-    ("[calibration.detector]\ncorner_window_px = 0\n", "calibration.detector.corner_window_px = 0"),
-    ("[calibration_twin.intrinsics]\nwidth = 0\n", "intrinsics.width = 0"),
-    ("[calibration_twin.intrinsics]\nfx = -1.0\n", "intrinsics.fx = -1.0"),
-    ("[calibration_twin]\nsupersample = 9\n", "calibration_twin.supersample = 9"),
-])
+@pytest.mark.parametrize(
+    "body, message",
+    [
+        ('[calibration.detector]\ncorner_refinement = "magic"\n', "corner_refinement must be one of"),
+        ("[calibration.board]\nkind = 'charuco'\nsquare_size_m = 0.04\n", "must exceed marker_size_m"),
+        ("[calibration.targets]\nboard_touched_corners = [[0, 0, 0], [1, 0, 0]]\n", "3 or 4 points"),
+        ("[calibration.registration]\nmin_frame = 2\n", "min_frame"),
+        ("[calibration.hmd]\ntracking_noise_m = 1.0\n", "calibration.hmd.tracking_noise_m = 1.0"),
+        ("[calibration.hmd]\nseed = -1\n", "calibration.hmd.seed = -1"),
+        (
+            "[calibration.targets]\nmarkers = [{ id = -2, xyz = [0.4, 0.0, 0.0] }]\n",
+            "calibration.targets.markers.id = -2",
+        ),
+        ("[calibration.board]\nrows = 1000\n", "calibration.board.rows = 1000"),
+        ("[calibration.detector]\ncorner_window_px = 0\n", "calibration.detector.corner_window_px = 0"),
+        ("[calibration_twin.intrinsics]\nwidth = 0\n", "intrinsics.width = 0"),
+        ("[calibration_twin.intrinsics]\nfx = -1.0\n", "intrinsics.fx = -1.0"),
+        ("[calibration_twin]\nsupersample = 9\n", "calibration_twin.supersample = 9"),
+    ],
+)
 def test_bad_config_values(tmp_path, body, message):
     path = tmp_path / "c.toml"
     path.write_text(body)

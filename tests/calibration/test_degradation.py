@@ -63,6 +63,8 @@ def test_partial_occlusion_hides_a_marker_instead_of_giving_a_wrong_pose(renders
     cam, image = shots[1]
     det = MarkerDetector(DetectorConfig(marker_size_m=SIZE))
     outline = cam.project(apply(T_base_marker, single_marker_corners(SIZE)))
-    assert det.detect(degrade(image, Degradation(occlusion=0.4), np.random.default_rng(0), outline)).corners_of(7) is None
+    assert (
+        det.detect(degrade(image, Degradation(occlusion=0.4), np.random.default_rng(0), outline)).corners_of(7) is None
+    )
     with pytest.raises(CalibrationError, match="occlusion in"):
         Degradation(occlusion=1.5)

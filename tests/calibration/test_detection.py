@@ -33,7 +33,9 @@ def test_bad_images_are_refused(hl2):
 
 
 def test_intrinsics_files(tmp_path):
-    (tmp_path / "k.json").write_text('{"width": 1280, "height": 720, "camera_matrix": [[1000, 0, 640], [0, 1001, 360], [0, 0, 1]], "dist": [0.1, 0, 0, 0, 0]}')
+    (tmp_path / "k.json").write_text(
+        '{"width": 1280, "height": 720, "camera_matrix": [[1000, 0, 640], [0, 1001, 360], [0, 0, 1]], "dist": [0.1, 0, 0, 0, 0]}'
+    )
     cam = load_camera_model(tmp_path / "k.json")
     assert (cam.fx, cam.fy, cam.cx, cam.dist[0]) == (1000.0, 1001.0, 640.0, 0.1)
     (tmp_path / "k.toml").write_text("width = 640\nheight = 480\nfx = 600\nfy = 600\ncx = 320\ncy = 240\n")
@@ -50,8 +52,10 @@ def marker_scene(client, orbit):
     """A 6 cm marker (id 7) on the table, and three oblique views of it at 0.5-0.9 m."""
     T_base_marker = marker_pose_on_table((0.5, 0.1, 0.0005), 25.0)
     add_marker_plane(client, "DICT_4X4_50", 7, 0.06, T_base_marker)
-    cams = [Camera(client, orbit([0.5, 0.1, 0.0], d, tilt, az), HOLOLENS2_PV)
-            for d, tilt, az in ((0.5, 35, 200), (0.7, 50, 120), (0.9, 20, 300))]
+    cams = [
+        Camera(client, orbit([0.5, 0.1, 0.0], d, tilt, az), HOLOLENS2_PV)
+        for d, tilt, az in ((0.5, 35, 200), (0.7, 50, 120), (0.9, 20, 300))
+    ]
     return T_base_marker, cams
 
 

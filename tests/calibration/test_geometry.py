@@ -50,7 +50,9 @@ def test_register_rejects_outlier_frame_and_thin_frames():
 
 
 def test_register_with_too_few_markers_raises_instead_of_guessing():
-    with pytest.raises(NotEnoughMarkersError, match=r"0 usable frames, 1 required.*2 target markers usable, 4 required"):
+    with pytest.raises(
+        NotEnoughMarkersError, match=r"0 usable frames, 1 required.*2 target markers usable, 4 required"
+    ):
         register([_frame("only", n_markers=2)], RegistrationConfig(min_markers=4))
 
 
@@ -64,8 +66,10 @@ def test_calibration_error_has_configured_size_at_pivot():
 
 
 def test_tracking_noise_statistics():
-    frames = with_tracking_noise(lambda: HmdFrame(np.zeros((2, 2), np.uint8), np.eye(4)),
-                                 HmdNoiseConfig(tracking_noise_m=0.002, tracking_noise_deg=0.5, seed=3))
+    frames = with_tracking_noise(
+        lambda: HmdFrame(np.zeros((2, 2), np.uint8), np.eye(4)),
+        HmdNoiseConfig(tracking_noise_m=0.002, tracking_noise_deg=0.5, seed=3),
+    )
     poses = [frames().T_hmd_cam for _ in range(2000)]
     t = np.array([p[:3, 3] for p in poses])
     angles = np.array([rotation_angle_deg(np.eye(3), p[:3, :3]) for p in poses])

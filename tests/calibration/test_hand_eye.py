@@ -13,7 +13,15 @@ from mrguide.calibration.config import DetectorConfig
 from mrguide.calibration.detection import MarkerDetector
 from mrguide.calibration.errors import CalibrationError, NotEnoughMarkersError
 from mrguide.calibration.pose import estimate_marker_pose
-from mrguide.calibration.se3 import apply, gaussian_noise, invert, make_T, rotation_about, rotation_angle_deg, rotation_from_rpy_deg
+from mrguide.calibration.se3 import (
+    apply,
+    gaussian_noise,
+    invert,
+    make_T,
+    rotation_about,
+    rotation_angle_deg,
+    rotation_from_rpy_deg,
+)
 from mrguide.twin.camera import look_at
 from mrguide.twin.markers import TwinHmd, add_marker_plane
 
@@ -50,7 +58,9 @@ def test_hand_eye_refuses_too_few_or_degenerate_poses():
         hand_eye._shah(A, B)
 
 
-@pytest.mark.skipif(not hasattr(cv2, "calibrateRobotWorldHandEye"), reason="this cv2 build lacks the binding (opencv#29565)")
+@pytest.mark.skipif(
+    not hasattr(cv2, "calibrateRobotWorldHandEye"), reason="this cv2 build lacks the binding (opencv#29565)"
+)
 def test_opencv_and_numpy_solvers_agree():
     rng = np.random.default_rng(2)
     A = _tool_poses(10, rng)

@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from mrguide.calibration.augment import occlude
 from mrguide.calibration.boards import board_pose_on_table, make_board, marker_pose_on_table, single_marker_corners
 from mrguide.calibration.config import BoardConfig, DetectorConfig
 from mrguide.calibration.detection import MarkerDetector
 from mrguide.calibration.errors import NotEnoughMarkersError
-from mrguide.calibration.augment import occlude
 from mrguide.calibration.pose import BoardPoseEstimator, estimate_marker_pose
 from mrguide.calibration.se3 import apply, invert, make_T, rotation_about, rotation_angle_deg
 from mrguide.twin.camera import Camera

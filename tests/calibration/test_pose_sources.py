@@ -16,8 +16,7 @@ from mrguide.calibration.pose_sources import HmdAnnotationPoseSource, MarkerPose
 from mrguide.calibration.se3 import make_T, rotation_from_rpy_deg
 from mrguide.pose_source import PoseUnavailable
 from mrguide.twin.camera import look_at
-from mrguide.twin.markers import (MarkerOnBody, TwinHmd, annotations_of_body, hmd_marker_pose_source,
-                                  marker_on_cube_top)
+from mrguide.twin.markers import MarkerOnBody, TwinHmd, annotations_of_body, hmd_marker_pose_source, marker_on_cube_top
 
 T_BASE_HMD = make_T(rotation_from_rpy_deg(90, 0, 160), [1.3, 0.4, 0.45])
 CUBE = 0.05
@@ -28,17 +27,24 @@ DETECTOR = DetectorConfig(marker_size_m=0.04)
 def cell(client):
     """A 5 cm cube on the table with a 4 cm marker (id 0) on its top face, and the HMD looking at it from ~0.75 m."""
     col = pb.createCollisionShape(pb.GEOM_BOX, halfExtents=[CUBE / 2] * 3, physicsClientId=client)
-    vis = pb.createVisualShape(pb.GEOM_BOX, halfExtents=[CUBE / 2] * 3, rgbaColor=[0.85, 0.1, 0.1, 1], physicsClientId=client)
+    vis = pb.createVisualShape(
+        pb.GEOM_BOX, halfExtents=[CUBE / 2] * 3, rgbaColor=[0.85, 0.1, 0.1, 1], physicsClientId=client
+    )
     cube = pb.createMultiBody(0.2, col, vis, [0.5, -0.05, CUBE / 2], physicsClientId=client)
     marker = MarkerOnBody(client, cube, marker_on_cube_top(CUBE), "DICT_4X4_50", 0, 0.04, quiet_zone_m=0.005)
-    hmd = TwinHmd(client, T_BASE_HMD, look_at(np.array([1.0, 0.1, 0.55]), np.array([0.5, -0.05, 0.05]), np.array([0, 0, 1.0])),
-                  attached=[marker])
+    hmd = TwinHmd(
+        client,
+        T_BASE_HMD,
+        look_at(np.array([1.0, 0.1, 0.55]), np.array([0.5, -0.05, 0.05]), np.array([0, 0, 1.0])),
+        attached=[marker],
+    )
     return cube, hmd
 
 
 def _move(client, cube, xy, yaw_deg=0.0):
-    pb.resetBasePositionAndOrientation(cube, [xy[0], xy[1], CUBE / 2], pb.getQuaternionFromEuler([0, 0, np.radians(yaw_deg)]),
-                                       physicsClientId=client)
+    pb.resetBasePositionAndOrientation(
+        cube, [xy[0], xy[1], CUBE / 2], pb.getQuaternionFromEuler([0, 0, np.radians(yaw_deg)]), physicsClientId=client
+    )
 
 
 def test_marker_pose_source_gives_object_centre(client, cell):
@@ -56,8 +62,9 @@ def test_calibration_error_and_tracking_noise_show_up(client, cell):
     _move(client, cube, (0.475, 0.1))  # at the pivot of the calibration error
     shifted = hmd_marker_pose_source(hmd, T_BASE_HMD, DETECTOR, 0, offset, HmdNoiseConfig(calibration_error_m=0.01))
     assert 0.007 < np.linalg.norm(shifted.object_position() - [0.475, 0.1, CUBE / 2]) < 0.013
-    shaky = hmd_marker_pose_source(hmd, T_BASE_HMD, DETECTOR, 0, offset,
-                                   HmdNoiseConfig(tracking_noise_m=0.003, tracking_noise_deg=0.3, seed=1))
+    shaky = hmd_marker_pose_source(
+        hmd, T_BASE_HMD, DETECTOR, 0, offset, HmdNoiseConfig(tracking_noise_m=0.003, tracking_noise_deg=0.3, seed=1)
+    )
     errs = [np.linalg.norm(shaky.object_position() - [0.475, 0.1, CUBE / 2]) for _ in range(6)]
     assert 0.002 < np.mean(errs) < 0.015 and np.std(errs) > 0.0005
 
@@ -93,18 +100,25 @@ def test_annotation_pose_source_maps_hmd_points_to_the_base_frame():
 def test_annotation_pose_source_of_a_twin_body(client, cell):
     """The simulated annotator (twin) through the source: exact without noise, the noise passed through."""
     cube, _ = cell
-    exact = HmdAnnotationPoseSource(annotations_of_body(client, cube, T_BASE_HMD, 0.0, np.random.default_rng(0)), T_BASE_HMD)
+    exact = HmdAnnotationPoseSource(
+        annotations_of_body(client, cube, T_BASE_HMD, 0.0, np.random.default_rng(0)), T_BASE_HMD
+    )
     assert np.allclose(exact.object_position(), [0.5, -0.05, CUBE / 2], atol=1e-9)
-    noisy = HmdAnnotationPoseSource(annotations_of_body(client, cube, T_BASE_HMD, 0.004, np.random.default_rng(0)), T_BASE_HMD)
+    noisy = HmdAnnotationPoseSource(
+        annotations_of_body(client, cube, T_BASE_HMD, 0.004, np.random.default_rng(0)), T_BASE_HMD
+    )
     errs = np.array([noisy.object_position() - [0.5, -0.05, CUBE / 2] for _ in range(500)])
     assert np.std(errs, axis=0) == pytest.approx([0.004] * 3, rel=0.15)
 
 
-@pytest.mark.parametrize("annotation, words", [
-    (None, "no object annotation"),
-    (np.array([0.1, np.nan, 0.0]), "not a finite point"),
-    (np.zeros((3, 3)), "shape (3, 3)"),
-])
+@pytest.mark.parametrize(
+    "annotation, words",
+    [
+        (None, "no object annotation"),
+        (np.array([0.1, np.nan, 0.0]), "not a finite point"),
+        (np.zeros((3, 3)), "shape (3, 3)"),
+    ],
+)
 def test_annotation_pose_source_without_a_usable_annotation_is_unavailable(annotation, words):
     source = HmdAnnotationPoseSource(lambda: annotation, T_BASE_HMD)
     with pytest.raises(PoseUnavailable, match=re.escape(words)):

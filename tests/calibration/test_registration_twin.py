@@ -8,8 +8,14 @@ import numpy as np
 import pytest
 
 from mrguide.calibration.boards import board_pose_on_table, make_board
-from mrguide.calibration.config import (BoardConfig, CalibrationConfig, DetectorConfig, HmdNoiseConfig, MarkerPlacement,
-                                        TargetsConfig)
+from mrguide.calibration.config import (
+    BoardConfig,
+    CalibrationConfig,
+    DetectorConfig,
+    HmdNoiseConfig,
+    MarkerPlacement,
+    TargetsConfig,
+)
 from mrguide.calibration.detection import MarkerDetector
 from mrguide.calibration.errors import CalibrationError, NotEnoughMarkersError
 from mrguide.calibration.se3 import apply, invert, rotation_angle_deg
@@ -27,7 +33,9 @@ def _workspace_error(T_est: np.ndarray) -> float:
 
 
 def _hmd(client) -> TwinHmd:
-    return TwinHmd(client, TWIN.T_base_hmd, look_at(np.array(TWIN.views[0]), np.array(TWIN.look_at), np.array([0, 0, 1.0])))
+    return TwinHmd(
+        client, TWIN.T_base_hmd, look_at(np.array(TWIN.views[0]), np.array(TWIN.look_at), np.array([0, 0, 1.0]))
+    )
 
 
 def test_board_registration_residual_and_truth(client):
@@ -49,10 +57,15 @@ def test_board_registration_with_head_tracking_noise(client):
 
 
 def test_single_markers_on_the_table(client):
-    markers = (MarkerPlacement(0, (0.38, 0.0, 0.0005), 0.0), MarkerPlacement(1, (0.6, 0.05, 0.0005), 30.0),
-               MarkerPlacement(2, (0.45, 0.3, 0.0005), -20.0), MarkerPlacement(3, (0.62, 0.28, 0.0005), 90.0))
-    cfg = CalibrationConfig(detector=DetectorConfig(marker_size_m=0.08),
-                            targets=TargetsConfig(use_board=False, markers=markers))
+    markers = (
+        MarkerPlacement(0, (0.38, 0.0, 0.0005), 0.0),
+        MarkerPlacement(1, (0.6, 0.05, 0.0005), 30.0),
+        MarkerPlacement(2, (0.45, 0.3, 0.0005), -20.0),
+        MarkerPlacement(3, (0.62, 0.28, 0.0005), 90.0),
+    )
+    cfg = CalibrationConfig(
+        detector=DetectorConfig(marker_size_m=0.08), targets=TargetsConfig(use_board=False, markers=markers)
+    )
     cfg = dataclasses.replace(cfg, registration=dataclasses.replace(cfg.registration, min_markers=3))
     run = calibrate_twin_hmd(_hmd(client), cfg, TWIN.views, TWIN.look_at)
     assert run.record.method == "markers"

@@ -30,9 +30,17 @@ def test_ur10_arm_loads_with_its_own_urdf_limits_and_identity():
 
 
 def test_shipped_arms_are_found_from_any_directory(tmp_path):
-    code = "from mrguide.robot import load_robot, RobotConfig; print(load_robot(RobotConfig(name='ur10')).urdf_path.name)"
-    out = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True,
-                         env={"PYTHONPATH": str(REPO), "PATH": "/usr/bin:/bin"}, timeout=120)
+    code = (
+        "from mrguide.robot import load_robot, RobotConfig; print(load_robot(RobotConfig(name='ur10')).urdf_path.name)"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        env={"PYTHONPATH": str(REPO), "PATH": "/usr/bin:/bin"},
+        timeout=120,
+    )
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "ur10_robot.urdf"
 
@@ -71,6 +79,7 @@ def _edit(old: str, new: str):
     def change(text: str) -> str:
         assert old in text, old
         return text.replace(old, new)
+
     return change
 
 
@@ -83,15 +92,30 @@ BAD_ARMS = [
     ("nan limit", _edit("v_max = [1.5,", "v_max = [nan,"), ["v_max[0]", "nan"]),
     ("five limits", _edit("a_max = [6.0, ", "a_max = ["), ["a_max", "expected 6 finite values"]),
     ("home outside", _edit("q_home = [0.0,", "q_home = [3.0,"), ["q_home", "outside the joint limits"]),
-    ("unknown joint", _edit('"elbow_joint", "wrist_1', '"knee_joint", "wrist_1'), ["joints", "knee_joint", "movable joints"]),
+    (
+        "unknown joint",
+        _edit('"elbow_joint", "wrist_1', '"knee_joint", "wrist_1'),
+        ["joints", "knee_joint", "movable joints"],
+    ),
     ("node map misses a joint", _edit("wrist_3_joint = 8\n", ""), ["can_nodes", "wrist_3_joint"]),
     ("duplicate node", _edit("wrist_3_joint = 8", "wrist_3_joint = 3"), ["can_nodes", "distinct"]),
     ("node 200", _edit("wrist_3_joint = 8", "wrist_3_joint = 200"), ["can_nodes", "1..127"]),
     ("flange not in URDF", _edit('flange_frame = "tool0"', 'flange_frame = "tool9"'), ["flange_frame", "tool9"]),
-    ("no such example-robot-data URDF", _edit("ur5_robot.urdf", "ur7_robot.urdf"), ["ur7_robot.urdf", "example-robot-data"]),
-    ("URDF file not found", _edit('example_robot_data = "ur_description/urdf/ur5_robot.urdf"', 'file = "nope.urdf"'),
-     ["urdf.file", "nope.urdf"]),
-    ("both URDF sources", _edit('example_robot_data = "', 'file = "x.urdf"\nexample_robot_data = "'), ["urdf", "exactly one"]),
+    (
+        "no such example-robot-data URDF",
+        _edit("ur5_robot.urdf", "ur7_robot.urdf"),
+        ["ur7_robot.urdf", "example-robot-data"],
+    ),
+    (
+        "URDF file not found",
+        _edit('example_robot_data = "ur_description/urdf/ur5_robot.urdf"', 'file = "nope.urdf"'),
+        ["urdf.file", "nope.urdf"],
+    ),
+    (
+        "both URDF sources",
+        _edit('example_robot_data = "', 'file = "x.urdf"\nexample_robot_data = "'),
+        ["urdf", "exactly one"],
+    ),
     ("workspace inverted", _edit("high = [0.65, 0.40, 0.35]", "high = [0.25, 0.40, 0.35]"), ["workspace", "high"]),
 ]
 
@@ -109,9 +133,9 @@ def test_a_bad_arm_file_is_one_line_naming_the_file_and_the_key(tmp_path, change
 
 
 def test_unknown_arm_and_missing_arm_file_are_one_clear_message(tmp_path):
-    with pytest.raises(RobotSpecError, match="unknown robot 'kuka'.*known robots: ur10, ur5"):
+    with pytest.raises(RobotSpecError, match=r"unknown robot 'kuka'.*known robots: ur10, ur5"):
         load_robot(RobotConfig(name="kuka"))
-    with pytest.raises(RobotSpecError, match="unknown robot '../ur5'"):
+    with pytest.raises(RobotSpecError, match=r"unknown robot '../ur5'"):
         load_robot(RobotConfig(name="../ur5"))
-    with pytest.raises(RobotSpecError, match="robot.file: arm file not found: .*none.toml"):
+    with pytest.raises(RobotSpecError, match=r"robot.file: arm file not found: .*none.toml"):
         load_robot(RobotConfig(file=str(tmp_path / "none.toml")))

@@ -5,13 +5,16 @@ from __future__ import annotations
 import pytest
 
 
-@pytest.mark.parametrize("argv, words", [
-    (["--episodes", "-1"], ["--episodes", "'-1'"]),
-    (["--episodes", "0"], ["--episodes", "'0'"]),
-    (["--episodes", "2.5"], ["--episodes", "'2.5'"]),
-    (["--seed", "-1"], ["--seed", "'-1'"]),
-    (["--seed", "nan"], ["--seed", "'nan'"]),
-])
+@pytest.mark.parametrize(
+    "argv, words",
+    [
+        (["--episodes", "-1"], ["--episodes", "'-1'"]),
+        (["--episodes", "0"], ["--episodes", "'0'"]),
+        (["--episodes", "2.5"], ["--episodes", "'2.5'"]),
+        (["--seed", "-1"], ["--seed", "'-1'"]),
+        (["--seed", "nan"], ["--seed", "'nan'"]),
+    ],
+)
 def test_bad_numbers_are_refused_at_parse_time(run_cli, argv, words):
     run_cli(["expert", "--quiet", *argv]).assert_refused(*words)
 

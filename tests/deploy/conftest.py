@@ -43,8 +43,18 @@ def run_dry(tmp_path):
     `pose(cell)` may give the object pose source (default: the exact pose from the twin), `on_placed` runs
     after the object was placed; `runtime_cfg` sets the runtime (RuntimeConfig)."""
 
-    def run(episodes=1, seed=0, hook=None, env_cfg=None, safety=None, on_cell=None, max_recoveries=0, pose=None,
-            runtime_cfg=None, on_placed=None):
+    def run(
+        episodes=1,
+        seed=0,
+        hook=None,
+        env_cfg=None,
+        safety=None,
+        on_cell=None,
+        max_recoveries=0,
+        pose=None,
+        runtime_cfg=None,
+        on_placed=None,
+    ):
         cfg = env_cfg or EnvConfig()
         cells = []
 
@@ -58,10 +68,20 @@ def run_dry(tmp_path):
 
         log = tmp_path / f"run-{seed}.jsonl"
         with RunLog(log, {"test": "dry run"}) as run_log:
-            summary = dry_run(None, cfg, bus_config(), episodes, seed, run_log, safety,
-                              pose_factory=pose_factory,
-                              policy=Expert(cfg, (lambda o, p, a: hook(o, p, a, cells[0])) if hook else None),
-                              max_recoveries=max_recoveries, runtime_cfg=runtime_cfg, on_placed=on_placed)
+            summary = dry_run(
+                None,
+                cfg,
+                bus_config(),
+                episodes,
+                seed,
+                run_log,
+                safety,
+                pose_factory=pose_factory,
+                policy=Expert(cfg, (lambda o, p, a: hook(o, p, a, cells[0])) if hook else None),
+                max_recoveries=max_recoveries,
+                runtime_cfg=runtime_cfg,
+                on_placed=on_placed,
+            )
         return summary, log, cells[0]
 
     return run
@@ -95,12 +115,15 @@ def camera_scene(tmp_path_factory) -> CameraScene:
     d = tmp_path_factory.mktemp("camera")
     T = look_at(np.array(CAMERA_EYE), np.array(CAMERA_TARGET), np.array([0.0, 0.0, 1.0]))
     cam = CameraModel.from_pinhole(HOLOLENS2_PV)
-    calibration = save_calibration(CalibrationRecord(T, "DICT_4X4_50", 0.04, "board", 0.001, 0.002, 1, 80,
-                                                     camera=cam.to_dict()), d / "calibration.json")
+    calibration = save_calibration(
+        CalibrationRecord(T, "DICT_4X4_50", 0.04, "board", 0.001, 0.002, 1, 80, camera=cam.to_dict()),
+        d / "calibration.json",
+    )
     truths = [np.array([0.45, -0.12, 0.025]), np.array([0.58, -0.02, 0.025]), np.array([0.50, -0.07, 0.025])]
     yaws = [0.3, -1.2, 2.5]
-    images = render_marked_object(T, cam, [(p, pb.getQuaternionFromEuler([0, 0, y])) for p, y in zip(truths, yaws)],
-                                  0.05, "DICT_4X4_50", 0, 0.04)
+    images = render_marked_object(
+        T, cam, [(p, pb.getQuaternionFromEuler([0, 0, y])) for p, y in zip(truths, yaws)], 0.05, "DICT_4X4_50", 0, 0.04
+    )
     (d / "images").mkdir()
     for i, image in enumerate(images):
         cv2.imwrite(str(d / "images" / f"frame{i:02d}.png"), cv2.cvtColor(image, cv2.COLOR_RGB2BGR))

@@ -31,10 +31,17 @@ def _arm(name: str):
 @pytest.fixture
 def exported(tmp_path, policy_file):
     """exported(arm name or None for no arm, **metadata changes) -> policy file (one layer, constant offset)."""
+
     def write(name: str | None, **changes) -> Path:
         robot = {} if name is None else {"robot": {"name": name, "fingerprint": _arm(name).fingerprint}}
-        return policy_file(tmp_path / f"{name}.npz", task=to_dict(TaskConfig(horizon=HORIZON)), arrays={"b0": BIASES, "b0_carry": BIASES},
-                           **robot, **changes)
+        return policy_file(
+            tmp_path / f"{name}.npz",
+            task=to_dict(TaskConfig(horizon=HORIZON)),
+            arrays={"b0": BIASES, "b0_carry": BIASES},
+            **robot,
+            **changes,
+        )
+
     return write
 
 
@@ -42,13 +49,15 @@ def exported(tmp_path, policy_file):
 def test_a_policy_for_one_arm_is_refused_on_the_other(exported, trained, configured):
     path = exported(trained)
     assert ExportedPolicy.load(path, _arm(trained), TaskConfig(horizon=HORIZON)).metadata["robot"]["name"] == trained
-    with pytest.raises(PolicyFileError, match=f"exported for arm '{trained}', the configuration drives arm '{configured}'"):
+    with pytest.raises(
+        PolicyFileError, match=f"exported for arm '{trained}', the configuration drives arm '{configured}'"
+    ):
         ExportedPolicy.load(path, _arm(configured), TaskConfig(horizon=HORIZON))
 
 
 def test_same_name_with_another_tool_is_refused_by_the_fingerprint(exported):
     longer_cup = load_robot(RobotConfig(name="ur5", tool_offset=0.12))
-    with pytest.raises(PolicyFileError, match="fingerprint .*TCP offset"):
+    with pytest.raises(PolicyFileError, match=r"fingerprint .*TCP offset"):
         ExportedPolicy.load(exported("ur5"), longer_cup, TaskConfig(horizon=HORIZON))
 
 
@@ -57,7 +66,9 @@ def test_a_policy_without_an_arm_is_taken_for_the_ur5_only(exported, caplog):
     with caplog.at_level(logging.WARNING, logger="mrguide.deploy.policy"):
         ExportedPolicy.load(path, _arm("ur5"), TaskConfig(horizon=HORIZON))
     assert "records no arm" in caplog.text and "Re-export" in caplog.text
-    with pytest.raises(PolicyFileError, match="records no arm .*drives 'ur10': train and export a policy for this arm"):
+    with pytest.raises(
+        PolicyFileError, match=r"records no arm .*drives 'ur10': train and export a policy for this arm"
+    ):
         ExportedPolicy.load(path, _arm("ur10"), TaskConfig(horizon=HORIZON))
     with pytest.raises(PolicyFileError, match="metadata robot 'ur5' is not an object"):
         ExportedPolicy.load(exported(None, robot="ur5"), _arm("ur5"))
@@ -65,19 +76,31 @@ def test_a_policy_without_an_arm_is_taken_for_the_ur5_only(exported, caplog):
 
 def _config(tmp_path: Path, arm: str) -> Path:
     cfg = tmp_path / f"{arm}.toml"
-    cfg.write_text(f'[robot]\nname = "{arm}"\n[task]\nhorizon = {HORIZON}\n'
-                   f'[deploy]\nbus_config = "bus.toml"\nepisodes = 1\nlog_dir = "{tmp_path / "logs"}"\n')
+    cfg.write_text(
+        f'[robot]\nname = "{arm}"\n[task]\nhorizon = {HORIZON}\n'
+        f'[deploy]\nbus_config = "bus.toml"\nepisodes = 1\nlog_dir = "{tmp_path / "logs"}"\n'
+    )
     (tmp_path / "bus.toml").write_text(f'[bus]\ninterface = "virtual"\nchannel = "arm-{tmp_path.name}"\n')
     return cfg
 
 
 @pytest.mark.parametrize("trained, configured", [("ur5", "ur10"), ("ur10", "ur5")])
-def test_deploy_refuses_a_policy_of_another_arm_before_enabling(tmp_path, exported, monkeypatch, capsys, trained,
-                                                                 configured):
+def test_deploy_refuses_a_policy_of_another_arm_before_enabling(
+    tmp_path, exported, monkeypatch, capsys, trained, configured
+):
     enabled = []
     monkeypatch.setattr(Cobot, "enable", lambda self, timeout=None: enabled.append(1))
-    code = main(["deploy", "--policy", str(exported(trained)), "--config", str(_config(tmp_path, configured)),
-                 "--dry-run", "--quiet"])
+    code = main(
+        [
+            "deploy",
+            "--policy",
+            str(exported(trained)),
+            "--config",
+            str(_config(tmp_path, configured)),
+            "--dry-run",
+            "--quiet",
+        ]
+    )
     err = capsys.readouterr().err
     assert code == 2 and enabled == []
     assert err.startswith("mrguide deploy: ") and err.count("\n") == 1
@@ -86,8 +109,20 @@ def test_deploy_refuses_a_policy_of_another_arm_before_enabling(tmp_path, export
 
 def test_sim2real_refuses_a_real_cell_with_another_arm(tmp_path, exported, capsys):
     train_cfg = _config(tmp_path, "ur10")
-    code = main(["sim2real", "--policy", str(exported("ur10")), "--config", str(train_cfg), "--real-config",
-                 str(REPO / "configs" / "real_cell.toml"), "--out", str(tmp_path / "s2r"), "--quiet"])
+    code = main(
+        [
+            "sim2real",
+            "--policy",
+            str(exported("ur10")),
+            "--config",
+            str(train_cfg),
+            "--real-config",
+            str(REPO / "configs" / "real_cell.toml"),
+            "--out",
+            str(tmp_path / "s2r"),
+            "--quiet",
+        ]
+    )
     assert code == 2
     assert "exported for arm 'ur10', the configuration drives arm 'ur5'" in capsys.readouterr().err
     assert not (tmp_path / "s2r").exists()
@@ -95,8 +130,19 @@ def test_sim2real_refuses_a_real_cell_with_another_arm(tmp_path, exported, capsy
 
 def test_ur10_deploy_dry_run_over_the_simulated_bus(tmp_path, exported, capsys):
     log = tmp_path / "run.jsonl"
-    code = main(["deploy", "--policy", str(exported("ur10")), "--config", str(_config(tmp_path, "ur10")), "--dry-run",
-                 "--log", str(log), "--quiet"])
+    code = main(
+        [
+            "deploy",
+            "--policy",
+            str(exported("ur10")),
+            "--config",
+            str(_config(tmp_path, "ur10")),
+            "--dry-run",
+            "--log",
+            str(log),
+            "--quiet",
+        ]
+    )
     assert code == 0, capsys.readouterr().err
     ur10, ur5 = _arm("ur10"), _arm("ur5")
     steps = [r for r in read_log(log) if r["kind"] == "decision" and "setpoints" in r]

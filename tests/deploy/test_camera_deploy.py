@@ -9,8 +9,8 @@ import pytest
 from mrguide.deploy.camera import CameraSourceConfig
 from mrguide.deploy.runlog import read_log
 from mrguide.deploy.runtime import RuntimeConfig
-from mrguide.task import Outcome
 from mrguide.robot import load_robot
+from mrguide.task import Outcome
 from mrguide.twin.camera_feed import TwinCameraFeed, TwinCameraPoses
 from mrguide.twin.visual_arm import ArmDrawing
 
@@ -23,7 +23,7 @@ def _poses(scene, **changes) -> TwinCameraPoses:
 def test_dry_run_with_the_camera_source_places_the_object(run_dry, camera_scene):
     poses = _poses(camera_scene)
     try:
-        summary, log, cell = run_dry(episodes=1, seed=1, pose=poses, on_placed=poses.refresh)
+        summary, _log, _cell = run_dry(episodes=1, seed=1, pose=poses, on_placed=poses.refresh)
         stats = poses.stats()
     finally:
         poses.close()
@@ -67,9 +67,14 @@ def test_camera_dying_mid_episode_ends_it_pose_lost_with_the_log_intact(run_dry,
         return action
 
     try:
-        summary, log, _ = run_dry(episodes=1, seed=1, pose=poses, on_placed=poses.refresh, hook=kill_camera,
-                                  runtime_cfg=RuntimeConfig(track_carried_object=False, max_pose_misses=2,
-                                                            max_pose_misses_before_grasp=2))
+        summary, log, _ = run_dry(
+            episodes=1,
+            seed=1,
+            pose=poses,
+            on_placed=poses.refresh,
+            hook=kill_camera,
+            runtime_cfg=RuntimeConfig(track_carried_object=False, max_pose_misses=2, max_pose_misses_before_grasp=2),
+        )
         stats = poses.stats()
     finally:
         poses.close()
@@ -92,8 +97,10 @@ def camera_cfg(tmp_path, camera_scene):
 
     def write(deploy='pose_source = "camera"', camera="", extra="") -> object:
         path = tmp_path / "cfg.toml"
-        path.write_text(f'[deploy]\nbus_config = "bus.toml"\n{deploy}\n[deploy.camera]\n'
-                        f'calibration = "{camera_scene.calibration}"\nsource = "{camera_scene.folder}"\n{camera}\n{extra}')
+        path.write_text(
+            f'[deploy]\nbus_config = "bus.toml"\n{deploy}\n[deploy.camera]\n'
+            f'calibration = "{camera_scene.calibration}"\nsource = "{camera_scene.folder}"\n{camera}\n{extra}'
+        )
         return path
 
     return write
@@ -105,8 +112,21 @@ def test_cli_dry_run_with_the_camera_source(tmp_path, camera_cfg, run_cli, polic
 
     policy = policy_file(tmp_path / "p.npz", task=to_dict(TaskConfig(horizon=5)))
     log = tmp_path / "log.jsonl"
-    result = run_cli(["deploy", "--policy", policy, "--config", camera_cfg(extra="[task]\nhorizon = 5\n"),
-                      "--dry-run", "--episodes", 1, "--log", log, "--quiet"])
+    result = run_cli(
+        [
+            "deploy",
+            "--policy",
+            policy,
+            "--config",
+            camera_cfg(extra="[task]\nhorizon = 5\n"),
+            "--dry-run",
+            "--episodes",
+            1,
+            "--log",
+            log,
+            "--quiet",
+        ]
+    )
     assert result.code == 0, result.err
     assert "episodes: 1" in result.out and "camera: " in result.out and "detected" in result.out
     records = read_log(log)
@@ -120,8 +140,9 @@ def test_camera_check_on_a_folder_prints_the_rate_and_writes_the_overlay(tmp_pat
     import cv2
 
     overlay = tmp_path / "check.png"
-    result = run_cli(["camera", "check", "--config", camera_cfg(camera="frame_rate = 0.0"), "--frames", 3,
-                      "--overlay", overlay])
+    result = run_cli(
+        ["camera", "check", "--config", camera_cfg(camera="frame_rate = 0.0"), "--frames", 3, "--overlay", overlay]
+    )
     assert result.code == 0, result.err
     assert "3 frames, 3 poses (100% detected)" in result.out and "latency median" in result.out, result.out
     assert "object (marker 0) in the robot frame:" in result.out
@@ -140,7 +161,12 @@ BAD = [
     ("source -1", 'pose_source = "camera"', "source = -1", ["deploy.camera.source = -1"]),
     ("unknown key", 'pose_source = "camera"', "fps = 30", ["[deploy]", "fps"]),
     ("marker size 0", 'pose_source = "camera"', "marker_size_m = 0.0", ["deploy.camera.marker_size_m = 0.0"]),
-    ("calibration missing", 'pose_source = "camera"', 'calibration = "nope.json"', ["calibration file not found", "nope.json"]),
+    (
+        "calibration missing",
+        'pose_source = "camera"',
+        'calibration = "nope.json"',
+        ["calibration file not found", "nope.json"],
+    ),
 ]
 
 
@@ -150,13 +176,28 @@ def test_bad_camera_config_is_refused_in_one_line(tmp_path, camera_cfg, run_cli,
     text = path.read_text()
     if camera.startswith("calibration") or camera.startswith("source"):  # the later key would be a duplicate
         key = camera.split(" =")[0]
-        text = "\n".join(line for line in text.splitlines() if not line.startswith(key + " = \"/")) + "\n"
+        text = "\n".join(line for line in text.splitlines() if not line.startswith(key + ' = "/')) + "\n"
         path.write_text(text)
     log = tmp_path / "log.jsonl"
-    run_cli(["deploy", "--policy", policy_file(tmp_path / "p.npz"), "--config", path, "--dry-run", "--episodes", 1,
-             "--log", log, "--quiet"]).assert_refused(*words)
+    run_cli(
+        [
+            "deploy",
+            "--policy",
+            policy_file(tmp_path / "p.npz"),
+            "--config",
+            path,
+            "--dry-run",
+            "--episodes",
+            1,
+            "--log",
+            log,
+            "--quiet",
+        ]
+    ).assert_refused(*words)
     assert not log.exists()
-    run_cli(["camera", "check", "--config", path, "--frames", 1, "--overlay", tmp_path / "o.png"]).assert_refused(*words)
+    run_cli(["camera", "check", "--config", path, "--frames", 1, "--overlay", tmp_path / "o.png"]).assert_refused(
+        *words
+    )
 
 
 def test_camera_check_refuses_an_empty_folder_and_an_overlay_it_cannot_write(tmp_path, camera_cfg, run_cli):
@@ -164,7 +205,8 @@ def test_camera_check_refuses_an_empty_folder_and_an_overlay_it_cannot_write(tmp
     path = camera_cfg()
     path.write_text(path.read_text().replace("\nsource = ", '\nsource = "empty"\n# '))
     run_cli(["camera", "check", "--config", path, "--overlay", tmp_path / "o.png"]).assert_refused(
-        "camera check", "the folder holds no images")
+        "camera check", "the folder holds no images"
+    )
     run_cli(["camera", "check", "--config", path, "--overlay", tmp_path / "o.xyz"]).assert_refused("--overlay", ".xyz")
 
 

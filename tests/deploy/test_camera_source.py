@@ -9,15 +9,21 @@ import numpy as np
 import pytest
 
 from mrguide.calibration.errors import CalibrationFileError
-from mrguide.deploy.camera import (MAX_GRAB_FAILURES, CameraPoseSource, CameraSourceConfig, load_marker_pipeline,
-                                   open_camera_source)
+from mrguide.deploy.camera import (
+    MAX_GRAB_FAILURES,
+    CameraPoseSource,
+    CameraSourceConfig,
+    load_marker_pipeline,
+    open_camera_source,
+)
 from mrguide.deploy.frames import CameraError, Frame, FrameGrabError, ReplayFrames, folder_frames, open_frames
 from mrguide.pose_source import PoseUnavailable
 
 
 def _config(scene, **changes) -> CameraSourceConfig:
-    return CameraSourceConfig(**{"source": str(scene.folder), "calibration": str(scene.calibration),
-                                 "frame_rate": 0.0, **changes})
+    return CameraSourceConfig(
+        **{"source": str(scene.folder), "calibration": str(scene.calibration), "frame_rate": 0.0, **changes}
+    )
 
 
 def test_folder_replay_gives_robot_frame_positions_within_2_mm(camera_scene, tmp_path):
@@ -68,7 +74,9 @@ def test_pose_carries_its_capture_time_and_goes_stale_after_max_age(camera_scene
 
 def test_no_marker_in_view_means_no_pose(camera_scene, tmp_path):
     blank = np.full((720, 1280, 3), 200, np.uint8)
-    source = CameraPoseSource(ReplayFrames(2, lambda k: blank, 0.0), load_marker_pipeline(_config(camera_scene), tmp_path), 1.0)
+    source = CameraPoseSource(
+        ReplayFrames(2, lambda k: blank, 0.0), load_marker_pipeline(_config(camera_scene), tmp_path), 1.0
+    )
     with pytest.raises(PoseUnavailable, match="no more frames"):
         source.wait_for_pose(after=0.0, timeout=30)
     source.close()
@@ -103,7 +111,9 @@ def test_failing_grabs_stop_the_source_with_a_reason(camera_scene, tmp_path):
 
 def test_image_of_the_wrong_size_is_a_bad_input(camera_scene, tmp_path):
     small = np.zeros((480, 640, 3), np.uint8)
-    source = CameraPoseSource(ReplayFrames(1, lambda k: small, 0.0), load_marker_pipeline(_config(camera_scene), tmp_path), 1.0)
+    source = CameraPoseSource(
+        ReplayFrames(1, lambda k: small, 0.0), load_marker_pipeline(_config(camera_scene), tmp_path), 1.0
+    )
     source._thread.join(10)
     source.close()
     assert source.error is not None and "image is 640x480 but the intrinsics are for 1280x720" in str(source.error)
@@ -121,12 +131,15 @@ def test_unreadable_image_in_a_folder_is_skipped_and_counted(camera_scene, tmp_p
     assert (stats.frames, stats.poses, stats.grab_failures) == (1, 1, 1)
 
 
-@pytest.mark.parametrize("source, words", [
-    (57, ["camera source 57", "cannot open this device"]),
-    ("rtsp://127.0.0.1:9/none", ["rtsp://127.0.0.1:9/none", "cannot open this stream"]),
-    ("missing", ["camera source 'missing'", "no such folder or file"]),
-    ("empty", ["the folder holds no images"]),
-])
+@pytest.mark.parametrize(
+    "source, words",
+    [
+        (57, ["camera source 57", "cannot open this device"]),
+        ("rtsp://127.0.0.1:9/none", ["rtsp://127.0.0.1:9/none", "cannot open this stream"]),
+        ("missing", ["camera source 'missing'", "no such folder or file"]),
+        ("empty", ["the folder holds no images"]),
+    ],
+)
 def test_a_camera_that_cannot_be_opened_is_an_input_error(tmp_path, source, words):
     (tmp_path / "empty").mkdir()
     with pytest.raises(CameraError) as info:

@@ -14,13 +14,16 @@ from mrguide.drivers.cobot import Cobot
 from mrguide.drivers.errors import DriverError
 from mrguide.task import ACT_DIM, OBS_DIM
 
+
 @pytest.fixture
 def calls(monkeypatch):
     """Every Cobot.connect and Cobot.enable, in order."""
     seen: list[str] = []
     real_connect, real_enable = Cobot.connect, Cobot.enable
     monkeypatch.setattr(Cobot, "connect", lambda self: (seen.append("connect"), real_connect(self))[1])
-    monkeypatch.setattr(Cobot, "enable", lambda self, timeout=None: (seen.append("enable"), real_enable(self, timeout))[1])
+    monkeypatch.setattr(
+        Cobot, "enable", lambda self, timeout=None: (seen.append("enable"), real_enable(self, timeout))[1]
+    )
     return seen
 
 
@@ -65,16 +68,39 @@ POLICY_CASES = [
 @pytest.mark.parametrize("policy, words", [c[1:] for c in POLICY_CASES], ids=[c[0] for c in POLICY_CASES])
 def test_bad_policy_file_is_refused_before_enabling(cell, calls, run_cli, policy_file, policy, words):
     log = cell / "log.jsonl"
-    run_cli(["deploy", "--policy", policy_file(cell / "p.npz", **policy), "--config", _config(cell), "--dry-run",
-             "--episodes", 1, "--log", log, "--quiet"]).assert_refused(*words)
+    run_cli(
+        [
+            "deploy",
+            "--policy",
+            policy_file(cell / "p.npz", **policy),
+            "--config",
+            _config(cell),
+            "--dry-run",
+            "--episodes",
+            1,
+            "--log",
+            log,
+            "--quiet",
+        ]
+    ).assert_refused(*words)
     assert calls == [] and not log.exists()
 
 
 def test_real_bus_refuses_a_decision_period_the_control_cycle_cannot_run(cell, calls, run_cli, policy_file):
     policy = policy_file(cell / "p.npz", decision_period=0.006)
-    run_cli(["deploy", "--policy", policy, "--config", _config(cell, deploy='bus_config = "real_bus.toml"'),
-             "--enable-drives", "--log", cell / "log.jsonl", "--quiet"]).assert_refused(
-        "p.npz", "decision period 0.006 s is not a whole number of control periods (0.004 s)")
+    run_cli(
+        [
+            "deploy",
+            "--policy",
+            policy,
+            "--config",
+            _config(cell, deploy='bus_config = "real_bus.toml"'),
+            "--enable-drives",
+            "--log",
+            cell / "log.jsonl",
+            "--quiet",
+        ]
+    ).assert_refused("p.npz", "decision period 0.006 s is not a whole number of control periods (0.004 s)")
     assert calls == [] and not (cell / "log.jsonl").exists()
 
 
@@ -89,53 +115,132 @@ RUN_CASES = [
     ("--episodes nan", lambda d: ["--episodes", "nan", *_log(d)], _config, ["--episodes", "'nan'"]),
     ("--episodes 1.5", lambda d: ["--episodes", "1.5", *_log(d)], _config, ["--episodes", "'1.5'"]),
     ("--seed -1", lambda d: ["--seed", "-1", *_log(d)], _config, ["--seed", "'-1'"]),
-    ("--log /dev/full", lambda d: ["--log", "/dev/full"], _config,
-     ["--log /dev/full", "cannot write the run log", "No space left on device"]),
-    ("--log under a file", lambda d: ["--log", d / "afile" / "log.jsonl"], _config, ["--log", "afile", "cannot create"]),
+    (
+        "--log /dev/full",
+        lambda d: ["--log", "/dev/full"],
+        _config,
+        ["--log /dev/full", "cannot write the run log", "No space left on device"],
+    ),
+    (
+        "--log under a file",
+        lambda d: ["--log", d / "afile" / "log.jsonl"],
+        _config,
+        ["--log", "afile", "cannot create"],
+    ),
     ("--log a directory", lambda d: ["--log", d], _config, ["--log", "cannot create the run log"]),
-    ("log_dir under a file", lambda d: [], lambda d: _config(d, deploy='bus_config = "bus.toml"\nlog_dir = "afile/logs"'),
-     ["cfg.toml [deploy] log_dir", "afile", "cannot create the run log"]),
-    ("[deploy] episodes 0", _log, lambda d: _config(d, deploy='bus_config = "bus.toml"\nepisodes = 0'),
-     ["cfg.toml [deploy]", "deploy.episodes = 0"]),
-    ("[deploy] goals empty", _log, lambda d: _config(d, deploy='bus_config = "bus.toml"\ngoals = []'),
-     ["cfg.toml [deploy]", "deploy.goals"]),
-    ("[deploy] goal nan", _log, lambda d: _config(d, deploy='bus_config = "bus.toml"\ngoals = [[0.5, nan, 0.0]]'),
-     ["cfg.toml [deploy]", "goals[0][1] = nan"]),
-    ("five drives", _log, lambda d: _config(d, deploy='bus_config = "five.toml"'), ["five.toml", "joints: 5 drives configured"]),
-    ("dry run on a real bus", _log, lambda d: _config(d, deploy='bus_config = "real_bus.toml"'),
-     ["--dry-run needs the virtual CAN interface", "'socketcan'"]),
-    ("key with a line break", _log, lambda d: _config(d, deploy='bus_config = "bus.toml"\n"a\\nb" = 1'),
-     ["cfg.toml [deploy]", '"a\\nb"']),
-    ("[safety] stall_timeout nan", _log, lambda d: _config(d, extra="[safety]\nstall_timeout = nan\n"),
-     ["cfg.toml [safety]", "stall_timeout = nan"]),
+    (
+        "log_dir under a file",
+        lambda d: [],
+        lambda d: _config(d, deploy='bus_config = "bus.toml"\nlog_dir = "afile/logs"'),
+        ["cfg.toml [deploy] log_dir", "afile", "cannot create the run log"],
+    ),
+    (
+        "[deploy] episodes 0",
+        _log,
+        lambda d: _config(d, deploy='bus_config = "bus.toml"\nepisodes = 0'),
+        ["cfg.toml [deploy]", "deploy.episodes = 0"],
+    ),
+    (
+        "[deploy] goals empty",
+        _log,
+        lambda d: _config(d, deploy='bus_config = "bus.toml"\ngoals = []'),
+        ["cfg.toml [deploy]", "deploy.goals"],
+    ),
+    (
+        "[deploy] goal nan",
+        _log,
+        lambda d: _config(d, deploy='bus_config = "bus.toml"\ngoals = [[0.5, nan, 0.0]]'),
+        ["cfg.toml [deploy]", "goals[0][1] = nan"],
+    ),
+    (
+        "five drives",
+        _log,
+        lambda d: _config(d, deploy='bus_config = "five.toml"'),
+        ["five.toml", "joints: 5 drives configured"],
+    ),
+    (
+        "dry run on a real bus",
+        _log,
+        lambda d: _config(d, deploy='bus_config = "real_bus.toml"'),
+        ["--dry-run needs the virtual CAN interface", "'socketcan'"],
+    ),
+    (
+        "key with a line break",
+        _log,
+        lambda d: _config(d, deploy='bus_config = "bus.toml"\n"a\\nb" = 1'),
+        ["cfg.toml [deploy]", '"a\\nb"'],
+    ),
+    (
+        "[safety] stall_timeout nan",
+        _log,
+        lambda d: _config(d, extra="[safety]\nstall_timeout = nan\n"),
+        ["cfg.toml [safety]", "stall_timeout = nan"],
+    ),
 ]
 
 
 @pytest.mark.parametrize("make_argv, make_config, words", [c[1:] for c in RUN_CASES], ids=[c[0] for c in RUN_CASES])
-def test_bad_options_and_configs_are_refused_before_enabling(cell, calls, run_cli, policy_file, monkeypatch, make_argv,
-                                                            make_config, words):
+def test_bad_options_and_configs_are_refused_before_enabling(
+    cell, calls, run_cli, policy_file, monkeypatch, make_argv, make_config, words
+):
     monkeypatch.chdir(cell)
-    run_cli(["deploy", "--policy", policy_file(cell / "p.npz"), "--config", make_config(cell), "--dry-run", *make_argv(cell),
-             "--quiet"]).assert_refused(*words)
+    run_cli(
+        [
+            "deploy",
+            "--policy",
+            policy_file(cell / "p.npz"),
+            "--config",
+            make_config(cell),
+            "--dry-run",
+            *make_argv(cell),
+            "--quiet",
+        ]
+    ).assert_refused(*words)
     assert calls == []
     assert not (cell / "log.jsonl").exists() and not (cell / "runs").exists()
 
 
 def test_real_bus_without_confirmation_is_refused_in_one_line(cell, calls, run_cli, policy_file):
-    run_cli(["deploy", "--policy", policy_file(cell / "p.npz"), "--config", _config(cell, deploy='bus_config = "real_bus.toml"'),
-             "--log", cell / "log.jsonl", "--quiet"]).assert_refused("socketcan:mrguide-no-if", "--enable-drives")
+    run_cli(
+        [
+            "deploy",
+            "--policy",
+            policy_file(cell / "p.npz"),
+            "--config",
+            _config(cell, deploy='bus_config = "real_bus.toml"'),
+            "--log",
+            cell / "log.jsonl",
+            "--quiet",
+        ]
+    ).assert_refused("socketcan:mrguide-no-if", "--enable-drives")
     assert calls == [] and not (cell / "log.jsonl").exists()
 
 
 def test_a_run_that_fails_keeps_its_run_log_header(cell, calls, run_cli, policy_file, monkeypatch):
     """The drives fail to enable: exit 1, and the run log holds the run's metadata (not an empty file)."""
+
     def fail(self, timeout=None):
         raise DriverError("drives did not reach OPERATION ENABLED (test)")
 
     monkeypatch.setattr(Cobot, "enable", fail)
     log = cell / "log.jsonl"
-    result = run_cli(["deploy", "--policy", policy_file(cell / "p.npz"), "--config", _config(cell), "--dry-run",
-                      "--episodes", 2, "--seed", 7, "--log", log, "--quiet"])
+    result = run_cli(
+        [
+            "deploy",
+            "--policy",
+            policy_file(cell / "p.npz"),
+            "--config",
+            _config(cell),
+            "--dry-run",
+            "--episodes",
+            2,
+            "--seed",
+            7,
+            "--log",
+            log,
+            "--quiet",
+        ]
+    )
     assert result.code == 1 and "OPERATION ENABLED (test)" in result.err
     header, *rest = read_log(log)
     assert header["kind"] == "run" and header["dry_run"] is True and header["episodes"] == 2 and header["seed"] == 7

@@ -28,8 +28,13 @@ def test_real_bus_needs_confirmation(tmp_path, monkeypatch, capsys):
 
     connected = []
     monkeypatch.setattr(Cobot, "connect", lambda self: connected.append(1))
-    pol = export_actor(DDPG(*obs_scaling(load_robot().workspace), 4, DDPGConfig()).actor, tmp_path / "p.npz", load_robot(),
-                       TaskConfig(), 0.1)
+    pol = export_actor(
+        DDPG(*obs_scaling(load_robot().workspace), 4, DDPGConfig()).actor,
+        tmp_path / "p.npz",
+        load_robot(),
+        TaskConfig(),
+        0.1,
+    )
     bus = tmp_path / "bus.toml"
     bus.write_text('[bus]\ninterface = "socketcan"\nchannel = "can0"\n')
     cfg = tmp_path / "cfg.toml"
@@ -55,12 +60,16 @@ def _robot_cell_files(tmp_path, policy_file):
     from mrguide.task import TaskConfig
 
     channel = f"deploy-real-{tmp_path.name}"
-    (tmp_path / "bus.toml").write_text(f'[bus]\ninterface = "virtual"\nchannel = "{channel}"\n'
-                                       "[timing]\nheartbeat_period = 0.15\nheartbeat_timeout_factor = 3.0\n"
-                                       "max_missed_feedback = 25\n")
+    (tmp_path / "bus.toml").write_text(
+        f'[bus]\ninterface = "virtual"\nchannel = "{channel}"\n'
+        "[timing]\nheartbeat_period = 0.15\nheartbeat_timeout_factor = 3.0\n"
+        "max_missed_feedback = 25\n"
+    )
     cfg = tmp_path / "cfg.toml"
     cfg.write_text(f'[deploy]\nbus_config = "bus.toml"\nepisodes = 2\n[task]\nhorizon = {HORIZON}\n')
-    policy = policy_file(tmp_path / "p.npz", task=to_dict(TaskConfig(horizon=HORIZON)), arrays={"b0": BIASES, "b0_carry": BIASES})
+    policy = policy_file(
+        tmp_path / "p.npz", task=to_dict(TaskConfig(horizon=HORIZON)), arrays={"b0": BIASES, "b0_carry": BIASES}
+    )
     return cfg, policy
 
 
@@ -91,8 +100,10 @@ def test_real_bus_path_runs_the_policy_on_the_robot(robot_on_virtual_bus, tmp_pa
 
     cfg, policy, sim, prompts = robot_on_virtual_bus
     log = tmp_path / "log.jsonl"
-    assert main(["deploy", "--policy", str(policy), "--config", str(cfg), "--enable-drives", "--log", str(log),
-                 "--quiet"]) == 0, capsys.readouterr().err
+    assert (
+        main(["deploy", "--policy", str(policy), "--config", str(cfg), "--enable-drives", "--log", str(log), "--quiet"])
+        == 0
+    ), capsys.readouterr().err
     assert "episodes: 2" in capsys.readouterr().out
     assert len(prompts) == 2 and all("place the object at" in p for p in prompts)
     records = read_log(log)
@@ -105,13 +116,16 @@ def test_real_bus_path_runs_the_policy_on_the_robot(robot_on_virtual_bus, tmp_pa
     spec = load_robot()
     # a constant offset from the part's centre (the part is where the operator put it; the vacuum stays off)
     for r in steps:
-        assert np.allclose(r["target"], spec.workspace.clamp(np.array(r["obs"][5:8]) + 0.5 * np.tanh(BIASES[:3]))[0], atol=2e-4)
+        assert np.allclose(
+            r["target"], spec.workspace.clamp(np.array(r["obs"][5:8]) + 0.5 * np.tanh(BIASES[:3]))[0], atol=2e-4
+        )
     # the simulated drives followed the streamed setpoints away from home, and were disabled at the end
     last = np.array(steps[-1]["setpoints"][-1]) - spec.q_home
     moved = sim.plant.joint_positions() - spec.q_home  # where the arm came to rest after braking
     assert np.max(np.abs(last)) > 0.05
-    assert np.all(np.abs(moved) >= np.abs(last) - 1e-3) and np.all(np.sign(moved[np.abs(last) > 0.01]) ==
-                                                                 np.sign(last[np.abs(last) > 0.01]))
+    assert np.all(np.abs(moved) >= np.abs(last) - 1e-3) and np.all(
+        np.sign(moved[np.abs(last) > 0.01]) == np.sign(last[np.abs(last) > 0.01])
+    )
     assert all(d.state == SWITCH_ON_DISABLED for d in sim.drives)
 
 
@@ -119,7 +133,7 @@ def test_ctrl_c_quick_stops_exits_130_and_closes_the_log(robot_on_virtual_bus, t
     from mrguide.deploy.policy import ExportedPolicy
     from mrguide.deploy.runlog import RunLog
 
-    cfg, policy, sim, _ = robot_on_virtual_bus
+    cfg, policy, _sim, _ = robot_on_virtual_bus
     calls, closed = [], []
     real_call, real_close = ExportedPolicy.__call__, RunLog.close
 
@@ -136,7 +150,9 @@ def test_ctrl_c_quick_stops_exits_130_and_closes_the_log(robot_on_virtual_bus, t
     monkeypatch.setattr(ExportedPolicy, "__call__", interrupted)
     monkeypatch.setattr(RunLog, "close", close)
     log = tmp_path / "log.jsonl"
-    code = main(["deploy", "--policy", str(policy), "--config", str(cfg), "--enable-drives", "--log", str(log), "--quiet"])
+    code = main(
+        ["deploy", "--policy", str(policy), "--config", str(cfg), "--enable-drives", "--log", str(log), "--quiet"]
+    )
     assert code == 130
     assert capsys.readouterr().err.strip().endswith("mrguide deploy: interrupted")
     assert closed == [True]
@@ -155,5 +171,6 @@ def test_virtual_interface_without_dry_run_is_refused_for_users(tmp_path, policy
     monkeypatch.setattr(Cobot, "connect", lambda self: connected.append(1))
     cfg, policy = _robot_cell_files(tmp_path, policy_file)
     run_cli(["deploy", "--policy", policy, "--config", cfg, "--enable-drives", "--quiet"]).assert_refused(
-        "virtual interface", "--dry-run")
+        "virtual interface", "--dry-run"
+    )
     assert connected == []

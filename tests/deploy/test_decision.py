@@ -36,8 +36,15 @@ def test_one_clamp_rule_counted(step, spec):
     assert np.allclose(step.tcp(cmd.q_target), cmd.target, atol=1e-3)  # IK reached the target
 
 
-@pytest.mark.parametrize("bad, kind", [([np.nan, 0, 0, 0], NON_FINITE), ([0, 0, np.inf, 1], NON_FINITE),
-                                       ([0, 0, 0], BAD_SHAPE), ([[0, 0, 0, 0]], BAD_SHAPE)])
+@pytest.mark.parametrize(
+    "bad, kind",
+    [
+        ([np.nan, 0, 0, 0], NON_FINITE),
+        ([0, 0, np.inf, 1], NON_FINITE),
+        ([0, 0, 0], BAD_SHAPE),
+        ([[0, 0, 0, 0]], BAD_SHAPE),
+    ],
+)
 def test_bad_action_is_refused_and_nothing_changes(step, spec, bad, kind):
     before = step.streamer.snapshot()
     with pytest.raises(ActionError) as info:

@@ -24,11 +24,17 @@ G, PHI = 3, 4  # observation indices of the gripper state and the task progress
 
 
 def _write_policy(path: Path, layers: list[tuple[np.ndarray, np.ndarray]]) -> Path:
-    meta = {"format": FORMAT, "format_version": FORMAT_VERSION, "obs_layout": list(OBS_LAYOUT),
-            "act_layout": list(ACT_LAYOUT), "activations": ["relu"] * (len(layers) - 1) + ["tanh"],
-            "workspace": {"low": list(load_robot().workspace.low), "high": list(load_robot().workspace.high)},
-            "task": to_dict(TaskConfig()), "decision_period": 0.1,
-            "head": {"kind": HEAD_KIND, "max_offset": 0.5, "carry_progress": 0.5}}
+    meta = {
+        "format": FORMAT,
+        "format_version": FORMAT_VERSION,
+        "obs_layout": list(OBS_LAYOUT),
+        "act_layout": list(ACT_LAYOUT),
+        "activations": ["relu"] * (len(layers) - 1) + ["tanh"],
+        "workspace": {"low": list(load_robot().workspace.low), "high": list(load_robot().workspace.high)},
+        "task": to_dict(TaskConfig()),
+        "decision_period": 0.1,
+        "head": {"kind": HEAD_KIND, "max_offset": 0.5, "carry_progress": 0.5},
+    }
     arrays = {"metadata": np.array(json.dumps(meta))}
     for i, (W, b) in enumerate(layers):
         arrays[f"W{i}"], arrays[f"b{i}"] = W, b
@@ -58,8 +64,10 @@ def test_policy_with_non_finite_output_somewhere_in_the_workspace_is_refused(tmp
 
 def test_a_finite_policy_passes_the_probe(tmp_path):
     rng = np.random.default_rng(0)
-    path = _write_policy(tmp_path / "ok.npz", [(rng.normal(size=(16, OBS_DIM)), rng.normal(size=16)),
-                                               (rng.normal(size=(4, 16)), rng.normal(size=4))])
+    path = _write_policy(
+        tmp_path / "ok.npz",
+        [(rng.normal(size=(16, OBS_DIM)), rng.normal(size=16)), (rng.normal(size=(4, 16)), rng.normal(size=4))],
+    )
     policy = ExportedPolicy.load(path, load_robot(), TaskConfig())
     assert np.all(np.isfinite(policy(np.zeros(OBS_DIM))))
 

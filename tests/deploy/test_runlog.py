@@ -38,12 +38,15 @@ def test_a_complete_last_record_without_its_line_break_is_kept(tmp_path):
     assert [r.get("t") for r in read_log(path)[1:]] == [0, 1, 2, 3]
 
 
-@pytest.mark.parametrize("bad, line", [
-    ('{"kind": "decision", "t": 1', 3),  # a torn line in the middle: the log was cut and appended to
-    ("garbage", 3),
-    ("", 3),  # an empty line in the middle
-    ("[1, 2]", 3),  # JSON, but not a record
-])
+@pytest.mark.parametrize(
+    "bad, line",
+    [
+        ('{"kind": "decision", "t": 1', 3),  # a torn line in the middle: the log was cut and appended to
+        ("garbage", 3),
+        ("", 3),  # an empty line in the middle
+        ("[1, 2]", 3),  # JSON, but not a record
+    ],
+)
 def test_a_corrupt_line_elsewhere_is_an_error_naming_file_and_line(tmp_path, bad, line):
     path = _log(tmp_path)
     lines = path.read_text().splitlines()

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from mrguide.deploy.runlog import RunLog, read_log
-from mrguide.deploy.runtime import Runtime, RuntimeConfig, RunStopped
+from mrguide.deploy.runtime import RunStopped, Runtime, RuntimeConfig
 from mrguide.deploy.session import FixedObjectPose
 from mrguide.drivers.cobot_state import DriverStats, JointState, VacuumState
 from mrguide.drivers.errors import DriverError
@@ -69,9 +69,11 @@ def test_runtime_runs_on_any_cobot_interface(tmp_path):
     cobot = IdealCobot(spec.q_home)
     assert isinstance(cobot, CobotInterface)
     policy = lambda obs: oracle_action(obs, task, spec.workspace.to_normalized)  # noqa: E731
-    with RunLog(tmp_path / "log.jsonl", {"test": "interface"}) as log:
-        with Runtime(cobot, policy, FixedObjectPose((0.5, -0.075, 0.025)), spec, task, log, 0.1, RuntimeConfig()) as rt:
-            report = rt.run_episode(np.array([0.5, 0.21, 0.025]), 0)
+    with (
+        RunLog(tmp_path / "log.jsonl", {"test": "interface"}) as log,
+        Runtime(cobot, policy, FixedObjectPose((0.5, -0.075, 0.025)), spec, task, log, 0.1, RuntimeConfig()) as rt,
+    ):
+        report = rt.run_episode(np.array([0.5, 0.21, 0.025]), 0)
     assert report.outcome == "no_grasp" and report.decisions == task.horizon  # the cup never seals here
     assert len(cobot.streamed) >= task.horizon * 25
     first_phase = [r for r in read_log(tmp_path / "log.jsonl") if r["kind"] == "decision" and r.get("phase") == 1]
@@ -99,10 +101,12 @@ def test_a_driver_fault_outside_the_streaming_ends_the_episode_as_a_safety_stop(
 
     cobot.joint_state = failing_joint_state
     policy = lambda obs: oracle_action(obs, task, spec.workspace.to_normalized)  # noqa: E731
-    with RunLog(tmp_path / "log.jsonl", {"test": "interface"}) as log:
-        with Runtime(cobot, policy, FixedObjectPose((0.5, -0.075, 0.025)), spec, task, log, 0.1, RuntimeConfig()) as rt:
-            with pytest.raises(DriverError, match="hung"):
-                rt.run_episode(np.array([0.5, 0.21, 0.025]), 0)
+    with (
+        RunLog(tmp_path / "log.jsonl", {"test": "interface"}) as log,
+        Runtime(cobot, policy, FixedObjectPose((0.5, -0.075, 0.025)), spec, task, log, 0.1, RuntimeConfig()) as rt,
+        pytest.raises(DriverError, match="hung"),
+    ):
+        rt.run_episode(np.array([0.5, 0.21, 0.025]), 0)
     ends = [r for r in read_log(tmp_path / "log.jsonl") if r["kind"] == "episode_end"]
     assert [e["outcome"] for e in ends] == ["safety_stop"] and ends[0]["decisions"] == 2
 
@@ -131,11 +135,13 @@ def test_homing_waits_for_lagging_joints_then_judges(tmp_path, stuck, reaches):
     spec = load_robot()
     cobot = LaggingCobot(spec.q_home + 0.3, lag=0.06, stuck=stuck)
     policy = lambda obs: oracle_action(obs, TaskConfig(), spec.workspace.to_normalized)  # noqa: E731
-    with RunLog(tmp_path / "log.jsonl", {"test": "homing"}) as log:
-        with Runtime(cobot, policy, FixedObjectPose((0.5, -0.075, 0.025)), spec, TaskConfig(), log, 0.1) as rt:
-            if reaches:
+    with (
+        RunLog(tmp_path / "log.jsonl", {"test": "homing"}) as log,
+        Runtime(cobot, policy, FixedObjectPose((0.5, -0.075, 0.025)), spec, TaskConfig(), log, 0.1) as rt,
+    ):
+        if reaches:
+            rt.home()
+            assert np.max(np.abs(cobot.joint_state().positions - spec.q_home)) <= rt.cfg.home_tolerance
+        else:
+            with pytest.raises(RunStopped, match="did not reach home within 1 s"):
                 rt.home()
-                assert np.max(np.abs(cobot.joint_state().positions - spec.q_home)) <= rt.cfg.home_tolerance
-            else:
-                with pytest.raises(RunStopped, match="did not reach home within 1 s"):
-                    rt.home()

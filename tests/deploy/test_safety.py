@@ -1,5 +1,6 @@
 """Each safety reaction, provoked in a dry run and checked in the summary and the run log."""
 
+import itertools
 import time
 
 import numpy as np
@@ -69,7 +70,7 @@ def test_stalled_decision_loop_triggers_the_watchdog(run_dry):
             time.sleep(0.6)
         return a
 
-    summary, log, cell = run_dry(hook=stall)
+    summary, log, _cell = run_dry(hook=stall)
     assert ("stall", "quick_stop") in events(log)
     assert summary.stopped is not None and "stall" in summary.stopped
 
@@ -83,7 +84,7 @@ def test_safety_stop_fails_its_episode_and_recovery_runs_the_next(run_dry):
             time.sleep(0.6)
         return a
 
-    summary, log, cell = run_dry(episodes=2, hook=stall_once, max_recoveries=1)
+    summary, log, _cell = run_dry(episodes=2, hook=stall_once, max_recoveries=1)
     assert [e.outcome for e in summary.episodes] == ["safety_stop", "success"]
     assert summary.recoveries == 1 and summary.stopped is None
     kinds = [r["kind"] for r in read_log(log)]
@@ -96,7 +97,7 @@ def test_recovery_fails_while_the_cause_persists(run_dry):
             cell.sim.faults.silence(5)
         return a
 
-    summary, log, _ = run_dry(episodes=3, hook=silence_in_transport, max_recoveries=3)
+    summary, _log, _ = run_dry(episodes=3, hook=silence_in_transport, max_recoveries=3)
     assert [e.outcome for e in summary.episodes] == ["safety_stop"]
     assert summary.recoveries == 0 and "recovery failed" in summary.stopped and "node 5" in summary.stopped
 
@@ -144,7 +145,7 @@ def test_following_error_quick_stops_the_run(run_dry):
             cell.sim.faults.set_position_error(4, 0.2)
         return a
 
-    summary, log, cell = run_dry(hook=slip_in_lift)
+    summary, log, _cell = run_dry(hook=slip_in_lift)
     ev = events(log)
     assert ev[-1] == ("following_error", "quick_stop"), ev
     assert summary.stopped is not None and "following_error" in summary.stopped
@@ -178,7 +179,7 @@ def test_setpoint_beyond_a_joint_limit_quick_stops_before_it_is_sent(run_dry, mo
         return a
 
     monkeypatch.setattr(JointStreamer, "step", faulty_step)
-    summary, log, cell = run_dry(hook=arm_in_grasp)
+    summary, log, _cell = run_dry(hook=arm_in_grasp)
     ev = events(log)
     assert ev[-1] == ("joint_limit", "quick_stop"), ev
     assert summary.stopped is not None and "joint_limit" in summary.stopped
@@ -236,8 +237,9 @@ def test_missing_pose_uses_the_last_one_a_few_times_then_stops_the_episode(run_d
             sources[0].failing = True
         return a
 
-    summary, log, cell = run_dry(hook=lose_in_grasp, pose=make_source,
-                                 runtime_cfg=RuntimeConfig(max_pose_misses_before_grasp=3))
+    summary, log, cell = run_dry(
+        hook=lose_in_grasp, pose=make_source, runtime_cfg=RuntimeConfig(max_pose_misses_before_grasp=3)
+    )
     ev = events(log)
     assert ev == [("pose_unavailable", "last_known")] * 3 + [("pose_lost", "abort")], ev
     assert summary.episodes[0].outcome == "pose_lost" and summary.stopped is None  # the episode ended, cleanly
@@ -264,8 +266,9 @@ def test_before_the_grasp_the_last_pose_serves_longer(run_dry, lost_in):
         sources[0].failing = phase == lost_in
         return a
 
-    summary, log, _ = run_dry(hook=lose, pose=make_source,
-                              runtime_cfg=RuntimeConfig(max_pose_misses=2, max_pose_misses_before_grasp=30))
+    summary, _log, _ = run_dry(
+        hook=lose, pose=make_source, runtime_cfg=RuntimeConfig(max_pose_misses=2, max_pose_misses_before_grasp=30)
+    )
     assert summary.episodes[0].outcome == "success", summary.text()
     misses = summary.episodes[0].events.get("pose_unavailable", 0)
     assert (misses > 2) if lost_in in (0, 1) else (misses == 0)
@@ -298,7 +301,7 @@ def test_carried_object_is_placed_under_the_cup(run_dry, track):
     records = decisions(log)
     # the object position of a decision is found in the phase the previous decision left (the logged phase
     # is the one after this decision's task step)
-    carried = [r for prev, r in zip(records, records[1:]) if prev["phase"] in (2, 3) and r["part"]]
+    carried = [r for prev, r in itertools.pairwise(records) if prev["phase"] in (2, 3) and r["part"]]
     assert len(carried) >= 5
     for r in carried:
         under_cup = np.array(r["obs"][0:3]) - [0.0, 0.0, 0.5 * h]

@@ -33,8 +33,9 @@ def test_bad_safety_values_are_refused_at_load_naming_file_section_and_key(tmp_p
 
 
 def test_the_defaults_and_the_dry_run_values_are_accepted():
-    assert SafetyConfig() == SafetyConfig(following_error=0.05, max_consecutive_ik_failures=3, stall_timeout=0.25,
-                                          limit_tolerance=1e-6)
+    assert SafetyConfig() == SafetyConfig(
+        following_error=0.05, max_consecutive_ik_failures=3, stall_timeout=0.25, limit_tolerance=1e-6
+    )
     SafetyConfig(following_error=0.1)
 
 

@@ -23,14 +23,16 @@ from mrguide.drivers.mock import FirstOrderParams, FirstOrderPlant, SimulatedCob
 from mrguide.drivers.realtime import freeze_heap
 from mrguide.robot import RobotSpec, load_robot
 
-TEST_TIMING = TimingConfig(heartbeat_period=0.05, boot_timeout=2.0, enable_timeout=1.0, max_missed_feedback=50,
-                           setpoint_queue_depth=8)
+TEST_TIMING = TimingConfig(
+    heartbeat_period=0.05, boot_timeout=2.0, enable_timeout=1.0, max_missed_feedback=50, setpoint_queue_depth=8
+)
 
 
 def _make_config(**timing: float | int) -> CobotBusConfig:
     """Default bus description on a fresh virtual channel, with test timing (overridable per key)."""
-    return replace(CobotBusConfig(), bus=BusConfig(channel=f"test-{uuid.uuid4().hex[:10]}"),
-                   timing=replace(TEST_TIMING, **timing))
+    return replace(
+        CobotBusConfig(), bus=BusConfig(channel=f"test-{uuid.uuid4().hex[:10]}"), timing=replace(TEST_TIMING, **timing)
+    )
 
 
 @pytest.fixture

@@ -61,6 +61,6 @@ def test_missing_node_is_named_at_boot(make_config, robot):
 def test_no_devices_at_all_is_a_clear_boot_error(make_config, robot):
     config = make_config(boot_timeout=0.2)
     cobot = Cobot(config, robot)
-    with pytest.raises(BootError, match="no boot-up message from node 3 .* node 16"):
+    with pytest.raises(BootError, match=r"no boot-up message from node 3 .* node 16"):
         cobot.connect()
     assert not cobot.status().connected

@@ -4,8 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from mrguide.drivers.cia402 import (OPERATION_ENABLED, PowerCommand, controlword_for, decode_state,
-                                    interpolation_period)
+from mrguide.drivers.cia402 import OPERATION_ENABLED, PowerCommand, controlword_for, decode_state, interpolation_period
 from mrguide.drivers.errors import BootError
 from mrguide.drivers.mock.drive_sim import _STATE_BITS, SW_REMOTE, SW_VOLTAGE_ENABLED, next_power_state
 

@@ -35,26 +35,58 @@ def _eds(tmp_path, name: str, text: str | bytes) -> str:
 
 CASES = [
     # (id, TOML of the bus description given the tmp dir, words in the one stderr line)
-    ("five joints", lambda d: SIX_JOINTS.rsplit("[[joints]]", 1)[0], ["bus.toml", "joints: 5 drives configured", "6 joints"]),
+    (
+        "five joints",
+        lambda d: SIX_JOINTS.rsplit("[[joints]]", 1)[0],
+        ["bus.toml", "joints: 5 drives configured", "6 joints"],
+    ),
     ("seven joints", lambda d: SIX_JOINTS + "[[joints]]\n", ["bus.toml", "7 drives"]),
-    ("not an EDS", lambda d: f'[drives]\neds = "{_eds(d, "x.eds", "garbage")}"\n',
-     ["drives.eds", "x.eds", "not a readable EDS file"]),
-    ("corrupt EDS", lambda d: f'[drives]\neds = "{_eds(d, "x.eds", CORRUPT_EDS)}"\n',
-     ["drives.eds", "x.eds", "not a readable EDS file"]),
-    ("binary EDS", lambda d: f'[vacuum]\neds = "{_eds(d, "x.eds", bytes(range(256)) * 4)}"\n',
-     ["vacuum.eds", "x.eds", "not a readable EDS file"]),
-    ("EDS of another format", lambda d: f'[drives]\neds = "{_eds(d, "x.toml", "a = 1")}"\n',
-     ["drives.eds", "x.toml", "not a readable EDS file"]),
-    ("EDS without the target", lambda d: f'[drives]\neds = "{_eds(d, "x.eds", _without_object(DRIVE_EDS, "607A"))}"\n',
-     ["drives.eds", "x.eds", "lacks object(s) 0x607A"]),
-    ("vacuum EDS for the drives", lambda d: '[drives]\neds = "vacuum_generator.eds"\n',
-     ["drives.eds", "vacuum_generator.eds", "0x6040"]),
+    (
+        "not an EDS",
+        lambda d: f'[drives]\neds = "{_eds(d, "x.eds", "garbage")}"\n',
+        ["drives.eds", "x.eds", "not a readable EDS file"],
+    ),
+    (
+        "corrupt EDS",
+        lambda d: f'[drives]\neds = "{_eds(d, "x.eds", CORRUPT_EDS)}"\n',
+        ["drives.eds", "x.eds", "not a readable EDS file"],
+    ),
+    (
+        "binary EDS",
+        lambda d: f'[vacuum]\neds = "{_eds(d, "x.eds", bytes(range(256)) * 4)}"\n',
+        ["vacuum.eds", "x.eds", "not a readable EDS file"],
+    ),
+    (
+        "EDS of another format",
+        lambda d: f'[drives]\neds = "{_eds(d, "x.toml", "a = 1")}"\n',
+        ["drives.eds", "x.toml", "not a readable EDS file"],
+    ),
+    (
+        "EDS without the target",
+        lambda d: f'[drives]\neds = "{_eds(d, "x.eds", _without_object(DRIVE_EDS, "607A"))}"\n',
+        ["drives.eds", "x.eds", "lacks object(s) 0x607A"],
+    ),
+    (
+        "vacuum EDS for the drives",
+        lambda d: '[drives]\neds = "vacuum_generator.eds"\n',
+        ["drives.eds", "vacuum_generator.eds", "0x6040"],
+    ),
     ("missing EDS", lambda d: '[vacuum]\neds = "nope.eds"\n', ["vacuum.eds", "nope.eds", "not found"]),
-    ("unknown option", lambda d: "[bus]\noptions = { recieve_own_messages = true }\n",
-     ["bus.toml", "bus.options", "recieve_own_messages", "'virtual'", "receive_own_messages"]),
-    ("option for another interface", lambda d: "[bus]\noptions = { tty_baudrate = 115200 }\n",
-     ["bus.options", "tty_baudrate"]),
-    ("non-finite option", lambda d: "[bus]\noptions = { rx_queue_size = inf }\n", ["bus.options: 'rx_queue_size' = inf"]),
+    (
+        "unknown option",
+        lambda d: "[bus]\noptions = { recieve_own_messages = true }\n",
+        ["bus.toml", "bus.options", "recieve_own_messages", "'virtual'", "receive_own_messages"],
+    ),
+    (
+        "option for another interface",
+        lambda d: "[bus]\noptions = { tty_baudrate = 115200 }\n",
+        ["bus.options", "tty_baudrate"],
+    ),
+    (
+        "non-finite option",
+        lambda d: "[bus]\noptions = { rx_queue_size = inf }\n",
+        ["bus.options: 'rx_queue_size' = inf"],
+    ),
     ("wrong-typed number", lambda d: '[timing]\nboot_timeout = "3 s"\n', ["bus.toml", "timing.boot_timeout", "'3 s'"]),
     ("boot timeout nan", lambda d: "[timing]\nboot_timeout = nan\n", ["bus.toml", "timing.boot_timeout = nan"]),
     ("enable timeout inf", lambda d: "[timing]\nenable_timeout = inf\n", ["timing.enable_timeout = inf"]),
@@ -66,6 +98,7 @@ CASES = [
 @pytest.fixture
 def no_devices(monkeypatch):
     """Fail the test if simulated devices are created."""
+
     def started(*args, **kwargs):
         raise AssertionError("simulated devices were created before the bus description was refused")
 
@@ -76,8 +109,9 @@ def no_devices(monkeypatch):
 @pytest.mark.parametrize("make_toml, words", [c[1:] for c in CASES], ids=[c[0] for c in CASES])
 def test_bad_bus_description_is_refused_at_load(tmp_path, run_cli, no_devices, command, make_toml, words):
     path = tmp_path / "bus.toml"
-    path.write_text(f'[bus]\nchannel = "bad-input-{command}"\n' * ("[bus]" not in make_toml(tmp_path))
-                    + make_toml(tmp_path))
+    path.write_text(
+        f'[bus]\nchannel = "bad-input-{command}"\n' * ("[bus]" not in make_toml(tmp_path)) + make_toml(tmp_path)
+    )
     argv = ["bus", command, "--config", path] + (["--simulate", "--duration", "0.1"] if command == "monitor" else [])
     line = run_cli(argv).assert_refused(*words)
     assert line.startswith(f"mrguide bus {command}: ")

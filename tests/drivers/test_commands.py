@@ -30,19 +30,33 @@ def test_monitor_with_simulated_cobot_decodes_traffic(tmp_path, capsys):
     config = _toml(tmp_path, '[bus]\nchannel = "cli-monitor"\n')
     assert _run(["bus", "monitor", "--config", config, "--duration", "0.6", "--simulate"]) == 0
     out = capsys.readouterr().out
-    for word in ("NMT RESET COMMUNICATION", "BOOT-UP", "SDO request", "SYNC", "TPDO1 node 3", "statusword=",
-                 "frames in 0.6 s"):
+    for word in (
+        "NMT RESET COMMUNICATION",
+        "BOOT-UP",
+        "SDO request",
+        "SYNC",
+        "TPDO1 node 3",
+        "statusword=",
+        "frames in 0.6 s",
+    ):
         assert word in out
 
 
-@pytest.mark.parametrize("argv_tail, toml, words, exit_code", [
-    (["selftest"], "[bus]\nbitrate = 7\n", ["mrguide bus selftest: ", "bus.bitrate"], 2),
-    (["monitor", "--duration", "0.1"], "[timing\n", ["mrguide bus monitor: ", "not valid TOML"], 2),
-    (["selftest"], '[bus]\ninterface = "socketcan"\nchannel = "can9"\n', ["--allow-motion"], 2),
-    (["monitor", "--simulate"], '[bus]\ninterface = "socketcan"\nchannel = "can9"\n', ["virtual bus"], 2),
-    (["selftest", "--allow-motion"], '[bus]\ninterface = "socketcan"\nchannel = "mrguide-no-if"\n',
-     ["CAN driver error", "mrguide-no-if"], 1),
-])
+@pytest.mark.parametrize(
+    "argv_tail, toml, words, exit_code",
+    [
+        (["selftest"], "[bus]\nbitrate = 7\n", ["mrguide bus selftest: ", "bus.bitrate"], 2),
+        (["monitor", "--duration", "0.1"], "[timing\n", ["mrguide bus monitor: ", "not valid TOML"], 2),
+        (["selftest"], '[bus]\ninterface = "socketcan"\nchannel = "can9"\n', ["--allow-motion"], 2),
+        (["monitor", "--simulate"], '[bus]\ninterface = "socketcan"\nchannel = "can9"\n', ["virtual bus"], 2),
+        (
+            ["selftest", "--allow-motion"],
+            '[bus]\ninterface = "socketcan"\nchannel = "mrguide-no-if"\n',
+            ["CAN driver error", "mrguide-no-if"],
+            1,
+        ),
+    ],
+)
 def test_bad_config_or_bus_gives_one_clear_line_and_nonzero_exit(tmp_path, capsys, argv_tail, toml, words, exit_code):
     config = _toml(tmp_path, toml)
     code = _run(["bus", *argv_tail[:1], "--config", config, *argv_tail[1:]])

@@ -9,8 +9,15 @@ import numpy as np
 import pytest
 
 from mrguide.config import ConfigError
-from mrguide.drivers.config import (BusConfig, CobotBusConfig, JointDriveConfig, LimitOverrides, TimingConfig,
-                                    load_cobot_bus_config, resolve_limits)
+from mrguide.drivers.config import (
+    BusConfig,
+    CobotBusConfig,
+    JointDriveConfig,
+    LimitOverrides,
+    TimingConfig,
+    load_cobot_bus_config,
+    resolve_limits,
+)
 from mrguide.drivers.conversion import JointConversion
 from tests.config_keys import undocumented
 
@@ -30,30 +37,33 @@ def test_repo_toml_documents_every_setting_and_takes_the_arm_limits(robot):
     np.testing.assert_array_equal(limits.v_max, robot.v_max)
 
 
-@pytest.mark.parametrize("toml, words", [
-    ('[bus]\ninterface = "cann"\n', ["bus.interface", "cann"]),
-    ("[bus]\nbitrate = 123456\n", ["bus.bitrate", "123456"]),
-    ("[timing]\ncontrol_period = 0.2\n", ["timing.control_period"]),
-    ("[timing]\nheartbeat_period = 0.0505\n", ["timing.heartbeat_period"]),
-    ("[timing]\ncontrol_perod = 0.004\n", ["control_perod"]),
-    ("[vacuum]\nnode_id = 3\n", ["unique", "3"]),
-    ("[vacuum]\nnode_id = 200\n", ["vacuum.node_id", "200"]),
-    ("[master]\nnode_id = 16\n", ["unique", "master.node_id", "16"]),
-    ("[master]\nnode_id = 0\n", ["master.node_id", "0"]),
-    ("[timing]\nheartbeat_period = 30.0\nheartbeat_timeout_factor = 3.0\n", ["65.535 s", "master"]),
-    ("[timing]\nheartbeat_timeout_factor = 2.0\n", ["timing.heartbeat_timeout_factor", "2.5", "lost heartbeat"]),
-    ('[drives]\neds = "nope.eds"\n', ["drives.eds", "nope.eds"]),
-    ("[drives]\nquick_stop_option = 3\n", ["quick_stop_option"]),
-    ("[[joints]]\ndirection = 2\n" + "[[joints]]\n" * 5, ["joints (node 3).direction"]),
-    ("[[joints]]\nnode_id = 3\n" * 6, ["joints[0].node_id", "can_nodes", "ur5.toml"]),
-    ("[[joints]]\n" * 5, ["joints: 5 drives configured", "ur5 has 6 joints"]),
-    ('[timing]\nboot_timeout = "long"\n', ["timing.boot_timeout", "'long'"]),
-    ("[timing]\nboot_timeout = nan\n", ["timing.boot_timeout", "nan"]),
-    ("[timing]\nenable_timeout = inf\n", ["timing.enable_timeout", "inf"]),
-    ("[bus]\noptions = { recieve_own_messages = true }\n", ["bus.options", "recieve_own_messages", "virtual"]),
-    ("[bus]\noptions = { rx_queue_size = nan }\n", ["bus.options: 'rx_queue_size' = nan"]),
-    ("[[joints]]\n" + "[[joints]]\ngear_ratio = 0.0\n" + "[[joints]]\n" * 4, ["joints (node 4).gear_ratio"]),
-])
+@pytest.mark.parametrize(
+    "toml, words",
+    [
+        ('[bus]\ninterface = "cann"\n', ["bus.interface", "cann"]),
+        ("[bus]\nbitrate = 123456\n", ["bus.bitrate", "123456"]),
+        ("[timing]\ncontrol_period = 0.2\n", ["timing.control_period"]),
+        ("[timing]\nheartbeat_period = 0.0505\n", ["timing.heartbeat_period"]),
+        ("[timing]\ncontrol_perod = 0.004\n", ["control_perod"]),
+        ("[vacuum]\nnode_id = 3\n", ["unique", "3"]),
+        ("[vacuum]\nnode_id = 200\n", ["vacuum.node_id", "200"]),
+        ("[master]\nnode_id = 16\n", ["unique", "master.node_id", "16"]),
+        ("[master]\nnode_id = 0\n", ["master.node_id", "0"]),
+        ("[timing]\nheartbeat_period = 30.0\nheartbeat_timeout_factor = 3.0\n", ["65.535 s", "master"]),
+        ("[timing]\nheartbeat_timeout_factor = 2.0\n", ["timing.heartbeat_timeout_factor", "2.5", "lost heartbeat"]),
+        ('[drives]\neds = "nope.eds"\n', ["drives.eds", "nope.eds"]),
+        ("[drives]\nquick_stop_option = 3\n", ["quick_stop_option"]),
+        ("[[joints]]\ndirection = 2\n" + "[[joints]]\n" * 5, ["joints (node 3).direction"]),
+        ("[[joints]]\nnode_id = 3\n" * 6, ["joints[0].node_id", "can_nodes", "ur5.toml"]),
+        ("[[joints]]\n" * 5, ["joints: 5 drives configured", "ur5 has 6 joints"]),
+        ('[timing]\nboot_timeout = "long"\n', ["timing.boot_timeout", "'long'"]),
+        ("[timing]\nboot_timeout = nan\n", ["timing.boot_timeout", "nan"]),
+        ("[timing]\nenable_timeout = inf\n", ["timing.enable_timeout", "inf"]),
+        ("[bus]\noptions = { recieve_own_messages = true }\n", ["bus.options", "recieve_own_messages", "virtual"]),
+        ("[bus]\noptions = { rx_queue_size = nan }\n", ["bus.options: 'rx_queue_size' = nan"]),
+        ("[[joints]]\n" + "[[joints]]\ngear_ratio = 0.0\n" + "[[joints]]\n" * 4, ["joints (node 4).gear_ratio"]),
+    ],
+)
 def test_bad_values_name_the_key_and_the_file(tmp_path, toml, words):
     path = tmp_path / "bus.toml"
     path.write_text(toml)
@@ -83,7 +93,7 @@ def test_joint_count_and_int32_range_are_checked(robot):
 
 
 def test_direct_construction_validates_too():
-    with pytest.raises(ConfigError, match="bus.interface"):
+    with pytest.raises(ConfigError, match=r"bus.interface"):
         BusConfig(interface="nonsense")
     with pytest.raises(ConfigError, match="realtime_priority"):
         TimingConfig(realtime_priority=120)
@@ -100,15 +110,28 @@ def test_counts_radians_round_trip(direction, offset):
     assert conv.velocity_to_rad(conv.velocity_to_counts(1.5)) == pytest.approx(1.5, abs=1e-6)
 
 
-@pytest.mark.parametrize("section, key, value", [
-    (section, key, value)
-    for section, key in [("timing", "boot_timeout"), ("timing", "enable_timeout"), ("timing", "sdo_timeout"),
-                         ("timing", "heartbeat_timeout_factor"), ("timing", "heartbeat_period"),
-                         ("timing", "control_period"), ("drives", "following_error_window"),
-                         ("drives", "quick_stop_deceleration")]
-    for value in ("nan", "inf", "-inf", "-1.0", "1e9")
-] + [("timing", key, value) for key in ("max_missed_feedback", "setpoint_queue_depth")
-     for value in ("0", "-3", "100000")])
+@pytest.mark.parametrize(
+    "section, key, value",
+    [
+        (section, key, value)
+        for section, key in [
+            ("timing", "boot_timeout"),
+            ("timing", "enable_timeout"),
+            ("timing", "sdo_timeout"),
+            ("timing", "heartbeat_timeout_factor"),
+            ("timing", "heartbeat_period"),
+            ("timing", "control_period"),
+            ("drives", "following_error_window"),
+            ("drives", "quick_stop_deceleration"),
+        ]
+        for value in ("nan", "inf", "-inf", "-1.0", "1e9")
+    ]
+    + [
+        ("timing", key, value)
+        for key in ("max_missed_feedback", "setpoint_queue_depth")
+        for value in ("0", "-3", "100000")
+    ],
+)
 def test_timing_values_that_arm_safety_must_be_finite_and_in_range(tmp_path, section, key, value):
     """NaN or inf would switch a supervision off (a time-out that never expires) or crash it later."""
     path = tmp_path / "bus.toml"

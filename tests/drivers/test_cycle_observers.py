@@ -24,7 +24,7 @@ def test_an_observer_exception_latches_a_fault_and_quick_stops(rig):
 
     cobot.add_cycle_observer(broken_monitor)
     q = cobot.setpoint
-    with pytest.raises(DriverError, match="broken_monitor.*ZeroDivisionError") as info:
+    with pytest.raises(DriverError, match=r"broken_monitor.*ZeroDivisionError") as info:
         for _ in range(500):
             q = q + np.full(6, 0.2 * cobot.period)
             cobot.stream(q)

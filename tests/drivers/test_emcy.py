@@ -27,8 +27,11 @@ def test_drive_fault_stops_motion_and_fault_reset_recovers(rig):
     assert error.node_id == 4 and error.name == "shoulder_lift_joint" and error.emcy_code == 0x2310
     assert "0x2310" in str(error)
     assert rig.wait_until(lambda: cobot.status().drive_states["shoulder_lift_joint"] == "FAULT")
-    assert rig.wait_until(lambda: all(s == SWITCH_ON_DISABLED for n, s in cobot.status().drive_states.items()
-                                      if n != "shoulder_lift_joint"))
+    assert rig.wait_until(
+        lambda: all(
+            s == SWITCH_ON_DISABLED for n, s in cobot.status().drive_states.items() if n != "shoulder_lift_joint"
+        )
+    )
     p1 = cobot.joint_state().positions
     time.sleep(0.1)
     assert np.max(np.abs(cobot.joint_state().positions - p1)) < 1e-5  # the arm stands still

@@ -29,7 +29,7 @@ def _call_with_deadline(call: Callable[[], object]) -> tuple[bool, BaseException
     def run() -> None:
         try:
             call()
-        except BaseException as exc:  # noqa: BLE001 - handed to the test
+        except BaseException as exc:
             outcome["error"] = exc
 
     t0 = time.monotonic()
@@ -63,10 +63,10 @@ def test_stop_and_stream_return_while_the_control_thread_hangs_holding_the_lock(
     monkeypatch.setattr(cobot._loop, "cycle", hang_holding_the_lock)
     assert held.wait(1.0), "the control thread never took the lock"
     try:
-        finished, error, took = _call_with_deadline(cobot.stop)
+        finished, error, _took = _call_with_deadline(cobot.stop)
         assert finished and error is None, f"stop() hung or raised: {error!r}"
         for name, call in (("stream", lambda: cobot.stream(q)), ("check", cobot.check)):
-            finished, error, took = _call_with_deadline(call)
+            finished, error, _took = _call_with_deadline(call)
             assert finished, f"{name}() still blocked after {BOUND} s"
             assert isinstance(error, DriverError) and "control thread" in str(error), f"{name}(): {error!r}"
     finally:

@@ -6,8 +6,21 @@ import inspect
 
 from mrguide.drivers import Cobot, CobotInterface
 
-MEMBERS = ("period", "setpoint_queue_depth", "setpoint", "enable", "stream", "set_vacuum", "stop", "reset_faults",
-           "joint_state", "vacuum_state", "stats", "add_cycle_observer", "remove_cycle_observer")
+MEMBERS = (
+    "period",
+    "setpoint_queue_depth",
+    "setpoint",
+    "enable",
+    "stream",
+    "set_vacuum",
+    "stop",
+    "reset_faults",
+    "joint_state",
+    "vacuum_state",
+    "stats",
+    "add_cycle_observer",
+    "remove_cycle_observer",
+)
 
 
 def test_the_protocol_is_what_the_runtime_uses():
@@ -24,4 +37,6 @@ def test_cobot_methods_take_the_protocols_parameters():
     for name in MEMBERS:
         spec = getattr(CobotInterface, name, None)
         if callable(spec):
-            assert list(inspect.signature(getattr(Cobot, name)).parameters) == list(inspect.signature(spec).parameters), name
+            assert list(inspect.signature(getattr(Cobot, name)).parameters) == list(
+                inspect.signature(spec).parameters
+            ), name

@@ -32,8 +32,9 @@ def _emcy_codes(tap, node_id: int) -> list[int]:
 def test_every_device_consumes_the_master_heartbeat_sent_every_period(rig, tap_on):
     tap = tap_on(rig.config.bus.channel)
     for slave in (*rig.sim.drives, rig.sim.vacuum):
-        assert slave.value((CONSUMER_HEARTBEAT, 1)) == consumer_heartbeat_entry(MASTER,
-                                                                                rig.config.timing.heartbeat_timeout_ms)
+        assert slave.value((CONSUMER_HEARTBEAT, 1)) == consumer_heartbeat_entry(
+            MASTER, rig.config.timing.heartbeat_timeout_ms
+        )
     time.sleep(20 * HB)
     beats = tap.with_id(0x700 + MASTER)
     assert beats and all(bytes(m.data) == b"\x05" for m in beats)  # state OPERATIONAL
@@ -56,8 +57,13 @@ def test_hung_control_thread_disables_the_drives_and_keeps_the_vacuum(rig, tap_o
     cobot._loop.cycle = lambda tick: release.wait()  # the control thread hangs: no SYNC, no heartbeat
     hung_at = time.monotonic()
     try:
-        assert rig.wait_until(lambda: all(d.state == SWITCH_ON_DISABLED for d in sim.drives)
-                              and not any(slave.operational for slave in (*sim.drives, sim.vacuum)), timeout=1.0)
+        assert rig.wait_until(
+            lambda: (
+                all(d.state == SWITCH_ON_DISABLED for d in sim.drives)
+                and not any(slave.operational for slave in (*sim.drives, sim.vacuum))
+            ),
+            timeout=1.0,
+        )
         reacted_after = time.monotonic() - hung_at
         # consumer time + the last beat's age + scheduling
         assert reacted_after <= rig.config.timing.heartbeat_timeout + HB + 0.1
@@ -124,4 +130,3 @@ def test_consumer_starts_with_the_first_heartbeat_and_reports_a_loss_once(make_c
             assert [n for n in (4, 5, 6, 7, 8) if HEARTBEAT_ERROR in _emcy_codes(tap, n)] == []  # not configured
         finally:
             network.disconnect()
-

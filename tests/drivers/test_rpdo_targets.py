@@ -32,16 +32,21 @@ def _rpdos(tap, config, node_id: int) -> list[tuple[int, float]]:
     """(controlword, target in rad) of every RPDO1 the master sent to `node_id`."""
     joint = next(j for j in config.joints if j.node_id == node_id)
     conv = JointConversion.from_config(joint)
-    return [(cw, conv.to_rad(counts)) for cw, counts in
-            (struct.unpack_from("<Hi", bytes(m.data)) for m in tap.with_id(0x200 + node_id))]
+    return [
+        (cw, conv.to_rad(counts))
+        for cw, counts in (struct.unpack_from("<Hi", bytes(m.data)) for m in tap.with_id(0x200 + node_id))
+    ]
 
 
 def _assert_all_targets_within_limits(tap, rig) -> None:
     lim = rig.cobot.limits
     for i, joint in enumerate(rig.config.joints):
         frames = _rpdos(tap, rig.config, joint.node_id)
-        bad = [(hex(cw), round(t, 3)) for cw, t in frames
-               if not lim.q_lower[i] - COUNT_SLACK <= t <= lim.q_upper[i] + COUNT_SLACK]
+        bad = [
+            (hex(cw), round(t, 3))
+            for cw, t in frames
+            if not lim.q_lower[i] - COUNT_SLACK <= t <= lim.q_upper[i] + COUNT_SLACK
+        ]
         assert not bad, f"{len(bad)} of {len(frames)} RPDOs to node {joint.node_id} outside the limits: {bad[:5]}"
     q = rig.plant.joint_positions()
     assert np.all(q >= lim.q_lower - 1e-3) and np.all(q <= lim.q_upper + 1e-3), f"simulated joints moved to {q}"
@@ -84,8 +89,12 @@ def _wrong_feedback_while_disabled(rig) -> None:
     rig.sim.faults.set_position_error(NODE, WRONG_BY)
 
 
-PATHS = {"enable": _wrong_feedback_while_enabling, "quick_stop": _wrong_feedback_then_quick_stop,
-         "fault_reset": _wrong_feedback_then_fault_reset, "disable": _wrong_feedback_while_disabled}
+PATHS = {
+    "enable": _wrong_feedback_while_enabling,
+    "quick_stop": _wrong_feedback_then_quick_stop,
+    "fault_reset": _wrong_feedback_then_fault_reset,
+    "disable": _wrong_feedback_while_disabled,
+}
 
 
 @pytest.mark.parametrize("path", sorted(PATHS))

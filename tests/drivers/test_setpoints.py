@@ -17,19 +17,22 @@ def _targets(tap, node_id):
     return {struct.unpack_from("<Hi", bytes(m.data))[1] for m in tap.with_id(0x200 + node_id)}
 
 
-@pytest.mark.parametrize("make_bad, words", [
-    (lambda q, lim: q + np.r_[0.0, 0.0, 1.0, 0, 0, 0], ["step per cycle", "elbow_joint"]),
-    (lambda q, lim: np.where(np.arange(6) == 3, lim.q_upper + 0.01, q), ["outside joint limits", "wrist_1_joint"]),
-    (lambda q, lim: np.where(np.arange(6) == 0, np.nan, q), ["non-finite", "shoulder_pan_joint"]),
-    (lambda q, lim: np.where(np.arange(6) == 5, np.inf, q), ["non-finite", "wrist_3_joint"]),
-    (lambda q, lim: q[:5], ["shape"]),
-    (lambda q, lim: ["a"] * 6, ["not an array"]),
-    # a complex setpoint, even with a zero imaginary part: np.array(dtype=float) would drop it silently
-    (lambda q, lim: q + 0j, ["real numbers", "complex128"]),
-    (lambda q, lim: list(q[:5]) + [complex(q[5], 1e-3)], ["real numbers", "complex128"]),
-    (lambda q, lim: np.zeros(6, dtype=bool), ["real numbers", "bool"]),
-    (lambda q, lim: list(q[:5]) + [None], ["real numbers", "object"]),
-])
+@pytest.mark.parametrize(
+    "make_bad, words",
+    [
+        (lambda q, lim: q + np.r_[0.0, 0.0, 1.0, 0, 0, 0], ["step per cycle", "elbow_joint"]),
+        (lambda q, lim: np.where(np.arange(6) == 3, lim.q_upper + 0.01, q), ["outside joint limits", "wrist_1_joint"]),
+        (lambda q, lim: np.where(np.arange(6) == 0, np.nan, q), ["non-finite", "shoulder_pan_joint"]),
+        (lambda q, lim: np.where(np.arange(6) == 5, np.inf, q), ["non-finite", "wrist_3_joint"]),
+        (lambda q, lim: q[:5], ["shape"]),
+        (lambda q, lim: ["a"] * 6, ["not an array"]),
+        # a complex setpoint, even with a zero imaginary part: np.array(dtype=float) would drop it silently
+        (lambda q, lim: q + 0j, ["real numbers", "complex128"]),
+        (lambda q, lim: list(q[:5]) + [complex(q[5], 1e-3)], ["real numbers", "complex128"]),
+        (lambda q, lim: np.zeros(6, dtype=bool), ["real numbers", "bool"]),
+        (lambda q, lim: list(q[:5]) + [None], ["real numbers", "object"]),
+    ],
+)
 def test_bad_setpoint_is_refused_and_never_sent(rig, tap_on, make_bad, words):
     cobot = rig.cobot
     tap = tap_on(rig.config.bus.channel)

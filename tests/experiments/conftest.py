@@ -31,12 +31,21 @@ def write_run(run: Path, eval_rates, asked_per_row, wall: float = 100.0) -> None
     with (run / "eval.csv").open("w", newline="") as fh:
         w = csv.DictWriter(fh, ["step", "success_rate", "mean_return"])
         w.writeheader()
-        w.writerows({"step": 1000 * (i + 1), "success_rate": r, "mean_return": 10 * r} for i, r in enumerate(eval_rates))
+        w.writerows(
+            {"step": 1000 * (i + 1), "success_rate": r, "mean_return": 10 * r} for i, r in enumerate(eval_rates)
+        )
     with (run / "metrics.csv").open("w", newline="") as fh:
         w = csv.DictWriter(fh, METRIC_FIELDS, restval="0")
         w.writeheader()
         for i, asked in enumerate(asked_per_row):
-            w.writerow({"step": 500 * (i + 1), "asked": asked, "expert_ratio": 0.5, "wall_s": wall * (i + 1) / len(asked_per_row)})
+            w.writerow(
+                {
+                    "step": 500 * (i + 1),
+                    "asked": asked,
+                    "expert_ratio": 0.5,
+                    "wall_s": wall * (i + 1) / len(asked_per_row),
+                }
+            )
     (run / "done").write_text(json.dumps({"wall_s": wall, "update_ms": 5.0, "steps": 1000 * len(eval_rates)}))
 
 
@@ -47,7 +56,7 @@ def tiny_experiment(tmp_path):
 
     def write(name: str, body: str) -> Path:
         path = tmp_path / f"{name}.toml"
-        path.write_text("[experiment]\nconfig = \"train.toml\"\n" + body)
+        path.write_text('[experiment]\nconfig = "train.toml"\n' + body)
         return path
 
     return write, tmp_path / "out"

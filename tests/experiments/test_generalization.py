@@ -22,15 +22,19 @@ def test_goal_grid_reaches_the_requested_distance_inside_the_box():
     d = np.array([t[2] for t in targets])
     assert d.max() > 0.18 and d.max() <= 0.21 + 1e-9 and (d == 0).sum() > 10
     xy = np.array([t[:2] for t in targets])
-    assert np.all(xy >= np.array(cfg.workspace_low[:2]) - 1e-9) and np.all(xy <= np.array(cfg.workspace_high[:2]) + 1e-9)
+    assert np.all(xy >= np.array(cfg.workspace_low[:2]) - 1e-9) and np.all(
+        xy <= np.array(cfg.workspace_high[:2]) + 1e-9
+    )
 
 
 def test_bins_pool_seeds_and_give_wilson_intervals():
     cfg = GeneralizationConfig(max_distance=0.09, bin_width=0.03)
-    rows = [{"x": "0.5", "y": "0.2", "distance_m": "0.0", "episodes": "20", "successes": "19"},
-            {"x": "0.5", "y": "0.2", "distance_m": "0.0", "episodes": "20", "successes": "20"},  # another seed, same target
-            {"x": "0.5", "y": "0.35", "distance_m": "0.05", "episodes": "20", "successes": "10"},
-            {"x": "0.5", "y": "0.39", "distance_m": "0.09", "episodes": "20", "successes": "0"}]  # the last edge is in
+    rows = [
+        {"x": "0.5", "y": "0.2", "distance_m": "0.0", "episodes": "20", "successes": "19"},
+        {"x": "0.5", "y": "0.2", "distance_m": "0.0", "episodes": "20", "successes": "20"},  # another seed, same target
+        {"x": "0.5", "y": "0.35", "distance_m": "0.05", "episodes": "20", "successes": "10"},
+        {"x": "0.5", "y": "0.39", "distance_m": "0.09", "episodes": "20", "successes": "0"},
+    ]  # the last edge is in
     table = bins(cfg, rows)
     assert [(t["targets"], t["episodes"], t["success"]) for t in table] == [(1, 40, 0.975), (1, 20, 0.5), (1, 20, 0.0)]
     assert table[0]["ci_low"] < 0.975 < table[0]["ci_high"] and table[2]["ci_low"] == 0.0
@@ -39,7 +43,10 @@ def test_bins_pool_seeds_and_give_wilson_intervals():
 def test_tiny_generalization_on_local_ray(tiny_experiment, capsys):
     write, out = tiny_experiment
     cfg = write("gen", "seeds = 1\nsteps = 200\ngrid_step = 0.1\nmax_distance = 0.09\nbin_width = 0.03\nepisodes = 1\n")
-    assert main(["experiment", "generalization", "--config", str(cfg), "--out", str(out), "--workers", "2", "--quiet"]) == 0
+    assert (
+        main(["experiment", "generalization", "--config", str(cfg), "--out", str(out), "--workers", "2", "--quiet"])
+        == 0
+    )
     with (out / "guided" / "seed0" / "goals.csv").open() as fh:
         goals = list(csv.DictReader(fh))
     assert goals and all(r["episodes"] == "1" and r["successes"] in ("0", "1") for r in goals)

@@ -30,13 +30,19 @@ def rows_up_to(run: Path, step: int) -> list[str]:
 def test_tiny_learning_curves_on_local_ray_then_report_again(tiny_experiment, capsys):
     write, out = tiny_experiment
     cfg = write("lc", "seeds = 2\nsteps = 300\n")
-    assert main(["experiment", "learning-curves", "--config", str(cfg), "--out", str(out), "--workers", "2", "--quiet"]) == 0
+    assert (
+        main(["experiment", "learning-curves", "--config", str(cfg), "--out", str(out), "--workers", "2", "--quiet"])
+        == 0
+    )
     for v in ("baseline", "guided"):
         for s in (0, 1):
             run = out / v / f"seed{s}"
             assert (run / "done").exists() and steps_of(run)[-1] == 300
     summary = (out / "summary.csv").read_text().splitlines()
-    assert summary[0] == "variant,seeds,converged_4k,converged_5k,converged_20k,median_step,median_annotations,median_person_minutes"
+    assert (
+        summary[0]
+        == "variant,seeds,converged_4k,converged_5k,converged_20k,median_step,median_annotations,median_person_minutes"
+    )
     assert len(summary) == 3 and (out / "fig3_learning_curves.png").stat().st_size > 10_000
     mtime = (out / "guided" / "seed0" / "done").stat().st_mtime
     capsys.readouterr()
@@ -50,17 +56,37 @@ def test_tiny_learning_curves_on_local_ray_then_report_again(tiny_experiment, ca
 def test_a_killed_experiment_resumes_from_checkpoints(tiny_experiment):
     write, out = tiny_experiment
     total = 600
-    cfg = write("lb", f"seeds = 2\nsteps = {total}\nvariants = [\"baseline\"]\n")
-    cmd = [sys.executable, "-m", "mrguide.cli", "experiment", "long-baseline", "--config", str(cfg), "--out", str(out),
-           "--workers", "2", "--quiet"]
+    cfg = write("lb", f'seeds = 2\nsteps = {total}\nvariants = ["baseline"]\n')
+    cmd = [
+        sys.executable,
+        "-m",
+        "mrguide.cli",
+        "experiment",
+        "long-baseline",
+        "--config",
+        str(cfg),
+        "--out",
+        str(out),
+        "--workers",
+        "2",
+        "--quiet",
+    ]
     env = {**os.environ, "PYTHONPATH": str(REPO)}
     # SIGINT back to its default in the child: a test run started in the background of a non-interactive shell
     # inherits SIGINT ignored, and Python then never installs its Ctrl-C handler
-    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    proc = subprocess.Popen(
+        cmd,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
     try:
         deadline = time.monotonic() + 180
-        while time.monotonic() < deadline and not all((out / "baseline" / f"seed{s}" / "checkpoint.pt").exists() for s in (0, 1)):
+        while time.monotonic() < deadline and not all(
+            (out / "baseline" / f"seed{s}" / "checkpoint.pt").exists() for s in (0, 1)
+        ):
             time.sleep(0.2)
         assert proc.poll() is None, proc.communicate()
         proc.send_signal(signal.SIGINT)  # Ctrl-C: the tasks are cancelled, the checkpoints stay

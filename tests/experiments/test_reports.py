@@ -19,16 +19,33 @@ def test_learning_curves_summary(tmp_path):
         write_run(tmp_path / "baseline" / f"seed{s}", [0.0] * 5, [0] * 10)
     # seed 0 reaches the window at 3000 (0.9, 1.0) having asked 40 by then; seed 1 only at the end
     write_run(tmp_path / "guided" / "seed0", [0.5, 0.9, 1.0, 1.0, 0.9], [10, 20, 25, 30, 40, 40, 40, 40, 40, 40])
-    write_run(tmp_path / "guided" / "seed1", [0.5, 0.9, 0.6, 0.6, 1.0], [10, 20, 30, 50, 60, 60, 60, 60, 60, 60], wall=300.0)
+    write_run(
+        tmp_path / "guided" / "seed1", [0.5, 0.9, 0.6, 0.6, 1.0], [10, 20, 30, 50, 60, 60, 60, 60, 60, 60], wall=300.0
+    )
     files = lc.learning_curves_report(cfg, lc.records(cfg, None, tmp_path, 10))
     (tmp_path / "summary.csv").write_bytes(files["summary.csv"])
     (tmp_path / "runs.csv").write_bytes(files["runs.csv"])
     table = {r["variant"]: r for r in read(tmp_path / "summary.csv")}
-    assert list(table["guided"]) == ["variant", "seeds", "converged_4k", "converged_5k", "converged_20k", "median_step",
-                                     "median_annotations", "median_person_minutes"]
-    assert table["guided"] == {"variant": "guided", "seeds": "2", "converged_4k": "1", "converged_5k": "1",
-                               "converged_20k": "1", "median_step": "3000", "median_annotations": "40",
-                               "median_person_minutes": "2.7"}  # 40 marks at 4 s
+    assert list(table["guided"]) == [
+        "variant",
+        "seeds",
+        "converged_4k",
+        "converged_5k",
+        "converged_20k",
+        "median_step",
+        "median_annotations",
+        "median_person_minutes",
+    ]
+    assert table["guided"] == {
+        "variant": "guided",
+        "seeds": "2",
+        "converged_4k": "1",
+        "converged_5k": "1",
+        "converged_20k": "1",
+        "median_step": "3000",
+        "median_annotations": "40",
+        "median_person_minutes": "2.7",
+    }  # 40 marks at 4 s
     assert table["baseline"]["converged_20k"] == "0" and table["baseline"]["median_step"] == ""
     runs = {(r["variant"], r["seed"]): r for r in read(tmp_path / "runs.csv")}
     assert runs["guided", "1"]["convergence_step"] == "" and runs["guided", "1"]["reached_at_end"] == "1"
@@ -44,8 +61,9 @@ def test_long_baseline_summary(tmp_path):
     write_run(tmp_path / "baseline" / "seed2", [0.0, 0.9, 0.9, 0.9, 0.9], [0] * 10)
     files = lc.long_baseline_report(cfg, lc.records(cfg, None, tmp_path, 10))
     (tmp_path / "s.csv").write_bytes(files["summary.csv"])
-    assert read(tmp_path / "s.csv") == [{"variant": "baseline", "seeds": "3", "steps": "5000", "converged": "2",
-                                         "median_step": "3500"}]
+    assert read(tmp_path / "s.csv") == [
+        {"variant": "baseline", "seeds": "3", "steps": "5000", "converged": "2", "median_step": "3500"}
+    ]
     assert "fig4_long_baseline.png" in files
 
 
@@ -56,13 +74,25 @@ def test_noise_summary_with_wilson_intervals(tmp_path):
     assert cfg.reading == "marks" and nr.runs(cfg, None)[3].overrides == {"guidance.noise.sigma": 0.05}
     stored = dataclasses.replace(cfg, reading="stored")
     assert nr.runs(stored, None)[1].overrides == {"guidance.action_noise": 0.05}
-    for name, rates in zip(names, ([0.5, 0.9, 1.0, 1.0, 1.0], [0.0, 0.5, 0.9, 0.9, 0.9], [0.6, 0.9, 0.9, 0.8, 0.9], [0.0] * 5)):
+    for name, rates in zip(
+        names, ([0.5, 0.9, 1.0, 1.0, 1.0], [0.0, 0.5, 0.9, 0.9, 0.9], [0.6, 0.9, 0.9, 0.8, 0.9], [0.0] * 5)
+    ):
         write_run(tmp_path / name, rates, list(range(10)))
     files = nr.noise_report(cfg, nr.records(cfg, None, tmp_path, 10))
     (tmp_path / "s.csv").write_bytes(files["summary.csv"])
     rows = read(tmp_path / "s.csv")
-    assert list(rows[0]) == ["sigma_m", "seeds", "converged", "probability", "median_annotations", "median_person_minutes"]
-    assert [(r["sigma_m"], r["converged"], r["probability"]) for r in rows] == [("0.0", "2", "1.0"), ("0.05", "1", "0.5")]
+    assert list(rows[0]) == [
+        "sigma_m",
+        "seeds",
+        "converged",
+        "probability",
+        "median_annotations",
+        "median_person_minutes",
+    ]
+    assert [(r["sigma_m"], r["converged"], r["probability"]) for r in rows] == [
+        ("0.0", "2", "1.0"),
+        ("0.05", "1", "0.5"),
+    ]
     md = files["summary.md"].decode()
     assert "| 0.05 | 2 | 1 | 0.5 | 0.095 | 0.905 |" in md  # Wilson interval of 1/2
     assert files["fig7_noise_robustness.png"][:4] == b"\x89PNG"
@@ -72,17 +102,28 @@ def test_person_report_counts_marks_and_person_minutes_and_the_fresh_episodes(tm
     from mrguide.experiments import person
 
     cfg = person.PersonConfig(seeds=2, steps=5000, episodes=4)
-    write_run(tmp_path / "seed0", [0.5, 0.9, 1.0, 1.0, 0.9], [10, 20, 25, 30, 45, 45, 45, 45, 45, 45])  # converged at 3000
+    write_run(
+        tmp_path / "seed0", [0.5, 0.9, 1.0, 1.0, 0.9], [10, 20, 25, 30, 45, 45, 45, 45, 45, 45]
+    )  # converged at 3000
     write_run(tmp_path / "seed1", [0.0, 0.1, 0.0, 0.2, 0.1], [30, 60, 90, 120, 150, 180, 210, 240, 270, 300])
     for s, outcomes in ((0, ["success"] * 3 + ["dropped"]), (1, ["no_grasp"] * 4)):
-        (tmp_path / f"seed{s}" / "fresh.csv").write_text("seed,outcome,return,steps\n"
-                                                         + "".join(f"{k},{o},1.0,30\n" for k, o in enumerate(outcomes)))
+        (tmp_path / f"seed{s}" / "fresh.csv").write_text(
+            "seed,outcome,return,steps\n" + "".join(f"{k},{o},1.0,30\n" for k, o in enumerate(outcomes))
+        )
     files = person.person_report(cfg, tmp_path, person.runs(cfg, None), 10)
     (tmp_path / "s.csv").write_bytes(files["summary.csv"])
     (summary,) = read(tmp_path / "s.csv")
-    assert (summary["converged"], summary["median_step"], summary["median_marks"], summary["median_person_minutes"]) == \
-        ("1", "3000", "45", "3.0")  # 45 marks by step 3000, at 4 s each
-    assert (summary["median_marks_total"], summary["fresh_success_min"], summary["fresh_success_max"]) == ("172", "0.0", "0.75")
+    assert (
+        summary["converged"],
+        summary["median_step"],
+        summary["median_marks"],
+        summary["median_person_minutes"],
+    ) == ("1", "3000", "45", "3.0")  # 45 marks by step 3000, at 4 s each
+    assert (summary["median_marks_total"], summary["fresh_success_min"], summary["fresh_success_max"]) == (
+        "172",
+        "0.0",
+        "0.75",
+    )
     assert all(r.client == "bot" for r in person.runs(cfg, None)) and files["person_marks.png"][:4] == b"\x89PNG"
 
 
@@ -92,7 +133,9 @@ def test_peers_report_compares_at_equal_marks_and_equal_wall_time(tmp_path):
     cfg = peers.PeersConfig(seeds=1, steps=5000, marks_budget=25, time_budget_s=150.0)
     assert [r.overrides["train.learner"] for r in peers.runs(cfg, None)] == ["ddpg", "sac"]
     # ddpg: cheap per step, many marks; sac: few marks, slow (wall time 5x)
-    write_run(tmp_path / "ddpg" / "seed0", [0.5, 0.9, 1.0, 1.0, 1.0], [10, 20, 25, 30, 45, 45, 45, 45, 45, 45], wall=100.0)
+    write_run(
+        tmp_path / "ddpg" / "seed0", [0.5, 0.9, 1.0, 1.0, 1.0], [10, 20, 25, 30, 45, 45, 45, 45, 45, 45], wall=100.0
+    )
     write_run(tmp_path / "sac" / "seed0", [0.0, 0.2, 0.6, 0.9, 1.0], [5, 8, 10, 12, 14, 15, 15, 15, 15, 15], wall=500.0)
     files = peers.peers_report(cfg, peers.records(cfg, None, tmp_path, 10))
     (tmp_path / "s.csv").write_bytes(files["summary.csv"])

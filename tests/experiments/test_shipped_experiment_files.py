@@ -27,6 +27,9 @@ def test_shipped_experiment_file_sets_up_every_run(path):
 
 def test_a_file_with_a_bad_override_is_refused_before_anything_runs(tmp_path):
     bad = tmp_path / "gen.toml"
-    bad.write_text((ROOT / "configs/experiments/generalization.toml").read_text() + '\n[experiment.overrides]\n"guidance.marks" = "pick_plase"\n')
+    bad.write_text(
+        (ROOT / "configs/experiments/generalization.toml").read_text()
+        + '\n[experiment.overrides]\n"guidance.marks" = "pick_plase"\n'
+    )
     with pytest.raises(ConfigError, match="pick_plase"):
         _setup(argparse.Namespace(name="generalization", config=str(bad), seeds=None, steps=None, out=None))

@@ -16,13 +16,19 @@ REAL_CELL = Path(__file__).resolve().parents[2] / "configs" / "real_cell.toml"
 
 def test_tiny_sim2real_experiment_on_local_ray_evaluates_each_run_once(tiny_experiment, capsys):
     write, out = tiny_experiment
-    cfg = write("s2r", f"seeds = 1\nsteps = 150\neval_seeds = 1\nepisodes = 1\nconditions = [\"sim\", \"real_exact\"]\n"
-                       f"real_config = \"{REAL_CELL}\"\n")
+    cfg = write(
+        "s2r",
+        f'seeds = 1\nsteps = 150\neval_seeds = 1\nepisodes = 1\nconditions = ["sim", "real_exact"]\n'
+        f'real_config = "{REAL_CELL}"\n',
+    )
     assert main(["experiment", "sim2real", "--config", str(cfg), "--out", str(out), "--workers", "1", "--quiet"]) == 0
     outcomes = out / "guided" / "seed0" / "sim2real" / "outcomes.csv"
     with outcomes.open() as fh:
         rows = list(csv.DictReader(fh))
-    assert [(r["condition"], r["eval_seed"], r["episode"]) for r in rows] == [("sim", "0", "0"), ("real_exact", "0", "0")]
+    assert [(r["condition"], r["eval_seed"], r["episode"]) for r in rows] == [
+        ("sim", "0", "0"),
+        ("real_exact", "0", "0"),
+    ]
     assert all(r["outcome"] for r in rows)
     assert list((outcomes.parent).glob("log-real_exact-seed0.jsonl"))  # the deploy run log of condition 2
     summary = (out / "summary.csv").read_text().splitlines()
@@ -42,6 +48,6 @@ def test_bad_sim2real_experiment_configs_are_refused(tiny_experiment, capsys):
     with pytest.raises(ConfigError, match="eval_seeds"):
         Sim2RealConfig(eval_seeds=0)
     write, out = tiny_experiment
-    cfg = write("s2r", "seeds = 1\nsteps = 150\nreal_config = \"no_such_cell.toml\"\n")
+    cfg = write("s2r", 'seeds = 1\nsteps = 150\nreal_config = "no_such_cell.toml"\n')
     assert main(["experiment", "sim2real", "--config", str(cfg), "--out", str(out)]) == 2
     assert "no_such_cell.toml" in capsys.readouterr().err and not out.exists()

@@ -18,18 +18,28 @@ from mrguide.policies.train import TrainConfig
 from mrguide.task import TaskConfig
 from mrguide.twin.config import TwinConfig
 
-SCALARS = (st.none() | st.booleans() | st.integers(-10**12, 10**12) | st.floats(allow_nan=True, allow_infinity=True)
-           | st.text(max_size=8))
-VALUES = st.recursive(SCALARS, lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=6), inner, max_size=4),
-                      max_leaves=12)
+SCALARS = (
+    st.none()
+    | st.booleans()
+    | st.integers(-(10**12), 10**12)
+    | st.floats(allow_nan=True, allow_infinity=True)
+    | st.text(max_size=8)
+)
+VALUES = st.recursive(
+    SCALARS,
+    lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=6), inner, max_size=4),
+    max_leaves=12,
+)
 
 
 def field_values(cls) -> st.SearchStrategy[dict]:
     """Tables over the real field names of `cls` (nested tables for nested configs, a stray key now and
     then) with arbitrary values."""
     hints = typing.get_type_hints(cls)
-    parts = {f.name: (field_values(hints[f.name]) | VALUES) if dataclasses.is_dataclass(hints[f.name]) else VALUES
-             for f in dataclasses.fields(cls)}
+    parts = {
+        f.name: (field_values(hints[f.name]) | VALUES) if dataclasses.is_dataclass(hints[f.name]) else VALUES
+        for f in dataclasses.fields(cls)
+    }
     return st.fixed_dictionaries({}, optional={**parts, "not_a_key": VALUES})
 
 

@@ -37,7 +37,9 @@ def test_every_update_steps_the_critic_the_actor_and_both_targets():
     for batch in batches(3):
         before = [params(n) for n in (agent.actor, agent.critic, agent.actor_target, agent.critic_target)]
         losses = agent.update(batch)
-        assert all(changed(b, n) for b, n in zip(before, (agent.actor, agent.critic, agent.actor_target, agent.critic_target)))
+        assert all(
+            changed(b, n) for b, n in zip(before, (agent.actor, agent.critic, agent.actor_target, agent.critic_target))
+        )
         assert set(losses) == set(DDPG.CRITIC_STATS + DDPG.ACTOR_STATS)
     assert agent.state_dict()["updates"] == 3
 
@@ -132,8 +134,9 @@ def test_bc_gripper_term_asks_for_the_right_side_of_zero_by_the_margin_and_no_mo
     """A gripper output already beyond the margin on the expert's side gets no pull (so tanh never saturates); the
     wrong side or too close to 0 is pulled; the position part is a plain squared error."""
     act = torch.tensor([[0.1, 0.2, 0.3, 1.0], [0.1, 0.2, 0.3, -1.0], [0.1, 0.2, 0.3, 1.0], [0.1, 0.2, 0.3, -1.0]])
-    pi = torch.tensor([[0.1, 0.2, 0.3, 0.7], [0.1, 0.2, 0.3, -0.9], [0.1, 0.2, 0.3, 0.2], [0.2, 0.2, 0.3, 0.4]],
-                      requires_grad=True)
+    pi = torch.tensor(
+        [[0.1, 0.2, 0.3, 0.7], [0.1, 0.2, 0.3, -0.9], [0.1, 0.2, 0.3, 0.2], [0.2, 0.2, 0.3, 0.4]], requires_grad=True
+    )
     err = bc_error(pi, act)
     assert err[:2].tolist() == [0.0, 0.0]
     assert err[2].item() == pytest.approx((GRIP_MARGIN - 0.2) ** 2)
@@ -177,7 +180,9 @@ def test_a_target_clamped_below_the_box_still_learns():
 
     ws = load_robot().workspace
     agent = DDPG(*obs_scaling(ws), 4, DDPGConfig(hidden=(16, 16)), seed=0)
-    obs = np.array([0.5, 0.1, 0.2, -1.0, 0.0, 0.47, -0.05, -0.3, 0.57, 0.16, 0.02], dtype=np.float32)  # part 30 cm below
+    obs = np.array(
+        [0.5, 0.1, 0.2, -1.0, 0.0, 0.47, -0.05, -0.3, 0.57, 0.16, 0.02], dtype=np.float32
+    )  # part 30 cm below
     label = np.concatenate([ws.to_normalized([0.47, -0.05, 0.13]), [-1.0]]).astype(np.float32)
     o, a = torch.as_tensor(obs[None]), torch.as_tensor(label[None])
     assert agent.actor(o)[0, 2].item() == -1.0  # clamped to the floor

@@ -28,8 +28,16 @@ def test_numpy_matches_torch(exported):
     agent, path, ws = exported
     pol = ExportedPolicy.load(path, load_robot(), TaskConfig())
     rng = np.random.default_rng(0)
-    obs = np.concatenate([rng.uniform(ws.lo, ws.hi, (500, 3)), rng.choice([-1, 1], (500, 1)), rng.uniform(0, 1, (500, 1)),
-                          rng.uniform(ws.lo, ws.hi, (500, 3)), rng.uniform(ws.lo, ws.hi, (500, 3))], axis=1).astype(np.float32)
+    obs = np.concatenate(
+        [
+            rng.uniform(ws.lo, ws.hi, (500, 3)),
+            rng.choice([-1, 1], (500, 1)),
+            rng.uniform(0, 1, (500, 1)),
+            rng.uniform(ws.lo, ws.hi, (500, 3)),
+            rng.uniform(ws.lo, ws.hi, (500, 3)),
+        ],
+        axis=1,
+    ).astype(np.float32)
     with torch.no_grad():
         ref = agent.actor(torch.as_tensor(obs)).numpy()
     got = np.array([pol(o) for o in obs])
@@ -45,7 +53,7 @@ def _rewrite(path, out, mutate):
 
 
 def test_wrong_shapes_refused(exported, tmp_path):
-    _, path, ws = exported
+    _, path, _ws = exported
     bad = _rewrite(path, tmp_path / "bad.npz", lambda a: a.update(W0=np.zeros((256, 12), np.float32)))
     with pytest.raises(PolicyFileError, match="layer 0 has weights"):
         ExportedPolicy.load(bad)
@@ -55,13 +63,14 @@ def test_wrong_shapes_refused(exported, tmp_path):
 
 
 def test_wrong_metadata_refused(exported, tmp_path):
-    _, path, ws = exported
+    _, path, _ws = exported
 
     def meta(change):
         def mutate(a):
             m = json.loads(str(a["metadata"]))
             change(m)
             a["metadata"] = np.array(json.dumps(m))
+
         return mutate
 
     bad = _rewrite(path, tmp_path / "layout.npz", meta(lambda m: m.update(obs_layout=["x"] * 11)))
@@ -71,7 +80,9 @@ def test_wrong_metadata_refused(exported, tmp_path):
     with pytest.raises(PolicyFileError, match="format"):
         ExportedPolicy.load(bad)
     with pytest.raises(PolicyFileError, match="workspace"):
-        ExportedPolicy.load(path, load_robot(RobotConfig(workspace=Workspace(low=(0.3, -0.2, 0.1), high=(0.65, 0.4, 0.35)))))
+        ExportedPolicy.load(
+            path, load_robot(RobotConfig(workspace=Workspace(low=(0.3, -0.2, 0.1), high=(0.65, 0.4, 0.35))))
+        )
     with pytest.raises(PolicyFileError, match="epsilon"):
         ExportedPolicy.load(path, load_robot(), TaskConfig(epsilon=0.03))
 
@@ -87,8 +98,16 @@ def test_unreadable_file_refused(tmp_path):
 
 def _random_obs(ws: Workspace, n: int, seed: int = 0) -> np.ndarray:
     rng = np.random.default_rng(seed)
-    return np.concatenate([rng.uniform(ws.lo, ws.hi, (n, 3)), rng.choice([-1, 1], (n, 1)), rng.uniform(0, 1, (n, 1)),
-                           rng.uniform(ws.lo, ws.hi, (n, 3)), rng.uniform(ws.lo, ws.hi, (n, 3))], axis=1).astype(np.float32)
+    return np.concatenate(
+        [
+            rng.uniform(ws.lo, ws.hi, (n, 3)),
+            rng.choice([-1, 1], (n, 1)),
+            rng.uniform(0, 1, (n, 1)),
+            rng.uniform(ws.lo, ws.hi, (n, 3)),
+            rng.uniform(ws.lo, ws.hi, (n, 3)),
+        ],
+        axis=1,
+    ).astype(np.float32)
 
 
 def _policy(tmp_path):
@@ -173,14 +192,22 @@ def _with_head(head):
         else:
             meta["head"] = head
         arrays["metadata"] = np.array(json.dumps(meta))
+
     return mutate
 
 
-@pytest.mark.parametrize("head", [{"kind": "anchor_offset", "max_offset": "far", "carry_progress": 0.5},
-                                  {"kind": "anchor_offset", "max_offset": 0.5, "carry_progress": 1.5}, {"kind": "sideways"}, []])
+@pytest.mark.parametrize(
+    "head",
+    [
+        {"kind": "anchor_offset", "max_offset": "far", "carry_progress": 0.5},
+        {"kind": "anchor_offset", "max_offset": 0.5, "carry_progress": 1.5},
+        {"kind": "sideways"},
+        [],
+    ],
+)
 def test_a_head_not_understood_is_refused(exported, tmp_path, head):
     _, path, _ = exported
-    with pytest.raises(PolicyFileError, match="head .* not understood"):
+    with pytest.raises(PolicyFileError, match=r"head .* not understood"):
         ExportedPolicy.load(_rewrite(path, tmp_path / "bad.npz", _with_head(head)), load_robot(), TaskConfig())
 
 
@@ -188,5 +215,7 @@ def test_a_head_not_understood_is_refused(exported, tmp_path, head):
 def test_a_file_of_a_retired_head_is_refused_with_the_reason(exported, tmp_path, head):
     """Files of earlier versions (absolute targets, also files without the field; tcp_offset; phase_anchor)."""
     _, path, _ = exported
-    with pytest.raises(PolicyFileError, match=r"no longer runs \(retired in mrguide 0.2.0\); train and export the policy again"):
+    with pytest.raises(
+        PolicyFileError, match=r"no longer runs \(retired in mrguide 0.2.0\); train and export the policy again"
+    ):
         ExportedPolicy.load(_rewrite(path, tmp_path / "old.npz", _with_head(head)), load_robot(), TaskConfig())

@@ -86,15 +86,18 @@ def test_cache_remark_supersedes_and_survives_reload(tmp_path):
     assert '"client": "bot"' in lines[0] and '"supersedes": 0' in lines[2]
 
 
-@pytest.mark.parametrize("record, reason", [
-    ("[1, 2]", "JSON object"),
-    ('{"obs": [0.1], "target": [0.5, 0, 0.1], "grip": 1}', "11 finite numbers"),
-    ('{"obs": OBS, "target": [NaN, 0, 0.1], "grip": 1}', "3 finite numbers"),
-    ('{"obs": OBS, "target": [0.5, 0, 0.1], "grip": null}', "gripper command"),
-    ('{"obs": OBS, "target": [0.5, 0, 0.1]}', "no 'grip'"),
-    ('{"obs": OBS, "target": "here", "grip": 1}', "target"),
-    ('{"obs": OBS, "target": [0.5, 0, 0.1], "grip": 1, "supersedes": 7}', "earlier record"),
-])
+@pytest.mark.parametrize(
+    "record, reason",
+    [
+        ("[1, 2]", "JSON object"),
+        ('{"obs": [0.1], "target": [0.5, 0, 0.1], "grip": 1}', "11 finite numbers"),
+        ('{"obs": OBS, "target": [NaN, 0, 0.1], "grip": 1}', "3 finite numbers"),
+        ('{"obs": OBS, "target": [0.5, 0, 0.1], "grip": null}', "gripper command"),
+        ('{"obs": OBS, "target": [0.5, 0, 0.1]}', "no 'grip'"),
+        ('{"obs": OBS, "target": "here", "grip": 1}', "target"),
+        ('{"obs": OBS, "target": [0.5, 0, 0.1], "grip": 1, "supersedes": 7}', "earlier record"),
+    ],
+)
 def test_cache_refuses_bad_records_naming_the_line(tmp_path, record, reason):
     path = tmp_path / "ann.jsonl"
     good = '{"obs": OBS, "target": [0.5, 0, 0.1], "grip": 1}'
@@ -137,7 +140,7 @@ def test_cache_load_skips_torn_last_line_but_refuses_corruption(tmp_path):
     with path.open("a") as fh:
         fh.write('{"obs": [0.1, 0.2')  # crash mid-write
     assert AnnotationCache().load(path) == 1
-    path.write_text('garbage\n' + path.read_text())
+    path.write_text("garbage\n" + path.read_text())
     with pytest.raises(AnnotationError, match=":1: not JSON"):
         AnnotationCache().load(path)
 
@@ -208,8 +211,16 @@ def _guided(source, tmp_path, reask_after):
 
     task = TaskConfig()
     cache = AnnotationCache(0.005, tmp_path / "ann.jsonl")
-    return GuidedExpert(source, NominalReference(task), cache, 0.05, task, load_robot().workspace.to_normalized, reask_after,
-                        marks="phases"), cache
+    return GuidedExpert(
+        source,
+        NominalReference(task),
+        cache,
+        0.05,
+        task,
+        load_robot().workspace.to_normalized,
+        reask_after,
+        marks="phases",
+    ), cache
 
 
 def test_a_waypoint_not_reached_is_asked_again_and_supersedes_the_first(tmp_path):
@@ -260,8 +271,18 @@ def test_action_noise_perturbs_every_action_afresh_after_the_projection(tmp_path
             return exact
 
     def steps(sigma, seed=0):
-        expert = GuidedExpert(Exact(), NominalReference(task), AnnotationCache(0.005), 0.05, task, ws.to_normalized, 0, sigma,
-                              seed, marks="phases")
+        expert = GuidedExpert(
+            Exact(),
+            NominalReference(task),
+            AnnotationCache(0.005),
+            0.05,
+            task,
+            ws.to_normalized,
+            0,
+            sigma,
+            seed,
+            marks="phases",
+        )
         out = [expert.action(_obs(0)) for _ in range(400)]
         return np.array([s.executed[:3] for s in out]), np.array([s.stored[:3] for s in out])
 
@@ -292,8 +313,18 @@ def test_action_noise_never_changes_the_vacuum_command(tmp_path):
         def annotate(self, obs, previous=None):
             return Annotation(place, -1.0)
 
-    expert = GuidedExpert(AtPlace(), NominalReference(task), AnnotationCache(0.005), 0.05, task, ws.to_normalized, 0, 0.01, 0,
-                          marks="phases")
+    expert = GuidedExpert(
+        AtPlace(),
+        NominalReference(task),
+        AnnotationCache(0.005),
+        0.05,
+        task,
+        ws.to_normalized,
+        0,
+        0.01,
+        0,
+        marks="phases",
+    )
     steps = [expert.action(obs) for _ in range(200)]
     assert all(s.executed[3] == -1.0 and s.stored[3] == -1.0 for s in steps)
     assert len({tuple(s.stored[:3]) for s in steps}) == 200  # the motion is still perturbed afresh
@@ -313,8 +344,18 @@ def test_action_noise_keeps_the_grasp_height_label_unbiased(tmp_path):
         def annotate(self, obs, previous=None):
             return Annotation(mark, 1.0)
 
-    expert = GuidedExpert(Grasp(), NominalReference(task), AnnotationCache(0.005), 0.05, task, ws.to_normalized, 0, 0.05, 0,
-                          marks="phases")
+    expert = GuidedExpert(
+        Grasp(),
+        NominalReference(task),
+        AnnotationCache(0.005),
+        0.05,
+        task,
+        ws.to_normalized,
+        0,
+        0.05,
+        0,
+        marks="phases",
+    )
     obs = _obs(1, tcp=(0.5, -0.1, 0.06), obj=(0.5, -0.1, ws.lo[2] + 0.005 - 0.5 * task.object_height))
     heights = ws.to_cartesian(np.array([expert.action(obs).stored[:3] for _ in range(4000)]))[:, 2]
     assert heights.min() < ws.lo[2] - 0.05

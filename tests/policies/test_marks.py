@@ -10,8 +10,18 @@ from mrguide.policies.guidance import NominalReference
 from mrguide.policies.guided_expert import GuidedExpert
 from mrguide.policies.mark_fusion import MarkFusion
 from mrguide.robot import Workspace, load_robot
-from mrguide.task import (GRASP_PRESS, PICK_PHASE, PLACE_PHASE, TaskConfig, mark_phase, observation, oracle_target,
-                          phase_from_progress, phase_target, waypoint_from_mark)
+from mrguide.task import (
+    GRASP_PRESS,
+    PICK_PHASE,
+    PLACE_PHASE,
+    TaskConfig,
+    mark_phase,
+    observation,
+    oracle_target,
+    phase_from_progress,
+    phase_target,
+    waypoint_from_mark,
+)
 
 WIDE = Workspace((-5.0, -5.0, -5.0), (5.0, 5.0, 5.0))  # no clamping: noise statistics as drawn
 OBJ, GOAL = np.array([0.5, -0.1, 0.025]), np.array([0.5, 0.2, 0.025])
@@ -34,7 +44,9 @@ def test_person_bias_is_drawn_once_per_run_and_differs_between_runs():
     assert np.allclose(a.run_bias, errs[0])
     b, _ = _errors(AnnotatorNoise(bias_sigma=0.007), seed=2, n=1)
     assert not np.allclose(a.run_bias, b.run_bias)
-    biases = np.array([SimulatedAnnotator(TaskConfig(), AnnotatorNoise(bias_sigma=0.007), WIDE, seed=s).run_bias for s in range(400)])
+    biases = np.array(
+        [SimulatedAnnotator(TaskConfig(), AnnotatorNoise(bias_sigma=0.007), WIDE, seed=s).run_bias for s in range(400)]
+    )
     assert biases.std(0) == pytest.approx([0.007] * 3, rel=0.15)
 
 
@@ -52,7 +64,9 @@ def test_person_error_is_larger_along_the_line_of_sight_than_across():
 
 
 def test_person_slips_are_rare_and_gross():
-    _, errs = _errors(AnnotatorNoise(sigma_across=0.005, sigma_along=0.005, outlier_rate=0.03, outlier_scale=0.1), seed=4)
+    _, errs = _errors(
+        AnnotatorNoise(sigma_across=0.005, sigma_along=0.005, outlier_rate=0.03, outlier_scale=0.1), seed=4
+    )
     gross = np.linalg.norm(errs, axis=1) > 0.05
     assert 0.015 < gross.mean() < 0.045
 
@@ -64,7 +78,9 @@ def test_isotropic_annotator_stream_is_unchanged_by_the_person_terms():
     assert np.allclose(errs, rng.normal(0.0, 0.02, (3, 3)))
 
 
-@pytest.mark.parametrize("field, value", [("bias_sigma", -0.01), ("sigma_along", float("nan")), ("viewpoint", (1.0, 2.0))])
+@pytest.mark.parametrize(
+    "field, value", [("bias_sigma", -0.01), ("sigma_along", float("nan")), ("viewpoint", (1.0, 2.0))]
+)
 def test_person_noise_refuses_bad_values(field, value):
     with pytest.raises(ConfigError, match=f"guidance.noise.{field}"):
         AnnotatorNoise(**{field: value})
@@ -95,7 +111,9 @@ def test_fusion_averages_the_scatter_and_outvotes_a_slip():
         fusion.add(PICK_PHASE, at, at + offset + err)
     assert np.abs(fusion.estimate(PICK_PHASE) - offset).max() < 0.01  # 2 cm per mark, 40 marks
     assert fusion.estimate(PLACE_PHASE) is None
-    assert np.allclose(fusion.point(PICK_PHASE, [1.0, 2.0, 3.0]), np.array([1.0, 2.0, 3.0]) + fusion.estimate(PICK_PHASE))
+    assert np.allclose(
+        fusion.point(PICK_PHASE, [1.0, 2.0, 3.0]), np.array([1.0, 2.0, 3.0]) + fusion.estimate(PICK_PHASE)
+    )
 
 
 def test_pick_place_bounds_the_fused_mark_around_the_reference(tmp_path):
@@ -105,8 +123,12 @@ def test_pick_place_bounds_the_fused_mark_around_the_reference(tmp_path):
     expert.begin_demonstration()
     target = _target_m(expert.action(_obs(1)).executed)
     ref = phase_target(1, OBJ, GOAL, TaskConfig())  # the nominal reference: the part's top centre
-    assert np.linalg.norm(target - ref) == pytest.approx(0.05, abs=1e-6) and target[0] > ref[0] + 0.049  # on the 5 cm sphere
-    assert expert.projected == 1 and np.allclose(expert.fusion.offsets[PICK_PHASE][0], [0.3, 0.0, 0.022])  # kept as marked
+    assert (
+        np.linalg.norm(target - ref) == pytest.approx(0.05, abs=1e-6) and target[0] > ref[0] + 0.049
+    )  # on the 5 cm sphere
+    assert expert.projected == 1 and np.allclose(
+        expert.fusion.offsets[PICK_PHASE][0], [0.3, 0.0, 0.022]
+    )  # kept as marked
 
 
 class _Recorder:
@@ -130,8 +152,16 @@ class _Recorder:
 def _pick_place(source, tmp_path, reask_after=15, path="ann.jsonl"):
     task = TaskConfig()
     cache = AnnotationCache(0.005, tmp_path / path)
-    expert = GuidedExpert(source, NominalReference(task), cache, 0.05, task, load_robot().workspace.to_normalized, reask_after,
-                          marks="pick_place")
+    expert = GuidedExpert(
+        source,
+        NominalReference(task),
+        cache,
+        0.05,
+        task,
+        load_robot().workspace.to_normalized,
+        reask_after,
+        marks="pick_place",
+    )
     return expert, cache
 
 
@@ -158,7 +188,9 @@ def test_a_pick_place_demonstration_asks_two_marks_and_follows_the_five_waypoint
     expert.begin_demonstration()
     other = OBJ + [0.05, 0.1, 0.0]
     step = expert.action(_obs(1, obj=other))
-    assert cache.asked == 3 and np.allclose(_target_m(step.executed), oracle_target(_obs(1, obj=other), task)[0], atol=1e-6)
+    assert cache.asked == 3 and np.allclose(
+        _target_m(step.executed), oracle_target(_obs(1, obj=other), task)[0], atol=1e-6
+    )
 
 
 def test_pick_place_fuses_the_marks_of_a_run(tmp_path):

@@ -9,14 +9,30 @@ import pytest
 
 from mrguide.policies.train import METRIC_FIELDS, UPDATE_FIELDS, Trainer, load_train_config
 
-OLD_FIELDS = ("step", "episode", "kind", "return", "success", "outcome", "length", "triggered", "lambda", "expert_ratio",
-              "asked", "reused", "remarks", "skipped", "wall_s")  # metrics.csv before the update statistics
+OLD_FIELDS = (
+    "step",
+    "episode",
+    "kind",
+    "return",
+    "success",
+    "outcome",
+    "length",
+    "triggered",
+    "lambda",
+    "expert_ratio",
+    "asked",
+    "reused",
+    "remarks",
+    "skipped",
+    "wall_s",
+)  # metrics.csv before the update statistics
 
 
 def make(tmp_path, name, guided=True, **train):
     tc, dc, gc, ec = load_train_config(None)
-    tc = dataclasses.replace(tc, total_steps=600, learning_starts=64, batch_size=32, eval_every=10_000,
-                             checkpoint_every=10_000, **train)
+    tc = dataclasses.replace(
+        tc, total_steps=600, learning_starts=64, batch_size=32, eval_every=10_000, checkpoint_every=10_000, **train
+    )
     dc = dataclasses.replace(dc, hidden=(32, 32))
     gc = dataclasses.replace(gc, intake_steps=400, enabled=guided)
     return Trainer(tc, dc, gc, ec, tmp_path / name)
@@ -73,7 +89,9 @@ def test_rows_hold_the_means_of_the_updates_since_the_previous_row(tmp_path, gui
     before = [r for r in csv_rows if int(r["step"]) < 64]
     after = [r for r in csv_rows if r["critic_loss"] != ""]
     assert before and all(r[f] == "" for r in before for f in UPDATE_FIELDS)
-    mine = [f for f in UPDATE_FIELDS if f in tr.agent.CRITIC_STATS + tr.agent.ACTOR_STATS]  # DDPG's; SAC fills "temperature"
+    mine = [
+        f for f in UPDATE_FIELDS if f in tr.agent.CRITIC_STATS + tr.agent.ACTOR_STATS
+    ]  # DDPG's; SAC fills "temperature"
     assert mine == ["critic_loss", "actor_loss", "q_mean", "q_max", "bc_loss"]
     assert len(after) >= 3 and all(math.isfinite(float(r[f])) for r in after for f in mine)
     assert all(r["temperature"] == "" for r in csv_rows)
@@ -83,7 +101,9 @@ def test_rows_hold_the_means_of_the_updates_since_the_previous_row(tmp_path, gui
         assert {r["kind"] for r in after} >= {"expert"} and min(bc) > 0
     else:
         assert bc == [0.0] * len(bc)
-        assert all(r["kind"] == "agent" for r in after) and len(after) == len([r for r in csv_rows if int(r["step"]) >= 64])
+        assert all(r["kind"] == "agent" for r in after) and len(after) == len(
+            [r for r in csv_rows if int(r["step"]) >= 64]
+        )
 
 
 def test_resume_keeps_earlier_rows_and_upgrades_an_old_metrics_file(tmp_path):
@@ -105,9 +125,11 @@ def test_resume_keeps_earlier_rows_and_upgrades_an_old_metrics_file(tmp_path):
         resumed.close()
     rows = read(path)
     assert tuple(rows[0]) == METRIC_FIELDS
-    old, new = rows[:len(kept)], rows[len(kept):]
+    old, new = rows[: len(kept)], rows[len(kept) :]
     assert [r["step"] for r in old] == [r["step"] for r in kept]  # the row after the checkpoint is gone
     assert all(r[f] == "" for r in old for f in UPDATE_FIELDS)
     assert new and int(new[0]["step"]) > first.step
-    assert all(math.isfinite(float(r[f])) for r in new if r["critic_loss"] != "" for f in UPDATE_FIELDS if f != "temperature")
+    assert all(
+        math.isfinite(float(r[f])) for r in new if r["critic_loss"] != "" for f in UPDATE_FIELDS if f != "temperature"
+    )
     assert any(r["critic_loss"] != "" for r in new)

@@ -79,5 +79,3 @@ def test_million_transitions_fit_and_filling_allocates_nothing_more():
     assert 2 * 1_000_000 * 112 <= built < 2 * 1_000_000 * 112 * 1.01  # ≈ 224 MB (213.6 MiB), nothing else
     assert grown < 100_000
     assert len(rp) == 3000 and rp.expert.obs.dtype == np.float32
-
-

@@ -24,7 +24,9 @@ def _replay(n=600, expert_every=3, seed=0):
     rng = np.random.default_rng(seed)
     replay = TaggedReplay(10_000, 11, 4)
     for i in range(n):
-        obs = np.concatenate([rng.uniform([0.3, -0.2, 0.05], [0.65, 0.4, 0.3]), [1.0, 0.2], [0.5, 0.0, 0.025], [0.5, 0.2, 0.025]])
+        obs = np.concatenate(
+            [rng.uniform([0.3, -0.2, 0.05], [0.65, 0.4, 0.3]), [1.0, 0.2], [0.5, 0.0, 0.025], [0.5, 0.2, 0.025]]
+        )
         replay.add(obs, rng.uniform(-1, 1, 4), float(rng.normal()), obs, False, int(i % expert_every == 0))
     return replay
 
@@ -37,8 +39,9 @@ def test_log_probability_is_the_tanh_gaussians():
     action, logp = agent.actor.sample(obs, eps)
     h = agent.actor.base.net[:-2](agent.actor.base.inputs(obs))
     mean, log_std = agent.actor.base.net[-2](h), agent.actor.log_std(h).clamp(-20, 2)
-    dist = torch.distributions.TransformedDistribution(torch.distributions.Normal(mean, log_std.exp()),
-                                                       [torch.distributions.TanhTransform()])
+    dist = torch.distributions.TransformedDistribution(
+        torch.distributions.Normal(mean, log_std.exp()), [torch.distributions.TanhTransform()]
+    )
     y = torch.tanh(mean + log_std.exp() * eps)
     assert torch.allclose(action, agent.actor.base.output(obs, y))
     assert torch.allclose(logp, dist.log_prob(y.clamp(-1 + 1e-6, 1 - 1e-6)).sum(-1), atol=1e-3)
@@ -107,8 +110,9 @@ def test_a_short_guided_sac_run_trains_resumes_and_exports(tmp_path):
     from mrguide.policies.train import Trainer, load_train_config
 
     tc, dc, gc, ec = load_train_config(None)
-    tc = dataclasses.replace(tc, total_steps=400, learning_starts=64, batch_size=32, eval_every=10_000, checkpoint_every=200,
-                             learner="sac")
+    tc = dataclasses.replace(
+        tc, total_steps=400, learning_starts=64, batch_size=32, eval_every=10_000, checkpoint_every=200, learner="sac"
+    )
     sc = SMALL
     tr = Trainer(tc, dc, gc, ec, tmp_path, sac_cfg=sc)
     try:
@@ -121,8 +125,13 @@ def test_a_short_guided_sac_run_trains_resumes_and_exports(tmp_path):
         again.load_checkpoint()
         assert again.step == tr.step and again.agent.updates == tr.agent.updates
         again.run()
-        path = export_actor(again.agent.policy_actor, tmp_path / "policy.npz", again.env.robot_spec, again.env.task_cfg,
-                            again.env.twin_cfg.decision_period)
+        path = export_actor(
+            again.agent.policy_actor,
+            tmp_path / "policy.npz",
+            again.env.robot_spec,
+            again.env.task_cfg,
+            again.env.twin_cfg.decision_period,
+        )
         obs = again.replay.agent.obs[10]
         assert np.allclose(ExportedPolicy.load(path)(obs), again.agent.act(obs), atol=1e-5)
         rows = (tmp_path / "metrics.csv").read_text().splitlines()

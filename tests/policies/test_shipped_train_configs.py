@@ -9,7 +9,9 @@ from mrguide.experiments.runs import SECTIONS
 from mrguide.policies.train import load_sac_config, load_train_config
 
 ROOT = Path(__file__).resolve().parents[2]
-TRAIN_CONFIGS = sorted(p for p in (ROOT / "configs").glob("*.toml") if set(tomllib.loads(p.read_text())) <= set(SECTIONS))
+TRAIN_CONFIGS = sorted(
+    p for p in (ROOT / "configs").glob("*.toml") if set(tomllib.loads(p.read_text())) <= set(SECTIONS)
+)
 
 
 def test_the_training_configs_are_found():

@@ -9,7 +9,9 @@ import sys
 from pathlib import Path
 
 import pytest
-from tensorboard.backend.event_processing.event_accumulator import EventAccumulator  # the dev extra installs tensorboard
+from tensorboard.backend.event_processing.event_accumulator import (
+    EventAccumulator,
+)  # the dev extra installs tensorboard
 
 from mrguide.cli import main
 from mrguide.policies import tensorboard_log as tb_mod
@@ -17,15 +19,18 @@ from mrguide.policies import tensorboard_log as tb_mod
 TAGS = {
     *(f"train/{k}" for k in ("critic_loss", "actor_loss", "q_mean", "q_max", "bc_loss", "expert_ratio", "lambda")),
     *(f"annotations/{k}" for k in ("asked", "reused", "remarks", "skipped")),
-    "eval/success_rate", "eval/mean_return",
+    "eval/success_rate",
+    "eval/mean_return",
 }
 
 
 @pytest.fixture
 def tiny(tmp_path):
     cfg = tmp_path / "tiny.toml"
-    cfg.write_text("[train]\nlearning_starts = 64\nbatch_size = 32\neval_every = 150\neval_episodes = 2\ncheckpoint_every = 100\n"
-                   "[ddpg]\nhidden = [32, 32]\n[guidance]\nintake_steps = 300\n")
+    cfg.write_text(
+        "[train]\nlearning_starts = 64\nbatch_size = 32\neval_every = 150\neval_episodes = 2\ncheckpoint_every = 100\n"
+        "[ddpg]\nhidden = [32, 32]\n[guidance]\nintake_steps = 300\n"
+    )
     return cfg
 
 
@@ -66,7 +71,9 @@ def test_tensorboard_event_files_hold_the_training_metrics(tmp_path, tiny, capsy
     assert main(["train", "--config", str(tiny), "--steps", "300", "--out", str(out), "--quiet", "--tensorboard"]) == 0
     assert f"tensorboard --logdir {out / 'tensorboard'}" in capsys.readouterr().out
     sc = check_against_csv(out)
-    assert len(sc["eval/success_rate"]) == 2 and sc["eval/success_rate"][-1][0] == 300  # every 150 steps, at an episode end
+    assert (
+        len(sc["eval/success_rate"]) == 2 and sc["eval/success_rate"][-1][0] == 300
+    )  # every 150 steps, at an episode end
 
 
 def test_writer_closed_on_crash_and_ctrl_c_and_resume_hides_what_ran_after_the_checkpoint(tmp_path, tiny, monkeypatch):
@@ -81,6 +88,7 @@ def test_writer_closed_on_crash_and_ctrl_c_and_resume_hides_what_ran_after_the_c
             row(self, r)
             if r["step"] > step:
                 raise RuntimeError("crash")
+
         return row_then_crash
 
     monkeypatch.setattr(tb_mod.TensorBoardLog, "row", crash_after(180))  # checkpointed at 100-something
@@ -113,11 +121,18 @@ def test_without_the_flag_nothing_changes(tmp_path, tiny, monkeypatch, capsys):
     out = tmp_path / "run"
     assert main(["train", "--config", str(tiny), "--steps", "100", "--out", str(out), "--quiet"]) == 0
     assert not (out / "tensorboard").exists() and "TensorBoard" not in capsys.readouterr().out
-    code = ("import sys, mrguide.cli, mrguide.policies.commands, mrguide.policies.train; "
-            "print(sorted(m for m in sys.modules if m.startswith(('tensorboard', 'torch.utils.tensorboard'))))")
+    code = (
+        "import sys, mrguide.cli, mrguide.policies.commands, mrguide.policies.train; "
+        "print(sorted(m for m in sys.modules if m.startswith(('tensorboard', 'torch.utils.tensorboard'))))"
+    )
     env_path = str(Path(__file__).resolve().parents[2])
-    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
-                         env={"PYTHONPATH": env_path, "PATH": ""})
+    res = subprocess.run(
+        [sys.executable, "-c", code],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env={"PYTHONPATH": env_path, "PATH": ""},
+    )
     assert res.returncode == 0 and res.stdout.strip() == "[]", res
 
 

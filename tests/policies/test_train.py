@@ -1,7 +1,7 @@
 """Training loop: guidance fires, checkpoints resume exactly, bad checkpoints are refused."""
 
-import dataclasses
 import csv
+import dataclasses
 
 import numpy as np
 import pytest
@@ -12,7 +12,9 @@ from mrguide.policies.train import CheckpointError, Trainer, load_train_config
 
 def make(tmp_path, name, **train):
     tc, dc, gc, ec = load_train_config(None)
-    tc = dataclasses.replace(tc, total_steps=600, learning_starts=64, batch_size=32, eval_every=10_000, checkpoint_every=10_000, **train)
+    tc = dataclasses.replace(
+        tc, total_steps=600, learning_starts=64, batch_size=32, eval_every=10_000, checkpoint_every=10_000, **train
+    )
     dc = dataclasses.replace(dc, hidden=(32, 32))
     gc = dataclasses.replace(gc, intake_steps=400)
     return Trainer(tc, dc, gc, ec, tmp_path / name)
@@ -39,7 +41,7 @@ def test_guidance_fires_and_expert_pool_fills(tmp_path):
 def flat_state(sd, prefix=""):
     """A nested state dict as {path: tensor or value}."""
     out = {}
-    for k, v in (sd.items() if isinstance(sd, dict) else enumerate(sd)):
+    for k, v in sd.items() if isinstance(sd, dict) else enumerate(sd):
         out |= flat_state(v, f"{prefix}{k}.") if isinstance(v, (dict, list)) else {f"{prefix}{k}": v}
     return out
 
@@ -53,7 +55,7 @@ def test_checkpoint_restores_the_exact_training_state(tmp_path):
         a, b = flat_state(first.agent.state_dict()), flat_state(resumed.agent.state_dict())
         assert a.keys() == b.keys()
         for k in a:  # networks, targets, both optimizers (moments, step counts), update counter
-            assert (torch.equal(a[k], b[k]) if torch.is_tensor(a[k]) else a[k] == b[k]), k
+            assert torch.equal(a[k], b[k]) if torch.is_tensor(a[k]) else a[k] == b[k], k
         for pool in ("agent", "expert"):
             sa, sb = getattr(first.replay, pool).state(), getattr(resumed.replay, pool).state()
             assert all(np.array_equal(sa[k], sb[k]) for k in sa), pool
@@ -97,7 +99,7 @@ def test_corrupt_and_mismatched_checkpoints_refused(tmp_path):
     tr.run(stop_at=100)
     tr.close()
     other = make(tmp_path, "c", seed=5)
-    with pytest.raises(CheckpointError, match="different configuration.*train"):
+    with pytest.raises(CheckpointError, match=r"different configuration.*train"):
         other.load_checkpoint()
     other.close()
     path = tmp_path / "c" / "checkpoint.pt"
@@ -110,8 +112,12 @@ def test_corrupt_and_mismatched_checkpoints_refused(tmp_path):
         flipped = bytearray(good)
         for i in rng.choice(np.arange(header_end, len(good)), 64, replace=False):
             flipped[i] ^= 0xFF
-        for damaged, reason in ((bytes(flipped), "digest"), (good[:1000], "digest"), (b"garbage", "not an mrguide checkpoint"),
-                                (good.replace(b"MRGUIDE-CHECKPOINT 6", b"MRGUIDE-CHECKPOINT 5", 1), "format 5")):
+        for damaged, reason in (
+            (bytes(flipped), "digest"),
+            (good[:1000], "digest"),
+            (b"garbage", "not an mrguide checkpoint"),
+            (good.replace(b"MRGUIDE-CHECKPOINT 6", b"MRGUIDE-CHECKPOINT 5", 1), "format 5"),
+        ):
             path.write_bytes(damaged)
             with pytest.raises(CheckpointError, match=reason):
                 same.load_checkpoint()
@@ -149,9 +155,17 @@ class _MustNotBeAsked:
 
 def test_a_baseline_never_calls_the_expert(tmp_path):
     tc, dc, gc, ec = load_train_config(None)
-    tc = dataclasses.replace(tc, total_steps=400, learning_starts=64, batch_size=32, eval_every=10_000, checkpoint_every=10_000)
-    tr = Trainer(tc, dataclasses.replace(dc, hidden=(16, 16)), dataclasses.replace(gc, enabled=False), ec, tmp_path / "b",
-                 lambda env: _MustNotBeAsked())
+    tc = dataclasses.replace(
+        tc, total_steps=400, learning_starts=64, batch_size=32, eval_every=10_000, checkpoint_every=10_000
+    )
+    tr = Trainer(
+        tc,
+        dataclasses.replace(dc, hidden=(16, 16)),
+        dataclasses.replace(gc, enabled=False),
+        ec,
+        tmp_path / "b",
+        lambda env: _MustNotBeAsked(),
+    )
     try:
         tr.run(stop_at=400)
         assert tr.step >= 400 and tr.interventions == 0 and tr.replay.expert.size == 0 and tr.cache.asked == 0
@@ -166,8 +180,12 @@ def _rows(path):
 
 def test_every_demonstration_restarts_its_episode(tmp_path):
     tc, dc, gc, ec = load_train_config(None)
-    tc = dataclasses.replace(tc, total_steps=500, learning_starts=64, batch_size=32, eval_every=10_000, checkpoint_every=10_000)
-    tr = Trainer(tc, dataclasses.replace(dc, hidden=(16, 16)), dataclasses.replace(gc, intake_steps=500), ec, tmp_path / "r")
+    tc = dataclasses.replace(
+        tc, total_steps=500, learning_starts=64, batch_size=32, eval_every=10_000, checkpoint_every=10_000
+    )
+    tr = Trainer(
+        tc, dataclasses.replace(dc, hidden=(16, 16)), dataclasses.replace(gc, intake_steps=500), ec, tmp_path / "r"
+    )
     restored, restore = [], tr.env.restore
     tr.env.restore = lambda snap: restored.append(snap) or restore(snap)
     try:
@@ -190,7 +208,9 @@ def test_a_demonstration_is_expert_data_only_for_the_phases_it_completed(tmp_pat
             return Annotation(target + ([0.016, 0.0, 0.0] if phase_from_progress(obs[4]) == 1 else 0.0), grip, "live")
 
     tc, dc, gc, ec = load_train_config(None)
-    tc = dataclasses.replace(tc, total_steps=300, learning_starts=64, batch_size=32, eval_every=10_000, checkpoint_every=10_000)
+    tc = dataclasses.replace(
+        tc, total_steps=300, learning_starts=64, batch_size=32, eval_every=10_000, checkpoint_every=10_000
+    )
     gc = dataclasses.replace(gc, intake_steps=300, reask_after=0)
     tr = Trainer(tc, dataclasses.replace(dc, hidden=(16, 16)), gc, ec, tmp_path / "f", lambda env: BesideThePart())
     try:
@@ -217,7 +237,9 @@ def test_terminal_transitions_stop_bootstrapping_truncated_ones_do_not(tmp_path)
     done = pool["done"][: tr.replay.agent.size].ravel()
     failed = ("dropped", "misplaced", "knocked_off")
     terminal = sum(r["outcome"] in ("success", *failed) for r in rows if r["kind"] == "agent")
-    terminal += sum(r["outcome"] in failed for r in rows if r["kind"] == "expert")  # a failed demonstration's last phase
+    terminal += sum(
+        r["outcome"] in failed for r in rows if r["kind"] == "expert"
+    )  # a failed demonstration's last phase
     assert done.sum() == terminal  # exactly the terminated episodes end in done = 1; truncated ones in 0
 
 
@@ -239,7 +261,9 @@ def test_a_checkpoint_from_before_a_new_setting_resumes_with_its_default(tmp_pat
     same.close()
     base = make(tmp_path, "old")
     base.close()
-    other = Trainer(base.cfg, dataclasses.replace(base.ddpg_cfg, bc_weight=5.0), base.guidance, base.env_cfg, tmp_path / "old")
+    other = Trainer(
+        base.cfg, dataclasses.replace(base.ddpg_cfg, bc_weight=5.0), base.guidance, base.env_cfg, tmp_path / "old"
+    )
     with pytest.raises(CheckpointError, match=r"different configuration \(sections differ: ddpg\)"):
         other.load_checkpoint()
     other.close()
@@ -251,7 +275,9 @@ def test_a_person_stepping_in_cuts_the_agents_episode_and_it_is_demonstrated(tmp
     from mrguide.policies.experts import OracleExpert
 
     tc, dc, gc, ec = load_train_config(None)
-    tc = dataclasses.replace(tc, total_steps=200, learning_starts=64, batch_size=32, eval_every=10_000, checkpoint_every=10_000)
+    tc = dataclasses.replace(
+        tc, total_steps=200, learning_starts=64, batch_size=32, eval_every=10_000, checkpoint_every=10_000
+    )
     gc = dataclasses.replace(gc, r_threshold=-1e4)  # Eq. 12 never fires on its own here
 
     class PersonStepsIn(OracleExpert):
@@ -261,7 +287,9 @@ def test_a_person_stepping_in_cuts_the_agents_episode_and_it_is_demonstrated(tmp
             PersonStepsIn.polls += 1
             return PersonStepsIn.polls == 5  # at the fifth agent step
 
-    tr = Trainer(tc, dataclasses.replace(dc, hidden=(16, 16)), gc, ec, tmp_path / "i", lambda env: PersonStepsIn(ec.task))
+    tr = Trainer(
+        tc, dataclasses.replace(dc, hidden=(16, 16)), gc, ec, tmp_path / "i", lambda env: PersonStepsIn(ec.task)
+    )
     try:
         tr.run(stop_at=200)
     finally:

@@ -27,7 +27,9 @@ intake_steps = 400
 def test_short_guided_training_with_the_ur10(tmp_path, capsys):
     cfg, out = tmp_path / "ur10.toml", tmp_path / "run"
     cfg.write_text(TINY_UR10)
-    assert main(["train", "--config", str(cfg), "--steps", "300", "--out", str(out), "--quiet"]) == 0, capsys.readouterr().err
+    assert main(["train", "--config", str(cfg), "--steps", "300", "--out", str(out), "--quiet"]) == 0, (
+        capsys.readouterr().err
+    )
     with (out / "metrics.csv").open() as fh:
         rows = list(csv.DictReader(fh))
     assert int(rows[-1]["step"]) >= 300
@@ -35,7 +37,11 @@ def test_short_guided_training_with_the_ur10(tmp_path, capsys):
     assert demos and any(r["outcome"] == "success" for r in demos)  # the expert places the cube with the UR10
     ur10 = load_robot(RobotConfig(name="ur10"))
     policy = ExportedPolicy.load(out / "policy.npz", ur10)
-    assert policy.metadata["robot"] == {"name": "ur10", "fingerprint": ur10.fingerprint, "joints": list(ur10.joint_names)}
+    assert policy.metadata["robot"] == {
+        "name": "ur10",
+        "fingerprint": ur10.fingerprint,
+        "joints": list(ur10.joint_names),
+    }
     with pytest.raises(PolicyFileError, match="exported for arm 'ur10'"):
         ExportedPolicy.load(out / "policy.npz", load_robot())
     # the checkpoint belongs to the UR10 run: resuming it with the UR5 is refused, with the UR10 it goes on
@@ -51,8 +57,13 @@ def test_checkpoints_record_the_arm_as_before_arm_files():
     from mrguide.policies.train import _arm_record
 
     assert _arm_record(load_robot()) == {
-        "name": "ur5", "tool_offset": 0.1, "q_lower": (-2.6, -3.0, -2.8, -3.8, -2.8, -3.2),
-        "q_upper": (2.6, -0.1, 2.8, 0.6, -0.3, 3.2), "v_max": (1.5, 1.5, 1.5, 2.0, 2.0, 2.0),
-        "a_max": (6.0, 6.0, 6.0, 8.0, 8.0, 8.0), "j_max": (60.0, 60.0, 60.0, 80.0, 80.0, 80.0),
+        "name": "ur5",
+        "tool_offset": 0.1,
+        "q_lower": (-2.6, -3.0, -2.8, -3.8, -2.8, -3.2),
+        "q_upper": (2.6, -0.1, 2.8, 0.6, -0.3, 3.2),
+        "v_max": (1.5, 1.5, 1.5, 2.0, 2.0, 2.0),
+        "a_max": (6.0, 6.0, 6.0, 8.0, 8.0, 8.0),
+        "j_max": (60.0, 60.0, 60.0, 80.0, 80.0, 80.0),
         "q_home": (0.0, -1.5707963, 1.5707963, -1.5707963, -1.5707963, 0.0),
-        "workspace": {"low": (0.3, -0.2, 0.045), "high": (0.65, 0.4, 0.35)}}
+        "workspace": {"low": (0.3, -0.2, 0.045), "high": (0.65, 0.4, 0.35)},
+    }

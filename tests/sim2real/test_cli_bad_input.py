@@ -15,6 +15,7 @@ REAL = Path(__file__).parents[2] / "configs" / "real_cell.toml"
 @pytest.fixture
 def no_episodes(monkeypatch):
     """Fail the test if an episode of any condition runs."""
+
     def ran(*args, **kwargs):
         raise AssertionError("an episode ran before the input was refused")
 
@@ -48,15 +49,27 @@ CASES = [
     ("--sweep no values", lambda d: ["--sweep", "object_mass="], ["--sweep", "PARAM=v1,v2"]),
     ("--sweep unknown", lambda d: ["--sweep", "gravity=9.8"], ["--sweep", "'gravity=9.8'"]),
     ("--sweep mass -1", lambda d: ["--sweep", "object_mass=0.2,-1"], ["--sweep object_mass=-1.0", "object_mass"]),
-    ("--sweep HMD noise 5 m", lambda d: ["--sweep", "tracking_noise_m=5"],
-     ["--sweep tracking_noise_m=5.0", "calibration.hmd.tracking_noise_m = 5.0"]),
+    (
+        "--sweep HMD noise 5 m",
+        lambda d: ["--sweep", "tracking_noise_m=5"],
+        ["--sweep tracking_noise_m=5.0", "calibration.hmd.tracking_noise_m = 5.0"],
+    ),
     ("--out under a file", lambda d: ["--out", d / "afile" / "out"], ["--out", "afile", "is not a directory"]),
-    ("reality gap nan", lambda d: _real_config(d, "actuator_lag = 0.015", "actuator_lag = nan"),
-     ["real.toml [twin]", "reality_gap.actuator_lag = nan"]),
-    ("reality gap latency 1.5", lambda d: _real_config(d, "actuator_latency = 2", "actuator_latency = 1.5"),
-     ["real.toml [twin]", "reality_gap.actuator_latency = 1.5"]),
-    ("HMD seed -1", lambda d: _real_config(d, "[calibration.hmd]", "[calibration.hmd]\nseed = -1"),
-     ["real.toml [calibration]", "hmd.seed = -1"]),
+    (
+        "reality gap nan",
+        lambda d: _real_config(d, "actuator_lag = 0.015", "actuator_lag = nan"),
+        ["real.toml [twin]", "reality_gap.actuator_lag = nan"],
+    ),
+    (
+        "reality gap latency 1.5",
+        lambda d: _real_config(d, "actuator_latency = 2", "actuator_latency = 1.5"),
+        ["real.toml [twin]", "reality_gap.actuator_latency = 1.5"],
+    ),
+    (
+        "HMD seed -1",
+        lambda d: _real_config(d, "[calibration.hmd]", "[calibration.hmd]\nseed = -1"),
+        ["real.toml [calibration]", "hmd.seed = -1"],
+    ),
     ("policy decision period 0.2", lambda d: ["--policy", d / "p2.npz"], ["p2.npz", "0.2 s decision period"]),
     ("bad policy", lambda d: ["--policy", d / "afile"], ["afile", "not a readable policy file"]),
 ]
@@ -67,19 +80,32 @@ def test_bad_input_is_refused_before_any_episode(tmp_path, run_cli, policy_file,
     (tmp_path / "afile").write_text("in the way")
     policy_file(tmp_path / "p2.npz", decision_period=0.2)
     out = tmp_path / "out"
-    run_cli(["sim2real", "--policy", policy_file(tmp_path / "p.npz"), "--real-config", REAL, "--out", out, "--quiet",
-             *make_argv(tmp_path)]).assert_refused(*words)
+    run_cli(
+        [
+            "sim2real",
+            "--policy",
+            policy_file(tmp_path / "p.npz"),
+            "--real-config",
+            REAL,
+            "--out",
+            out,
+            "--quiet",
+            *make_argv(tmp_path),
+        ]
+    ).assert_refused(*words)
     assert not out.exists() and not (tmp_path / "afile" / "out").exists()
 
 
-@pytest.mark.parametrize("argv, words", [
-    (["--train-steps", "0"], ["--train-steps"]),
-    (["--deploy-episodes", "-1"], ["--deploy-episodes"]),
-    (["--seeds", "0"], ["--seeds"]),
-    (["--episodes", "x"], ["--episodes", "'x'"]),
-    (["--seed", "-3"], ["--seed", "'-3'"]),
-])
+@pytest.mark.parametrize(
+    "argv, words",
+    [
+        (["--train-steps", "0"], ["--train-steps"]),
+        (["--deploy-episodes", "-1"], ["--deploy-episodes"]),
+        (["--seeds", "0"], ["--seeds"]),
+        (["--episodes", "x"], ["--episodes", "'x'"]),
+        (["--seed", "-3"], ["--seed", "'-3'"]),
+    ],
+)
 def test_main_job_refuses_bad_numbers_at_parse_time(tmp_path, run_cli, argv, words):
     run_cli(["main", "--out", tmp_path / "main", *argv]).assert_refused(*words)
     assert not (tmp_path / "main").exists()
-

@@ -87,8 +87,18 @@ def test_hmd_dying_in_the_grasp_finishes_the_episode_on_the_last_pose_then_stops
         return oracle_action(obs, cfg.task, ws.to_normalized)
 
     log = tmp_path / "log.jsonl"
-    out = s2r.run_real(None, cfg, CobotBusConfig(bus=BusConfig(channel="s2r-hmd-loss")), seed=0, episodes=2,
-                       log_path=log, hmd_config=REAL, safety=None, policy=expert_then_kill, use_hmd=True)
+    out = s2r.run_real(
+        None,
+        cfg,
+        CobotBusConfig(bus=BusConfig(channel="s2r-hmd-loss")),
+        seed=0,
+        episodes=2,
+        log_path=log,
+        hmd_config=REAL,
+        safety=None,
+        policy=expert_then_kill,
+        use_hmd=True,
+    )
     assert killed == [1]
     assert out == ["success", "safety_stop"]  # the second episode could not start
     records = read_log(log)
@@ -104,6 +114,7 @@ def test_hmd_dying_in_the_grasp_finishes_the_episode_on_the_last_pose_then_stops
 def test_an_hmd_that_cannot_start_fails_its_seed_and_the_run_goes_on(tmp_path, monkeypatch):
     """With too much head-tracking noise the HMD's marker calibration fails (2 cm: the 4 views disagree by ~2 cm):
     that seed's episodes count as safety stops, the log says why, and nothing raises (a sweep goes on)."""
+
     def cannot_start(*args, **kwargs):
         raise s2r.HmdStartError("HMD process failed to start: CalibrationError: registration: only 0 of 4 frames agree")
 
@@ -111,9 +122,19 @@ def test_an_hmd_that_cannot_start_fails_its_seed_and_the_run_goes_on(tmp_path, m
     cfg = EnvConfig.load(REAL)
     seen = []
     log = tmp_path / "log.jsonl"
-    out = s2r.run_real(None, cfg, CobotBusConfig(bus=BusConfig(channel="s2r-hmd-start")), seed=1, episodes=3,
-                       log_path=log, hmd_config=REAL, safety=None, on_episode=seen.append, use_hmd=True,
-                       hmd_overrides={"tracking_noise_m": 0.02})
+    out = s2r.run_real(
+        None,
+        cfg,
+        CobotBusConfig(bus=BusConfig(channel="s2r-hmd-start")),
+        seed=1,
+        episodes=3,
+        log_path=log,
+        hmd_config=REAL,
+        safety=None,
+        on_episode=seen.append,
+        use_hmd=True,
+        hmd_overrides={"tracking_noise_m": 0.02},
+    )
     assert out == seen == ["safety_stop"] * 3
     records = read_log(log)
     assert records[0]["hmd_overrides"] == {"tracking_noise_m": 0.02}

@@ -25,14 +25,25 @@ def test_sim_condition_is_reproducible_per_seed():
     a = s2r.run_sim(expert(cfg), cfg, seed=4, episodes=3)
     b = s2r.run_sim(expert(cfg), cfg, seed=4, episodes=3)
     assert a == b == ["success"] * 3
-    assert all(np.array_equal(x[0], y[0]) for x, y in zip(s2r.episode_layouts(cfg, 3, 4), s2r.episode_layouts(cfg, 3, 4)))
+    assert all(
+        np.array_equal(x[0], y[0]) for x, y in zip(s2r.episode_layouts(cfg, 3, 4), s2r.episode_layouts(cfg, 3, 4))
+    )
 
 
 def test_real_exact_condition(tmp_path):
     cfg = EnvConfig.load(REAL)
     bus = CobotBusConfig(bus=BusConfig(channel="s2r-exact"))
-    out = s2r.run_real(None, cfg, bus, seed=0, episodes=2, log_path=tmp_path / "log.jsonl", hmd_config=REAL,
-                       safety=None, policy=expert(cfg))
+    out = s2r.run_real(
+        None,
+        cfg,
+        bus,
+        seed=0,
+        episodes=2,
+        log_path=tmp_path / "log.jsonl",
+        hmd_config=REAL,
+        safety=None,
+        policy=expert(cfg),
+    )
     assert out == ["success", "success"]
 
 
@@ -48,8 +59,18 @@ def test_real_hmd_condition_uses_marker_pipeline_poses(tmp_path, monkeypatch):
         return est
 
     monkeypatch.setattr(HmdPoseStream, "object_position", spy)
-    out = s2r.run_real(None, cfg, bus, seed=0, episodes=2, log_path=tmp_path / "log.jsonl", hmd_config=REAL,
-                       safety=None, policy=expert(cfg), use_hmd=True)
+    out = s2r.run_real(
+        None,
+        cfg,
+        bus,
+        seed=0,
+        episodes=2,
+        log_path=tmp_path / "log.jsonl",
+        hmd_config=REAL,
+        safety=None,
+        policy=expert(cfg),
+        use_hmd=True,
+    )
     assert len(out) == 2 and "success" in out, out
     assert len(seen) > 10 and max(f for *_, f in seen) > 2
     # poses really came out of the marker pipeline with its noise: never the ground truth, and close to
@@ -83,15 +104,41 @@ def test_sweep_runs_each_value_as_its_type_and_reports_it(tmp_path, run_cli, pol
 
     monkeypatch.setattr(s2r, "run_real", run_real)
     out = tmp_path / "out"
-    result = run_cli(["sim2real", "--policy", policy_file(tmp_path / "p.npz"), "--real-config", REAL, "--out", out,
-                      "--quiet", "--seeds", 2, "--episodes", 3, "--sweep", "actuator_latency=0,3",
-                      "--sweep", "tracking_noise_m=0.004"])
+    result = run_cli(
+        [
+            "sim2real",
+            "--policy",
+            policy_file(tmp_path / "p.npz"),
+            "--real-config",
+            REAL,
+            "--out",
+            out,
+            "--quiet",
+            "--seeds",
+            2,
+            "--episodes",
+            3,
+            "--sweep",
+            "actuator_latency=0,3",
+            "--sweep",
+            "tracking_noise_m=0.004",
+        ]
+    )
     assert result.code == 0, result.err
-    assert seen == [(0, None, 0), (0, None, 1), (3, None, 0), (3, None, 1),
-                    (2, {"tracking_noise_m": 0.004}, 0), (2, {"tracking_noise_m": 0.004}, 1)]
+    assert seen == [
+        (0, None, 0),
+        (0, None, 1),
+        (3, None, 0),
+        (3, None, 1),
+        (2, {"tracking_noise_m": 0.004}, 0),
+        (2, {"tracking_noise_m": 0.004}, 1),
+    ]
     assert all(type(latency) is int for latency, *_ in seen)
     rows = (out / "sim2real.csv").read_text().splitlines()
-    assert [r.split(",")[0] for r in rows[1:]] == ["real_exact actuator_latency=0", "real_exact actuator_latency=3",
-                                                   "real_hmd tracking_noise_m=0.004"]
+    assert [r.split(",")[0] for r in rows[1:]] == [
+        "real_exact actuator_latency=0",
+        "real_exact actuator_latency=3",
+        "real_hmd tracking_noise_m=0.004",
+    ]
     assert (out / "fig8_sim2real.png").stat().st_size > 1000 and "| real_hmd tracking_noise_m=0.004 |" in result.out
     assert sorted(p.name for p in out.iterdir()) == ["fig8_sim2real.png", "sim2real.csv", "sim2real.md"]

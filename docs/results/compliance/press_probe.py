@@ -57,11 +57,28 @@ def main() -> None:
         for case, (offset, vacuum) in CASES.items():
             bus = CobotBusConfig(bus=BusConfig(interface="virtual", channel=f"press-{stroke}-{offset}"))
             with RunLog(Path("/tmp") / "press_probe.jsonl", {"probe": case}) as log:
-                summary = dry_run(None, cfg, bus, args.episodes, 0, log, None, policy=pressing_expert(cfg, np.array([offset, 0.0, 0.0]), vacuum),
-                                  max_recoveries=args.episodes)
+                summary = dry_run(
+                    None,
+                    cfg,
+                    bus,
+                    args.episodes,
+                    0,
+                    log,
+                    None,
+                    policy=pressing_expert(cfg, np.array([offset, 0.0, 0.0]), vacuum),
+                    max_recoveries=args.episodes,
+                )
             for e in summary.episodes:
                 safety = ";".join(sorted(k for k in e.events if k != "workspace"))
-                rows.append({"stroke_m": stroke, "case": case, "episode": e.index, "outcome": e.outcome, "safety_events": safety})
+                rows.append(
+                    {
+                        "stroke_m": stroke,
+                        "case": case,
+                        "episode": e.index,
+                        "outcome": e.outcome,
+                        "safety_events": safety,
+                    }
+                )
             stops = sum(e.outcome == "safety_stop" for e in summary.episodes)
             print(f"stroke {stroke * 1000:.0f} mm | {case}: {stops}/{len(summary.episodes)} safety stops", flush=True)
     with (Path(__file__).parent / "press_probe.csv").open("w", newline="") as fh:

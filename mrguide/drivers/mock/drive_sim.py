@@ -35,8 +35,16 @@ FAULT_REACTION_ACTIVE = "FAULT REACTION ACTIVE"
 FAULT = "FAULT"
 
 #: Statusword bits 0-6 per state (CiA 402).
-_STATE_BITS = {NOT_READY: 0x0000, SWITCH_ON_DISABLED: 0x0040, READY: 0x0021, SWITCHED_ON: 0x0023,
-               OPERATION_ENABLED: 0x0027, QUICK_STOP_ACTIVE: 0x0007, FAULT_REACTION_ACTIVE: 0x000F, FAULT: 0x0008}
+_STATE_BITS = {
+    NOT_READY: 0x0000,
+    SWITCH_ON_DISABLED: 0x0040,
+    READY: 0x0021,
+    SWITCHED_ON: 0x0023,
+    OPERATION_ENABLED: 0x0027,
+    QUICK_STOP_ACTIVE: 0x0007,
+    FAULT_REACTION_ACTIVE: 0x000F,
+    FAULT: 0x0008,
+}
 SW_VOLTAGE_ENABLED = 0x0010
 SW_REMOTE = 0x0200
 SW_CSP_FOLLOWING = 0x1000
@@ -48,10 +56,20 @@ EMCY_FOLLOWING_ERROR = 0x8611
 #: Below this speed (rad/s) a quick-stopped joint counts as standing still.
 STANDSTILL = 1e-3
 
-_KEYS = {name: (index, 0) for name, index in (
-    ("controlword", 0x6040), ("statusword", 0x6041), ("mode", 0x6060), ("mode_display", 0x6061),
-    ("position", 0x6064), ("velocity", 0x606C), ("target", 0x607A), ("error_code", 0x603F),
-    ("error_register", 0x1001))}
+_KEYS = {
+    name: (index, 0)
+    for name, index in (
+        ("controlword", 0x6040),
+        ("statusword", 0x6041),
+        ("mode", 0x6060),
+        ("mode_display", 0x6061),
+        ("position", 0x6064),
+        ("velocity", 0x606C),
+        ("target", 0x607A),
+        ("error_code", 0x603F),
+        ("error_register", 0x1001),
+    )
+}
 
 
 def next_power_state(state: str, controlword: int, previous: int, quick_stop_option: int) -> str:
@@ -92,8 +110,15 @@ def error_register_for(code: int) -> int:
 class SimulatedDrive(SimulatedSlave):
     """One CiA 402 servo drive: power state machine, CSP tracking, quick stop, following error, EMCY."""
 
-    def __init__(self, node_id: int, eds: Path, network: canopen.Network, receiver: BusReceiver,
-                 faults: FaultInjector, conversion: JointConversion) -> None:
+    def __init__(
+        self,
+        node_id: int,
+        eds: Path,
+        network: canopen.Network,
+        receiver: BusReceiver,
+        faults: FaultInjector,
+        conversion: JointConversion,
+    ) -> None:
         super().__init__(node_id, eds, network, receiver, faults)
         self.conversion = conversion
         self.state = NOT_READY
@@ -156,8 +181,9 @@ class SimulatedDrive(SimulatedSlave):
         elif self._following_error_expired(q, dt):
             self._enter_fault(EMCY_FOLLOWING_ERROR)
         else:
-            self._transition(next_power_state(self.state, controlword, self._prev_controlword,
-                                              self._quick_stop_option), q, v)
+            self._transition(
+                next_power_state(self.state, controlword, self._prev_controlword, self._quick_stop_option), q, v
+            )
         self._prev_controlword = controlword
         target = self._plant_target(q, v, dt)
         self._update_statusword()

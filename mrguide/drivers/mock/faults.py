@@ -65,7 +65,9 @@ class FaultInjector:
     def silence(self, node_id: int, heartbeat_only: bool = False) -> None:
         """Node `node_id` stops sending: everything, or only its heartbeat."""
         self._silent[node_id] = heartbeat_only
-        logger.info("fault injection: node %d silent (%s)", node_id, "heartbeat only" if heartbeat_only else "all frames")
+        logger.info(
+            "fault injection: node %d silent (%s)", node_id, "heartbeat only" if heartbeat_only else "all frames"
+        )
 
     def unsilence(self, node_id: int) -> None:
         self._silent.pop(node_id, None)

@@ -8,8 +8,17 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from canopen import LocalNode
-from canopen.objectdictionary import (BOOLEAN, INTEGER8, INTEGER16, INTEGER32, UNSIGNED8, UNSIGNED16, UNSIGNED32,
-                                      ODArray, ODRecord)
+from canopen.objectdictionary import (
+    BOOLEAN,
+    INTEGER8,
+    INTEGER16,
+    INTEGER32,
+    UNSIGNED8,
+    UNSIGNED16,
+    UNSIGNED32,
+    ODArray,
+    ODRecord,
+)
 from canopen.pdo.base import PDO_NOT_VALID
 
 logger = logging.getLogger(__name__)
@@ -19,8 +28,15 @@ TPDO_COMM, TPDO_MAP = 0x1800, 0x1A00
 #: Transmission types 1..240: synchronous, every n-th SYNC (CiA 301).
 SYNC_TYPES = range(1, 241)
 
-_FORMATS = {BOOLEAN: "?", INTEGER8: "b", UNSIGNED8: "B", INTEGER16: "h", UNSIGNED16: "H",
-            INTEGER32: "i", UNSIGNED32: "I"}
+_FORMATS = {
+    BOOLEAN: "?",
+    INTEGER8: "b",
+    UNSIGNED8: "B",
+    INTEGER16: "h",
+    UNSIGNED16: "H",
+    INTEGER32: "i",
+    UNSIGNED32: "I",
+}
 
 Key = tuple[int, int]
 
@@ -67,8 +83,12 @@ def read_layouts(node: LocalNode, comm_base: int, map_base: int) -> list[PdoLayo
                 if isinstance(obj, (ODRecord, ODArray)):
                     obj = obj.get(subindex)
                 if obj is None or obj.data_type not in _FORMATS or len(obj) != bits:
-                    logger.error("node %d: PDO 0x%04X maps 0x%08X, which is invalid; PDO not processed",
-                                 node.id, comm_base + n, raw)
+                    logger.error(
+                        "node %d: PDO 0x%04X maps 0x%08X, which is invalid; PDO not processed",
+                        node.id,
+                        comm_base + n,
+                        raw,
+                    )
                     break
                 entries.append((index, subindex))
                 fmt += _FORMATS[obj.data_type]

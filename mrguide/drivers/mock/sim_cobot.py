@@ -50,9 +50,16 @@ def shared_pc_config(config: CobotBusConfig) -> CobotBusConfig:
     busy machine is not mistaken for a dead drive. Injected faults still trip them.
     """
     t = config.timing
-    return replace(config, timing=replace(
-        t, realtime_priority=t.realtime_priority or 50, max_missed_feedback=max(t.max_missed_feedback, 25),
-        heartbeat_timeout_factor=3.0, heartbeat_period=max(t.heartbeat_period, 0.15)))
+    return replace(
+        config,
+        timing=replace(
+            t,
+            realtime_priority=t.realtime_priority or 50,
+            max_missed_feedback=max(t.max_missed_feedback, 25),
+            heartbeat_timeout_factor=3.0,
+            heartbeat_period=max(t.heartbeat_period, 0.15),
+        ),
+    )
 
 
 @dataclass(frozen=True)
@@ -91,10 +98,15 @@ class SimulatedCobot:
         receiver.expect(0x000, (2,))
         receiver.expect(0x080, (0, 1))
         network.subscribe(0x080, self._on_sync)
-        self.drives = [SimulatedDrive(j.node_id, eds_path(cfg.drives.eds), network, receiver, self.faults,
-                                      JointConversion.from_config(j)) for j in cfg.joints]
-        self.vacuum = SimulatedVacuumGenerator(cfg.vacuum.node_id, eds_path(cfg.vacuum.eds), network, receiver,
-                                               self.faults)
+        self.drives = [
+            SimulatedDrive(
+                j.node_id, eds_path(cfg.drives.eds), network, receiver, self.faults, JointConversion.from_config(j)
+            )
+            for j in cfg.joints
+        ]
+        self.vacuum = SimulatedVacuumGenerator(
+            cfg.vacuum.node_id, eds_path(cfg.vacuum.eds), network, receiver, self.faults
+        )
         self._network, self._receiver = network, receiver
         receiver.start()
         for slave in (*self.drives, self.vacuum):
@@ -102,8 +114,13 @@ class SimulatedCobot:
         self._stop_clock.clear()
         self._clock_thread = threading.Thread(target=self._device_clock, name="sim-device-clock", daemon=True)
         self._clock_thread.start()
-        logger.info("simulated cobot on %s:%s: drives %s, vacuum generator %d", cfg.bus.interface, cfg.bus.channel,
-                    [d.node_id for d in self.drives], self.vacuum.node_id)
+        logger.info(
+            "simulated cobot on %s:%s: drives %s, vacuum generator %d",
+            cfg.bus.interface,
+            cfg.bus.channel,
+            [d.node_id for d in self.drives],
+            self.vacuum.node_id,
+        )
 
     def stop(self) -> None:
         """Leave the bus (heartbeats stop, the bus is shut down)."""

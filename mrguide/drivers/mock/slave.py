@@ -24,8 +24,16 @@ from canopen.objectdictionary import ODVariable
 from mrguide.drivers.bus import BusReceiver
 from mrguide.drivers.heartbeat import CONSUMER_HEARTBEAT, HEARTBEAT_ERROR, parse_consumer_heartbeat_entry
 from mrguide.drivers.mock.faults import FaultInjector
-from mrguide.drivers.mock.pdo_image import (RPDO_COMM, RPDO_MAP, SYNC_TYPES, TPDO_COMM, TPDO_MAP, Key, PdoLayout,
-                                            read_layouts)
+from mrguide.drivers.mock.pdo_image import (
+    RPDO_COMM,
+    RPDO_MAP,
+    SYNC_TYPES,
+    TPDO_COMM,
+    TPDO_MAP,
+    Key,
+    PdoLayout,
+    read_layouts,
+)
 
 logger = logging.getLogger(__name__)
 
@@ -50,8 +58,9 @@ class _ConsumedHeartbeat:
 class SimulatedSlave(ABC):
     """Base of the simulated devices; subclasses define the process image and the SYNC behaviour."""
 
-    def __init__(self, node_id: int, eds: Path, network: canopen.Network, receiver: BusReceiver,
-                 faults: FaultInjector) -> None:
+    def __init__(
+        self, node_id: int, eds: Path, network: canopen.Network, receiver: BusReceiver, faults: FaultInjector
+    ) -> None:
         self.node = LocalNode(node_id, str(eds))
         network.add_node(self.node)
         self.network = network
@@ -86,13 +95,13 @@ class SimulatedSlave(ABC):
     def reset_application(self) -> None:
         """Power-on values of the process image and the device's internal state."""
 
-    def validate_write(self, key: Key, value: int) -> None:
+    def validate_write(self, key: Key, value: int) -> None:  # noqa: B027 - an optional hook: by default nothing
         """Raise canopen.SdoAbortedError to refuse an SDO write to a process-image object."""
 
-    def after_write(self, index: int, subindex: int) -> None:
+    def after_write(self, index: int, subindex: int) -> None:  # noqa: B027 - an optional hook: by default nothing
         """Called after any SDO write (the value is stored)."""
 
-    def on_nmt_state(self) -> None:
+    def on_nmt_state(self) -> None:  # noqa: B027 - an optional hook: by default nothing
         """Called after an NMT command changed the state (not on reset)."""
 
     # ---------------------------------------------------------------- NMT
@@ -178,8 +187,12 @@ class SimulatedSlave(ABC):
             if entry.lost or entry.last is None or now - entry.last <= entry.timeout:
                 continue
             entry.lost = True
-            logger.warning("node %d: heartbeat of node %d lost (consumer time %.0f ms)", self.node.id, producer_id,
-                           entry.timeout * 1000)
+            logger.warning(
+                "node %d: heartbeat of node %d lost (consumer time %.0f ms)",
+                self.node.id,
+                producer_id,
+                entry.timeout * 1000,
+            )
             self.node.emcy.send(HEARTBEAT_ERROR, COMMUNICATION_ERROR_REGISTER)
             if self.operational:
                 self.node.nmt.send_command(NMT_ENTER_PRE_OPERATIONAL)
