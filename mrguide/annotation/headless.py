@@ -243,9 +243,10 @@ class AnnotationPage:
         )  # the goal ring on the table, the part's top
         px = self.page.evaluate("(p) => window.mrguide.screenOf(p)", spot)
         self.page.mouse.click(px["x"], px["y"])
-        self.wait_state(f"s.placedOn === '{'goal' if on_goal else 'object'}'")
+        placed = self.wait_state(f"s.placedOn === '{'goal' if on_goal else 'object'}'")
         self.click_submit()
-        target = self.wait_state(f"s.submitted && s.submitted.id === '{req['id']}'")["submitted"]["target"]
+        self.wait_state(f"s.answers > {placed['answers']}")  # acked (the next request may already be shown)
+        target = placed["target"]
         return {**req, "target": target, "actions": 2, "seconds": time.monotonic() - t0}
 
     def enter_xr(self) -> dict[str, Any]:

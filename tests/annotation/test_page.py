@@ -32,10 +32,13 @@ OBJ = np.array([0.52, -0.06, 0.025])
 GOAL = np.array([0.46, 0.22, 0.025])
 QUAT = np.array([0.0, 0.0, 0.2588190, 0.9659258])  # 30 degrees about z
 
+
 def screen_delta(page, p, dp) -> tuple[float, float]:
     """Screen pixels (dx, dy) between robot-frame points p and p + dp, as the page's camera shows them."""
-    a, b = page.page.evaluate("([p, q]) => [window.mrguide.screenOf(p), window.mrguide.screenOf(q)]",
-                              [list(map(float, p)), list(map(float, np.add(p, dp)))])
+    a, b = page.page.evaluate(
+        "([p, q]) => [window.mrguide.screenOf(p), window.mrguide.screenOf(q)]",
+        [list(map(float, p)), list(map(float, np.add(p, dp)))],
+    )
     return b["x"] - a["x"], b["y"] - a["y"]
 
 
@@ -67,8 +70,18 @@ def test_page_shows_request_drag_keys_and_submit(browser, served, spec, tmp_path
     broker, server = served
     req = make_request(1, obj=OBJ, goal=GOAL, quat=QUAT)
     fut = ask_in_thread(broker, req)
-    broker.publish_status(step=3120, total_steps=20000, episode=71, success_rate=0.35, asked=212, reused=1930,
-                          remarks=3, skipped=1, fallbacks=0, **{"lambda": 0.775})
+    broker.publish_status(
+        step=3120,
+        total_steps=20000,
+        episode=71,
+        success_rate=0.35,
+        asked=212,
+        reused=1930,
+        remarks=3,
+        skipped=1,
+        fallbacks=0,
+        **{"lambda": 0.775},
+    )
     page = browser.open(server.url)
     try:
         s = page.wait_request()
@@ -329,14 +342,39 @@ def test_a_plain_wheel_serves_a_working_page(browser, tmp_path):
     import subprocess
     import sys
 
-    subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q", "-w", str(tmp_path), str(REPO)],
-                   check=True, capture_output=True, timeout=300)
+    subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "wheel",
+            "--no-deps",
+            "--no-build-isolation",
+            "-q",
+            "-w",
+            str(tmp_path),
+            str(REPO),
+        ],
+        check=True,
+        capture_output=True,
+        timeout=300,
+    )
     (wheel,) = tmp_path.glob("mrguide-*.whl")
     site = tmp_path / "site"
-    subprocess.run([sys.executable, "-m", "pip", "install", "--no-deps", "-q", "--target", str(site), str(wheel)],
-                   check=True, capture_output=True, timeout=300)
-    proc = subprocess.Popen([sys.executable, "-c", SERVE_INSTALLED], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
-                            env={**os.environ, "PYTHONPATH": str(site)}, cwd=tmp_path)
+    subprocess.run(
+        [sys.executable, "-m", "pip", "install", "--no-deps", "-q", "--target", str(site), str(wheel)],
+        check=True,
+        capture_output=True,
+        timeout=300,
+    )
+    proc = subprocess.Popen(
+        [sys.executable, "-c", SERVE_INSTALLED],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+        env={**os.environ, "PYTHONPATH": str(site)},
+        cwd=tmp_path,
+    )
     try:
         web_dir, url = proc.stdout.readline().split()
         assert Path(web_dir).is_relative_to(site)  # the installed copy, not the checkout
@@ -379,7 +417,9 @@ def test_click_to_place_on_the_part_the_goal_and_the_table(browser, served, spec
         assert s["target"] == pytest.approx([OBJ[0], OBJ[1], task.object_height], abs=1e-4)  # snapped to the centre
         page.click_submit()
         pick = fut.result(10)
-        assert isinstance(pick, LiveAnswer) and pick.target == pytest.approx([OBJ[0], OBJ[1], task.object_height], abs=1e-4)
+        assert isinstance(pick, LiveAnswer) and pick.target == pytest.approx(
+            [OBJ[0], OBJ[1], task.object_height], abs=1e-4
+        )
 
         fut = ask_in_thread(broker, make_request(4, obj=OBJ, goal=GOAL, quat=QUAT))  # the place mark (release)
         page.wait_state("s.phase === 'release'")
@@ -390,12 +430,16 @@ def test_click_to_place_on_the_part_the_goal_and_the_table(browser, served, spec
         place = fut.result(10)
         assert place.target == pytest.approx([GOAL[0], GOAL[1], task.object_height], abs=1e-4)
 
-        fut = ask_in_thread(broker, make_request(3, obj=OBJ, goal=GOAL, quat=QUAT))  # transport: table point, lift height
+        fut = ask_in_thread(
+            broker, make_request(3, obj=OBJ, goal=GOAL, quat=QUAT)
+        )  # transport: table point, lift height
         page.wait_state("s.phase === 'transport'")
         spot = np.array([0.42, 0.05, 0.0])
         _click(page, spot)
         s = page.wait_state("s.placedOn === 'table'")
-        assert s["target"][:2] == pytest.approx(spot[:2], abs=0.003) and s["target"][2] == pytest.approx(task.lift_height), s["target"]
+        assert s["target"][:2] == pytest.approx(spot[:2], abs=0.003) and s["target"][2] == pytest.approx(
+            task.lift_height
+        ), s["target"]
         before = s["target"]
         px = page.page.evaluate("(p) => window.mrguide.screenOf(p)", [0.5, 0.25, 0.0])
         page.page.mouse.move(px["x"], px["y"])
@@ -425,6 +469,26 @@ def test_the_person_steps_in_with_the_intervene_button_or_the_i_key(browser, ser
         fut = ask_in_thread(broker, make_request(1, obj=OBJ, goal=GOAL, quat=QUAT))
         page.wait_request()
         assert page.page.is_disabled("#intervene")
+        page.skip()
+        fut.result(10)
+    finally:
+        page.close()
+
+
+def test_a_click_on_a_gizmo_arrow_places_through_it(browser, served):
+    """The gizmo's arrows stand over what is behind them (over the goal while the arm holds the part above
+    it): a click there, without a drag, places the target on the surface behind, as anywhere else."""
+    broker, server = served
+    page = browser.open(server.url)
+    try:
+        fut = ask_in_thread(broker, make_request(3, obj=OBJ, goal=GOAL, quat=QUAT))  # transport: a table point
+        page.wait_request()
+        page.wait_robot()
+        before = page.state()["target"]
+        h = page.gizmo_handle("X")
+        page.page.mouse.click(h["x"], h["y"])
+        s = page.wait_state("s.placedOn !== null")
+        assert s["placedOn"] in ("table", "goal", "object") and s["target"][:2] != pytest.approx(before[:2], abs=0.01)
         page.skip()
         fut.result(10)
     finally:

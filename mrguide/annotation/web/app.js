@@ -229,12 +229,13 @@ async function main() {
     setTarget(p);
   }
 
-  // Click (or tap) to place: a press and release on the same spot of the view, not on the gizmo, puts the
-  // target on what it shows (scene.js `pick`); a drag still orbits, the gizmo and the keys still adjust.
+  // Click (or tap) to place: a press and release on the same spot of the view puts the target on what it
+  // shows (scene.js `pick`), also through the gizmo (whose arrows stand over the goal when the arm holds the
+  // part above it); a drag still orbits or moves an arrow, and the keys still adjust.
   const canvas = view.renderer.domElement;
   let press = null;
   canvas.addEventListener('pointerdown', (e) => {
-    press = e.isPrimary && !view.onGizmo() ? { x: e.clientX, y: e.clientY } : null;
+    press = e.isPrimary ? { x: e.clientX, y: e.clientY } : null;
   });
   canvas.addEventListener('pointerup', (e) => {
     if (!press || !S.request || Math.hypot(e.clientX - press.x, e.clientY - press.y) > 5) return;

@@ -385,11 +385,6 @@ export class TwinView extends EventTarget {
     return { on: 'table', point: [p.x, p.y, z] };
   }
 
-  /** Whether the pointer is on one of the gizmo's handles (a drag there moves the target, it is no click). */
-  onGizmo() {
-    return this.gizmo.enabled && this.gizmo.axis !== null;
-  }
-
   // -- camera, rendering, screen positions -----------------------------------------------------
   resetCamera() {
     const { lo, hi } = this.workspace;
