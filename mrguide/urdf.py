@@ -65,8 +65,13 @@ def _chain(urdf: Path, _mtime: int, base: str, flange: str) -> tuple[ChainJoint,
     for key, frame in (("base_frame", base), ("flange_frame", flange)):
         if frame not in links:
             raise UrdfError(f"{key} {frame!r} is not a link of {urdf}")
-    parent_joint = {j.find("child").get("link"): j for j in root.iter("joint") if j.find("child") is not None}
-    chain, link = [], flange
+    parent_joint: dict[str | None, ET.Element] = {}  # the joint above each link (by its child element)
+    for j in root.iter("joint"):
+        child = j.find("child")
+        if child is not None:
+            parent_joint[child.get("link")] = j
+    chain: list[ChainJoint] = []
+    link: str | None = flange
     while link != base:
         joint = parent_joint.get(link)
         if joint is None or len(chain) > len(parent_joint):
@@ -75,7 +80,8 @@ def _chain(urdf: Path, _mtime: int, base: str, flange: str) -> tuple[ChainJoint,
             chain.append(_chain_joint(joint))
         except ValueError as exc:
             raise UrdfError(f"{urdf}: joint {joint.get('name')!r} has a malformed origin or axis ({exc})") from exc
-        link = joint.find("parent").get("link") if joint.find("parent") is not None else None
+        parent = joint.find("parent")
+        link = parent.get("link") if parent is not None else None
     return tuple(reversed(chain))
 
 

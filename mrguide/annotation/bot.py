@@ -10,7 +10,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 from urllib.parse import parse_qs, urlsplit, urlunsplit
 
@@ -44,7 +44,7 @@ class BotOptions:
 class BotReport:
     answers: int = 0
     refused: int = 0
-    latencies_s: list[float] | None = None
+    latencies_s: list[float] = field(default_factory=list)
 
 
 def ws_url(page_url: str) -> str:

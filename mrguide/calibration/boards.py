@@ -29,7 +29,14 @@ class Board:
 
     @property
     def ids(self) -> np.ndarray:
-        return self.board.getIds().reshape(-1).astype(int)
+        return np.asarray(self.board.getIds()).reshape(-1).astype(int)  # an (n, 1) array (typed as a sequence)
+
+    @property
+    def charuco(self) -> cv2.aruco.CharucoBoard:
+        """The OpenCV board of a board of kind "charuco" (TypeError for a grid)."""
+        if not isinstance(self.board, cv2.aruco.CharucoBoard):
+            raise TypeError(f"calibration.board: a {self.cfg.kind!r} board is no ChArUco board")
+        return self.board
 
     @property
     def size_m(self) -> tuple[float, float]:
@@ -49,6 +56,7 @@ class Board:
 
 def make_board(cfg: BoardConfig, dictionary: cv2.aruco.Dictionary) -> Board:
     """The grid or ChArUco board described by `cfg`, with marker ids from `cfg.first_id` on."""
+    board: cv2.aruco.Board
     if cfg.kind == "grid":
         n = cfg.columns * cfg.rows
         ids = np.arange(cfg.first_id, cfg.first_id + n, dtype=np.int32)

@@ -146,7 +146,8 @@ def camera_from_dict(data: Any, where: str) -> CameraModel:
             fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
         else:
             fx, fy, cx, cy = (float(data[k]) for k in ("fx", "fy", "cx", "cy"))
-        dist = tuple(float(d) for d in data.get("dist", data.get("dist_coeffs", ())))
+        dist_coeffs = data["dist"] if "dist" in data else data.get("dist_coeffs", ())
+        dist = tuple(float(d) for d in dist_coeffs)
     except CalibrationError:
         raise
     except KeyError as exc:

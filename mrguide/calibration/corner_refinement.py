@@ -93,11 +93,11 @@ def _refine_once(gray: np.ndarray, c: np.ndarray, bits: int, camera: CameraModel
     if sides.min() < _MIN_SIDE_PX:
         return None
     half_cell = 0.5 * sides.min() / bits
-    distorted = camera is not None and np.any(camera.dist_coeffs)
+    distorted = camera if camera is not None and np.any(camera.dist_coeffs) else None  # a lens that bends edges
     lines = []
     for i in range(4):
         pts = _edge_points(gray, c[i], c[(i + 1) % 4], half_cell)
-        line = _fit_line(_undistort(pts, camera) if distorted and len(pts) else pts)
+        line = _fit_line(_undistort(pts, distorted) if distorted is not None and len(pts) else pts)
         if line is None:
             return None
         lines.append(line)
@@ -108,7 +108,7 @@ def _refine_once(gray: np.ndarray, c: np.ndarray, bits: int, camera: CameraModel
         if abs(np.linalg.det(A)) < 1e-6:
             return None
         out[i] = p1 + np.linalg.solve(A, p2 - p1)[0] * d1
-    if distorted:
-        normalized = cv2.undistortPoints(out.reshape(-1, 1, 2), camera.K, np.zeros(5)).reshape(-1, 2)
-        out = camera.project(np.column_stack([normalized, np.ones(4)]))
+    if distorted is not None:
+        normalized = cv2.undistortPoints(out.reshape(-1, 1, 2), distorted.K, np.zeros(5)).reshape(-1, 2)
+        out = distorted.project(np.column_stack([normalized, np.ones(4)]))
     return out

@@ -85,7 +85,8 @@ def _opencv(A: list[np.ndarray], B: list[np.ndarray]) -> tuple[np.ndarray, np.nd
     """X, Z through cv2.calibrateRobotWorldHandEye (its 'camera' is our marker, its 'world' our HMD frame)."""
     world2cam = [invert(b) for b in B]  # T_marker_hmd
     base2gripper = [invert(a) for a in A]  # T_tcp_base
-    R_b2w, t_b2w, R_g2c, t_g2c = cv2.calibrateRobotWorldHandEye(
+    # not in the 5.0.0 bindings nor their stubs (opencv#29565): called only where the installed cv2 has it
+    R_b2w, t_b2w, R_g2c, t_g2c = cv2.calibrateRobotWorldHandEye(  # type: ignore[attr-defined]
         [m[:3, :3] for m in world2cam],
         [m[:3, 3] for m in world2cam],
         [m[:3, :3] for m in base2gripper],

@@ -94,7 +94,7 @@ class BoardPoseEstimator:
         self._board_ids = set(board.ids.tolist())
         if board.cfg.kind == "charuco":
             self._charuco_params = cv2.aruco.CharucoParameters()
-            self._charuco = cv2.aruco.CharucoDetector(board.board, self._charuco_params, detector.params)
+            self._charuco = cv2.aruco.CharucoDetector(board.charuco, self._charuco_params, detector.params)
 
     def estimate(
         self, image: np.ndarray, camera: CameraModel, detections: Detections | None = None, where: str = "image"
@@ -121,12 +121,12 @@ class BoardPoseEstimator:
         if len(det) == 0:
             return det
         corners, ids = det.as_opencv()
-        corners, ids, _, recovered = self.detector.detector.refineDetectedMarkers(
+        refined, refined_ids, _, recovered = self.detector.detector.refineDetectedMarkers(
             gray, self.board.board, corners, ids, det.rejected, camera.K, camera.dist_coeffs
         )
         if recovered is not None and len(recovered):
             log.debug("board refinement recovered %d markers", len(recovered))
-        return Detections.from_opencv(corners, ids)
+        return Detections.from_opencv(refined, refined_ids)
 
     def _charuco_points(self, gray: np.ndarray, det: Detections, camera: CameraModel, where: str):
         self._charuco_params.cameraMatrix = camera.K
@@ -135,11 +135,12 @@ class BoardPoseEstimator:
         corners, ids = det.as_opencv()
         ch_corners, ch_ids, _, _ = self._charuco.detectBoard(gray, markerCorners=corners, markerIds=ids)
         n = 0 if ch_ids is None else len(ch_ids)
-        if n < 4 or self.board.board.checkCharucoCornersCollinear(ch_ids):
+        if n < 4 or self.board.charuco.checkCharucoCornersCollinear(ch_ids):
             raise NotEnoughMarkersError(
                 f"{where}: only {n} ChArUco corners found (or all on one line); need 4 spread ones"
             )
-        return self.board.board.matchImagePoints(ch_corners, ch_ids)
+        # the stub wants a sequence of arrays (InputArrayOfArrays); the ChArUco corners are one (n, 1, 2) array
+        return self.board.board.matchImagePoints(ch_corners, ch_ids)  # type: ignore[call-overload]
 
     @staticmethod
     def _solve(obj: np.ndarray, img: np.ndarray, camera: CameraModel, n_markers: int) -> PoseEstimate:

@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
+from numpy.typing import ArrayLike
 
 
-def make_T(R: np.ndarray, t: np.ndarray) -> np.ndarray:
+def make_T(R: ArrayLike, t: ArrayLike) -> np.ndarray:
     """4x4 transform from a 3x3 rotation and a translation (3,)."""
     T = np.eye(4)
     T[:3, :3] = R

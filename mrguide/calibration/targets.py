@@ -36,7 +36,7 @@ class TargetLayout:
     """Targets with known poses in the robot base frame."""
 
     board: Board | None = None
-    T_base_board: np.ndarray | None = None
+    T_base_board: np.ndarray | None = None  # given with the board
     markers: dict[int, np.ndarray] = field(default_factory=dict)  # id -> T_base_marker
     marker_size_m: float = 0.0
 
@@ -91,21 +91,21 @@ class TargetObserver:
         self.camera.check_image(image, label)
         det = self.detector.detect(image, label, self.camera)
         hmd_pts, base_pts, poses, n_markers = [], [], [], 0
-        board_pose = None
+        R_cam_base: np.ndarray | None = None  # base-frame orientation in the camera, seen through the board
         if self.board_estimator is not None:
             try:
                 board_pose, used = self.board_estimator.estimate(image, self.camera, det, label)
             except NotEnoughMarkersError as exc:
                 log.info("%s", exc)
             else:
-                pts = np.vstack(list(self.layout.board.marker_corners().values()))
+                board, T_base_board = self.layout.board, self.layout.T_base_board
+                assert board is not None and T_base_board is not None  # there is a board estimator
+                pts = np.vstack(list(board.marker_corners().values()))
                 hmd_pts.append(apply(T_hmd_cam @ board_pose.T_cam_target, pts))
-                base_pts.append(apply(self.layout.T_base_board, pts))
-                poses.append((board_pose, 0.5 * min(self.layout.board.size_m)))
+                base_pts.append(apply(T_base_board, pts))
+                poses.append((board_pose, 0.5 * min(board.size_m)))
                 n_markers += len(used)
-        R_cam_base = (
-            None if board_pose is None else (board_pose.T_cam_target @ invert(self.layout.T_base_board))[:3, :3]
-        )
+                R_cam_base = (board_pose.T_cam_target @ invert(T_base_board))[:3, :3]
         n_markers += self._single_markers(det, T_hmd_cam, R_cam_base, hmd_pts, base_pts, poses)
         if not hmd_pts:
             return Correspondences(label, np.zeros((0, 3)), np.zeros((0, 3)), n_markers), det, poses
@@ -124,25 +124,28 @@ class TargetObserver:
         seen through the board or the other markers, or left out."""
         size = self.layout.marker_size_m
         obj = single_marker_corners(size)
-        found = {}
+        found: dict[int, tuple[np.ndarray, PoseEstimate]] = {}  # id -> (corners, pose)
         for mid in self.layout.markers:
             corners = det.corners_of(mid)
             if corners is not None:
-                found[mid] = estimate_marker_pose(corners, size, self.camera, self.detector.cfg.ambiguity_ratio)
+                found[mid] = (
+                    corners,
+                    estimate_marker_pose(corners, size, self.camera, self.detector.cfg.ambiguity_ratio),
+                )
         if R_cam_base is None:
-            clear = [(mid, p) for mid, p in found.items() if not p.ambiguous]
+            clear = [(mid, p) for mid, (_, p) in found.items() if not p.ambiguous]
             if clear:
                 mid, p = min(clear, key=lambda mp: mp[1].reprojection_error_px)
                 R_cam_base = p.T_cam_target[:3, :3] @ self.layout.markers[mid][:3, :3].T
         used = 0
-        for mid, pose in found.items():
+        for mid, (corners, pose) in found.items():
             T_base_marker = self.layout.markers[mid]
             if pose.ambiguous:
                 if R_cam_base is None:
                     log.info("marker %d: pose ambiguous and no reference to settle it; left out", mid)
                     continue
                 pose = estimate_marker_pose(
-                    det.corners_of(mid),
+                    corners,
                     size,
                     self.camera,
                     self.detector.cfg.ambiguity_ratio,

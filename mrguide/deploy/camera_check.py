@@ -51,17 +51,20 @@ def run_camera_check(args: argparse.Namespace) -> int:
         )
     cfg = load_section(DeployConfig, args.config, "deploy").camera
     base = args.config.parent if args.config else Path.cwd()
-    done, shown = threading.Event(), {"n": 0, "view": None}
+    done = threading.Event()
+    shown = 0
+    view: tuple[Frame, MarkerObservation] | None = None  # the last frame with a pose
 
     def on_frame(frame: Frame, seen: MarkerObservation) -> None:
-        shown["n"] += 1
+        nonlocal shown, view
+        shown += 1
         if seen.position is not None:
-            shown["view"] = (frame, seen)
+            view = (frame, seen)
             where = f"object at {np.round(seen.position, 4).tolist()} m"
         else:
             where = seen.problem
-        print(f"frame {shown['n']:4d}  latency {(time.monotonic() - frame.t_capture) * 1e3:6.1f} ms  {where}")
-        if shown["n"] >= args.frames:
+        print(f"frame {shown:4d}  latency {(time.monotonic() - frame.t_capture) * 1e3:6.1f} ms  {where}")
+        if shown >= args.frames:
             done.set()
 
     source = open_camera_source(cfg, base, on_frame)
@@ -73,7 +76,7 @@ def run_camera_check(args: argparse.Namespace) -> int:
         source.close()
     if source.error is not None:
         raise source.error
-    return _report(source, shown["view"], args.overlay)
+    return _report(source, view, args.overlay)
 
 
 def _report(source: CameraPoseSource, view: tuple[Frame, MarkerObservation] | None, overlay: Path) -> int:
@@ -83,6 +86,7 @@ def _report(source: CameraPoseSource, view: tuple[Frame, MarkerObservation] | No
         print(f"marker {source.pipeline.marker_id} was never seen; no overlay written")
         return 1
     frame, seen = view
+    assert seen.pose is not None and seen.position is not None  # kept only when it gave a position
     position = np.round(seen.position, 4).tolist()
     print(f"object (marker {source.pipeline.marker_id}) in the robot frame: {position} m")
     image = draw_overlay(

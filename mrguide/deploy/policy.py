@@ -14,6 +14,7 @@ import itertools
 import json
 import logging
 import zipfile
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -41,7 +42,7 @@ FORMAT = "mrguide-policy"
 FORMAT_VERSION = 1
 #: Longest decision period (s) a policy file may declare (the paper's policy acts every 0.1 s).
 MAX_DECISION_PERIOD = 10.0
-ACTIVATIONS = {"relu": lambda x: np.maximum(x, 0.0), "tanh": np.tanh}
+ACTIVATIONS: dict[str, Callable[[np.ndarray], np.ndarray]] = {"relu": lambda x: np.maximum(x, 0.0), "tanh": np.tanh}
 #: The arm of policy files that record none (exported before arm identities): the only arm there was then.
 LEGACY_ARM = "ur5"
 #: The output head every policy file declares: target = anchor + max_offset · y, the part up to φ = carry_progress
@@ -253,17 +254,18 @@ def _head(path: Path, meta: dict[str, Any], trained: Workspace) -> OffsetHead:
             f"{path}: exported with the {kind!r} output head, which this version no longer runs (retired "
             f"in mrguide {RETIRED_IN}); train and export the policy again"
         )
-    offset, switch = (head.get(k) if isinstance(head, dict) else None for k in ("max_offset", "carry_progress"))
-    if (
-        kind != HEAD_KIND
-        or any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in (offset, switch))
-        or not (0 < offset < 100 and 0 < switch < 1)
-    ):
+    offset, switch = (_real(head.get(k)) if isinstance(head, dict) else None for k in ("max_offset", "carry_progress"))
+    if kind != HEAD_KIND or offset is None or switch is None or not (0 < offset < 100 and 0 < switch < 1):
         raise PolicyFileError(
             f"{path}: metadata head {head!r} not understood ({HEAD_KIND} with a max_offset in m and a "
             "carry_progress in (0, 1))"
         )
     return OffsetHead(float(offset), 0.5 * (trained.lo + trained.hi), 0.5 * (trained.hi - trained.lo), float(switch))
+
+
+def _real(value: object) -> float | None:
+    """`value` if it is a real number (a JSON int or float; true and false are not), else None."""
+    return value if isinstance(value, (int, float)) and not isinstance(value, bool) else None
 
 
 def _carry_layer(path: Path, meta: dict[str, Any], arrays: dict[str, np.ndarray], W0: np.ndarray) -> CarryLayer:
@@ -290,13 +292,20 @@ def _layer_array(path: Path, arrays: dict[str, np.ndarray], name: str) -> np.nda
 
 def _trained_workspace(path: Path, meta: dict[str, Any]) -> Workspace:
     ws = meta.get("workspace")
+    corners = ws if isinstance(ws, dict) else {}  # no object: no corners (KeyError below)
     try:
-        box = Workspace(low=tuple(map(float, ws["low"])), high=tuple(map(float, ws["high"])))
+        box = Workspace(low=_corner(corners["low"]), high=_corner(corners["high"]))
     except (TypeError, KeyError, ValueError, ConfigError) as exc:
         raise PolicyFileError(f"{path}: metadata workspace {ws!r} is not a box with low and high corners") from exc
     if not (np.all(np.isfinite(box.lo)) and np.all(np.isfinite(box.hi))):
         raise PolicyFileError(f"{path}: metadata workspace {ws!r} has non-finite corners")
     return box
+
+
+def _corner(values: Any) -> tuple[float, float, float]:
+    """A box corner (x, y, z); ValueError unless it is three numbers (TypeError if it is no sequence)."""
+    x, y, z = map(float, values)
+    return x, y, z
 
 
 def probe_observations(workspace: Workspace) -> np.ndarray:

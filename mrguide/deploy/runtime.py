@@ -13,13 +13,14 @@ from __future__ import annotations
 import logging
 import time
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import NoReturn
 
 import numpy as np
 
-from mrguide.config import check_number
+from mrguide.config import ConfigError, check_number
 from mrguide.deploy.decision import NON_FINITE, ActionError, DecisionStep
-from mrguide.deploy.policy import ExportedPolicy
 from mrguide.deploy.runlog import RunLog
 from mrguide.deploy.safety import Event, Reaction, SafetyConfig, Supervisor, Watchdog
 from mrguide.drivers.cobot_state import CycleSample, JointState, VacuumState
@@ -101,12 +102,15 @@ class _FollowingMonitor:
 
 
 class Runtime:
-    """Runs episodes of an exported policy on a connected, enabled cobot (any `CobotInterface`)."""
+    """Runs episodes of an exported policy on a connected, enabled cobot (any `CobotInterface`).
+
+    `policy` maps an observation to an action: an `ExportedPolicy`, or any such callable (a scripted expert).
+    ConfigError unless `decision_period` is a whole number of the cobot's control periods."""
 
     def __init__(
         self,
         cobot: CobotInterface,
-        policy: ExportedPolicy,
+        policy: Callable[[np.ndarray], np.ndarray],
         pose: ObjectPoseSource,
         spec: RobotSpec,
         task: TaskConfig,
@@ -119,8 +123,10 @@ class Runtime:
         self.cfg = config or RuntimeConfig()
         period = cobot.period
         ratio = decision_period / period
-        if abs(ratio - round(ratio)) > 1e-6 or ratio < 1:
-            raise ValueError(f"decision period {decision_period} s is not a multiple of the control period {period} s")
+        if abs(ratio - round(ratio)) > 1e-6 or ratio < 1 - 1e-9:  # the tolerances of check_decision_period
+            raise ConfigError(
+                f"decision period {decision_period} s is not a whole number of control periods ({period} s)"
+            )
         self.cycles = round(ratio)
         self.decision = DecisionStep(spec, task, period)
         self.kin, self.streamer = self.decision.kin, self.decision.streamer
@@ -176,7 +182,7 @@ class Runtime:
         self.watchdog.feed()
         return sp.q, sp.dq, sp.finished
 
-    def _quick_stop(self, event: Event, detail: str) -> None:
+    def _quick_stop(self, event: Event, detail: str) -> NoReturn:
         self.cobot.stop()
         self.supervisor.report(event, detail)
         raise RunStopped(f"{event.value}: {detail}")

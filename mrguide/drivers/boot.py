@@ -42,6 +42,7 @@ from mrguide.drivers.nmt import (
     set_master_consumer,
     sign_off,
 )
+from mrguide.drivers.od_values import node_id_of
 from mrguide.drivers.vacuum import BLOW_OFF_BIT, VACUUM_ON_BIT, VacuumGenerator
 
 logger = logging.getLogger(__name__)
@@ -70,7 +71,7 @@ def connect(core: CobotCore, loop: ControlLoop) -> None:
         core.receiver.start()
         _boot(core)
         loop.start()
-        devices = [*core.drives, core.vacuum]
+        devices: list[Cia402Drive | VacuumGenerator] = [*core.drives, core.vacuum]
         if not core.wait_for(lambda: all(d.feedback is not None for d in devices), core.config.timing.boot_timeout):
             silent = [d.label for d in devices if d.feedback is None]
             raise BootError(f"no PDO feedback from {', '.join(silent)} after NMT start")
@@ -106,10 +107,11 @@ def _open(core: CobotCore) -> None:
     for node in [*nodes, vacuum_node]:
         network.add_node(node)
         hb.watch(node)
-        node.emcy.add_callback(partial(supervision.on_emcy, core, node.id))
-        receiver.expect(0x700 + node.id, (1,))
-        receiver.expect(0x080 + node.id, (8,))
-        receiver.expect(0x580 + node.id, (8,))
+        nid = node_id_of(node)
+        node.emcy.add_callback(partial(supervision.on_emcy, core, nid))
+        receiver.expect(0x700 + nid, (1,))
+        receiver.expect(0x080 + nid, (8,))
+        receiver.expect(0x580 + nid, (8,))
     core.network, core.receiver, core.hb = network, receiver, hb
 
 
@@ -117,10 +119,10 @@ def _boot(core: CobotCore) -> None:
     timing = core.config.timing
     hb, receiver, vacuum = core.hb, core.receiver, core.vacuum
     assert hb is not None and receiver is not None and vacuum is not None
-    devices = [*core.drives, vacuum]
+    devices: list[Cia402Drive | VacuumGenerator] = [*core.drives, vacuum]
     hb.expect_bootup()
     for dev in devices:
-        send_nmt(dev.node.network, NMT_RESET_COMMUNICATION, dev.node.id)
+        send_nmt(dev.node.network, NMT_RESET_COMMUNICATION, dev.node_id)
     missing = hb.wait_bootup(timing.boot_timeout)
     if missing:
         labels = ", ".join(core.label(n) for n in missing)
@@ -142,7 +144,7 @@ def _boot(core: CobotCore) -> None:
     vacuum.vacuum_on, vacuum.blow_off = _vacuum_command_on_device(vacuum)
     hb.arm()
     for dev in devices:
-        send_nmt(dev.node.network, NMT_START, dev.node.id)
+        send_nmt(dev.node.network, NMT_START, dev.node_id)
     ids = core.config.node_ids
     if not core.wait_for(lambda: hb.all_in_state(OPERATIONAL, ids), timing.boot_timeout):
         states = ", ".join(f"{core.label(n)}: {nmt_state_name(hb.state(n))}" for n in ids if hb.state(n) != OPERATIONAL)
@@ -180,7 +182,7 @@ def _stop_and_disable(core: CobotCore, loop: ControlLoop) -> None:
     if isinstance(core.fault, BusError) or not loop.alive:
         return  # nothing can be sent
     powered = (OPERATION_ENABLED, QUICK_STOP_ACTIVE)
-    alive = [d for d in core.drives if d.feedback is not None and not core.misses.get(d.node.id)]
+    alive = [d for d in core.drives if d.feedback is not None and not core.misses.get(d.node_id)]
     timeout = core.config.timing.enable_timeout
     if any(core.state(d) in powered for d in alive):
         if not supervision.quick_stop(core):

@@ -11,6 +11,7 @@ import logging
 import threading
 from collections.abc import Iterable
 from dataclasses import dataclass
+from typing import Any
 
 import can
 import canopen
@@ -41,7 +42,9 @@ def open_bus(config: BusConfig) -> can.BusABC:
     """Open the python-can bus described by `config`; failures raise BusError with interface and channel."""
     where = f"{config.interface} channel {config.channel!r} at {config.bitrate} bit/s"
     try:
-        return can.Bus(interface=config.interface, channel=config.channel, bitrate=config.bitrate, **config.options)
+        # keyword arguments of the interface's bus class (bus_options.py), none of can.Bus's own parameters
+        options: dict[str, Any] = dict(config.options)
+        return can.Bus(interface=config.interface, channel=config.channel, bitrate=config.bitrate, **options)
     except can.CanInterfaceNotImplementedError as exc:
         raise BusError(f"CAN interface {config.interface!r} is not usable here: {exc}") from exc
     except (can.CanError, OSError, ValueError, TypeError) as exc:
@@ -130,11 +133,11 @@ class BusReceiver:
             self._remote += 1
             self._reject("remote frame", msg, self._remote)
             return
-        lengths = False if msg.is_extended_id else self._expected.get(msg.arbitration_id, False)
-        if lengths is False:
+        if msg.is_extended_id or msg.arbitration_id not in self._expected:
             self._unknown_id += 1
             self._reject("unexpected CAN ID", msg, self._unknown_id)
             return
+        lengths = self._expected[msg.arbitration_id]
         if lengths is not None and len(msg.data) not in lengths:
             self._bad_length += 1
             self._reject(f"wrong length (expected {sorted(lengths)})", msg, self._bad_length)

@@ -13,6 +13,7 @@ import importlib
 import inspect
 import logging
 import math
+from collections.abc import Mapping
 
 from can.interfaces import BACKENDS
 
@@ -55,7 +56,7 @@ KWARGS_READ: dict[str, tuple[str, ...]] = {
 _NOT_OPTIONS = frozenset({"self", "channel", "bitrate", "timing", "can_filters"})
 
 
-def check_bus_options(interface: str, options: dict[str, object]) -> None:
+def check_bus_options(interface: str, options: Mapping[str, object]) -> None:
     """ConfigError naming the key unless every key of `options` is taken by `interface` and every number is finite."""
     for key, value in options.items():
         if isinstance(value, float) and not math.isfinite(value):

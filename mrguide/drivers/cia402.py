@@ -23,6 +23,7 @@ from canopen.sdo.exceptions import SdoError
 from mrguide.drivers.config import DriveConfig, TimingConfig
 from mrguide.drivers.conversion import JointConversion
 from mrguide.drivers.errors import BootError
+from mrguide.drivers.od_values import node_id_of, od_int
 from mrguide.drivers.pdo_setup import PdoEntries, map_pdos
 
 logger = logging.getLogger(__name__)
@@ -134,6 +135,7 @@ class Cia402Drive:
         sync_index: Callable[[], int],
     ) -> None:
         self.node = node
+        self.node_id = node_id_of(node)
         self.name = name
         self.conversion = conversion
         self.config = config
@@ -150,7 +152,7 @@ class Cia402Drive:
 
     @property
     def label(self) -> str:
-        return f"node {self.node.id} ({self.name})"
+        return f"node {self.node_id} ({self.name})"
 
     def configure(self, timing: TimingConfig) -> dict[int, int]:
         """Configure the drive by SDO (it must be PRE-OPERATIONAL); returns {TPDO COB-ID: length}."""
@@ -196,12 +198,12 @@ class Cia402Drive:
 
     def _on_status_pdo(self, pdo_map: PdoMap) -> None:
         self.feedback = DriveFeedback(
-            self._sw_var.raw, self._pos_var.raw, self._velocity, self._sync_index(), time.monotonic()
+            od_int(self._sw_var.raw), od_int(self._pos_var.raw), self._velocity, self._sync_index(), time.monotonic()
         )
         self.rx_count += 1
 
     def _on_velocity_pdo(self, pdo_map: PdoMap) -> None:
-        self._velocity = self._vel_var.raw
+        self._velocity = od_int(self._vel_var.raw)
         fb = self.feedback
         if fb is not None:
             self.feedback = DriveFeedback(fb.statusword, fb.position, self._velocity, fb.sync_index, fb.received_at)

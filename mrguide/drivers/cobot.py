@@ -244,8 +244,9 @@ class Cobot:
         with core.lock.bounded():
             core.require_connected()
             drives = list(core.drives)
-            fbs = [d.feedback for d in drives]
-        if any(fb is None for fb in fbs):
+            latest = [d.feedback for d in drives]
+        fbs = [fb for fb in latest if fb is not None]
+        if len(fbs) < len(latest):
             raise NotReadyError("no joint feedback yet")
         now = time.monotonic()
         return JointState(

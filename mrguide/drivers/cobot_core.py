@@ -87,7 +87,7 @@ class CobotCore:
 
     def name(self, node_id: int) -> str:
         for drive in self.drives:
-            if drive.node.id == node_id:
+            if drive.node_id == node_id:
                 return drive.name
         return "vacuum generator"
 

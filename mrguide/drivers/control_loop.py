@@ -175,7 +175,7 @@ class ControlLoop:
             supervision.latch(
                 core,
                 DeviceFaultError(
-                    f"{drive.label}: {source} refused as RPDO target: {plan.problem}", drive.node.id, drive.name, None
+                    f"{drive.label}: {source} refused as RPDO target: {plan.problem}", drive.node_id, drive.name, None
                 ),
             )
         for drive, rpdo in zip(core.drives, plan.frames):
@@ -197,8 +197,9 @@ class ControlLoop:
 
     def _notify_observers(self, cycle: int, lateness: float, setpoint: np.ndarray | None) -> None:
         core = self.core
-        fbs = [d.feedback for d in core.drives]
-        if any(fb is None for fb in fbs):
+        latest = [d.feedback for d in core.drives]
+        fbs = [fb for fb in latest if fb is not None]
+        if len(fbs) < len(latest):
             return
         sample = CycleSample(cycle, lateness, setpoint, core.positions(), np.array([fb.sync_index for fb in fbs]))
         for observer in list(core.observers):

@@ -18,6 +18,8 @@ from functools import partial
 from canopen import RemoteNode
 from canopen.nmt import NMT_STATES
 
+from mrguide.drivers.od_values import node_id_of
+
 #: NMT state reported in a boot-up message.
 BOOTUP = 0
 #: NMT state OPERATIONAL as carried in heartbeats.
@@ -62,9 +64,10 @@ class HeartbeatConsumer:
 
     def watch(self, node: RemoteNode) -> None:
         """Start following the heartbeats of `node`."""
-        self._state[node.id] = None
-        self._bootups[node.id] = threading.Event()
-        node.nmt.add_heartbeat_callback(partial(self._on_heartbeat, node.id))
+        nid = node_id_of(node)
+        self._state[nid] = None
+        self._bootups[nid] = threading.Event()
+        node.nmt.add_heartbeat_callback(partial(self._on_heartbeat, nid))
 
     def _on_heartbeat(self, node_id: int, state: int) -> None:
         self._last[node_id] = self._clock()

@@ -55,6 +55,10 @@ class _PdoField:
 
     def format(self, raw: bytes) -> str:
         value = self.var.decode_raw(raw)
+        if isinstance(value, (bytes, bytearray)):  # DOMAIN, OCTET_STRING: shown as b'...' (what str() gives)
+            return f"{self.var.name}={value!r}"
+        if not isinstance(value, int):  # a string or a real: none of the integer objects below
+            return f"{self.var.name}={value}"
         conv, key = self.conversion, (self.var.index, self.var.subindex)
         if key == (0x6040, 0):
             return f"controlword=0x{value:04X}"
@@ -180,14 +184,15 @@ class FrameDecoder:
             text += f" value={self._sdo_value(node_id, index, subindex, data[4 : 4 + size])}"
         return text
 
-    def _sdo_value(self, node_id: int, index: int, subindex: int, raw: bytes) -> int | str:
-        """An expedited SDO value decoded with the object's type from the EDS, when it is known."""
+    def _sdo_value(self, node_id: int, index: int, subindex: int, raw: bytes) -> str:
+        """An expedited SDO value as text, decoded with the object's type from the EDS when it is known."""
         obj = self._ods[node_id].get(index) if node_id in self._ods else None
         if isinstance(obj, (ODRecord, ODArray)):
             obj = obj.get(subindex)
         if isinstance(obj, ODVariable) and len(obj) == 8 * len(raw):
-            return obj.decode_raw(raw)
-        return int.from_bytes(raw, "little")
+            value = obj.decode_raw(raw)
+            return repr(value) if isinstance(value, (bytes, bytearray)) else str(value)  # bytes: b'...' as str()
+        return str(int.from_bytes(raw, "little"))
 
 
 def monitor(

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable, Iterable
+from functools import partial
 
 import can
 import canopen
@@ -42,7 +43,7 @@ def sign_off(devices: Iterable[Cia402Drive | VacuumGenerator], hb: HeartbeatCons
     disconnect is no master loss (devices left OPERATIONAL by a fault still answer SDO)."""
     silent = {node_id for node_id, _ in hb.expired()}
     for dev in devices:
-        if dev.node.id in silent or hb.state(dev.node.id) is None:
+        if dev.node_id in silent or hb.state(dev.node_id) is None:
             continue
         try:
             set_master_consumer(dev.node, master_id, 0)
@@ -62,10 +63,7 @@ def close_network(
     if receiver is not None:
         _best_effort("stopping the CAN receive thread", receiver.stop)
     for node_id in node_ids:
-        _best_effort(
-            f"NMT pre-operational to node {node_id}",
-            lambda node_id=node_id: send_nmt(network, NMT_PRE_OPERATIONAL, node_id),
-        )
+        _best_effort(f"NMT pre-operational to node {node_id}", partial(send_nmt, network, NMT_PRE_OPERATIONAL, node_id))
     _best_effort("closing the CAN bus", network.disconnect)
 
 

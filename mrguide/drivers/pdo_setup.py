@@ -21,6 +21,7 @@ def map_pdos(pdos: PdoBase, layouts: Mapping[int, PdoEntries], where: str) -> di
     Mapped PDOs are synchronous on every SYNC. Returns the mapped canopen variables per PDO number.
     """
     mapped: dict[int, list[PdoVariable]] = {}
+    assert pdos.map is not None, "a node's RPDO or TPDO collection"  # None only on canopen's bare PdoBase
     for number, pdo_map in pdos.map.items():
         entries = layouts.get(number, ())
         pdo_map.clear()

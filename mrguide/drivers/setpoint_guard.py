@@ -40,11 +40,11 @@ def setpoint_problem(
         return f"shape {q.shape}, expected ({len(names)},) joint positions in rad"
     bad = ~np.isfinite(q)
     if bad.any():
-        return "non-finite value for " + ", ".join(f"{names[i]} ({q[i]})" for i in np.flatnonzero(bad))
+        return "non-finite value for " + ", ".join(f"{names[int(i)]} ({q[i]})" for i in np.flatnonzero(bad))
     out = ~((q >= limits.q_lower) & (q <= limits.q_upper))
     if out.any():
         return "outside joint limits: " + "; ".join(
-            f"{names[i]} = {q[i]:.4f} rad not in [{limits.q_lower[i]:.3f}, {limits.q_upper[i]:.3f}]"
+            f"{names[int(i)]} = {q[i]:.4f} rad not in [{limits.q_lower[i]:.3f}, {limits.q_upper[i]:.3f}]"
             for i in np.flatnonzero(out)
         )
     max_step = limits.v_max * period
@@ -54,7 +54,7 @@ def setpoint_problem(
         return (
             "step per cycle exceeds v_max * period: "
             + "; ".join(
-                f"{names[i]} moves {step[i]:.5f} rad > {max_step[i]:.5f} rad "
+                f"{names[int(i)]} moves {step[i]:.5f} rad > {max_step[i]:.5f} rad "
                 f"({limits.v_max[i]} rad/s x {period * 1000:g} ms)"
                 for i in np.flatnonzero(too_far)
             )
@@ -118,7 +118,8 @@ def plan_rpdos(
         for i, state in enumerate(states)
     )
     problem = (
-        "; ".join(f"{names[i]} target {wanted[i]:.4f} rad not in [{lo[i]:.3f}, {hi[i]:.3f}]" for i in refused) or None
+        "; ".join(f"{names[int(i)]} target {wanted[i]:.4f} rad not in [{lo[i]:.3f}, {hi[i]:.3f}]" for i in refused)
+        or None
     )
     return RpdoPlan(frames, refused, problem)
 

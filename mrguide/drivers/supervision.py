@@ -15,7 +15,7 @@ import time
 
 from canopen.emcy import EmcyError
 
-from mrguide.drivers.cia402 import FAULT_STATES, OPERATION_ENABLED, PowerCommand
+from mrguide.drivers.cia402 import FAULT_STATES, OPERATION_ENABLED, Cia402Drive, PowerCommand
 from mrguide.drivers.cobot_core import CobotCore
 from mrguide.drivers.errors import (
     BusOffError,
@@ -26,6 +26,7 @@ from mrguide.drivers.errors import (
     NodeLostError,
 )
 from mrguide.drivers.heartbeat import OPERATIONAL, nmt_state_name
+from mrguide.drivers.vacuum import VacuumGenerator
 
 logger = logging.getLogger(__name__)
 
@@ -77,8 +78,9 @@ def check_feedback(core: CobotCore) -> None:
         return
     assert core.vacuum is not None
     limit = core.config.timing.max_missed_feedback
-    for dev in (*core.drives, core.vacuum):
-        node_id = dev.node.id
+    devices: tuple[Cia402Drive | VacuumGenerator, ...] = (*core.drives, core.vacuum)
+    for dev in devices:
+        node_id = dev.node_id
         if dev.rx_count != core.last_rx.get(node_id):
             core.last_rx[node_id] = dev.rx_count
             core.misses[node_id] = 0
@@ -114,12 +116,12 @@ def supervise(core: CobotCore) -> None:
                 ),
             )
     for node_id in core.config.node_ids:
-        state = core.hb.state(node_id)
-        if state is not None and state != OPERATIONAL:
+        nmt_state = core.hb.state(node_id)
+        if nmt_state is not None and nmt_state != OPERATIONAL:
             latch(
                 core,
                 NodeLostError(
-                    f"{core.label(node_id)} left NMT OPERATIONAL: reports {nmt_state_name(state)}",
+                    f"{core.label(node_id)} left NMT OPERATIONAL: reports {nmt_state_name(nmt_state)}",
                     node_id,
                     core.name(node_id),
                 ),
@@ -127,7 +129,7 @@ def supervise(core: CobotCore) -> None:
     for drive in core.drives:
         state = core.state(drive)
         if state in FAULT_STATES:
-            latch(core, DeviceFaultError(f"{drive.label} is in {state}", drive.node.id, drive.name, None))
+            latch(core, DeviceFaultError(f"{drive.label} is in {state}", drive.node_id, drive.name, None))
         elif core.motion and state != OPERATION_ENABLED:
             latch(core, DriverError(f"{drive.label} left {OPERATION_ENABLED}: now {state}"))
 

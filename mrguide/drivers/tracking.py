@@ -37,8 +37,9 @@ class TrackingRecorder:
             return
         self._held[sample.cycle] = self._current
         self._held.pop(sample.cycle - self._history, None)
-        refs = [self._held.get(int(s) - PIPELINE_CYCLES) for s in sample.feedback_sync]
-        if any(r is None for r in refs):
+        held = [self._held.get(int(s) - PIPELINE_CYCLES) for s in sample.feedback_sync]
+        refs = [r for r in held if r is not None]
+        if len(refs) < len(held):
             return
         reference = np.array([r[j] for j, r in enumerate(refs)])
         self.last_error = np.abs(sample.positions - reference)

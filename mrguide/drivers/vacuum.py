@@ -13,11 +13,13 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from canopen import RemoteNode
+from canopen.objectdictionary import ODVariable
 from canopen.pdo import PdoMap
 from canopen.sdo.exceptions import SdoError
 
 from mrguide.drivers.config import TimingConfig, VacuumConfig
 from mrguide.drivers.errors import BootError
+from mrguide.drivers.od_values import node_id_of, od_int
 from mrguide.drivers.pdo_setup import PdoEntries, map_pdos
 
 logger = logging.getLogger(__name__)
@@ -56,6 +58,7 @@ class VacuumGenerator:
 
     def __init__(self, node: RemoteNode, config: VacuumConfig, sync_index: Callable[[], int]) -> None:
         self.node = node
+        self.node_id = node_id_of(node)
         self.config = config
         self._sync_index = sync_index
         self.feedback: VacuumFeedback | None = None
@@ -67,13 +70,15 @@ class VacuumGenerator:
 
     @property
     def label(self) -> str:
-        return f"node {self.node.id} (vacuum generator)"
+        return f"node {self.node_id} (vacuum generator)"
 
     def configure(self, timing: TimingConfig) -> dict[int, int]:
         """Configure by SDO (node PRE-OPERATIONAL); returns {TPDO COB-ID: length}."""
         sdo = self.node.sdo
         sdo.RESPONSE_TIMEOUT = timing.sdo_timeout
-        expected_type = self.node.object_dictionary[0x1000].default
+        device_type_object = self.node.object_dictionary[0x1000]
+        assert isinstance(device_type_object, ODVariable), "0x1000 is a variable (CiA 301)"
+        expected_type = device_type_object.default
         try:
             device_type = sdo[0x1000].raw
             if device_type != expected_type:
@@ -103,9 +108,9 @@ class VacuumGenerator:
 
     def _on_status_pdo(self, pdo_map: PdoMap) -> None:
         self.feedback = VacuumFeedback(
-            self._level_var.raw * LEVEL_UNIT_KPA,
-            bool(self._gripped_var.raw & MODULE0_BIT),
-            bool(self._lost_var.raw & MODULE0_BIT),
+            od_int(self._level_var.raw) * LEVEL_UNIT_KPA,
+            bool(od_int(self._gripped_var.raw) & MODULE0_BIT),
+            bool(od_int(self._lost_var.raw) & MODULE0_BIT),
             self._sync_index(),
             time.monotonic(),
         )

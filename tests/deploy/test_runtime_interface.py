@@ -9,12 +9,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from mrguide.config import ConfigError
 from mrguide.deploy.runlog import RunLog, read_log
 from mrguide.deploy.runtime import RunStopped, Runtime, RuntimeConfig
 from mrguide.deploy.session import FixedObjectPose
 from mrguide.drivers.cobot_state import DriverStats, JointState, VacuumState
 from mrguide.drivers.errors import DriverError
 from mrguide.drivers.interface import CobotInterface
+from mrguide.errors import InputError
 from mrguide.robot import load_robot
 from mrguide.task import TaskConfig, oracle_action
 
@@ -145,3 +147,41 @@ def test_homing_waits_for_lagging_joints_then_judges(tmp_path, stuck, reaches):
         else:
             with pytest.raises(RunStopped, match="did not reach home within 1 s"):
                 rt.home()
+
+
+@pytest.mark.parametrize("decision_period", [0.006, 0.002, 0.1 + 1e-4])
+def test_a_decision_period_off_the_control_cycle_is_bad_input(tmp_path, decision_period):
+    """Refused as the CLI's bad input (ConfigError, an InputError: one line, exit 2), not as a bare ValueError."""
+    spec = load_robot()
+    policy = lambda obs: oracle_action(obs, TaskConfig(), spec.workspace.to_normalized)  # noqa: E731
+    with (
+        RunLog(tmp_path / "log.jsonl", {"test": "period"}) as log,
+        pytest.raises(ConfigError, match=r"not a whole number of control periods \(0.004 s\)") as info,
+    ):
+        Runtime(
+            IdealCobot(spec.q_home),
+            policy,
+            FixedObjectPose((0.5, -0.075, 0.025)),
+            spec,
+            TaskConfig(),
+            log,
+            decision_period,
+        )
+    assert isinstance(info.value, InputError) and f"decision period {decision_period} s" in str(info.value)
+
+
+def test_a_decision_period_within_rounding_of_the_control_period_runs(tmp_path):
+    """The tolerance `check_decision_period` grants the policy file (a period a hair below one control period)."""
+    spec = load_robot()
+    policy = lambda obs: oracle_action(obs, TaskConfig(), spec.workspace.to_normalized)  # noqa: E731
+    with RunLog(tmp_path / "log.jsonl", {"test": "period"}) as log:
+        rt = Runtime(
+            IdealCobot(spec.q_home),
+            policy,
+            FixedObjectPose((0.5, -0.075, 0.025)),
+            spec,
+            TaskConfig(),
+            log,
+            0.004 * (1 - 5e-10),
+        )
+    assert rt.cycles == 1

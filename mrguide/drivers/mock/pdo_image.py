@@ -20,6 +20,9 @@ from canopen.objectdictionary import (
     ODRecord,
 )
 from canopen.pdo.base import PDO_NOT_VALID
+from canopen.sdo import SdoArray, SdoRecord
+
+from mrguide.drivers.od_values import od_int
 
 logger = logging.getLogger(__name__)
 
@@ -73,11 +76,12 @@ def read_layouts(node: LocalNode, comm_base: int, map_base: int) -> list[PdoLayo
     n = 0
     while comm_base + n in od:
         comm, mapping = node.sdo[comm_base + n], node.sdo[map_base + n]
-        cob_id = comm[1].raw
+        assert isinstance(comm, (SdoRecord, SdoArray)) and isinstance(mapping, (SdoRecord, SdoArray))
+        cob_id = od_int(comm[1].raw)
         if not cob_id & PDO_NOT_VALID:
             entries, fmt = [], "<"
-            for sub in range(1, mapping[0].raw + 1):
-                raw = mapping[sub].raw
+            for sub in range(1, od_int(mapping[0].raw) + 1):
+                raw = od_int(mapping[sub].raw)
                 index, subindex, bits = raw >> 16, (raw >> 8) & 0xFF, raw & 0xFF
                 obj = od.get(index)
                 if isinstance(obj, (ODRecord, ODArray)):
@@ -93,6 +97,8 @@ def read_layouts(node: LocalNode, comm_base: int, map_base: int) -> list[PdoLayo
                 entries.append((index, subindex))
                 fmt += _FORMATS[obj.data_type]
             else:
-                layouts.append(PdoLayout(n + 1, cob_id & 0x7FF, comm[2].raw, tuple(entries), struct.Struct(fmt)))
+                layouts.append(
+                    PdoLayout(n + 1, cob_id & 0x7FF, od_int(comm[2].raw), tuple(entries), struct.Struct(fmt))
+                )
         n += 1
     return layouts

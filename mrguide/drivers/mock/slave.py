@@ -34,6 +34,7 @@ from mrguide.drivers.mock.pdo_image import (
     PdoLayout,
     read_layouts,
 )
+from mrguide.drivers.od_values import node_id_of, od_int
 
 logger = logging.getLogger(__name__)
 
@@ -79,7 +80,7 @@ class SimulatedSlave(ABC):
 
     @property
     def node_id(self) -> int:
-        return self.node.id
+        return node_id_of(self.node)
 
     @property
     def operational(self) -> bool:
@@ -87,7 +88,7 @@ class SimulatedSlave(ABC):
 
     @property
     def silent(self) -> bool:
-        return self.faults.is_silent(self.node.id)
+        return self.faults.is_silent(self.node_id)
 
     # ---------------------------------------------------------------- subclass hooks
 
@@ -144,7 +145,7 @@ class SimulatedSlave(ABC):
         index, subindex = key
         obj = self.node.object_dictionary[index]
         var = obj if isinstance(obj, ODVariable) else obj[subindex]
-        return var.decode_raw(self.node.get_data(index, subindex))
+        return od_int(var.decode_raw(self.node.get_data(index, subindex)))
 
     def _on_read(self, index: int, subindex: int, od: ODVariable) -> int | None:
         return self.image.get((index, subindex))
@@ -154,7 +155,7 @@ class SimulatedSlave(ABC):
             self._pdo_dirty = True
         key = (index, subindex)
         if key in self.image:
-            value = od.decode_raw(data)
+            value = od_int(od.decode_raw(data))  # the process image holds integer objects
             self.validate_write(key, value)
             self.image[key] = value
         self.node.data_store.setdefault(index, {})[subindex] = bytes(data)
