@@ -2,7 +2,7 @@
 
 Run: python benchmarks/deploy.py [--episodes N] [--robot ur10]. The dry run drives the scripted expert through
 the whole stack (IK, Ruckig, CANopen over the virtual bus, simulated drives, the "real" twin of
-configs/real_cell.toml with the chosen arm, default the UR5); inference is timed on an exported actor of the
+configs/cells/real_cell.toml with the chosen arm, default the UR5); inference is timed on an exported actor of the
 default size. Prints a table; the last line is one JSON object.
 """
 
@@ -57,7 +57,7 @@ def main() -> None:
     ap.add_argument("--episodes", type=positive_int, default=10)
     ap.add_argument("--robot", default="", help="a shipped arm (ur5, ur10) in place of the real cell's (the UR5)")
     args = ap.parse_args()
-    cfg = EnvConfig.load(Path(__file__).parents[1] / "configs" / "real_cell.toml")
+    cfg = EnvConfig.load(Path(__file__).parents[1] / "configs" / "cells" / "real_cell.toml")
     if args.robot:
         cfg = dataclasses.replace(cfg, robot=RobotConfig(name=args.robot))
     spec = load_robot(cfg.robot)

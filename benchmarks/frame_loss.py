@@ -1,6 +1,6 @@
 """Frame-loss benchmark: spurious quick stops under random CAN frame loss, and fault-detection times.
 
-Uses the timing of a bus config (default `configs/cobot_bus.toml`, the real timing: no test leniency) with
+Uses the timing of a bus config (default `configs/devices/cobot_bus.toml`, the real timing: no test leniency) with
 the simulated cobot (first-order plant) and the master in this process, on a private virtual channel.
 
 1. Frame loss: `--runs` runs of `--seconds` each. The master enables the drives and streams a slow sine on
@@ -12,7 +12,7 @@ the simulated cobot (first-order plant) and the master in this process, on a pri
    control thread hangs (every device's consumer of the master heartbeat; time until all drives are
    disabled and every device left OPERATIONAL).
 
-    python benchmarks/frame_loss.py [--config configs/cobot_bus.toml] [--runs 20] [--seconds 5] [--loss 0.05]
+    python benchmarks/frame_loss.py [--config configs/devices/cobot_bus.toml] [--runs 20] [--seconds 5] [--loss 0.05]
                                     [--repeats 5] [--realtime-priority 0]
 
 The last line is one JSON object with the figures.
@@ -42,7 +42,7 @@ from mrguide.drivers.mock.drive_sim import OPERATION_ENABLED
 from mrguide.drivers.realtime import freeze_heap, make_current_thread_realtime
 from mrguide.robot import RobotSpec, load_robot
 
-REPO_CONFIG = Path(__file__).resolve().parents[1] / "configs" / "cobot_bus.toml"
+REPO_CONFIG = Path(__file__).resolve().parents[1] / "configs" / "devices" / "cobot_bus.toml"
 #: Streamed motion: q_home + A sin(2 pi t / P) on every joint (0.31 rad/s peak).
 AMPLITUDE = 0.1
 PERIOD = 2.0

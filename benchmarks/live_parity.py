@@ -3,7 +3,7 @@ in-process simulated annotator (same noise, same seeds).
 
     python benchmarks/live_parity.py [--seeds 3] [--steps 5000] [--out runs/live-parity]
 
-For each seed it runs `mrguide train --stop-after STEPS` twice with configs/live_parity.toml (σ = 1 cm):
+For each seed it runs `mrguide train --stop-after STEPS` twice with configs/runs/live_parity.toml (σ = 1 cm):
 once with the in-process annotator, once with `--expert live` answered by `mrguide annotate bot --noise
 0.01 --seed S` over a loopback WebSocket. It compares the annotation logs (targets bit for bit), the
 metrics and evaluation CSVs, and prints a table and, last, one JSON line.
@@ -20,7 +20,7 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-CONFIG = ROOT / "configs" / "live_parity.toml"
+CONFIG = ROOT / "configs" / "runs" / "live_parity.toml"
 MRGUIDE = [sys.executable, "-m", "mrguide.cli"]
 
 

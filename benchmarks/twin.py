@@ -1,7 +1,7 @@
 """Twin benchmark: env decisions/s, sim-to-wall factor, oracle success, IK and Ruckig timing.
 
 Run: python benchmarks/twin.py [--episodes N] [--config C]. The arm is the config's ([robot], default UR5;
-e.g. --config configs/ur10.toml). Oracle episodes use env seeds 0..N-1. Prints a table; the last line is
+e.g. --config configs/runs/ur10_run.toml). Oracle episodes use env seeds 0..N-1. Prints a table; the last line is
 one JSON object.
 """
 

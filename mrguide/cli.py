@@ -19,7 +19,7 @@ def cmd_main(args: argparse.Namespace) -> int:
 
     t0 = time.perf_counter()
     out = Path(args.out)
-    real_config = str(args.real_config or shipped_config("real_cell.toml"))  # checked before training starts
+    real_config = str(args.real_config or shipped_config("cells", "real_cell.toml"))  # checked before training starts
     policy = out / "train" / "policy.npz"
     if policy.exists():
         print(f"[1/3] using the policy trained before: {policy} (delete {out} to train again)")
@@ -83,7 +83,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--seeds", type=positive_int, default=2, help="sim-to-real seeds")
     sp.add_argument("--episodes", type=positive_int, default=5, help="sim-to-real episodes per seed and condition")
     sp.add_argument("--seed", type=nonnegative_int, default=0, help="training seed")
-    sp.add_argument("--real-config", help="the 'real' cell (TOML); default: the shipped configs/real_cell.toml")
+    sp.add_argument("--real-config", help="the 'real' cell (TOML); default: the shipped configs/cells/real_cell.toml")
     sp.add_argument("--quiet", action="store_true", help="no progress bars")
     sp.set_defaults(func=cmd_main)
 

@@ -109,7 +109,7 @@ def load_toml(path: str | Path) -> dict[str, Any]:
         raise ConfigError(f"{path}: not valid TOML: {exc}") from exc
 
 
-#: The sections a run config may hold: one file may serve several commands (`configs/real_cell.toml` is
+#: The sections a run config may hold: one file may serve several commands (`configs/cells/real_cell.toml` is
 #: read by `deploy` and `sim2real`), so each command reads its sections and any other known one is left to
 #: the command it belongs to; an unknown section (a typo: `[deplyo]`) is refused instead of ignored.
 RUN_SECTIONS = (

@@ -1,5 +1,9 @@
 """Where the configuration files shipped with mrguide are: the checkout's `configs/` (an editable install,
-CI, a clone), or the copy that a plain `pip install .` puts under `<prefix>/share/mrguide/configs`."""
+CI, a clone), or the copy that a plain `pip install .` puts under `<prefix>/share/mrguide/configs`.
+
+`configs/` is split by kind: `runs/` (training run configs), `cells/` (the cells deploy and sim-to-real run
+in), `devices/` (the CAN bus description, the marker calibration config, a camera calibration file) and
+`experiments/` (`mrguide experiment` files)."""
 
 from __future__ import annotations
 

@@ -13,6 +13,7 @@ from mrguide.deploy.session import DeployConfig
 from mrguide.policies.train import load_sac_config, load_train_config
 from mrguide.robot import load_robot_config
 from mrguide.twin.markers import TwinCalibrationConfig
+from tests import shipped_files
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -52,8 +53,10 @@ def test_an_experiment_file_holds_only_its_experiment(tmp_path, run_cli):
     assert result.code == 2 and "exp.toml: unknown section [train]; this file may hold [experiment]" in result.err
 
 
-@pytest.mark.parametrize("path", sorted((ROOT / "configs").glob("*.toml")), ids=lambda p: p.name)
+@pytest.mark.parametrize(
+    "path",
+    shipped_files.RUN_CONFIGS + shipped_files.CELL_CONFIGS + shipped_files.CALIBRATION_CONFIGS,
+    ids=lambda p: f"{p.parent.name}/{p.name}",
+)
 def test_shipped_run_configs_load_in_every_command(path):
-    if path.name == "cobot_bus.toml":  # a bus description, not a run config
-        return
     _every_loader(path)

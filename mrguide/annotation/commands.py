@@ -80,7 +80,7 @@ def add_annotate_command(sub: argparse._SubParsersAction) -> None:
     b.add_argument(
         "--config",
         help="a training config whose [guidance.noise] is the error model to mark with, e.g. "
-        "configs/person.toml (a person in a headset: bias, line-of-sight error, slips)",
+        "configs/runs/person.toml (a person in a headset: bias, line-of-sight error, slips)",
     )
     b.add_argument("--seed", type=nonnegative_int, default=0, help="training seed whose simulated annotator to mimic")
     b.add_argument("--delay", type=nonnegative_float, default=0.0, metavar="S", help="think time before each answer, s")

@@ -36,7 +36,7 @@ class Cobot:
 
     Typical use::
 
-        with Cobot(load_cobot_bus_config("configs/cobot_bus.toml")) as cobot:   # connect()
+        with Cobot(load_cobot_bus_config("configs/devices/cobot_bus.toml")) as cobot:   # connect()
             cobot.enable()
             for q in trajectory:            # one setpoint (rad) per control period
                 cobot.stream(q)             # blocks while the setpoint queue is full

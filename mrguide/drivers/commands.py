@@ -77,7 +77,7 @@ def _add_config(parser: argparse.ArgumentParser) -> None:
         "--config",
         type=Path,
         default=None,
-        help="bus description TOML, e.g. configs/cobot_bus.toml (default: built-in defaults, virtual bus)",
+        help="bus description TOML, e.g. configs/devices/cobot_bus.toml (default: built-in defaults, virtual bus)",
     )
     parser.add_argument(
         "--robot",

@@ -1,6 +1,6 @@
 """Bus description of the cobot: CAN interface, control timing, node IDs, EDS files, unit conversions.
 
-Loaded from a TOML file (`configs/cobot_bus.toml`) into frozen dataclasses with defaults. What belongs to
+Loaded from a TOML file (`configs/devices/cobot_bus.toml`) into frozen dataclasses with defaults. What belongs to
 the arm is not repeated here: the number of drives, the joint <-> node-ID map and the joint limits come from
 the arm file (`mrguide.robot.load_robot()`); `[limits]` may only tighten the limits.
 No value in this file comes from the paper (it says nothing about the bus); values marked "assumed"
@@ -83,7 +83,7 @@ class TimingConfig:
     heartbeat_period: float = 0.04
     #: Heartbeat consumer time = factor x producer time, in both directions (the master consumes the
     #: devices', every device the master's via 0x1016). 4.5 = three lost heartbeats in a row plus half a
-    #: period of jitter: 180 ms at 40 ms (see configs/cobot_bus.toml); at least MIN_HEARTBEAT_FACTOR.
+    #: period of jitter: 180 ms at 40 ms (see configs/devices/cobot_bus.toml); at least MIN_HEARTBEAT_FACTOR.
     heartbeat_timeout_factor: float = 4.5
     #: Time allowed for all nodes to send their boot-up message after NMT reset communication; [0.01, 60].
     boot_timeout: float = 3.0

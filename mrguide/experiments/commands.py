@@ -299,7 +299,7 @@ def cmd_sim2real(args: argparse.Namespace) -> int:
 
     out = check_output_dir(args.out, "--out")
     train_cfg = EnvConfig.load(args.config)
-    cell = s2r.load_real_cell(args.real_config or shipped_config("real_cell.toml"))
+    cell = s2r.load_real_cell(args.real_config or shipped_config("cells", "real_cell.toml"))
     real_cfg, real_path, bus, hmd = cell.env, cell.path, cell.bus, cell.hmd
     policy = s2r.load_policy(args.policy, train_cfg, cell)
     _check_sweeps(args.sweep, real_cfg, hmd)

@@ -32,7 +32,7 @@ class PeersConfig:
     seeds: int = 10
     steps: int = 20_000
     learners: tuple[str, ...] = LEARNERS
-    config: str = "../person.toml"  # base training config, relative to the experiment file (the marks in process)
+    config: str = "../runs/person.toml"  # base training config, relative to the experiment file (the marks in process)
     marks_budget: int = 100  # compare the learners' evaluation success after this many marks ...
     time_budget_s: float = 180.0  # ... and after this much training wall time
     overrides: dict[str, Any] = field(default_factory=dict)  # for every learner ("sac.utd" = 4, ...)

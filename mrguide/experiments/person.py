@@ -1,5 +1,5 @@
 """A person's marks: guided training where every mark is made over the live protocol by the annotation bot
-with a headset user's errors (`configs/person.toml`: a registration bias drawn once per run, more error
+with a headset user's errors (`configs/runs/person.toml`: a registration bias drawn once per run, more error
 along the line of sight than across it, the odd slip), then every final policy on fresh episodes.
 
 Reported beside Fig. 7's isotropic σ: convergence, marks and person-minutes until convergence, marks over
@@ -30,7 +30,8 @@ class PersonConfig:
 
     seeds: int = 10
     steps: int = 20_000
-    config: str = "../person.toml"  # base training config (its [guidance.noise] is the person), relative to the file
+    #: Base training config (its [guidance.noise] is the person), relative to the experiment file.
+    config: str = "../runs/person.toml"
     episodes: int = 50  # fresh episodes per final policy
     overrides: dict[str, Any] = field(default_factory=dict)
 

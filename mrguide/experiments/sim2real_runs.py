@@ -29,7 +29,8 @@ class Sim2RealConfig:
     eval_seeds: int = 3  # evaluation seeds per policy and condition (object and goal layouts)
     episodes: int = 10  # per evaluation seed and condition
     conditions: tuple[str, ...] = CONDITIONS
-    real_config: str = "../real_cell.toml"  # the 'real' cell, relative to the experiment file (made absolute on load)
+    #: The 'real' cell, relative to the experiment file (made absolute on load).
+    real_config: str = "../cells/real_cell.toml"
     config: str = ""  # base training config (TOML), relative to the experiment file; "" = defaults
     overrides: dict[str, Any] = field(default_factory=dict)
 

@@ -51,7 +51,7 @@ DEFAULT_VIEWPOINT = (1.3, 0.1, 0.8)
 class AnnotatorNoise:
     """How a simulated MR annotator errs (Sec. V-E), every term zero by default.
 
-    Fig. 7's reading is `sigma` alone (isotropic, fresh per mark). A person in a headset (`configs/person.toml`)
+    Fig. 7's reading is `sigma` alone (isotropic, fresh per mark). A person in a headset (`configs/runs/person.toml`)
     has a registration bias held for the whole run (`bias_sigma`, drawn once), a per-mark error that is larger
     along the line of sight from `viewpoint` than across it (`sigma_along`, `sigma_across`) and occasional gross
     slips (`outlier_rate`, `outlier_scale`). The terms add: independent Gaussians, each drawn only when non-zero.

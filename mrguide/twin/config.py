@@ -13,7 +13,7 @@ class RealityGap:
     """Physical parameters that differ between the training twin and the 'real' cell.
 
     The defaults are the training twin's (ideal actuators, noise-free sensors). A second twin playing
-    the real robot loads other values, e.g. from `configs/real_cell.toml`.
+    the real robot loads other values, e.g. from `configs/cells/real_cell.toml`.
     """
 
     object_mass: float = 0.20  # kg

@@ -246,7 +246,7 @@ def test_annotate_bot_takes_its_error_model_from_a_training_config(tmp_path, cap
         bot_module.AnnotationBot, "run", lambda self: seen.append(self.options) or bot_module.BotReport(0, 0, [])
     )
     url = "http://127.0.0.1:1/?token=t"
-    person = Path(__file__).resolve().parents[2] / "configs" / "person.toml"
+    person = Path(__file__).resolve().parents[2] / "configs" / "runs" / "person.toml"
     assert main(["annotate", "bot", "--url", url, "--config", str(person)]) == 0
     assert main(["annotate", "bot", "--url", url, "--config", str(person), "--noise", "0.03"]) == 0
     assert (seen[0].noise.bias_sigma, seen[0].noise.sigma_along, seen[0].noise.sigma) == (0.007, 0.02, 0.0)

@@ -12,7 +12,7 @@ from mrguide.config import ConfigError, load_section
 from mrguide.twin.markers import TwinCalibrationConfig
 from tests.config_keys import undocumented
 
-CONFIG = Path(__file__).parents[2] / "configs" / "calibration.toml"
+CONFIG = Path(__file__).parents[2] / "configs" / "devices" / "calibration.toml"
 
 
 def test_shipped_config_documents_every_setting_and_loads():

@@ -117,7 +117,7 @@ def test_sim2real_refuses_a_real_cell_with_another_arm(tmp_path, exported, capsy
             "--config",
             str(train_cfg),
             "--real-config",
-            str(REPO / "configs" / "real_cell.toml"),
+            str(REPO / "configs" / "cells" / "real_cell.toml"),
             "--out",
             str(tmp_path / "s2r"),
             "--quiet",

@@ -217,7 +217,7 @@ def test_the_example_camera_config_loads():
     from mrguide.deploy.camera import load_marker_pipeline
     from mrguide.deploy.session import DeployConfig
 
-    path = Path(__file__).parents[2] / "configs" / "camera_cell.toml"
+    path = Path(__file__).parents[2] / "configs" / "cells" / "camera_cell.toml"
     cfg = load_section(DeployConfig, path, "deploy")
     assert cfg.pose_source == "camera" and cfg.camera.source == 0
     pipeline = load_marker_pipeline(cfg.camera, path.parent)

@@ -13,7 +13,7 @@ from mrguide.twin.config import TwinConfig
 from mrguide.twin.env import EnvConfig
 from tests.deploy.test_safety import events
 
-REAL_CELL = Path(__file__).resolve().parents[2] / "configs" / "real_cell.toml"
+REAL_CELL = Path(__file__).resolve().parents[2] / "configs" / "cells" / "real_cell.toml"
 STROKE = 0.012  # the shipped real cell's level-compensator
 
 

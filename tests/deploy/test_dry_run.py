@@ -38,5 +38,5 @@ def test_expert_success_rate_over_40_episodes(run_dry):
 def test_real_cell_gap_config_loads():
     from pathlib import Path
 
-    cfg = EnvConfig.load(Path(__file__).parents[2] / "configs" / "real_cell.toml")
+    cfg = EnvConfig.load(Path(__file__).parents[2] / "configs" / "cells" / "real_cell.toml")
     assert cfg.twin.reality_gap.actuator_latency == 2

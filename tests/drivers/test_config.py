@@ -21,7 +21,7 @@ from mrguide.drivers.config import (
 from mrguide.drivers.conversion import JointConversion
 from tests.config_keys import undocumented
 
-REPO_TOML = Path(__file__).resolve().parents[2] / "configs" / "cobot_bus.toml"
+REPO_TOML = Path(__file__).resolve().parents[2] / "configs" / "devices" / "cobot_bus.toml"
 
 
 def test_repo_toml_documents_every_setting_and_takes_the_arm_limits(robot):

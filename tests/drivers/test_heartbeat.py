@@ -13,7 +13,7 @@ from mrguide.drivers.cia402 import OPERATION_ENABLED
 from mrguide.drivers.heartbeat import HeartbeatConsumer
 
 HB = 0.05  # heartbeat period of the test rigs (s)
-REPO_TOML = Path(__file__).resolve().parents[2] / "configs" / "cobot_bus.toml"
+REPO_TOML = Path(__file__).resolve().parents[2] / "configs" / "devices" / "cobot_bus.toml"
 
 
 class _Node:

@@ -8,9 +8,10 @@ import pytest
 
 from mrguide.config import ConfigError
 from mrguide.experiments.commands import NAMES, _setup
+from tests import shipped_files
 
 ROOT = Path(__file__).resolve().parents[2]
-FILES = sorted((ROOT / "configs" / "experiments").glob("*.toml"))
+FILES = shipped_files.EXPERIMENT_FILES
 
 
 def experiment_of(path: Path) -> str:

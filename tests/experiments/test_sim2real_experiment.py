@@ -11,7 +11,7 @@ from mrguide.cli import main
 from mrguide.config import ConfigError
 from mrguide.experiments.sim2real_runs import Sim2RealConfig
 
-REAL_CELL = Path(__file__).resolve().parents[2] / "configs" / "real_cell.toml"
+REAL_CELL = Path(__file__).resolve().parents[2] / "configs" / "cells" / "real_cell.toml"
 
 
 def test_tiny_sim2real_experiment_on_local_ray_evaluates_each_run_once(tiny_experiment, capsys):

@@ -1,21 +1,18 @@
-"""The training configs shipped in configs/ load, and configs/person.toml is the person its comment describes."""
+"""The training configs shipped in configs/runs/ load, and configs/runs/person.toml is the person it describes."""
 
-import tomllib
 from pathlib import Path
 
 import pytest
 
-from mrguide.experiments.runs import SECTIONS
 from mrguide.policies.train import load_sac_config, load_train_config
+from tests import shipped_files
 
 ROOT = Path(__file__).resolve().parents[2]
-TRAIN_CONFIGS = sorted(
-    p for p in (ROOT / "configs").glob("*.toml") if set(tomllib.loads(p.read_text())) <= set(SECTIONS)
-)
+TRAIN_CONFIGS = shipped_files.RUN_CONFIGS
 
 
 def test_the_training_configs_are_found():
-    assert {"person.toml", "live_parity.toml"} <= {p.name for p in TRAIN_CONFIGS}
+    assert {"person.toml", "live_parity.toml", "sac.toml", "ur10_run.toml"} <= {p.name for p in TRAIN_CONFIGS}
 
 
 @pytest.mark.parametrize("path", TRAIN_CONFIGS, ids=lambda p: p.name)
@@ -25,7 +22,7 @@ def test_each_training_config_loads(path):
 
 
 def test_the_person_config_is_a_headset_user_marking_without_ground_truth():
-    _, _, guidance, _ = load_train_config(ROOT / "configs" / "person.toml")
+    _, _, guidance, _ = load_train_config(ROOT / "configs" / "runs" / "person.toml")
     n = guidance.noise
     assert (n.bias_sigma, n.sigma_across, n.sigma_along, n.outlier_rate) == (0.007, 0.01, 0.02, 0.03)
     assert n.sigma == 0.0 and guidance.reference == "running_median"

@@ -9,7 +9,7 @@ import pytest
 
 from mrguide.experiments import sim2real as s2r
 
-REAL = Path(__file__).parents[2] / "configs" / "real_cell.toml"
+REAL = Path(__file__).parents[2] / "configs" / "cells" / "real_cell.toml"
 
 
 @pytest.fixture
@@ -24,11 +24,14 @@ def no_episodes(monkeypatch):
 
 
 def _real_config(d: Path, old: str, new: str) -> list:
-    """--real-config with a copy of configs/real_cell.toml whose line `old` is replaced by `new`."""
-    (d / "cobot_bus.toml").write_text((REAL.parent / "cobot_bus.toml").read_text())
+    """--real-config with a copy of configs/cells/real_cell.toml whose line `old` is replaced by `new` (beside a copy
+    of the bus config it names, in the same layout)."""
+    (d / "devices").mkdir(exist_ok=True)
+    (d / "devices" / "cobot_bus.toml").write_text((REAL.parents[1] / "devices" / "cobot_bus.toml").read_text())
     text = REAL.read_text()
-    assert old in text
-    path = d / "real.toml"
+    assert old in text and 'bus_config = "../devices/cobot_bus.toml"' in text
+    (d / "cells").mkdir(exist_ok=True)
+    path = d / "cells" / "real.toml"
     path.write_text(text.replace(old, new))
     return ["--real-config", path]
 

@@ -21,7 +21,7 @@ from mrguide.twin.plant import TwinPlant
 from mrguide.twin.scene import Scene
 from mrguide.twin.visual_arm import ArmDrawing
 
-REAL = Path(__file__).parents[2] / "configs" / "real_cell.toml"
+REAL = Path(__file__).parents[2] / "configs" / "cells" / "real_cell.toml"
 
 
 def _kill_hmd() -> int:

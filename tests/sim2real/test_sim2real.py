@@ -12,7 +12,7 @@ from mrguide.task import oracle_action
 from mrguide.twin.env import EnvConfig
 from mrguide.twin.hmd_stream import HmdPoseStream
 
-REAL = Path(__file__).parents[2] / "configs" / "real_cell.toml"
+REAL = Path(__file__).parents[2] / "configs" / "cells" / "real_cell.toml"
 
 
 def expert(cfg):
