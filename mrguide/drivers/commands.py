@@ -2,9 +2,9 @@
 
 The top-level `mrguide` parser calls `add_bus_commands(subparsers)`; each command stores a handler in
 `func` that takes the parsed arguments and returns the process exit code. The handlers import the driver
-(python-can, canopen) and the arm (Pinocchio) themselves: the parser is built without them. Bad input raises ConfigError
-(or another InputError) and a bus fault DriverError: `mrguide.cli.main` turns them into one line on
-stderr and exit 2 or 1.
+(python-can, canopen) themselves: the parser is built without it. Bad input raises ConfigError (or another
+InputError) and a bus fault DriverError: `mrguide.cli.main` turns them into one line on stderr and exit 2
+or 1.
 """
 
 from __future__ import annotations
