@@ -17,7 +17,8 @@ if [ ! -f "$STAMP" ]; then
   "$VENV/bin/python" -m pip install --quiet --upgrade pip
   # torch is pinned to the CPU build; install it first so nothing pulls a CUDA build.
   "$VENV/bin/python" -m pip install --quiet "torch==2.13.0"
-  "$VENV/bin/python" -m pip install --quiet -e ".[dev]"
+  # The workstation profile and the test tools (docs/install.md; a robot PC installs '.[robot]' instead).
+  "$VENV/bin/python" -m pip install --quiet -e ".[train,dev]"
   rm -f "$VENV"/.installed-*
   touch "$STAMP"
 fi

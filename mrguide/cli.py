@@ -11,6 +11,7 @@ from pathlib import Path
 from mrguide.cli_args import ArgumentParser, nonnegative_int, positive_int
 from mrguide.drivers.errors import DriverError
 from mrguide.errors import InputError
+from mrguide.install_profiles import missing_profile_message
 
 
 def cmd_main(args: argparse.Namespace) -> int:
@@ -117,7 +118,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run one command. Bad input: one line on stderr, exit 2; driver faults: exit 1; Ctrl-C: exit 130."""
+    """Run one command. Bad input, or a package of the command's install profile missing: one line on stderr,
+    exit 2; driver faults: exit 1; Ctrl-C: exit 130."""
     args = build_parser().parse_args(argv)
     logging.basicConfig(
         level=logging.DEBUG if args.verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s"
@@ -133,6 +135,12 @@ def main(argv: list[str] | None = None) -> int:
         return int(args.func(args))
     except InputError as exc:
         return fail(str(exc), 2)
+    except ModuleNotFoundError as exc:  # e.g. `mrguide train` on a robot PC: which extra to install
+        message = missing_profile_message(name, exc)
+        if message is None:
+            raise
+        print(message, file=sys.stderr)
+        return 2
     except DriverError as exc:
         return fail(f"CAN driver error: {exc}", 1)
     except OSError as exc:  # a full disk, a vanished directory: the environment, not the input

@@ -42,7 +42,9 @@ def example_robot_data(relative: str) -> tuple[Path, Path]:
     try:
         dist = importlib.metadata.distribution("example-robot-data")
     except importlib.metadata.PackageNotFoundError as exc:
-        raise UrdfError("package example-robot-data is not installed; `pip install example-robot-data`") from exc
+        raise UrdfError(
+            "package example-robot-data is not installed; it comes with the robot install: pip install 'mrguide[robot]'"
+        ) from exc
     robots = Path(str(dist.locate_file(EXAMPLE_ROBOT_DATA_ROBOTS)))
     urdf = robots / relative
     if not urdf.is_file():

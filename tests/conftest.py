@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -88,6 +90,30 @@ def policy_file():
         return path
 
     return write
+
+
+def build_wheel(dest: Path) -> Path:
+    """The wheel of this checkout, as `pip install .` builds it (the annotation page's scripts included), built
+    into `dest` by the running interpreter without build isolation (no download of setuptools)."""
+    subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "wheel",
+            "--no-deps",
+            "--no-build-isolation",
+            "-q",
+            "-w",
+            str(dest),
+            str(Path(__file__).resolve().parents[1]),
+        ],
+        check=True,
+        capture_output=True,
+        timeout=300,
+    )
+    (wheel,) = dest.glob("mrguide-*.whl")
+    return wheel
 
 
 def render_calibration_images(client: int, tmp_path: Path) -> Path:

@@ -1,4 +1,7 @@
-"""`mrguide calibrate`: register the HMD (or a fixed camera) to the robot base from images or the twin."""
+"""`mrguide calibrate`: register the HMD (or a fixed camera) to the robot base from images or the twin.
+
+The handler imports OpenCV and the calibration modules itself: the `mrguide` parser is built without them.
+"""
 
 from __future__ import annotations
 
@@ -8,18 +11,18 @@ import logging
 import sys
 from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import cv2
 import numpy as np
 from tqdm import tqdm
 
-from mrguide.calibration.camera_model import CameraModel, load_camera_model
-from mrguide.calibration.config import CalibrationConfig, load_calibration_config
 from mrguide.calibration.errors import CalibrationError
-from mrguide.calibration.overlay import can_write_image, encode_image, mosaic
-from mrguide.calibration.procedure import CalibrationRun, calibrate_frames
-from mrguide.calibration.se3 import apply, invert, is_rigid, rotation_angle_deg
 from mrguide.output_files import check_output_file, write_files_atomically
+
+if TYPE_CHECKING:
+    from mrguide.calibration.camera_model import CameraModel
+    from mrguide.calibration.config import CalibrationConfig
+    from mrguide.calibration.procedure import CalibrationRun
 
 log = logging.getLogger(__name__)
 
@@ -58,6 +61,11 @@ def add_calibrate_command(
 
 def run_calibrate(args: argparse.Namespace) -> int:
     """Bad input raises CalibrationError/ConfigError before anything is written; both files are written together."""
+    from mrguide.calibration.camera_model import load_camera_model
+    from mrguide.calibration.config import load_calibration_config
+    from mrguide.calibration.overlay import encode_image, mosaic
+    from mrguide.calibration.procedure import calibrate_frames
+
     _check_outputs(args.out, args.overlay)
     cfg = load_calibration_config(args.config)
     if args.twin:
@@ -78,6 +86,8 @@ def run_calibrate(args: argparse.Namespace) -> int:
 
 def _check_outputs(out: Path, overlay: Path) -> None:
     """Refuse output locations that cannot be written, before any work is done."""
+    from mrguide.calibration.overlay import can_write_image
+
     check_output_file(out, "--out")
     check_output_file(overlay, "--overlay")
     if not can_write_image(overlay):
@@ -90,6 +100,8 @@ def _check_outputs(out: Path, overlay: Path) -> None:
 
 def _image_frames(folder: Path, camera: CameraModel, poses_path: Path | None):
     """(label, RGB image, T_hmd_cam) for every image in `folder`, checked against the intrinsics."""
+    import cv2
+
     if not folder.is_dir():
         raise CalibrationError(f"image folder not found: {folder}")
     files = sorted(f for f in folder.iterdir() if f.suffix.lower() in IMAGE_SUFFIXES)
@@ -108,6 +120,8 @@ def _image_frames(folder: Path, camera: CameraModel, poses_path: Path | None):
 
 
 def _load_poses(path: Path, names: list[str]) -> dict[str, np.ndarray]:
+    from mrguide.calibration.se3 import is_rigid
+
     try:
         data = json.loads(path.read_text())
     except (OSError, json.JSONDecodeError) as exc:
@@ -130,6 +144,8 @@ def _load_poses(path: Path, names: list[str]) -> dict[str, np.ndarray]:
 
 
 def _report(run: CalibrationRun, truth: np.ndarray | None) -> None:
+    from mrguide.calibration.se3 import apply, invert, rotation_angle_deg
+
     reg, T = run.registration, run.registration.T_base_hmd
     print(f"{'frame':<24}{'markers':>8}{'rms mm':>9}{'max mm':>9}  status")
     for f in run.frames:

@@ -2,7 +2,8 @@
 
 Prints one line per frame (marker seen or why not, capture->pose latency, object position in the robot frame),
 then the detection rate, latency median/p95 and poses/s, and writes an overlay PNG of the last frame with a
-pose (marker outline, id and axes). No PyBullet, no torch: it runs on the robot PC.
+pose (marker outline, id and axes). No PyBullet, no torch: it runs on the robot PC. The handler imports
+OpenCV and the camera pipeline itself: the `mrguide` parser is built without them.
 """
 
 from __future__ import annotations
@@ -11,17 +12,17 @@ import argparse
 import threading
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from mrguide.calibration.overlay import can_write_image, draw_overlay, encode_image
-from mrguide.calibration.pose_sources import MarkerObservation
 from mrguide.cli_args import positive_float, positive_int
-from mrguide.config import load_section
-from mrguide.deploy.camera import CameraPoseSource, open_camera_source
-from mrguide.deploy.frames import CameraError, Frame
-from mrguide.deploy.session import DeployConfig
 from mrguide.output_files import check_output_file, write_files_atomically
+
+if TYPE_CHECKING:
+    from mrguide.calibration.pose_sources import MarkerObservation
+    from mrguide.deploy.camera import CameraPoseSource
+    from mrguide.deploy.frames import Frame
 
 
 def add_camera_command(subparsers: argparse._SubParsersAction) -> None:
@@ -44,6 +45,12 @@ def add_camera_command(subparsers: argparse._SubParsersAction) -> None:
 
 def run_camera_check(args: argparse.Namespace) -> int:
     """Exit 0 when at least one pose was found, 1 when none was, 2 on bad input."""
+    from mrguide.calibration.overlay import can_write_image
+    from mrguide.config import load_section
+    from mrguide.deploy.camera import open_camera_source
+    from mrguide.deploy.frames import CameraError
+    from mrguide.deploy.session import DeployConfig
+
     check_output_file(args.overlay, "--overlay")
     if not can_write_image(args.overlay):
         raise CameraError(
@@ -80,6 +87,8 @@ def run_camera_check(args: argparse.Namespace) -> int:
 
 
 def _report(source: CameraPoseSource, view: tuple[Frame, MarkerObservation] | None, overlay: Path) -> int:
+    from mrguide.calibration.overlay import draw_overlay, encode_image
+
     stats = source.stats()
     print(stats.text())
     if view is None:

@@ -1,9 +1,10 @@
 """`mrguide bus selftest` and `mrguide bus monitor`: argparse wiring for the top-level CLI.
 
 The top-level `mrguide` parser calls `add_bus_commands(subparsers)`; each command stores a handler in
-`func` that takes the parsed arguments and returns the process exit code. Bad input raises ConfigError
-(or another InputError) and a bus fault DriverError: `mrguide.cli.main` turns them into one line on
-stderr and exit 2 or 1.
+`func` that takes the parsed arguments and returns the process exit code. The handlers import the driver
+(python-can, canopen) themselves: the parser is built without it. Bad input raises ConfigError (or another
+InputError) and a bus fault DriverError: `mrguide.cli.main` turns them into one line on stderr and exit 2
+or 1.
 """
 
 from __future__ import annotations
@@ -12,19 +13,17 @@ import argparse
 import logging
 import threading
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from mrguide.cli_args import positive_float
 from mrguide.config import ConfigError
-from mrguide.drivers.cobot import Cobot
-from mrguide.drivers.config import CobotBusConfig, load_cobot_bus_config
 from mrguide.drivers.errors import DriverError
-from mrguide.drivers.mock.first_order_plant import FirstOrderPlant
-from mrguide.drivers.mock.sim_cobot import SimulatedCobot, shared_pc_config
-from mrguide.drivers.monitor import monitor
-from mrguide.drivers.selftest import run_selftest
-from mrguide.robot import RobotConfig, RobotSpec, load_robot
+
+if TYPE_CHECKING:
+    from mrguide.drivers.config import CobotBusConfig
+    from mrguide.robot import RobotSpec
 
 logger = logging.getLogger(__name__)
 
@@ -89,11 +88,16 @@ def _add_config(parser: argparse.ArgumentParser) -> None:
 
 def _robot(args: argparse.Namespace) -> RobotSpec:
     """The arm named by --robot: a shipped arm's name, or a path to an arm file."""
+    from mrguide.robot import RobotConfig, load_robot
+
     text = args.robot
     return load_robot(RobotConfig(file=text) if text.endswith(".toml") or "/" in text else RobotConfig(name=text))
 
 
 def _selftest_command(args: argparse.Namespace) -> int:
+    from mrguide.drivers.config import load_cobot_bus_config
+    from mrguide.drivers.selftest import run_selftest
+
     robot = _robot(args)
     config = load_cobot_bus_config(args.config, robot)
     if config.bus.interface != "virtual" and not args.allow_motion:
@@ -105,6 +109,9 @@ def _selftest_command(args: argparse.Namespace) -> int:
 
 
 def _monitor_command(args: argparse.Namespace) -> int:
+    from mrguide.drivers.config import load_cobot_bus_config
+    from mrguide.drivers.monitor import monitor
+
     robot = _robot(args)
     config = load_cobot_bus_config(args.config, robot)
     if args.simulate and config.bus.interface != "virtual":
@@ -125,6 +132,9 @@ class _SimulatedDemo:
     """Simulated cobot plus a master that boots it and streams a slow sine on every joint."""
 
     def __init__(self, config: CobotBusConfig, robot: RobotSpec) -> None:
+        from mrguide.drivers.mock.first_order_plant import FirstOrderPlant
+        from mrguide.drivers.mock.sim_cobot import SimulatedCobot, shared_pc_config
+
         self._config = config = shared_pc_config(config)
         self._robot = robot
         self._sim = SimulatedCobot(config, FirstOrderPlant(self._robot.q_home))
@@ -142,6 +152,8 @@ class _SimulatedDemo:
         self._sim.stop()
 
     def _master(self) -> None:
+        from mrguide.drivers.cobot import Cobot
+
         try:
             with Cobot(self._config, self._robot) as cobot:
                 cobot.enable()

@@ -342,24 +342,9 @@ def test_a_plain_wheel_serves_a_working_page(browser, tmp_path):
     import subprocess
     import sys
 
-    subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "pip",
-            "wheel",
-            "--no-deps",
-            "--no-build-isolation",
-            "-q",
-            "-w",
-            str(tmp_path),
-            str(REPO),
-        ],
-        check=True,
-        capture_output=True,
-        timeout=300,
-    )
-    (wheel,) = tmp_path.glob("mrguide-*.whl")
+    from tests.conftest import build_wheel
+
+    wheel = build_wheel(tmp_path)
     site = tmp_path / "site"
     subprocess.run(
         [sys.executable, "-m", "pip", "install", "--no-deps", "-q", "--target", str(site), str(wheel)],

@@ -35,12 +35,13 @@ def files(tmp_path):
 @pytest.fixture
 def no_calibration(monkeypatch):
     """Fail the test if a calibration is computed (from images or in the twin)."""
+    import mrguide.calibration.procedure
     import mrguide.twin.markers
 
     def computed(*args, **kwargs):
         raise AssertionError("the calibration ran before the input was refused")
 
-    monkeypatch.setattr(commands, "calibrate_frames", computed)
+    monkeypatch.setattr(mrguide.calibration.procedure, "calibrate_frames", computed)  # run_calibrate imports it
     monkeypatch.setattr(mrguide.twin.markers, "calibrate_twin_hmd", computed)
 
 
