@@ -24,6 +24,16 @@ if [ ! -f "$STAMP" ]; then
 fi
 
 if [ ! -f "$WEB_STAMP" ]; then
+  if ! command -v npm >/dev/null; then
+    if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
+      echo "[run.sh] installing Debian's nodejs and npm for the annotation page's packages..." >&2
+      DEBIAN_FRONTEND=noninteractive apt-get update -qq
+      DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends nodejs npm >/dev/null
+    else
+      echo "[run.sh] the annotation page needs Node.js and npm: 'sudo apt-get install nodejs npm'" >&2
+      exit 1
+    fi
+  fi
   echo "[run.sh] installing the annotation page's npm packages (npm ci)..." >&2
   (cd "$WEB" && npm ci --no-audit --no-fund --loglevel=error)
   touch "$WEB_STAMP"
