@@ -28,7 +28,7 @@ from mrguide.drivers.interface import CobotInterface
 from mrguide.motion.trajectory import TrajectoryError
 from mrguide.pose_source import ObjectPoseSource, PoseUnavailable
 from mrguide.robot import RobotSpec
-from mrguide.task import Outcome, TaskConfig
+from mrguide.task import Outcome, Phase, TaskConfig
 
 log = logging.getLogger(__name__)
 
@@ -364,11 +364,11 @@ class Runtime:
         cup let it go. Otherwise the pose source says; when it has no pose, the last one is used for at most
         `max_pose_misses` decisions in a row (`max_pose_misses_before_grasp` before the grasp, when the arm
         hides the part as it reaches for it), each counted and logged; then the episode ends."""
-        if self.cfg.track_carried_object and self.decision.phase >= 2:
+        if self.cfg.track_carried_object and self.decision.phase >= Phase.LIFT:
             if vac.part_gripped:
                 self._carried = tcp - np.array([0.0, 0.0, 0.5 * self.task.object_height])
                 return self._carried
-            if self._carried is not None and self.decision.phase == 4:
+            if self._carried is not None and self.decision.phase == Phase.RELEASE:
                 return self._carried
         try:
             obj = self.pose.object_position()
@@ -376,7 +376,11 @@ class Runtime:
             if self._last_obj is None:
                 raise RunStopped(f"no object pose at the start of the episode: {exc}") from exc
             self._pose_misses += 1
-            allowed = self.cfg.max_pose_misses_before_grasp if self.decision.phase <= 1 else self.cfg.max_pose_misses
+            allowed = (
+                self.cfg.max_pose_misses_before_grasp
+                if self.decision.phase <= Phase.GRASP
+                else self.cfg.max_pose_misses
+            )
             if self._pose_misses > allowed:
                 self.supervisor.report(
                     Event.POSE_LOST,

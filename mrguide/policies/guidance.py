@@ -13,7 +13,7 @@ import numpy as np
 from mrguide.config import ConfigError, check_number
 from mrguide.policies.annotations import Annotation, AnnotationError
 from mrguide.policies.experts import AnnotatorNoise
-from mrguide.task import TaskConfig, phase_from_progress, phase_target
+from mrguide.task import OBS_GOAL, OBS_OBJECT, OBS_PROGRESS, TaskConfig, phase_from_progress, phase_target
 
 log = logging.getLogger(__name__)
 
@@ -72,7 +72,7 @@ class NominalReference:
         self.task = task
 
     def reference(self, obs: np.ndarray) -> np.ndarray:
-        return phase_target(phase_from_progress(obs[4]), obs[5:8], obs[8:11], self.task)
+        return phase_target(phase_from_progress(obs[OBS_PROGRESS]), obs[OBS_OBJECT], obs[OBS_GOAL], self.task)
 
     def observe(self, obs: np.ndarray, annotation: Annotation) -> None:
         """Nothing to learn: the model is exact."""
@@ -91,14 +91,15 @@ class RunningMedianReference:
         self.offsets: dict[int, deque] = {k: deque(maxlen=window) for k in range(5)}
 
     def reference(self, obs: np.ndarray) -> np.ndarray:
-        phase = phase_from_progress(obs[4])
-        nominal = phase_target(phase, obs[5:8], obs[8:11], self.task)
+        phase = phase_from_progress(obs[OBS_PROGRESS])
+        nominal = phase_target(phase, obs[OBS_OBJECT], obs[OBS_GOAL], self.task)
         offs = self.offsets[phase]
         return nominal + (np.median(np.array(offs), axis=0) if offs else 0.0)
 
     def observe(self, obs: np.ndarray, annotation: Annotation) -> None:
-        phase = phase_from_progress(obs[4])
-        self.offsets[phase].append(np.asarray(annotation.target) - phase_target(phase, obs[5:8], obs[8:11], self.task))
+        phase = phase_from_progress(obs[OBS_PROGRESS])
+        nominal = phase_target(phase, obs[OBS_OBJECT], obs[OBS_GOAL], self.task)
+        self.offsets[phase].append(np.asarray(annotation.target) - nominal)
 
 
 @dataclass(frozen=True)

@@ -14,6 +14,7 @@ from mrguide.policies.guidance import GuidanceConfig, ReferencePose, bounded_pro
 from mrguide.policies.mark_fusion import KINDS, MarkFusion, anchor
 from mrguide.task import (
     G_REQUIRED,
+    OBS_PROGRESS,
     TaskConfig,
     annotation_action,
     mark_phase,
@@ -118,26 +119,26 @@ class GuidedExpert:
     def _pick_place_waypoint(self, obs: np.ndarray) -> tuple[np.ndarray, float] | None:
         """Two marks per demonstration: the phase's waypoint from the fused pick or place mark, fixed for the
         demonstration when first needed (so the lift rises above where the cup went down)."""
-        phase = phase_from_progress(obs[4])
+        phase = phase_from_progress(obs[OBS_PROGRESS])
         kind = mark_phase(phase)
         steps = self._streak[1] + 1 if self._streak[0] == phase else 1
-        asking = obs.copy()
-        asking[4] = progress(kind)  # the request names the mark's phase: the page asks for the grasp or set-down point
+        ask_obs = obs.copy()  # the request names the mark's phase: the page asks for the grasp or set-down point
+        ask_obs[OBS_PROGRESS] = progress(kind)
         planned = self._plan.get(kind)
         due = planned is not None and self.reask_after and steps > self.reask_after
         if planned is None or due:
-            hit = self.cache.lookup(asking) if planned is None else None
+            hit = self.cache.lookup(ask_obs) if planned is None else None
             if hit is not None:
                 self.cache.reused += 1
                 index = hit.index
             else:
                 self.remarks += int(bool(due))
-                index = self._ask(asking, planned[0] if planned else None)
+                index = self._ask(ask_obs, planned[0] if planned else None)
                 if index is None:
                     return None
                 steps = 1
-            fused = self.fusion.point(kind, anchor(kind, asking))
-            bounded = bounded_projection(fused, self.reference.reference(asking), self.delta)
+            fused = self.fusion.point(kind, anchor(kind, ask_obs))
+            bounded = bounded_projection(fused, self.reference.reference(ask_obs), self.delta)
             self.projected += int(not np.allclose(bounded, fused))
             self._plan[kind] = (index, bounded)
         else:
@@ -156,7 +157,7 @@ class GuidedExpert:
         if recorded is not None:
             recorded(ann)
         if self.marks == "pick_place":
-            kind = phase_from_progress(obs[4])
+            kind = phase_from_progress(obs[OBS_PROGRESS])
             self.fusion.add(kind, anchor(kind, obs), ann.target)
         self.reference.observe(obs, ann)
         return index
@@ -166,7 +167,7 @@ class GuidedExpert:
         marks were made."""
         self.fusion = MarkFusion()
         for obs, ann in self.cache.history():
-            kind = phase_from_progress(obs[4])
+            kind = phase_from_progress(obs[OBS_PROGRESS])
             if self.marks == "pick_place" and kind in KINDS:
                 self.fusion.add(kind, anchor(kind, obs), ann.target)
             self.reference.observe(obs, ann)

@@ -17,7 +17,7 @@ import torch
 from torch import nn
 
 from mrguide.robot import Workspace
-from mrguide.task import OBS_DIM, OBS_GOAL, OBS_OBJECT, OBS_PROGRESS, OBS_TCP
+from mrguide.task import OBS_DIM, OBS_GOAL, OBS_GRIP, OBS_OBJECT, OBS_PROGRESS, OBS_TCP
 
 #: φ above which the actor anchors on the goal instead of the part: transport and release (φ = 3/5, 4/5, 1).
 CARRY_PROGRESS = 0.5
@@ -61,7 +61,7 @@ def anchor_features(anchor: slice) -> np.ndarray:
     """The fixed map (6 × 11) from the scaled observation to the actor's input: TCP height, g, φ and anchor − TCP
     (xyz), the anchor being the observation's `anchor` slice (OBS_OBJECT or OBS_GOAL)."""
     eye = np.eye(OBS_DIM)
-    rows = [eye[k] for k in (OBS_TCP.start + 2, OBS_TCP.stop, OBS_PROGRESS)]  # TCP z, g, φ
+    rows = [eye[k] for k in (OBS_TCP.start + 2, OBS_GRIP, OBS_PROGRESS)]  # TCP z, g, φ
     rows += [eye[anchor.start + i] - eye[OBS_TCP.start + i] for i in range(3)]
     return np.array(rows)
 

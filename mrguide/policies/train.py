@@ -46,7 +46,7 @@ from mrguide.policies.networks import obs_scaling
 from mrguide.policies.replay import TaggedReplay
 from mrguide.policies.sac import SAC, SACConfig
 from mrguide.robot import RobotSpec
-from mrguide.task import ACT_DIM, OBS_DIM, phase_from_progress
+from mrguide.task import ACT_DIM, OBS_DIM, OBS_PROGRESS, phase_from_progress
 from mrguide.twin.env import EnvConfig, PickPlaceEnv
 
 log = logging.getLogger(__name__)
@@ -359,9 +359,9 @@ class Trainer:
             if self.expert.remarks != remarks:  # the phase's earlier mark did not complete it
                 self._flush_segment(0)
                 remarks = self.expert.remarks
-            phase = phase_from_progress(obs[4])
+            phase = phase_from_progress(obs[OBS_PROGRESS])
             obs, r, term, trunc, info = self._env_step(step.executed, None, obs, step.stored)
-            if info["is_success"] or phase_from_progress(obs[4]) > phase:
+            if info["is_success"] or phase_from_progress(obs[OBS_PROGRESS]) > phase:
                 self._flush_segment(1)
             ret += r
             length += 1

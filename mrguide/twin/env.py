@@ -19,7 +19,7 @@ import numpy as np
 from mrguide.config import load_section
 from mrguide.deploy.decision import ActionError, DecisionState, DecisionStep
 from mrguide.robot import RobotConfig, RobotSpec, load_robot, load_robot_config
-from mrguide.task import ACT_DIM, OBS_DIM, Outcome, TaskConfig, oracle_action
+from mrguide.task import ACT_DIM, OBS_DIM, OBS_GRIP, OBS_PROGRESS, Outcome, TaskConfig, oracle_action
 from mrguide.twin.config import Region, TwinConfig
 from mrguide.twin.scene import Scene, SceneSnapshot
 
@@ -77,9 +77,9 @@ class PickPlaceEnv(gym.Env):
         self.kin, self.streamer = self.decision.kin, self.decision.streamer
         self.action_space = gym.spaces.Box(-1.0, 1.0, (ACT_DIM,), np.float32)
         lim = np.full(OBS_DIM, 5.0, np.float32)
-        lim[3], lim[4] = 1.0, 1.0
+        lim[OBS_GRIP], lim[OBS_PROGRESS] = 1.0, 1.0
         low = -lim.copy()
-        low[4] = 0.0
+        low[OBS_PROGRESS] = 0.0
         self.observation_space = gym.spaces.Box(low, lim, (OBS_DIM,), np.float32)
         self.vacuum = False
         self._obs = np.zeros(OBS_DIM, np.float32)
