@@ -244,3 +244,55 @@ def test_the_phase_search_catches(code):
 @pytest.mark.parametrize("code", PASSED_PHASES)
 def test_the_phase_search_lets_pass(code):
     assert not bare_phase_comparisons(ast.parse(code))
+
+
+# -- the names a config chooses between -----------------------------------------------------------------------------
+def test_every_name_has_its_entry_in_the_registry():
+    from mrguide.experiments.commands import NAMES, _experiments
+    from mrguide.policies.choices import EXPERT_SOURCES, REFERENCES
+    from mrguide.policies.guidance import REFERENCE_POSES
+    from mrguide.policies.guided_expert import IN_PROCESS_SOURCES
+
+    assert list(IN_PROCESS_SOURCES) + ["live"] == list(EXPERT_SOURCES)  # a person is attached by the CLI
+    assert list(REFERENCE_POSES) == list(REFERENCES)
+    assert list(_experiments()) == list(NAMES)
+
+
+@pytest.mark.parametrize(
+    "section, key, value, message",
+    [
+        (
+            "guidance",
+            "source",
+            "oracel",
+            "guidance.source must be 'oracle', 'annotator', 'file' or 'live', got 'oracel'",
+        ),
+        ("guidance", "marks", "sideways", "guidance.marks must be 'phases' or 'pick_place', got 'sideways'"),
+        ("guidance", "reference", "mean", "guidance.reference must be 'nominal' or 'running_median', got 'mean'"),
+        ("guidance", "marks", 3, "guidance.marks must be 'phases' or 'pick_place', got 3"),
+        ("train", "learner", "td3", "train.learner = 'td3': expected one of ddpg, sac"),
+        ("peers", "learners", ["sac", "td3"], "experiment.learners = ['sac', 'td3']: expected some of ddpg, sac"),
+    ],
+)
+def test_a_value_outside_its_choices_gets_the_keys_own_message(section, key, value, message):
+    """Loaded through dacite, a `Literal` field's bad value is refused by the config's own check, not by dacite's
+    type check (which would name only the type)."""
+    from mrguide.config import ConfigError, from_dict
+    from mrguide.experiments.peers import PeersConfig
+    from mrguide.policies.guidance import GuidanceConfig
+    from mrguide.policies.train import TrainConfig
+
+    cls = {"guidance": GuidanceConfig, "train": TrainConfig, "peers": PeersConfig}[section]
+    with pytest.raises(ConfigError) as err:
+        from_dict(cls, {key: value}, "run.toml [x]")
+    assert str(err.value) == f"run.toml [x]: {message}"
+
+
+def test_the_choices_load():
+    from mrguide.config import from_dict
+    from mrguide.experiments.peers import PeersConfig
+    from mrguide.policies.guidance import GuidanceConfig
+
+    g = from_dict(GuidanceConfig, {"source": "oracle", "marks": "phases", "reference": "running_median"})
+    assert (g.source, g.marks, g.reference) == ("oracle", "phases", "running_median")
+    assert from_dict(PeersConfig, {"learners": ["sac"]}).learners == ("sac",)

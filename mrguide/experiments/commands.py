@@ -16,7 +16,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal, get_args
 
 from tqdm import tqdm
 
@@ -56,7 +56,15 @@ class Experiment:
     evaluated: Callable[[Any, Path], Path] | None = None  # (run, root) → that file
 
 
-def _experiments() -> dict[str, Experiment]:
+#: The experiments, by the name `mrguide experiment NAME` takes (their `Experiment`s: `_experiments`).
+ExperimentName = Literal[
+    "learning-curves", "long-baseline", "noise-robustness", "generalization", "person", "peers", "sim2real"
+]
+NAMES: tuple[ExperimentName, ...] = get_args(ExperimentName)
+
+
+def _experiments() -> dict[ExperimentName, Experiment]:
+    """Every experiment by name (imported here: the parser needs only NAMES)."""
     from mrguide.experiments import generalization as gen
     from mrguide.experiments import learning_curves as lc
     from mrguide.experiments import noise_robustness as nr
@@ -130,9 +138,6 @@ def _evaluate(
 
     todo = [r for r in exp.runs(cfg, base) if not exp.evaluated(r, out).exists()]
     map_tasks(exp.evaluate, [(r, str(out), cfg) for r in todo], workers, address, "evaluation", show_progress)
-
-
-NAMES = ("learning-curves", "long-baseline", "noise-robustness", "generalization", "person", "peers", "sim2real")
 
 
 def add_experiment_command(sub: argparse._SubParsersAction) -> None:

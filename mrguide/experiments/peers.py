@@ -20,8 +20,8 @@ from mrguide.experiments import report
 from mrguide.experiments.run_records import RunRecord, read_run
 from mrguide.experiments.runs import TrainRun
 from mrguide.experiments.stats import person_minutes
+from mrguide.policies.choices import LEARNERS, Learner
 
-LEARNERS = ("ddpg", "sac")
 COLORS = {"ddpg": "tab:red", "sac": "tab:purple"}
 
 
@@ -31,7 +31,7 @@ class PeersConfig:
 
     seeds: int = 10
     steps: int = 20_000
-    learners: tuple[str, ...] = LEARNERS
+    learners: tuple[Learner, ...] = LEARNERS
     config: str = "../person.toml"  # base training config, relative to the experiment file (the marks in process)
     marks_budget: int = 100  # compare the learners' evaluation success after this many marks ...
     time_budget_s: float = 180.0  # ... and after this much training wall time

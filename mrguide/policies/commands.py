@@ -16,6 +16,7 @@ from typing import Any, Protocol
 from tqdm import tqdm
 
 from mrguide.cli_args import nonnegative_int, positive_int
+from mrguide.policies.choices import EXPERT_SOURCES
 
 
 class LiveSessionLike(Protocol):
@@ -42,9 +43,6 @@ class LivePlugin(Protocol):
     def open_session(self, args: argparse.Namespace, on_waiting: Callable[[bool], None]) -> LiveSessionLike: ...
 
 
-EXPERTS = ("oracle", "annotator", "file", "live")
-
-
 def add_train_command(sub: argparse._SubParsersAction, live: LivePlugin | None = None) -> None:
     """`mrguide train`; with `live`, also `--expert live` and its server options."""
     p = sub.add_parser("train", help="train DDPG in the twin, with or without MR-style expert guidance")
@@ -61,7 +59,7 @@ def add_train_command(sub: argparse._SubParsersAction, live: LivePlugin | None =
     p.add_argument("--no-guidance", action="store_true", help="baseline DDPG (guidance.enabled = false)")
     p.add_argument(
         "--expert",
-        choices=EXPERTS if live else EXPERTS[:-1],
+        choices=EXPERT_SOURCES if live else tuple(s for s in EXPERT_SOURCES if s != "live"),
         help="override guidance.source: the scripted oracle, the simulated MR annotator, a recorded "
         "annotation file (guidance.annotation_file), or a person through the live annotation page",
     )

@@ -3,12 +3,14 @@ bounded by Eq. 13, optionally perturbed, and turned into normalized actions."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import NamedTuple
 
 import numpy as np
 
 from mrguide.config import ConfigError
 from mrguide.policies.annotations import AnnotationCache
+from mrguide.policies.choices import ExpertSourceName, MarksMode
 from mrguide.policies.experts import ANNOTATOR_SEED_OFFSET, ExpertSource, FileExpert, OracleExpert, SimulatedAnnotator
 from mrguide.policies.guidance import GuidanceConfig, ReferencePose, bounded_projection
 from mrguide.policies.mark_fusion import KINDS, MarkFusion, anchor
@@ -62,7 +64,7 @@ class GuidedExpert:
         reask_after: int = 0,
         action_noise: float = 0.0,
         seed: int = 0,
-        marks: str = "pick_place",
+        marks: MarksMode = "pick_place",
     ):
         self.source, self.reference, self.cache = source, reference, cache
         self.action_noise = action_noise
@@ -173,12 +175,20 @@ class GuidedExpert:
             self.reference.observe(obs, ann)
 
 
+#: The in-process expert source of each guidance.source, built from (guidance, env, training seed). "live" is not
+#: among them: a person is attached by `mrguide train --expert live` (the trainer's `source_factory`).
+IN_PROCESS_SOURCES: dict[ExpertSourceName, Callable[[GuidanceConfig, PickPlaceEnv, int], ExpertSource]] = {
+    "oracle": lambda g, env, seed: OracleExpert(env.task_cfg),
+    "annotator": lambda g, env, seed: SimulatedAnnotator(
+        env.task_cfg, g.noise, env.workspace, seed=seed + ANNOTATOR_SEED_OFFSET
+    ),
+    "file": lambda g, env, seed: FileExpert(g.annotation_file, g.cache_tolerance),
+}
+
+
 def make_expert_source(g: GuidanceConfig, env: PickPlaceEnv, seed: int) -> ExpertSource:
     """The configured in-process expert source (a live person is attached by `mrguide train --expert live`)."""
-    if g.source == "oracle":
-        return OracleExpert(env.task_cfg)
-    if g.source == "annotator":
-        return SimulatedAnnotator(env.task_cfg, g.noise, env.workspace, seed=seed + ANNOTATOR_SEED_OFFSET)
-    if g.source == "file":
-        return FileExpert(g.annotation_file, g.cache_tolerance)
-    raise ConfigError("guidance.source = 'live' needs a person: run `mrguide train --expert live`")
+    build = IN_PROCESS_SOURCES.get(g.source)
+    if build is None:
+        raise ConfigError(f"guidance.source = {g.source!r} needs a person: run `mrguide train --expert live`")
+    return build(g, env, seed)

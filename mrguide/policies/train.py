@@ -31,16 +31,10 @@ from mrguide import __version__
 from mrguide.config import ConfigError, check_number, load_section, to_dict
 from mrguide.policies.annotations import AnnotationCache
 from mrguide.policies.checkpoint import CheckpointError, read_checkpoint, with_defaults, write_checkpoint
+from mrguide.policies.choices import LEARNERS, Learner
 from mrguide.policies.ddpg import DDPG, DDPGConfig
 from mrguide.policies.experts import ExpertSource
-from mrguide.policies.guidance import (
-    GuidanceConfig,
-    NominalReference,
-    ReferencePose,
-    RunningMedianReference,
-    ThresholdTrigger,
-    expert_ratio,
-)
+from mrguide.policies.guidance import REFERENCE_POSES, GuidanceConfig, ThresholdTrigger, expert_ratio
 from mrguide.policies.guided_expert import GuidedExpert, make_expert_source
 from mrguide.policies.networks import obs_scaling
 from mrguide.policies.replay import TaggedReplay
@@ -51,8 +45,6 @@ from mrguide.twin.env import EnvConfig, PickPlaceEnv
 
 log = logging.getLogger(__name__)
 
-LEARNERS = ("ddpg", "sac")
-
 
 @dataclass(frozen=True)
 class TrainConfig:
@@ -60,7 +52,7 @@ class TrainConfig:
 
     total_steps: int = 20_000  # paper: 20k timesteps (Fig. 3)
     #: "ddpg" (the paper's learner, [ddpg]) or "sac" (the RLPD-style peer, [sac]; `mrguide experiment peers`).
-    learner: str = "ddpg"
+    learner: Learner = "ddpg"
     seed: int = 0
     batch_size: int = 256  # Table I
     buffer_size: int = 1_000_000  # Table I
@@ -202,11 +194,7 @@ class Trainer:
         self.replay = TaggedReplay(cfg.buffer_size, OBS_DIM, ACT_DIM)
         self.rng = np.random.default_rng(cfg.seed)
         self.source = source_factory(self.env) if source_factory else make_expert_source(guidance, self.env, cfg.seed)
-        reference: ReferencePose = (
-            NominalReference(self.env.task_cfg)
-            if guidance.reference == "nominal"
-            else RunningMedianReference(self.env.task_cfg)
-        )
+        reference = REFERENCE_POSES[guidance.reference](self.env.task_cfg)
         self.cache = AnnotationCache(guidance.cache_tolerance, self.out / "annotations.jsonl")
         self.expert = GuidedExpert(
             self.source,
