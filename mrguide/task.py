@@ -44,7 +44,8 @@ class Outcome(str, enum.Enum):
     """How an episode ended: every outcome of the twin and of the robot, in one enum.
 
     The task model (`task_step`) gives the first six; the deploy runtime adds the ones only a robot has
-    (its safety supervisor ended the episode). `terminated`/`truncated` are the Gymnasium reading."""
+    (its safety supervisor ended the episode). `terminated`/`truncated` are the Gymnasium reading. A member is a
+    str, so JSON and CSV write its value; str() and f-strings give its name (`Outcome.SUCCESS`): write `.value`."""
 
     SUCCESS = "success"
     NO_GRASP = "no_grasp"  # horizon reached before the object was grasped

@@ -296,3 +296,28 @@ def test_the_choices_load():
     g = from_dict(GuidanceConfig, {"source": "oracle", "marks": "phases", "reference": "running_median"})
     assert (g.source, g.marks, g.reference) == ("oracle", "phases", "running_median")
     assert from_dict(PeersConfig, {"learners": ["sac"]}).learners == ("sac",)
+
+
+# -- outcomes -------------------------------------------------------------------------------------------------------
+def test_an_outcome_is_written_as_its_value():
+    import csv
+    import io
+    import json
+
+    from mrguide.task import Outcome
+
+    buf = io.StringIO()
+    csv.writer(buf).writerow([Outcome.SAFETY_STOP])
+    assert buf.getvalue().strip() == "safety_stop" == Outcome.SAFETY_STOP.value
+    assert json.dumps({"outcome": Outcome.POSE_LOST}) == '{"outcome": "pose_lost"}'
+    assert Outcome("no_grasp") is Outcome.NO_GRASP and Outcome.NO_GRASP == "no_grasp"
+
+
+def test_a_deploy_summary_counts_outcomes_by_value():
+    from mrguide.deploy.runtime import EpisodeReport
+    from mrguide.deploy.session import DeploySummary
+    from mrguide.task import Outcome
+
+    summary = DeploySummary([EpisodeReport(0, Outcome.SUCCESS, 5, {}), EpisodeReport(1, Outcome.DROPPED, 3, {})])
+    assert summary.successes == 1 and summary.outcomes() == {"success": 1, "dropped": 1}
+    assert "outcomes: {'success': 1, 'dropped': 1}" in summary.text()

@@ -72,7 +72,7 @@ class RuntimeConfig:
 @dataclass
 class EpisodeReport:
     index: int
-    outcome: str  # an `Outcome` value
+    outcome: Outcome
     decisions: int
     events: dict[str, int]
     latency_ms: list[float] = field(default_factory=list)
@@ -227,7 +227,7 @@ class Runtime:
         """One episode toward `goal` from the home pose; returns its report (RunStopped ends the run)."""
         goal = np.asarray(goal, dtype=float)
         self._episode_events = Counter()
-        report = EpisodeReport(index, Outcome.ABORTED.value, 0, {})
+        report = EpisodeReport(index, Outcome.ABORTED, 0, {})
         t0 = time.perf_counter()
         self.log.write("episode_start", episode=index, goal=goal)
         self.decision.reset(self.cobot.setpoint)
@@ -235,7 +235,7 @@ class Runtime:
         self.watchdog.arm(True)
         try:
             outcome = self._decisions(goal, index, report)
-            report.outcome = outcome.value
+            report.outcome = outcome
             self.streamer.brake()
             self._settle()
             if outcome is not Outcome.SUCCESS:
@@ -243,14 +243,14 @@ class Runtime:
         except KeyboardInterrupt:
             self.cobot.stop()
             self.supervisor.report(Event.INTERRUPT, "Ctrl-C")
-            report.outcome = Outcome.SAFETY_STOP.value
+            report.outcome = Outcome.SAFETY_STOP
             raise
         except RunStopped as exc:
-            report.outcome = Outcome.SAFETY_STOP.value
+            report.outcome = Outcome.SAFETY_STOP
             exc.report = report
             raise
         except DriverError:  # a fault surfaced outside the streaming (reading the state, the vacuum command)
-            report.outcome = Outcome.SAFETY_STOP.value
+            report.outcome = Outcome.SAFETY_STOP
             raise
         finally:
             self.watchdog.arm(False)
@@ -259,7 +259,7 @@ class Runtime:
             self.log.write(
                 "episode_end",
                 episode=index,
-                outcome=report.outcome,
+                outcome=report.outcome.value,
                 decisions=report.decisions,
                 events=report.events,
                 wall_s=report.wall_s,
