@@ -83,8 +83,6 @@ class AnnotationCache:
         self._observations: list[np.ndarray] = []  # every record's observation, superseded ones included
         self._values: list[Annotation] = []
         self._matrix: np.ndarray | None = None
-        self.asked = 0
-        self.reused = 0
 
     def __len__(self) -> int:
         """Annotations in use (superseded ones not counted)."""

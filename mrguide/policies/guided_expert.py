@@ -4,6 +4,7 @@ bounded by Eq. 13, optionally perturbed, and turned into normalized actions."""
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
@@ -39,6 +40,16 @@ class ExpertStep(NamedTuple):
     stored: np.ndarray
 
 
+@dataclass
+class ExpertCounts:
+    """What the guided expert counted (the trainer's `TrainerCounters` extends it, so one object holds all)."""
+
+    asked: int = 0  # annotations asked of the source
+    reused: int = 0  # expert steps that reused a cached annotation (or a planned mark)
+    projected: int = 0  # annotations moved onto the Δ-sphere (Eq. 13)
+    remarks: int = 0  # waypoints asked again because the arm did not reach them
+
+
 class GuidedExpert:
     """Expert actions for the learner: cache → source (counted) → bounded projection → normalized action.
 
@@ -65,7 +76,9 @@ class GuidedExpert:
         action_noise: float = 0.0,
         seed: int = 0,
         marks: MarksMode = "pick_place",
+        counts: ExpertCounts | None = None,
     ):
+        """`counts` is what the expert counts into (default: counts of its own)."""
         self.source, self.reference, self.cache = source, reference, cache
         self.action_noise = action_noise
         self.rng = np.random.default_rng(seed + ACTION_NOISE_SEED_OFFSET)  # draws only when action_noise > 0
@@ -75,8 +88,7 @@ class GuidedExpert:
         self.reask_after = reask_after
         self.marks = marks
         self.fusion = MarkFusion()
-        self.projected = 0  # annotations moved onto the Δ-sphere
-        self.remarks = 0  # waypoints asked again because the arm did not reach them
+        self.counts = counts if counts is not None else ExpertCounts()
         self._streak = (
             -1,
             0,
@@ -104,18 +116,18 @@ class GuidedExpert:
         """The paper's protocol: this phase's own mark, bounded by Eq. 13 around the reference."""
         hit = self.cache.lookup(obs)
         if hit is None or (self.reask_after and self._streak == (hit.index, self.reask_after)):
-            self.remarks += int(hit is not None)
+            self.counts.remarks += int(hit is not None)
             index = self._ask(obs, hit.index if hit else None)
             if index is None:
                 return None
             self._streak = (index, 1)
         else:
-            self.cache.reused += 1
+            self.counts.reused += 1
             index = hit.index
             self._streak = (index, self._streak[1] + 1 if self._streak[0] == index else 1)
         ann = self.cache.get(index)
         target = bounded_projection(ann.target, self.reference.reference(obs), self.delta)
-        self.projected += int(not np.allclose(target, ann.target))
+        self.counts.projected += int(not np.allclose(target, ann.target))
         return target, ann.grip
 
     def _pick_place_waypoint(self, obs: np.ndarray) -> tuple[np.ndarray, float] | None:
@@ -131,27 +143,27 @@ class GuidedExpert:
         if planned is None or due:
             hit = self.cache.lookup(ask_obs) if planned is None else None
             if hit is not None:
-                self.cache.reused += 1
+                self.counts.reused += 1
                 index = hit.index
             else:
-                self.remarks += int(bool(due))
+                self.counts.remarks += int(bool(due))
                 index = self._ask(ask_obs, planned[0] if planned else None)
                 if index is None:
                     return None
                 steps = 1
             fused = self.fusion.point(kind, anchor(kind, ask_obs))
             bounded = bounded_projection(fused, self.reference.reference(ask_obs), self.delta)
-            self.projected += int(not np.allclose(bounded, fused))
+            self.counts.projected += int(not np.allclose(bounded, fused))
             self._plan[kind] = (index, bounded)
         else:
-            self.cache.reused += 1
+            self.counts.reused += 1
         self._streak = (phase, steps)
         return waypoint_from_mark(phase, self._plan[kind][1], self.task), float(G_REQUIRED[phase])
 
     def _ask(self, obs: np.ndarray, previous: int | None) -> int | None:
         """Ask the source (a re-mark of cache record `previous` if given); the new record's index, or None."""
         ann = self.source.annotate(obs, self.cache.get(previous) if previous is not None else None)
-        self.cache.asked += 1
+        self.counts.asked += 1
         if ann is None:
             return None
         index = self.cache.insert(obs, ann, supersedes=previous)  # on disk (fsync'd) when this returns

@@ -82,7 +82,7 @@ def test_rows_hold_the_means_of_the_updates_since_the_previous_row(tmp_path, gui
                 assert payload[field] == "", (field, payload)
         since = []
     # updates start at the 64th stored transition (a demonstration's steps are stored as its phases complete)
-    assert n_updates == tr.agent.updates and 0 < tr.agent.updates <= tr.step - 63 and rows >= 5
+    assert n_updates == tr.agent.updates and 0 < tr.agent.updates <= tr.counters.step - 63 and rows >= 5
     csv_rows = read(tmp_path / "run" / "metrics.csv")
     assert tuple(csv_rows[0]) == METRIC_FIELDS and len(csv_rows) == rows
     assert [r["step"] for r in csv_rows] == [str(p["step"]) for k, p in rec.events if k == "row"]
@@ -116,7 +116,7 @@ def test_resume_keeps_earlier_rows_and_upgrades_an_old_metrics_file(tmp_path):
     with path.open("w", newline="") as fh:
         w = csv.DictWriter(fh, OLD_FIELDS, extrasaction="ignore")
         w.writeheader()
-        w.writerows(kept + [{**kept[-1], "step": str(first.step + 7)}])
+        w.writerows(kept + [{**kept[-1], "step": str(first.counters.step + 7)}])
     resumed = make(tmp_path, "run")
     resumed.load_checkpoint()
     try:
@@ -128,7 +128,7 @@ def test_resume_keeps_earlier_rows_and_upgrades_an_old_metrics_file(tmp_path):
     old, new = rows[: len(kept)], rows[len(kept) :]
     assert [r["step"] for r in old] == [r["step"] for r in kept]  # the row after the checkpoint is gone
     assert all(r[f] == "" for r in old for f in UPDATE_FIELDS)
-    assert new and int(new[0]["step"]) > first.step
+    assert new and int(new[0]["step"]) > first.counters.step
     assert all(
         math.isfinite(float(r[f])) for r in new if r["critic_loss"] != "" for f in UPDATE_FIELDS if f != "temperature"
     )
