@@ -18,6 +18,7 @@ from __future__ import annotations
 import csv
 import dataclasses
 import logging
+import os
 import threading
 import time
 from collections.abc import Callable
@@ -191,6 +192,23 @@ def _append_csv(path: Path, fields: tuple[str, ...], row: dict) -> None:
         if new:
             w.writeheader()
         w.writerow(row)
+
+
+def _replace_csv(path: Path, fields: tuple[str, ...], rows: list[dict]) -> None:
+    """Rewrite `path` with `rows` (and a header) atomically: a temporary file beside it, fsync'd, then renamed over
+    it. An interruption leaves the old file or the new one, never part of either."""
+    tmp = path.with_name(path.name + ".tmp")
+    try:
+        with tmp.open("w", newline="") as fh:
+            w = csv.DictWriter(fh, fields)
+            w.writeheader()
+            w.writerows(rows)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
 
 
 class Trainer:
@@ -518,11 +536,7 @@ class Trainer:
                 continue
             with path.open() as fh:
                 rows = [r for r in csv.DictReader(fh) if int(r["step"]) <= self.counters.step]
-            fields = METRIC_FIELDS if name == "metrics.csv" else EVAL_FIELDS
-            with path.open("w", newline="") as fh:
-                w = csv.DictWriter(fh, fields)
-                w.writeheader()
-                w.writerows(rows)
+            _replace_csv(path, METRIC_FIELDS if name == "metrics.csv" else EVAL_FIELDS, rows)
 
     def close(self) -> None:
         self.env.close()

@@ -133,3 +133,42 @@ def test_resume_keeps_earlier_rows_and_upgrades_an_old_metrics_file(tmp_path):
         math.isfinite(float(r[f])) for r in new if r["critic_loss"] != "" for f in UPDATE_FIELDS if f != "temperature"
     )
     assert any(r["critic_loss"] != "" for r in new)
+
+
+@pytest.mark.parametrize("fails", ["writing", "renaming"])
+def test_an_interrupted_truncation_leaves_the_log_as_it_was(tmp_path, monkeypatch, fails):
+    """Resuming rewrites metrics.csv without the rows after the checkpoint through a temporary file renamed over
+    it: a failure while writing the new one, or between writing and renaming, leaves the old file whole."""
+    import os
+
+    first = make(tmp_path, "run", guided=False)
+    first.run(stop_at=150)
+    first.close()
+    path = tmp_path / "run" / "metrics.csv"
+    kept = read(path)
+    with path.open("a", newline="") as fh:  # a row after the checkpoint: the resume drops it
+        csv.DictWriter(fh, METRIC_FIELDS).writerow({**kept[-1], "step": str(first.counters.step + 7)})
+    before = path.read_bytes()
+
+    def fail(*args, **kwargs):
+        raise OSError(28, "No space left on device")
+
+    if fails == "writing":
+        monkeypatch.setattr(csv.DictWriter, "writerows", fail)
+    else:
+        monkeypatch.setattr(os, "replace", fail)
+    resumed = make(tmp_path, "run", guided=False)
+    try:
+        with pytest.raises(OSError, match="No space left"):
+            resumed.load_checkpoint()
+    finally:
+        resumed.close()
+    assert path.read_bytes() == before
+    assert not (tmp_path / "run" / "metrics.csv.tmp").exists()  # the partial file is gone
+    monkeypatch.undo()
+    again = make(tmp_path, "run", guided=False)
+    try:
+        again.load_checkpoint()
+    finally:
+        again.close()
+    assert read(path) == kept  # the truncation, done
