@@ -89,7 +89,7 @@ def _choice_refusal(cls: Any, data: Any) -> ConfigError | None:
     dacite would refuse it first, naming only the type; so the value is set alone on a default instance, whose
     `__post_init__` says what the key takes. None also when there is no such value, or nothing refuses it there
     (dacite then names it)."""
-    if not dataclasses.is_dataclass(cls) or not isinstance(data, dict):
+    if not (isinstance(cls, type) and dataclasses.is_dataclass(cls)) or not isinstance(data, dict):
         return None
     hints = typing.get_type_hints(cls)
     for f in dataclasses.fields(cls):

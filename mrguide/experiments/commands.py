@@ -46,7 +46,7 @@ class Experiment:
     """How to run and report one experiment: its config class and file, its runs, an optional evaluation of
     the trained runs (Ray tasks), and its report built from the run directories."""
 
-    config_cls: type
+    config_cls: type[Any]
     default_config: str
     default_out: str
     runs: Callable[[Any, str | None], list]
@@ -136,6 +136,7 @@ def _evaluate(
     """Every trained run not evaluated yet, one Ray task each (Fig. 6: the goal grid; sim-to-real: three conditions)."""
     from mrguide.experiments.execution import map_tasks
 
+    assert exp.evaluate is not None and exp.evaluated is not None  # called for experiments that evaluate
     todo = [r for r in exp.runs(cfg, base) if not exp.evaluated(r, out).exists()]
     map_tasks(exp.evaluate, [(r, str(out), cfg) for r in todo], workers, address, "evaluation", show_progress)
 

@@ -80,7 +80,8 @@ def wall_until_convergence(rec: RunRecord) -> float | None:
 
 def peers_report(cfg: PeersConfig, recs: dict[str, list[RunRecord]]) -> dict[str, bytes]:
     """summary.csv, runs.csv, summary.md and the figure: success against marks and against wall time."""
-    rows, table = [], []
+    rows: list[dict[str, Any]] = []
+    table = []
     for learner, rs in recs.items():
         for r in rs:
             rows.append(

@@ -147,9 +147,10 @@ class GuidedExpert:
                 index = hit.index
             else:
                 self.counts.remarks += int(bool(due))
-                index = self._ask(ask_obs, planned[0] if planned else None)
-                if index is None:
+                asked = self._ask(ask_obs, planned[0] if planned else None)
+                if asked is None:
                     return None
+                index = asked
                 steps = 1
             fused = self.fusion.point(kind, anchor(kind, ask_obs))
             bounded = bounded_projection(fused, self.reference.reference(ask_obs), self.delta)

@@ -48,6 +48,9 @@ class ObsScaler(nn.Module):
     """Fixed affine input scaling x ↦ (x − offset) · scale, so positions in metres reach the first layer
     in about [-1, 1] (from the workspace box); not trained, folded into the first layer on export."""
 
+    offset: torch.Tensor  # buffers (registered in __init__)
+    scale: torch.Tensor
+
     def __init__(self, offset: np.ndarray, scale: np.ndarray):
         super().__init__()
         self.register_buffer("offset", torch.as_tensor(offset, dtype=torch.float32))
@@ -70,6 +73,9 @@ class Actor(nn.Module):
     """μ_θ(s) ∈ [-1, 1]^act_dim: the target = anchor + MAX_OFFSET · y[:3] (normalized to the workspace box), the
     gripper command y[3], with y = tanh(MLP(features)); `features` and `carry_features` map the scaled
     observation to the MLP's input before and after φ = CARRY_PROGRESS."""
+
+    features: torch.Tensor  # buffers (registered in __init__)
+    carry_features: torch.Tensor
 
     def __init__(self, scaler: ObsScaler, act_dim: int, hidden: tuple[int, ...]):
         super().__init__()

@@ -176,6 +176,10 @@ class TrainerCounters(ExpertCounts):
             setattr(self, f.name, getattr(loaded, f.name))
 
 
+#: A transition τ without its tag ζ: (s, a, r, s', done) (Eq. 7).
+Transition = tuple[np.ndarray, np.ndarray, float, np.ndarray, bool]
+
+
 class MetricSink(Protocol):
     """Receives what the trainer writes to metrics.csv and eval.csv, as it writes it (e.g. TensorBoardLog)."""
 
@@ -259,7 +263,7 @@ class Trainer:
         )
         self.trigger = ThresholdTrigger(guidance.r_threshold)
         self.stop_requested = threading.Event()  # set (e.g. on Ctrl-C) to stop at the next step
-        self._segment: list[tuple] = []  # the demonstration's steps held until their phase completes
+        self._segment: list[Transition] = []  # the demonstration's steps held until their phase completes
         self._ratio_sum, self._ratio_n = 0.0, 0
         self._stat_sum: dict[str, float] = {}  # update statistics summed since the last metrics row
         self._stat_n: dict[str, int] = {}
@@ -328,8 +332,8 @@ class Trainer:
         return next_obs, r, term, trunc, info
 
     def _flush_segment(self, zeta: int) -> None:
-        for transition in self._segment:
-            self.replay.add(*transition, zeta)
+        for obs, act, rew, next_obs, done in self._segment:
+            self.replay.add(obs, act, rew, next_obs, done, zeta)
         self._segment = []
 
     def _agent_episode(self, end: int) -> dict:
@@ -376,7 +380,8 @@ class Trainer:
         the steps of a phase it did not complete, and those that followed a mark that was then marked again, go to
         the agent pool (ζ = 0): the critic learns from them, nothing clones them (ours: a mark the arm cannot
         complete the phase with is no demonstration of it)."""
-        ret, length, info = 0.0, 0, {"outcome": None, "is_success": False}
+        ret, length = 0.0, 0
+        info: dict[str, Any] = {"outcome": None, "is_success": False}
         self.expert.begin_demonstration()
         remarks = self.counters.remarks
         while self.counters.step < end and not self.stop_requested.is_set():
@@ -476,6 +481,7 @@ class Trainer:
 
     def save_checkpoint(self) -> Path:
         """Everything to resume: networks, optimizers, both pools, RNG states, counters. Written atomically."""
+        source_rng = self._source_rng()
         state = {
             "version": __version__,
             "config": self._fingerprint(),
@@ -484,11 +490,15 @@ class Trainer:
             "expert_pool": self.replay.expert.state(),
             "rng": self.rng.bit_generator.state,
             "torch_rng": torch.get_rng_state(),
-            "annotator_rng": getattr(self.source, "rng", None) and self.source.rng.bit_generator.state,
+            "annotator_rng": None if source_rng is None else source_rng.bit_generator.state,
             "expert_noise_rng": self.expert.rng.bit_generator.state,
             "counters": dataclasses.asdict(dataclasses.replace(self.counters, wall_s=self.wall_s())),
         }
         return write_checkpoint(self.out / "checkpoint.pt", state)
+
+    def _source_rng(self) -> Any:
+        """The expert source's random stream (the simulated annotator's; checkpointed with the run), or None."""
+        return getattr(self.source, "rng", None)
 
     def load_checkpoint(self, path: str | Path | None = None) -> None:
         """Resume from a checkpoint; a corrupt or mismatched file raises CheckpointError."""
@@ -510,7 +520,7 @@ class Trainer:
             self.rng.bit_generator.state = state["rng"]
             torch.set_rng_state(state["torch_rng"])
             if state["annotator_rng"] is not None:
-                self.source.rng.bit_generator.state = state["annotator_rng"]
+                self._source_rng().bit_generator.state = state["annotator_rng"]
             self.expert.rng.bit_generator.state = state["expert_noise_rng"]
             self.counters.restore(state["counters"])
         except (KeyError, TypeError, RuntimeError, ValueError, AttributeError, dacite.DaciteError) as exc:
