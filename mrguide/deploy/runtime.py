@@ -29,7 +29,7 @@ from mrguide.drivers.interface import CobotInterface
 from mrguide.motion.trajectory import TrajectoryError
 from mrguide.pose_source import ObjectPoseSource, PoseUnavailable
 from mrguide.robot import RobotSpec
-from mrguide.task import Outcome, TaskConfig
+from mrguide.task import Outcome, Phase, TaskConfig
 
 log = logging.getLogger(__name__)
 
@@ -73,7 +73,7 @@ class RuntimeConfig:
 @dataclass
 class EpisodeReport:
     index: int
-    outcome: str  # an `Outcome` value
+    outcome: Outcome
     decisions: int
     events: dict[str, int]
     latency_ms: list[float] = field(default_factory=list)
@@ -233,7 +233,7 @@ class Runtime:
         """One episode toward `goal` from the home pose; returns its report (RunStopped ends the run)."""
         goal = np.asarray(goal, dtype=float)
         self._episode_events = Counter()
-        report = EpisodeReport(index, Outcome.ABORTED.value, 0, {})
+        report = EpisodeReport(index, Outcome.ABORTED, 0, {})
         t0 = time.perf_counter()
         self.log.write("episode_start", episode=index, goal=goal)
         self.decision.reset(self.cobot.setpoint)
@@ -241,7 +241,7 @@ class Runtime:
         self.watchdog.arm(True)
         try:
             outcome = self._decisions(goal, index, report)
-            report.outcome = outcome.value
+            report.outcome = outcome
             self.streamer.brake()
             self._settle()
             if outcome is not Outcome.SUCCESS:
@@ -249,14 +249,14 @@ class Runtime:
         except KeyboardInterrupt:
             self.cobot.stop()
             self.supervisor.report(Event.INTERRUPT, "Ctrl-C")
-            report.outcome = Outcome.SAFETY_STOP.value
+            report.outcome = Outcome.SAFETY_STOP
             raise
         except RunStopped as exc:
-            report.outcome = Outcome.SAFETY_STOP.value
+            report.outcome = Outcome.SAFETY_STOP
             exc.report = report
             raise
         except DriverError:  # a fault surfaced outside the streaming (reading the state, the vacuum command)
-            report.outcome = Outcome.SAFETY_STOP.value
+            report.outcome = Outcome.SAFETY_STOP
             raise
         finally:
             self.watchdog.arm(False)
@@ -265,7 +265,7 @@ class Runtime:
             self.log.write(
                 "episode_end",
                 episode=index,
-                outcome=report.outcome,
+                outcome=report.outcome.value,
                 decisions=report.decisions,
                 events=report.events,
                 wall_s=report.wall_s,
@@ -370,11 +370,11 @@ class Runtime:
         cup let it go. Otherwise the pose source says; when it has no pose, the last one is used for at most
         `max_pose_misses` decisions in a row (`max_pose_misses_before_grasp` before the grasp, when the arm
         hides the part as it reaches for it), each counted and logged; then the episode ends."""
-        if self.cfg.track_carried_object and self.decision.phase >= 2:
+        if self.cfg.track_carried_object and self.decision.phase >= Phase.LIFT:
             if vac.part_gripped:
                 self._carried = tcp - np.array([0.0, 0.0, 0.5 * self.task.object_height])
                 return self._carried
-            if self._carried is not None and self.decision.phase == 4:
+            if self._carried is not None and self.decision.phase == Phase.RELEASE:
                 return self._carried
         try:
             obj = self.pose.object_position()
@@ -382,7 +382,11 @@ class Runtime:
             if self._last_obj is None:
                 raise RunStopped(f"no object pose at the start of the episode: {exc}") from exc
             self._pose_misses += 1
-            allowed = self.cfg.max_pose_misses_before_grasp if self.decision.phase <= 1 else self.cfg.max_pose_misses
+            allowed = (
+                self.cfg.max_pose_misses_before_grasp
+                if self.decision.phase <= Phase.GRASP
+                else self.cfg.max_pose_misses
+            )
             if self._pose_misses > allowed:
                 self.supervisor.report(
                     Event.POSE_LOST,

@@ -16,6 +16,7 @@ from typing import Any, Protocol
 from tqdm import tqdm
 
 from mrguide.cli_args import nonnegative_int, positive_int
+from mrguide.policies.choices import EXPERT_SOURCES
 
 
 class LiveSessionLike(Protocol):
@@ -42,9 +43,6 @@ class LivePlugin(Protocol):
     def open_session(self, args: argparse.Namespace, on_waiting: Callable[[bool], None]) -> LiveSessionLike: ...
 
 
-EXPERTS = ("oracle", "annotator", "file", "live")
-
-
 def add_train_command(sub: argparse._SubParsersAction, live: LivePlugin | None = None) -> None:
     """`mrguide train`; with `live`, also `--expert live` and its server options."""
     p = sub.add_parser("train", help="train DDPG in the twin, with or without MR-style expert guidance")
@@ -61,7 +59,7 @@ def add_train_command(sub: argparse._SubParsersAction, live: LivePlugin | None =
     p.add_argument("--no-guidance", action="store_true", help="baseline DDPG (guidance.enabled = false)")
     p.add_argument(
         "--expert",
-        choices=EXPERTS if live else EXPERTS[:-1],
+        choices=EXPERT_SOURCES if live else tuple(s for s in EXPERT_SOURCES if s != "live"),
         help="override guidance.source: the scripted oracle, the simulated MR annotator, a recorded "
         "annotation file (guidance.annotation_file), or a person through the live annotation page",
     )
@@ -124,9 +122,9 @@ def cmd_train(args: argparse.Namespace, live: LivePlugin | None = None) -> int:
             except CheckpointError as exc:
                 return _refuse(str(exc))
         if args.tensorboard:  # on a resume, what was logged after the checkpoint is purged (it runs again)
-            tb = TensorBoardLog(out / "tensorboard", purge_step=tr.step + 1 if args.resume else None)
+            tb = TensorBoardLog(out / "tensorboard", purge_step=tr.counters.step + 1 if args.resume else None)
             tr.sinks.append(tb)
-        bar.n = tr.step
+        bar.n = tr.counters.step
         bar.refresh()
         with _stop_on_sigint(tr, session, bar):
             _run(tr, args.stop_after, bar, session)
@@ -153,7 +151,7 @@ def _interrupted(tr, out: Path, bar: tqdm) -> int:
     tr.save_checkpoint()
     bar.close()
     print(
-        f"interrupted at step {tr.step}: checkpoint {out / 'checkpoint.pt'} written; "
+        f"interrupted at step {tr.counters.step}: checkpoint {out / 'checkpoint.pt'} written; "
         f"`mrguide train --out {out} --resume` continues",
         file=sys.stderr,
     )
@@ -194,17 +192,17 @@ def _run(tr, stop_after: int | None, bar: tqdm, session: LiveSessionLike | None)
 
     def status() -> dict:
         return {
-            "step": tr.step,
+            "step": tr.counters.step,
             "total_steps": tr.cfg.total_steps,
-            "episode": tr.episode,
+            "episode": tr.counters.episode,
             "lambda": round(tr.lam(), 4),
             "success_rate": sum(recent) / len(recent) if recent else None,
-            "asked": tr.cache.asked,
-            "reused": tr.cache.reused,
-            "remarks": tr.expert.remarks,
-            "skipped": tr.skipped,
-            "interventions": tr.interventions,
-            "person_interventions": tr.person_interventions,
+            "asked": tr.counters.asked,
+            "reused": tr.counters.reused,
+            "remarks": tr.counters.remarks,
+            "skipped": tr.counters.skipped,
+            "interventions": tr.counters.interventions,
+            "person_interventions": tr.counters.person_interventions,
         }
 
     def progress(row: dict) -> None:
@@ -214,7 +212,7 @@ def _run(tr, stop_after: int | None, bar: tqdm, session: LiveSessionLike | None)
             ret=f"{row['return']:.1f}",
             succ20=f"{sum(recent) / len(recent):.0%}",
             lam=f"{row['lambda']:.2f}",
-            interv=tr.interventions,
+            interv=tr.counters.interventions,
             asked=row["asked"],
         )
         if session:
@@ -235,12 +233,12 @@ def _finish(tr, tc, gc, out: Path) -> None:
         tr.env.robot_spec,
         tr.env.task_cfg,
         tr.env.twin_cfg.decision_period,
-        {"trained": {"steps": tr.step, "seed": tc.seed, "guidance": gc.enabled}},
+        {"trained": {"steps": tr.counters.step, "seed": tc.seed, "guidance": gc.enabled}},
     )
     print(
-        f"trained {tr.step} steps in {tr.wall_s():.0f} s ({tr.step / max(tr.wall_s(), 1e-9):.0f} steps/s); "
-        f"expert interventions {tr.interventions}, annotations asked {tr.cache.asked} / reused {tr.cache.reused}"
-        f" / re-marked {tr.expert.remarks}, demonstrations skipped {tr.skipped}"
+        f"trained {tr.counters.step} steps in {tr.wall_s():.0f} s ({tr.counters.step / max(tr.wall_s(), 1e-9):.0f} steps/s); "
+        f"expert interventions {tr.counters.interventions}, annotations asked {tr.counters.asked} / reused {tr.counters.reused}"
+        f" / re-marked {tr.counters.remarks}, demonstrations skipped {tr.counters.skipped}"
     )
     print(f"deterministic evaluation: {final['success_rate']:.0%} success over {tc.eval_episodes} episodes")
     print(f"policy: {policy}   metrics: {out / 'metrics.csv'}   checkpoint: {out / 'checkpoint.pt'}")

@@ -184,10 +184,12 @@ class HmdPoseStream(ObjectPoseSource):
         return info
 
     def _run(self) -> None:
+        plant = self.plant
+        assert plant is not None  # the thread starts once a twin is attached
         while not self._stop.is_set():
             gen = self._generation
             try:
-                pos, orn, q = self.plant.view()
+                pos, orn, q = plant.view()
             except Exception as exc:  # the twin playing the robot was closed under us (end of a run) or failed
                 with self._lock:
                     self._lost = f"the twin that plays the robot is gone ({type(exc).__name__}: {exc})"
