@@ -138,6 +138,7 @@ class Runtime:
         self._last_obj: np.ndarray | None = None  # last pose the source gave in this episode
         self._pose_misses = 0  # decisions in a row without a pose from the source
         self._carried: np.ndarray | None = None  # where the part hung under the cup, last seen
+        self._object_from = "source"  # where the last decision's object position came from (the run log says)
 
     # -- lifecycle ----------------------------------------------------------------------------------
     def __enter__(self) -> Runtime:
@@ -330,7 +331,11 @@ class Runtime:
             "q": js.positions,
             "vacuum_kpa": vac.level_kpa,
             "part": vac.part_gripped,
+            "object_from": self._object_from,
         }
+        details = getattr(self.pose, "pose_details", None)  # optional (PoseDetails): the estimate's age, the truth
+        if details is not None:
+            record["pose"] = details()
         try:
             cmd = self.decision.act(action, js.positions)
         except ActionError as exc:
@@ -373,9 +378,12 @@ class Runtime:
         if self.cfg.track_carried_object and self.decision.phase >= Phase.LIFT:
             if vac.part_gripped:
                 self._carried = tcp - np.array([0.0, 0.0, 0.5 * self.task.object_height])
+                self._object_from = "carried"
                 return self._carried
             if self._carried is not None and self.decision.phase == Phase.RELEASE:
+                self._object_from = "released"
                 return self._carried
+        self._object_from = "source"
         try:
             obj = self.pose.object_position()
         except PoseUnavailable as exc:
@@ -397,6 +405,7 @@ class Runtime:
             self.supervisor.report(
                 Event.POSE_UNAVAILABLE, f"{exc}; using the last pose ({self._pose_misses} of at most {allowed})"
             )
+            self._object_from = "last"
             return self._last_obj
         self._last_obj, self._pose_misses = obj, 0
         return obj

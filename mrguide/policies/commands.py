@@ -71,9 +71,28 @@ def add_train_command(sub: argparse._SubParsersAction, live: LivePlugin | None =
         help="also write TensorBoard event files to OUT/tensorboard/: losses, Q, BC term, λ_t, expert ratio, "
         "annotation counters, evaluations (needs the tensorboard package: pip install 'mrguide[tensorboard]')",
     )
+    p.add_argument(
+        "--record",
+        nargs="?",
+        const=256.0,
+        type=_megabytes,
+        metavar="MB",
+        help="also record every training step (arm, object, cup, actions, ζ, annotation) to OUT/episodes.jsonl.gz, "
+        "for `mrguide replay` and `mrguide export lerobot`; recording stops when the file reaches MB (default 256)",
+    )
     if live is not None:
         live.add_arguments(p)
     p.set_defaults(func=partial(cmd_train, live=live))
+
+
+def _megabytes(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not 0 < value <= 1e6:
+        raise argparse.ArgumentTypeError(f"expected a size in MB in (0, 1e6], got {text!r}")
+    return value
 
 
 def _refuse(message: str) -> int:
@@ -121,6 +140,10 @@ def cmd_train(args: argparse.Namespace, live: LivePlugin | None = None) -> int:
                 tr.load_checkpoint()
             except CheckpointError as exc:
                 return _refuse(str(exc))
+        if args.record is not None:  # after a resume: the recording is cut back to the checkpoint
+            from mrguide.policies.episode_recorder import FILE_NAME, EpisodeRecorder
+
+            tr.recorder = EpisodeRecorder(tr, out / FILE_NAME, args.record)
         if args.tensorboard:  # on a resume, what was logged after the checkpoint is purged (it runs again)
             tb = TensorBoardLog(out / "tensorboard", purge_step=tr.counters.step + 1 if args.resume else None)
             tr.sinks.append(tb)
@@ -140,6 +163,8 @@ def cmd_train(args: argparse.Namespace, live: LivePlugin | None = None) -> int:
         bar.close()
         if tb is not None:
             tb.close()
+        if tr.recorder is not None:
+            tr.recorder.close()
         tr.close()
         if session:
             session.close()

@@ -99,6 +99,13 @@ class GuidedExpert:
         self._streak = (-1, 0)
         self._plan = {}
 
+    def annotation_in_use(self, obs: np.ndarray) -> int | None:
+        """The annotation cache record the last `action(obs)` followed (its index in annotations.jsonl), or None."""
+        if self.marks == "pick_place":
+            planned = self._plan.get(mark_phase(phase_from_progress(obs[4])))
+            return planned[0] if planned is not None else None
+        return self._streak[0] if self._streak[0] >= 0 else None
+
     def action(self, obs: np.ndarray) -> ExpertStep | None:
         """The expert's normalized action for `obs` (executed and stored), or None when nobody annotated."""
         waypoint = self._pick_place_waypoint(obs) if self.marks == "pick_place" else self._phase_waypoint(obs)

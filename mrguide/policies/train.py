@@ -218,6 +218,9 @@ def _replace_csv(path: Path, fields: tuple[str, ...], rows: list[dict]) -> None:
 class Trainer:
     """One seed's training run, resumable from its checkpoint."""
 
+    #: Off by default; `mrguide train --record` attaches one (policies/episode_recorder.py): it sees every step.
+    recorder: Any = None
+
     def __init__(
         self,
         cfg: TrainConfig,
@@ -313,6 +316,8 @@ class Trainer:
         """Execute `action`; store the transition with `stored` as its action (default: the executed one), tagged
         `zeta` — or, with zeta None, hold it in the demonstration's current phase (see `_expert_episode`)."""
         next_obs, r, term, trunc, info = self.env.step(action)
+        if self.recorder is not None:
+            self.recorder.step(self, obs, action, stored, zeta, r, next_obs, term, trunc, info)
         transition = (obs, action if stored is None else stored, r, next_obs, term)
         if zeta is None:
             self._segment.append(transition)
