@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from mrguide.task import phase_from_progress
+from mrguide.task import OBS_PROGRESS, phase_from_progress
 
 log = logging.getLogger(__name__)
 
@@ -154,7 +154,7 @@ class EpisodeRecorder:
             "vacuum_kpa": max(0.0, -float(scene.suction.state.level)),
             "part": bool(info.get("part_present", False)),
             "g": 1 if trainer.env.vacuum else -1,
-            "phase": int(phase_from_progress(obs[4])),
+            "phase": int(phase_from_progress(obs[OBS_PROGRESS])),
             "annotation": trainer.expert.annotation_in_use(obs) if zeta is None else None,
         }
         if zeta is None:  # the trainer's rule (Trainer._expert_episode): a re-mark sends the held steps to ζ = 0
@@ -162,7 +162,9 @@ class EpisodeRecorder:
                 self._decide(0)
                 self._remarks = trainer.expert.remarks
             self._pending.append(record)
-            if info.get("is_success") or phase_from_progress(next_obs[4]) > phase_from_progress(obs[4]):
+            if info.get("is_success") or phase_from_progress(next_obs[OBS_PROGRESS]) > phase_from_progress(
+                obs[OBS_PROGRESS]
+            ):
                 self._decide(1)
         self._open["steps"].append(record)
         if term or trunc:

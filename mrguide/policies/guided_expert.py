@@ -102,7 +102,7 @@ class GuidedExpert:
     def annotation_in_use(self, obs: np.ndarray) -> int | None:
         """The annotation cache record the last `action(obs)` followed (its index in annotations.jsonl), or None."""
         if self.marks == "pick_place":
-            planned = self._plan.get(mark_phase(phase_from_progress(obs[4])))
+            planned = self._plan.get(mark_phase(phase_from_progress(obs[OBS_PROGRESS])))
             return planned[0] if planned is not None else None
         return self._streak[0] if self._streak[0] >= 0 else None
 

@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from mrguide.errors import InputError
-from mrguide.task import OBS_OBJECT, OBS_PROGRESS, OBS_TCP, phase_from_progress
+from mrguide.task import OBS_GRIP, OBS_OBJECT, OBS_PROGRESS, OBS_TCP, phase_from_progress
 
 
 class RunError(InputError):
@@ -157,7 +157,7 @@ def _decision_frame(rec: dict) -> Frame:
         t=int(rec["t"]),
         phase=int(rec.get("phase", 0)),
         tcp=obs[OBS_TCP] if obs is not None else _arr(rec.get("tcp")),
-        g=int(obs[3]) if obs is not None else rec.get("g"),
+        g=int(obs[OBS_GRIP]) if obs is not None else rec.get("g"),
         phi=float(obs[OBS_PROGRESS]) if obs is not None else None,
         obj=obs[OBS_OBJECT] if obs is not None else None,
         obj_true=_arr(pose.get("true")),
@@ -228,7 +228,7 @@ def _training_frame(t: int, obs: np.ndarray, q, obj_true, vacuum_kpa: float, par
         t=t,
         phase=phase_from_progress(obs[OBS_PROGRESS]),
         phi=float(obs[OBS_PROGRESS]),
-        g=int(obs[3]),
+        g=int(obs[OBS_GRIP]),
         tcp=obs[OBS_TCP],
         q=q,
         obj=obs[OBS_OBJECT],
