@@ -29,11 +29,14 @@ import logging
 import os
 import zlib
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from mrguide.task import OBS_PROGRESS, phase_from_progress
+
+if TYPE_CHECKING:
+    from mrguide.policies.train import Trainer
 
 log = logging.getLogger(__name__)
 
@@ -90,7 +93,7 @@ def _whole_members(raw: bytes) -> str:
 class EpisodeRecorder:
     """Records a `Trainer`'s steps; attach with `trainer.recorder = EpisodeRecorder(...)` after any resume."""
 
-    def __init__(self, trainer: Any, path: str | Path, limit_mb: float = DEFAULT_LIMIT_MB):
+    def __init__(self, trainer: Trainer, path: str | Path, limit_mb: float = DEFAULT_LIMIT_MB):
         self.path = Path(path)
         self.limit = int(limit_mb * 1024 * 1024)
         self.stopped = False
@@ -99,9 +102,9 @@ class EpisodeRecorder:
         self._pending: list[dict] = []  # a demonstration's steps whose ζ is not decided yet
         self._remarks = 0
         self.episodes = 0
-        if trainer.step > 0 and self.path.exists():
-            self._cut_back(trainer.step)
-        elif not self.path.exists() or trainer.step == 0:
+        if trainer.counters.step > 0 and self.path.exists():
+            self._cut_back(trainer.counters.step)
+        elif not self.path.exists() or trainer.counters.step == 0:
             spec = trainer.env.robot_spec
             self._write(
                 [
@@ -119,20 +122,20 @@ class EpisodeRecorder:
             )
 
     # -- the hook ------------------------------------------------------------------------------------
-    def step(self, trainer: Any, obs, action, stored, zeta, reward, next_obs, term, trunc, info) -> None:
+    def step(self, trainer: Trainer, obs, action, stored, zeta, reward, next_obs, term, trunc, info) -> None:
         """One training step, as `Trainer._env_step` executed it (`zeta` None: a demonstration's step)."""
         if self.stopped:
             return
         kind = "agent" if zeta is not None else "expert"
-        key = (trainer.episode, kind)
+        key = (trainer.counters.episode, kind)
         if key != self._key:
             self._finish()
             self._key = key
-            self._remarks = trainer.expert.remarks
+            self._remarks = trainer.counters.remarks
             self._open = {
                 "kind": "episode",
                 "episode": self.episodes,
-                "trainer_episode": trainer.episode,
+                "trainer_episode": trainer.counters.episode,
                 "type": kind,
                 "goal": _floats(trainer.env.scene.goal),
                 "outcome": None,
@@ -141,7 +144,7 @@ class EpisodeRecorder:
         assert self._open is not None
         scene = trainer.env.scene
         record = {
-            "step": trainer.step + 1,
+            "step": trainer.counters.step + 1,
             "t": len(self._open["steps"]),
             "obs": _floats(obs),
             "action": _floats(action),
@@ -158,9 +161,9 @@ class EpisodeRecorder:
             "annotation": trainer.expert.annotation_in_use(obs) if zeta is None else None,
         }
         if zeta is None:  # the trainer's rule (Trainer._expert_episode): a re-mark sends the held steps to ζ = 0
-            if trainer.expert.remarks != self._remarks:
+            if trainer.counters.remarks != self._remarks:
                 self._decide(0)
-                self._remarks = trainer.expert.remarks
+                self._remarks = trainer.counters.remarks
             self._pending.append(record)
             if info.get("is_success") or phase_from_progress(next_obs[OBS_PROGRESS]) > phase_from_progress(
                 obs[OBS_PROGRESS]

@@ -30,6 +30,8 @@ import shutil
 from pathlib import Path
 
 import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
 
 from mrguide.errors import InputError
 from mrguide.task import ACT_LAYOUT, OBS_LAYOUT
@@ -41,15 +43,6 @@ QUANTILES = (0.01, 0.10, 0.50, 0.90, 0.99)
 
 class ExportError(InputError):
     """A run that cannot be exported (not recorded, no demonstrations), or an output directory in the way."""
-
-
-def _pyarrow():
-    try:
-        import pyarrow as pa
-        import pyarrow.parquet as pq
-    except ImportError as exc:
-        raise ExportError("export lerobot needs pyarrow: pip install 'mrguide[replay]'") from exc
-    return pa, pq
 
 
 def features() -> dict[str, dict]:
@@ -102,7 +95,6 @@ def export_lerobot(run: Path, out: Path, all_episodes: bool = False, task: str =
     """Write the dataset; returns a one-paragraph summary."""
     from mrguide.policies.episode_recorder import FILE_NAME, read_episodes
 
-    pa, pq = _pyarrow()
     recorded = run / FILE_NAME if run.is_dir() else run
     if not recorded.is_file():
         raise ExportError(f"{run}: no {FILE_NAME}: record the training run with `mrguide train --record`")

@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import rerun as rr
 
 from mrguide.replay.runs import Episode
 from mrguide.robot import RobotSpec, urdf_with_tool
@@ -40,16 +41,6 @@ COLORS = {
 OTHER = (60, 110, 220)
 #: Where the 3D view looks from and at (robot base frame, m): across the table at the object and goal regions.
 EYE, LOOK_AT = (1.25, -0.85, 0.65), (0.45, 0.0, 0.1)
-
-
-def _rerun():
-    try:
-        import rerun
-    except ImportError as exc:  # the robot-PC profile has no Rerun: say what to install
-        from mrguide.errors import InputError
-
-        raise InputError("replay needs the Rerun SDK: pip install 'mrguide[replay]'") from exc
-    return rerun
 
 
 def replay_urdf(spec: RobotSpec, folder: Path) -> tuple[Path, list[tuple[str, np.ndarray, np.ndarray]]]:
@@ -119,7 +110,6 @@ def write_recording(
     name: str = "replay",
 ) -> Any:
     """Log `episodes` into one recording, saved to `save` (.rrd) and/or sent to a spawned viewer; returns it."""
-    rr = _rerun()
     rec = rr.RecordingStream(APPLICATION_ID, recording_id=name)
     blueprint = _blueprint(episodes)
     if spawn:

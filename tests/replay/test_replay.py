@@ -5,9 +5,6 @@ cell) replays into an .rrd whose entities and row counts, read back with Rerun's
 from __future__ import annotations
 
 import itertools
-import subprocess
-import sys
-import textwrap
 from collections import Counter
 from pathlib import Path
 
@@ -97,37 +94,3 @@ def test_replay_refuses_a_selection_that_matches_nothing(dry_log, tmp_path, run_
     run_cli(["replay", dry_log, "--outcome", "dropped", "--save", tmp_path / "x.rrd"]).assert_refused("no episode")
     run_cli(["replay", dry_log]).assert_refused("--save")
     run_cli(["replay", tmp_path / "missing.jsonl", "--save", tmp_path / "x.rrd"]).assert_refused("missing.jsonl")
-
-
-def test_without_rerun_the_command_names_the_replay_extra(dry_log, tmp_path):
-    """The robot-PC profile has no Rerun: `mrguide` still parses, and replay says in one line what to install."""
-    script = tmp_path / "no_rerun.py"
-    script.write_text(
-        textwrap.dedent(
-            f"""
-            import sys
-
-            class _Blocker:
-                def find_spec(self, name, path=None, target=None):
-                    if name.split(".")[0] in ("rerun", "rerun_bindings"):
-                        raise ImportError("no rerun here (test blocker)")
-
-            sys.meta_path.insert(0, _Blocker())
-            import mrguide.cli as cli
-            code = cli.main(["replay", {str(dry_log)!r}, "--save", {str(tmp_path / "x.rrd")!r}])
-            assert not any(m.startswith("rerun") for m in sys.modules)
-            sys.exit(code)
-            """
-        )
-    )
-    result = subprocess.run(
-        [sys.executable, str(script)],
-        cwd=ROOT,
-        capture_output=True,
-        text=True,
-        timeout=300,
-        env={"PYTHONPATH": str(ROOT)},
-    )
-    assert result.returncode == 2, result.stderr
-    lines = result.stderr.strip().splitlines()
-    assert len(lines) == 1 and "mrguide[replay]" in lines[0] and "Traceback" not in result.stderr
