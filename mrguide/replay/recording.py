@@ -115,6 +115,7 @@ def write_recording(
     if spawn:
         rec.spawn(default_blueprint=blueprint)
     if save is not None:
+        Path(save).parent.mkdir(parents=True, exist_ok=True)
         rec.save(str(save), default_blueprint=blueprint)
     elif not spawn:
         raise ValueError("write_recording needs save or spawn")

@@ -1,6 +1,6 @@
 """`mrguide replay`: a dry run's log (the scripted expert through the whole deploy stack against the simulated
 cell) replays into an .rrd whose entities and row counts, read back with Rerun's own reader
-(`rerun.chunk.RrdReader`), are what the log holds; without Rerun the command says which extra to install."""
+(`rerun.chunk.RrdReader`), are what the log holds."""
 
 from __future__ import annotations
 

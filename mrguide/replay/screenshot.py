@@ -1,6 +1,6 @@
 """Screenshot a Rerun recording in Rerun's web viewer, in headless Chromium under SwiftShader (WebGL).
 
-    python docs/results/replay/screenshot.py RECORDING.rrd OUT.png [--wait S] [--time T]
+    python -m mrguide.replay.screenshot RECORDING.rrd OUT.png [--wait S] [--width W] [--height H]
 
 Starts `rerun RECORDING --web-viewer` on loopback ports, opens the page with Debian's chromium through the
 `playwright` package (mrguide.annotation.headless's browser flags), waits, and saves a full-page PNG. What it
