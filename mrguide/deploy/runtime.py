@@ -90,6 +90,7 @@ class _FollowingMonitor:
         self.recent: np.ndarray | None = None  # ring of the last `depth` setpoints
         self.depth, self.count = depth, 0
         self.error = 0.0
+        self.joint = 0  # the joint furthest from the setpoint nearest to the measured joints
 
     def __call__(self, sample: CycleSample) -> None:
         if sample.setpoint is not None:
@@ -98,7 +99,10 @@ class _FollowingMonitor:
             self.recent[self.count % self.depth] = sample.setpoint
             self.count += 1
         if self.recent is not None:
-            self.error = float(np.abs(self.recent - sample.positions).max(axis=1).min())
+            distance = np.abs(self.recent - sample.positions)
+            nearest = int(distance.max(axis=1).argmin())
+            self.joint = int(distance[nearest].argmax())
+            self.error = float(distance[nearest, self.joint])
 
 
 class Runtime:
@@ -169,7 +173,7 @@ class Runtime:
         problem = self.supervisor.check_setpoint(sp.q, sp.dq, sp.ddq)
         if problem:
             self._quick_stop(Event.JOINT_LIMIT, problem)
-        problem = self.supervisor.check_following(self.following.error)
+        problem = self.supervisor.check_following(self.following.error, self.following.joint)
         if problem:
             self._quick_stop(Event.FOLLOWING_ERROR, problem)
         if not self.watchdog.alive:
