@@ -125,7 +125,7 @@ EVAL_SEED_BASE = 1_000_000  # evaluation env seeds start here (training seeds co
 #: Update statistics in metrics.csv, each the mean over the updates since the previous row (see DDPG.update):
 #: critic loss, actor loss, mean and max Q_φ1(s, a) of the batch, BC loss (DDPG), temperature (SAC). Empty in a row with no update
 #: since the previous one (before learning_starts; the agent row of a triggered episode, which follows
-#: its expert row); the actor's are also empty when no actor step fell in the row (policy_delay > 1).
+#: its expert row).
 UPDATE_FIELDS = ("critic_loss", "actor_loss", "q_mean", "q_max", "bc_loss", "temperature")
 METRIC_FIELDS = (
     "step",
