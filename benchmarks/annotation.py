@@ -41,7 +41,7 @@ from mrguide.annotation.protocol import AnnotationRequest
 from mrguide.annotation.server import AnnotationServer
 from mrguide.policies.experts import OracleExpert
 from mrguide.robot import load_robot
-from mrguide.task import TaskConfig, observation, progress
+from mrguide.task import PICK_PHASE, PLACE_PHASE, TaskConfig, observation, progress
 
 WARMUP = 5  # browser requests answered before timing starts
 BAD_MESSAGES = (
@@ -134,7 +134,7 @@ def browser_round_trips(broker: AnnotationBroker, server: AnnotationServer, n: i
 def person_marks(broker: AnnotationBroker, server: AnnotationServer, n: int) -> tuple[list[int], list[float], int]:
     """(clicks per mark, page interaction s per mark, answers lost) for pick and place requests answered with the
     mouse alone."""
-    reqs = [r for r in requests(5 * n, seed=3) if r.phase in (1, 4)][:n]
+    reqs = [r for r in requests(5 * n, seed=3) if r.phase in (PICK_PHASE, PLACE_PHASE)][:n]
     actions, seconds, lost = [], [], 0
     with HeadlessBrowser() as browser:
         page = browser.open(server.url)
@@ -148,7 +148,7 @@ def person_marks(broker: AnnotationBroker, server: AnnotationServer, n: int) -> 
             actions.append(mark["actions"])
             seconds.append(mark["seconds"])
             res = done[-1]["res"]
-            top = req.object_position if req.phase == 1 else req.goal
+            top = req.object_position if req.phase == PICK_PHASE else req.goal
             expected = np.array([top[0], top[1], TaskConfig().object_height])
             lost += int(not (isinstance(res, LiveAnswer) and np.allclose(res.target, expected, atol=2e-4)))
         page.close()

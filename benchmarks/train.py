@@ -33,18 +33,18 @@ def main() -> None:
     wall = tr.wall_s()
     res = {
         "learner": tc.learner,
-        "steps": tr.step,
-        "steps_per_s": tr.step / wall,
+        "steps": tr.counters.step,
+        "steps_per_s": tr.counters.step / wall,
         "update_ms": tr.update_ms(),
         f"wall_s_{args.steps // 1000}k": wall,
-        "wall_s_20k": wall * 20_000 / tr.step,
+        "wall_s_20k": wall * 20_000 / tr.counters.step,
         "final_eval_success": tr.last_eval.get("success_rate"),
-        "annotations_asked": tr.cache.asked,
+        "annotations_asked": tr.counters.asked,
     }
     print(
         f"machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}, pinned to one core"
     )
-    print(f"{'guided training steps':<40} {tr.step}")
+    print(f"{'guided training steps':<40} {tr.counters.step}")
     print(f"{'steps/s (env + update)':<40} {res['steps_per_s']:.1f}")
     hidden = "x".join(map(str, (tr.sac_cfg if tc.learner == "sac" else dc).hidden))
     print(f"{f'update (batch {tc.batch_size}, {hidden} MLPs)':<40} {res['update_ms']:.2f} ms")

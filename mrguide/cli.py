@@ -114,6 +114,10 @@ def build_parser() -> argparse.ArgumentParser:
     add_train_command(sub, LiveTrainPlugin())
     add_annotate_command(sub)
     add_experiment_command(sub)
+    from mrguide.replay.commands import add_export_command, add_replay_command  # lazy: Rerun/pyarrow when run
+
+    add_replay_command(sub)
+    add_export_command(sub)
     return p
 
 

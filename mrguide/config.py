@@ -39,6 +39,9 @@ def from_dict(cls: type[T], data: dict[str, Any], where: str = "config") -> T:
     problem = _number_problem(cls, data, "")
     if problem:
         raise ConfigError(f"{where}: {problem}")
+    refusal = _choice_refusal(cls, data)
+    if refusal:
+        raise ConfigError(f"{where}: {refusal}")
     try:
         return dacite.from_dict(
             cls, data, config=dacite.Config(strict=True, cast=[tuple], type_hooks={float: _to_float})
@@ -78,6 +81,44 @@ def _number_problem(cls: Any, data: Any, prefix: str) -> str | None:
             if problem:
                 return problem
     return None
+
+
+def _choice_refusal(cls: Any, data: Any) -> ConfigError | None:
+    """The dataclass's own refusal of a value outside a `Literal` field's choices (or a tuple of them), or None.
+
+    dacite would refuse it first, naming only the type; so the value is set alone on a default instance, whose
+    `__post_init__` says what the key takes. None also when there is no such value, or nothing refuses it there
+    (dacite then names it)."""
+    if not (isinstance(cls, type) and dataclasses.is_dataclass(cls)) or not isinstance(data, dict):
+        return None
+    hints = typing.get_type_hints(cls)
+    for f in dataclasses.fields(cls):
+        if f.name not in data:
+            continue
+        hint, value = hints[f.name], data[f.name]
+        if dataclasses.is_dataclass(hint):
+            refusal = _choice_refusal(hint, value)
+            if refusal:
+                return refusal
+        elif _outside_choices(hint, value):
+            try:
+                as_loaded = tuple(value) if typing.get_origin(hint) is tuple and isinstance(value, list) else value
+                dataclasses.replace(cls(), **{f.name: as_loaded})
+            except ConfigError as exc:
+                return exc
+            except Exception:  # no default instance to try it on: left to dacite
+                return None
+    return None
+
+
+def _outside_choices(hint: Any, value: Any) -> bool:
+    """`value` is not among the choices of `Literal` type `hint`, or not all of a `tuple[Literal[...], ...]`."""
+    origin, args = typing.get_origin(hint), typing.get_args(hint)
+    if origin is typing.Literal:
+        return not any(value == a and type(value) is type(a) for a in args)
+    if origin is tuple and len(args) == 2 and args[1] is Ellipsis and typing.get_origin(args[0]) is typing.Literal:
+        return not isinstance(value, (list, tuple)) or any(_outside_choices(args[0], v) for v in value)
+    return False
 
 
 def _scalar_problem(key: str, value: Any, kind: type) -> str | None:

@@ -2,6 +2,7 @@
 
     pip install 'mrguide[robot]'   robot PC: deploy, bus, calibrate --images, camera check (no torch, PyBullet, Ray)
     pip install 'mrguide[train]'   workstation: the robot profile plus the twin, training, experiments, annotation
+    pip install 'mrguide[replay]'  mrguide replay (Rerun) and mrguide export lerobot (parquet), beside either
 
 The bare `pip install mrguide` gets only what the `mrguide` command needs to build its parser and print help.
 Every command imports its packages inside its handler, so a missing one surfaces as ModuleNotFoundError
@@ -12,7 +13,7 @@ Standard library only.
 from __future__ import annotations
 
 #: extra -> what the message calls it
-PROFILES = {"robot": "robot", "train": "workstation"}
+PROFILES = {"robot": "robot", "train": "workstation", "replay": "replay"}
 
 #: top-level module -> (the distribution that provides it, the extra that lists it)
 MODULES = {
@@ -29,6 +30,8 @@ MODULES = {
     "matplotlib": ("matplotlib", "train"),
     "scipy": ("scipy", "train"),
     "aiohttp": ("aiohttp", "train"),
+    "rerun": ("rerun-sdk", "replay"),
+    "pyarrow": ("pyarrow", "replay"),
 }
 
 

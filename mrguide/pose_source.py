@@ -17,3 +17,13 @@ class ObjectPoseSource(Protocol):
     def object_position(self) -> np.ndarray:
         """Current object position, shape (3,); raises PoseUnavailable when there is none."""
         ...
+
+
+class PoseDetails(Protocol):
+    """Optional beside `ObjectPoseSource`: what the run log keeps with each decision about the pose it gave.
+
+    `pose_details()` is called right after `object_position()` returned; e.g. `{"age_s": 0.08}` (how old the
+    estimate is) and, in a simulated cell, `{"true": [x, y, z]}` (where the object really is). `mrguide replay`
+    draws them."""
+
+    def pose_details(self) -> dict: ...

@@ -23,7 +23,18 @@ import numpy as np
 
 from mrguide.config import ConfigError
 
-PHASES: tuple[str, ...] = ("approach", "grasp", "lift", "transport", "release")
+
+class Phase(enum.IntEnum):
+    """The task's five phases κ in order (Sec. III-A). An int: phases travel as their index (protocol, logs, JSON)."""
+
+    APPROACH = 0
+    GRASP = 1
+    LIFT = 2
+    TRANSPORT = 3
+    RELEASE = 4
+
+
+PHASES: tuple[str, ...] = tuple(p.name.lower() for p in Phase)  # ("approach", "grasp", "lift", "transport", "release")
 #: Required gripper state per phase, ḡ = [-1, 1, 1, 1, -1] (paper, Eq. 5).
 G_REQUIRED: tuple[int, ...] = (-1, 1, 1, 1, -1)
 N_PHASES = len(PHASES)
@@ -33,7 +44,8 @@ class Outcome(str, enum.Enum):
     """How an episode ended: every outcome of the twin and of the robot, in one enum.
 
     The task model (`task_step`) gives the first six; the deploy runtime adds the ones only a robot has
-    (its safety supervisor ended the episode). `terminated`/`truncated` are the Gymnasium reading."""
+    (its safety supervisor ended the episode). `terminated`/`truncated` are the Gymnasium reading. A member is a
+    str, so JSON and CSV write its value; str() and f-strings give its name (`Outcome.SUCCESS`): write `.value`."""
 
     SUCCESS = "success"
     NO_GRASP = "no_grasp"  # horizon reached before the object was grasped
@@ -103,15 +115,15 @@ def phase_target(phase: int, obj: np.ndarray, goal: np.ndarray, cfg: TaskConfig)
     obj = np.asarray(obj, dtype=float)
     goal = np.asarray(goal, dtype=float)
     top = obj[2] + 0.5 * cfg.object_height
-    if phase == 0:
+    if phase == Phase.APPROACH:
         return np.array([obj[0], obj[1], top + cfg.approach_height])
-    if phase == 1:
+    if phase == Phase.GRASP:
         return np.array([obj[0], obj[1], top])
-    if phase == 2:
+    if phase == Phase.LIFT:
         return np.array([obj[0], obj[1], cfg.lift_height])
-    if phase == 3:
+    if phase == Phase.TRANSPORT:
         return np.array([goal[0], goal[1], cfg.lift_height])
-    if phase == 4:
+    if phase == Phase.RELEASE:
         return np.array([goal[0], goal[1], goal[2] + 0.5 * cfg.object_height])
     raise ValueError(f"phase must be in 0..{N_PHASES - 1}, got {phase}")
 
@@ -166,7 +178,7 @@ def task_step(
     d = float(np.linalg.norm(tcp - phase_target(phase, obj, goal, cfg)))
     terms = {
         "tracking": -cfg.alpha * d,
-        "premature_close": -cfg.eta if (phase == 0 and g == 1) else 0.0,
+        "premature_close": -cfg.eta if (phase == Phase.APPROACH and g == 1) else 0.0,
         "phase_bonus": 0.0,
         "step": -cfg.step_penalty,
         "terminal": 0.0,
@@ -174,48 +186,53 @@ def task_step(
     outcome: Outcome | None = None
     next_phase = phase
     reached = d < cfg.epsilon and g == G_REQUIRED[phase]
-    holding_needed = phase in (2, 3) or (phase == 4 and g == 1)
+    holding_needed = phase in (Phase.LIFT, Phase.TRANSPORT) or (phase == Phase.RELEASE and g == 1)
     if holding_needed and not part_present:
         outcome = Outcome.DROPPED
     elif not part_present and np.asarray(obj)[2] < cfg.table_height:
         outcome = Outcome.KNOCKED_OFF  # no phase target can be reached any more: end it, don't track a falling object
-    elif phase == 4 and g == -1:
+    elif phase == Phase.RELEASE and g == -1:
         if reached and placed_at_goal(cfg, obj, goal):
             terms["phase_bonus"] = cfg.bonuses[phase]
             terms["terminal"] = cfg.r_success
             outcome = Outcome.SUCCESS
         else:
             outcome = Outcome.MISPLACED
-    elif reached and (phase != 1 or part_present):
+    elif reached and (phase != Phase.GRASP or part_present):
         terms["phase_bonus"] = cfg.bonuses[phase]
         next_phase = phase + 1
     if outcome is None and t + 1 >= cfg.horizon:
-        outcome = Outcome.NO_GRASP if next_phase <= 1 else Outcome.TIMEOUT
+        outcome = Outcome.NO_GRASP if next_phase <= Phase.GRASP else Outcome.TIMEOUT
     if outcome is not None and outcome is not Outcome.SUCCESS:
         terms["terminal"] = -cfg.r_fail
     return StepResult(float(sum(terms.values())), terms, next_phase, outcome, d)
 
 
+# The observation and action layouts: the one place that knows where each number sits. Index an observation only
+# by these names (tests/test_contracts.py refuses a literal index into one anywhere else).
+OBS_LAYOUT = ("tcp_x", "tcp_y", "tcp_z", "g", "phi", "obj_x", "obj_y", "obj_z", "goal_x", "goal_y", "goal_z")
+OBS_DIM = len(OBS_LAYOUT)  # 11
+OBS_TCP = slice(0, 3)  # TCP position (m)
+OBS_GRIP = 3  # gripper state g: +1 vacuum on, -1 off
+OBS_PROGRESS = 4  # task progress φ ∈ [0, 1] (`progress`)
+OBS_OBJECT = slice(5, 8)  # object centre (m)
+OBS_GOAL = slice(8, 11)  # goal centre (m)
+ACT_LAYOUT = ("target_x", "target_y", "target_z", "gripper")
+ACT_DIM = len(ACT_LAYOUT)  # 4
+
+
 def observation(tcp: np.ndarray, g: int, phi: float, obj: np.ndarray, goal: np.ndarray) -> np.ndarray:
-    """The policy's observation [tcp xyz, g, φ, object xyz, goal xyz] (float32, shape (11,))."""
+    """The policy's observation [tcp xyz, g, φ, object xyz, goal xyz] (float32, shape (OBS_DIM,), OBS_LAYOUT)."""
     return np.concatenate(
         [np.asarray(tcp, float), [float(g), float(phi)], np.asarray(obj, float), np.asarray(goal, float)]
     ).astype(np.float32)
-
-
-OBS_DIM = 11
-ACT_DIM = 4
-OBS_LAYOUT = ("tcp_x", "tcp_y", "tcp_z", "g", "phi", "obj_x", "obj_y", "obj_z", "goal_x", "goal_y", "goal_z")
-#: The observation's parts, by name (see `observation`).
-OBS_TCP, OBS_GRIP, OBS_PROGRESS, OBS_OBJECT, OBS_GOAL = slice(0, 3), 3, 4, slice(5, 8), slice(8, 11)
-ACT_LAYOUT = ("target_x", "target_y", "target_z", "gripper")
 
 
 #: m: the scripted expert's grasp target lies this far into the object top so the cup seals.
 GRASP_PRESS = 0.003
 #: The phases whose marks stand for a whole demonstration when a person gives two marks (guidance.marks =
 #: "pick_place"): the grasp point (the pick mark) and the set-down point (the place mark).
-PICK_PHASE, PLACE_PHASE = 1, 4
+PICK_PHASE, PLACE_PHASE = Phase.GRASP, Phase.RELEASE
 
 
 def oracle_target(obs: np.ndarray, cfg: TaskConfig) -> tuple[np.ndarray, float]:
@@ -224,16 +241,16 @@ def oracle_target(obs: np.ndarray, cfg: TaskConfig) -> tuple[np.ndarray, float]:
     In the grasp phase the target lies GRASP_PRESS into the object top so the cup seals.
     """
     obs = np.asarray(obs, dtype=float)
-    phase = phase_from_progress(obs[4])
-    target = phase_target(phase, obs[5:8], obs[8:11], cfg)
-    if phase == 1:
+    phase = phase_from_progress(obs[OBS_PROGRESS])
+    target = phase_target(phase, obs[OBS_OBJECT], obs[OBS_GOAL], cfg)
+    if phase == Phase.GRASP:
         target = target - np.array([0.0, 0.0, GRASP_PRESS])
     return target, float(G_REQUIRED[phase])
 
 
 def mark_phase(phase: int) -> int:
     """The phase whose mark a pick-and-place demonstration follows in `phase`: the pick up to the lift, then the place."""
-    return PICK_PHASE if phase <= 2 else PLACE_PHASE
+    return PICK_PHASE if phase <= Phase.LIFT else PLACE_PHASE
 
 
 def waypoint_from_mark(phase: int, mark: np.ndarray, cfg: TaskConfig) -> np.ndarray:
@@ -245,11 +262,11 @@ def waypoint_from_mark(phase: int, mark: np.ndarray, cfg: TaskConfig) -> np.ndar
     stays above the grasp point instead of following the part.
     """
     mark = np.asarray(mark, dtype=float)
-    if phase == 0:
+    if phase == Phase.APPROACH:
         return mark + np.array([0.0, 0.0, GRASP_PRESS + cfg.approach_height])
-    if phase in (2, 3):
+    if phase in (Phase.LIFT, Phase.TRANSPORT):
         return np.array([mark[0], mark[1], cfg.lift_height])
-    if phase in (1, 4):
+    if phase in (Phase.GRASP, Phase.RELEASE):
         return mark.copy()
     raise ValueError(f"phase must be in 0..{N_PHASES - 1}, got {phase}")
 
@@ -261,7 +278,8 @@ def annotation_action(obs: np.ndarray, target: np.ndarray, grip: float, cfg: Tas
     vacuum stays on until the TCP is within ε/2 of the marked pose.
     """
     obs = np.asarray(obs, dtype=float)
-    if phase_from_progress(obs[4]) == 4 and grip < 0 and np.linalg.norm(obs[0:3] - target) > 0.5 * cfg.epsilon:
+    release = phase_from_progress(obs[OBS_PROGRESS]) == Phase.RELEASE
+    if release and grip < 0 and np.linalg.norm(obs[OBS_TCP] - target) > 0.5 * cfg.epsilon:
         grip = 1.0
     return np.concatenate([np.clip(to_normalized(target), -1.0, 1.0), [grip]]).astype(np.float32)
 

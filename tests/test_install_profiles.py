@@ -26,6 +26,7 @@ from tests.conftest import build_wheel
 
 ROOT = Path(__file__).parents[1]
 TRAIN_LINE = "needs the workstation install: pip install 'mrguide[train]' (missing: "
+REPLAY_LINE = "needs the replay install: pip install 'mrguide[replay]' (missing: "
 ROBOT_LINE = "needs the robot install: pip install 'mrguide[robot]' (missing: "
 
 
@@ -99,6 +100,8 @@ def test_the_bare_install_prints_help(bare):
         (["calibrate", "--images", "."], "mrguide calibrate " + ROBOT_LINE + "opencv-python-headless)"),
         (["camera", "check"], "mrguide camera check " + ROBOT_LINE + "opencv-python-headless)"),
         (["train", "--out", "t"], "mrguide train " + TRAIN_LINE + "torch)"),
+        (["replay", "run.jsonl", "--save", "r.rrd"], "mrguide replay " + REPLAY_LINE + "rerun-sdk)"),
+        (["export", "lerobot", "t", "--out", "d"], "mrguide export lerobot " + REPLAY_LINE + "pyarrow)"),
     ],
 )
 def test_the_bare_install_names_the_extra_a_command_needs(bare, argv, line):

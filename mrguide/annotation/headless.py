@@ -23,6 +23,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+from mrguide.task import Phase
+
 #: Chromium flags for a root user in a container without a GPU or display.
 CHROMIUM_ARGS = (
     "--no-sandbox",
@@ -236,7 +238,7 @@ class AnnotationPage:
         t0 = time.monotonic()
         req = self.page.evaluate("() => ({id: window.mrguide.state().requestId, phase: window.mrguide.state().phase})")
         shown = self.page.evaluate("() => window.mrguide.shown()")
-        on_goal = shown["phase_index"] >= 3
+        on_goal = shown["phase_index"] >= Phase.TRANSPORT
         spot = list(shown["goal"]) if on_goal else list(shown["object"])
         spot[2] = (
             0.001 if on_goal else spot[2] + 0.5 * shown["object_height"]

@@ -24,7 +24,7 @@ from mrguide.config import ConfigError
 from mrguide.policies.annotations import Annotation
 from mrguide.policies.experts import OracleExpert
 from mrguide.robot import RobotSpec
-from mrguide.task import TaskConfig, phase_from_progress
+from mrguide.task import OBS_GOAL, OBS_GRIP, OBS_OBJECT, OBS_PROGRESS, OBS_TCP, TaskConfig, phase_from_progress
 from mrguide.twin.env import PickPlaceEnv
 
 log = logging.getLogger(__name__)
@@ -83,13 +83,13 @@ class LiveExpert:
         obs = np.asarray(obs)
         _, orientation = self.env.scene.object_pose()
         req = AnnotationRequest(
-            phase=phase_from_progress(obs[4]),
+            phase=phase_from_progress(obs[OBS_PROGRESS]),
             joints=self.env.scene.joint_positions(noisy=False),
-            tcp=obs[0:3],
-            vacuum_on=bool(obs[3] > 0),
-            object_position=obs[5:8],
+            tcp=obs[OBS_TCP],
+            vacuum_on=bool(obs[OBS_GRIP] > 0),
+            object_position=obs[OBS_OBJECT],
             object_orientation=orientation,
-            goal=obs[8:11],
+            goal=obs[OBS_GOAL],
             obs=obs,
             remark=previous is not None,
             previous_target=None if previous is None else np.asarray(previous.target),

@@ -30,9 +30,11 @@ from mrguide.task import (
     N_PHASES,
     OBS_DIM,
     OBS_GOAL,
+    OBS_GRIP,
     OBS_LAYOUT,
     OBS_OBJECT,
     OBS_PROGRESS,
+    OBS_TCP,
     PHASES,
     TaskConfig,
     progress,
@@ -326,10 +328,11 @@ def _refuse_non_finite_output(path: Path, policy: ExportedPolicy, workspace: Wor
         actions = policy.batch(obs)
     bad = np.flatnonzero(~np.all(np.isfinite(actions), axis=1))
     if bad.size:
-        o = obs[bad[0]]
-        phase = round(o[4] * N_PHASES)
+        bad_obs = obs[bad[0]]
+        phase = round(bad_obs[OBS_PROGRESS] * N_PHASES)
         raise PolicyFileError(
             f"{path}: non-finite action for {bad.size} of {len(obs)} probe observations spanning the workspace, "
-            f"e.g. {actions[bad[0]].tolist()} at tcp {np.round(o[:3], 3).tolist()}, g = {o[3]:+.0f}, "
-            f"phase {phase} ({PHASES[phase]}), object {np.round(o[5:8], 3).tolist()}, goal {np.round(o[8:], 3).tolist()}"
+            f"e.g. {actions[bad[0]].tolist()} at tcp {np.round(bad_obs[OBS_TCP], 3).tolist()}, "
+            f"g = {bad_obs[OBS_GRIP]:+.0f}, phase {phase} ({PHASES[phase]}), "
+            f"object {np.round(bad_obs[OBS_OBJECT], 3).tolist()}, goal {np.round(bad_obs[OBS_GOAL], 3).tolist()}"
         )

@@ -7,6 +7,7 @@ that cannot be written is refused before any drive is enabled, and no run leaves
 from __future__ import annotations
 
 import contextlib
+import gzip
 import json
 import os
 from pathlib import Path
@@ -76,12 +77,13 @@ class RunLog:
 
 
 def read_log(path: str | Path) -> list[dict]:
-    """All records of a run log. Only a torn last line (the one in flight when the writer died: no line
-    break after it) is skipped; any other line that is not a JSON object raises RunLogError naming file:line."""
+    """All records of a run log (also a gzipped one, `*.gz`, as the results store them). Only a torn last line
+    (the one in flight when the writer died: no line break after it) is skipped; any other line that is not a
+    JSON object raises RunLogError naming file:line."""
     path = Path(path)
     try:
-        text = path.read_text()
-    except (OSError, UnicodeDecodeError) as exc:
+        text = gzip.decompress(path.read_bytes()).decode() if path.suffix == ".gz" else path.read_text()
+    except (OSError, EOFError, UnicodeDecodeError) as exc:
         raise RunLogError(f"{path}: cannot read the run log: {exc}") from exc
     lines = text.split("\n")  # the last element is "" when the log ends with a line break
     records = []

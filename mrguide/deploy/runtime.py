@@ -29,7 +29,7 @@ from mrguide.drivers.interface import CobotInterface
 from mrguide.motion.trajectory import TrajectoryError
 from mrguide.pose_source import ObjectPoseSource, PoseUnavailable
 from mrguide.robot import RobotSpec
-from mrguide.task import Outcome, TaskConfig
+from mrguide.task import Outcome, Phase, TaskConfig
 
 log = logging.getLogger(__name__)
 
@@ -73,7 +73,7 @@ class RuntimeConfig:
 @dataclass
 class EpisodeReport:
     index: int
-    outcome: str  # an `Outcome` value
+    outcome: Outcome
     decisions: int
     events: dict[str, int]
     latency_ms: list[float] = field(default_factory=list)
@@ -90,6 +90,7 @@ class _FollowingMonitor:
         self.recent: np.ndarray | None = None  # ring of the last `depth` setpoints
         self.depth, self.count = depth, 0
         self.error = 0.0
+        self.joint = 0  # the joint furthest from the setpoint nearest to the measured joints
 
     def __call__(self, sample: CycleSample) -> None:
         if sample.setpoint is not None:
@@ -98,7 +99,10 @@ class _FollowingMonitor:
             self.recent[self.count % self.depth] = sample.setpoint
             self.count += 1
         if self.recent is not None:
-            self.error = float(np.abs(self.recent - sample.positions).max(axis=1).min())
+            distance = np.abs(self.recent - sample.positions)
+            nearest = int(distance.max(axis=1).argmin())
+            self.joint = int(distance[nearest].argmax())
+            self.error = float(distance[nearest, self.joint])
 
 
 class Runtime:
@@ -138,6 +142,7 @@ class Runtime:
         self._last_obj: np.ndarray | None = None  # last pose the source gave in this episode
         self._pose_misses = 0  # decisions in a row without a pose from the source
         self._carried: np.ndarray | None = None  # where the part hung under the cup, last seen
+        self._object_from = "source"  # where the last decision's object position came from (the run log says)
 
     # -- lifecycle ----------------------------------------------------------------------------------
     def __enter__(self) -> Runtime:
@@ -168,7 +173,7 @@ class Runtime:
         problem = self.supervisor.check_setpoint(sp.q, sp.dq, sp.ddq)
         if problem:
             self._quick_stop(Event.JOINT_LIMIT, problem)
-        problem = self.supervisor.check_following(self.following.error)
+        problem = self.supervisor.check_following(self.following.error, self.following.joint)
         if problem:
             self._quick_stop(Event.FOLLOWING_ERROR, problem)
         if not self.watchdog.alive:
@@ -233,7 +238,7 @@ class Runtime:
         """One episode toward `goal` from the home pose; returns its report (RunStopped ends the run)."""
         goal = np.asarray(goal, dtype=float)
         self._episode_events = Counter()
-        report = EpisodeReport(index, Outcome.ABORTED.value, 0, {})
+        report = EpisodeReport(index, Outcome.ABORTED, 0, {})
         t0 = time.perf_counter()
         self.log.write("episode_start", episode=index, goal=goal)
         self.decision.reset(self.cobot.setpoint)
@@ -241,7 +246,7 @@ class Runtime:
         self.watchdog.arm(True)
         try:
             outcome = self._decisions(goal, index, report)
-            report.outcome = outcome.value
+            report.outcome = outcome
             self.streamer.brake()
             self._settle()
             if outcome is not Outcome.SUCCESS:
@@ -249,14 +254,14 @@ class Runtime:
         except KeyboardInterrupt:
             self.cobot.stop()
             self.supervisor.report(Event.INTERRUPT, "Ctrl-C")
-            report.outcome = Outcome.SAFETY_STOP.value
+            report.outcome = Outcome.SAFETY_STOP
             raise
         except RunStopped as exc:
-            report.outcome = Outcome.SAFETY_STOP.value
+            report.outcome = Outcome.SAFETY_STOP
             exc.report = report
             raise
         except DriverError:  # a fault surfaced outside the streaming (reading the state, the vacuum command)
-            report.outcome = Outcome.SAFETY_STOP.value
+            report.outcome = Outcome.SAFETY_STOP
             raise
         finally:
             self.watchdog.arm(False)
@@ -265,7 +270,7 @@ class Runtime:
             self.log.write(
                 "episode_end",
                 episode=index,
-                outcome=report.outcome,
+                outcome=report.outcome.value,
                 decisions=report.decisions,
                 events=report.events,
                 wall_s=report.wall_s,
@@ -330,7 +335,11 @@ class Runtime:
             "q": js.positions,
             "vacuum_kpa": vac.level_kpa,
             "part": vac.part_gripped,
+            "object_from": self._object_from,
         }
+        details = getattr(self.pose, "pose_details", None)  # optional (PoseDetails): the estimate's age, the truth
+        if details is not None:
+            record["pose"] = details()
         try:
             cmd = self.decision.act(action, js.positions)
         except ActionError as exc:
@@ -370,19 +379,26 @@ class Runtime:
         cup let it go. Otherwise the pose source says; when it has no pose, the last one is used for at most
         `max_pose_misses` decisions in a row (`max_pose_misses_before_grasp` before the grasp, when the arm
         hides the part as it reaches for it), each counted and logged; then the episode ends."""
-        if self.cfg.track_carried_object and self.decision.phase >= 2:
+        if self.cfg.track_carried_object and self.decision.phase >= Phase.LIFT:
             if vac.part_gripped:
                 self._carried = tcp - np.array([0.0, 0.0, 0.5 * self.task.object_height])
+                self._object_from = "carried"
                 return self._carried
-            if self._carried is not None and self.decision.phase == 4:
+            if self._carried is not None and self.decision.phase == Phase.RELEASE:
+                self._object_from = "released"
                 return self._carried
+        self._object_from = "source"
         try:
             obj = self.pose.object_position()
         except PoseUnavailable as exc:
             if self._last_obj is None:
                 raise RunStopped(f"no object pose at the start of the episode: {exc}") from exc
             self._pose_misses += 1
-            allowed = self.cfg.max_pose_misses_before_grasp if self.decision.phase <= 1 else self.cfg.max_pose_misses
+            allowed = (
+                self.cfg.max_pose_misses_before_grasp
+                if self.decision.phase <= Phase.GRASP
+                else self.cfg.max_pose_misses
+            )
             if self._pose_misses > allowed:
                 self.supervisor.report(
                     Event.POSE_LOST,
@@ -393,6 +409,7 @@ class Runtime:
             self.supervisor.report(
                 Event.POSE_UNAVAILABLE, f"{exc}; using the last pose ({self._pose_misses} of at most {allowed})"
             )
+            self._object_from = "last"
             return self._last_obj
         self._last_obj, self._pose_misses = obj, 0
         return obj

@@ -134,10 +134,12 @@ class Supervisor:
             return f"acceleration {np.round(ddq, 3).tolist()} above a_max"
         return None
 
-    def check_following(self, error: float) -> str | None:
-        """Why the measured joints are too far from the setpoints (`error`: rad, largest joint), or None."""
+    def check_following(self, error: float, joint: int = 0) -> str | None:
+        """Why the measured joints are too far from the setpoints (`error`: rad, of the furthest joint, index
+        `joint`), or None."""
         if not error <= self.cfg.following_error:
-            return f"measured joints {error:.4f} rad from the setpoints (limit {self.cfg.following_error} rad)"
+            name = self.spec.joint_names[joint]
+            return f"{name} measured {error:.4f} rad from its setpoints (limit {self.cfg.following_error} rad)"
         return None
 
 

@@ -77,7 +77,7 @@ class DeploySummary:
         return sum(e.outcome == Outcome.SUCCESS.value for e in self.episodes)
 
     def outcomes(self) -> Counter:
-        return Counter(e.outcome for e in self.episodes)
+        return Counter(e.outcome.value for e in self.episodes)
 
     def events(self) -> Counter:
         c: Counter = Counter()
@@ -143,7 +143,7 @@ def run_session(
                 report = runtime.run_episode(goal, i)
             except (RunStopped, DriverError) as exc:
                 stopped = exc.report if isinstance(exc, RunStopped) else None
-                record(stopped or EpisodeReport(i, Outcome.SAFETY_STOP.value, 0, {}))
+                record(stopped or EpisodeReport(i, Outcome.SAFETY_STOP, 0, {}))
                 if summary.recoveries >= max_recoveries or i == len(goals) - 1:
                     raise
                 _recover(runtime, exc)

@@ -16,7 +16,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal, get_args
 
 from tqdm import tqdm
 
@@ -46,7 +46,7 @@ class Experiment:
     """How to run and report one experiment: its config class and file, its runs, an optional evaluation of
     the trained runs (Ray tasks), and its report built from the run directories."""
 
-    config_cls: type
+    config_cls: type[Any]
     default_config: str
     default_out: str
     runs: Callable[[Any, str | None], list]
@@ -56,7 +56,15 @@ class Experiment:
     evaluated: Callable[[Any, Path], Path] | None = None  # (run, root) → that file
 
 
-def _experiments() -> dict[str, Experiment]:
+#: The experiments, by the name `mrguide experiment NAME` takes (their `Experiment`s: `_experiments`).
+ExperimentName = Literal[
+    "learning-curves", "long-baseline", "noise-robustness", "generalization", "person", "peers", "sim2real"
+]
+NAMES: tuple[ExperimentName, ...] = get_args(ExperimentName)
+
+
+def _experiments() -> dict[ExperimentName, Experiment]:
+    """Every experiment by name (imported here: the parser needs only NAMES)."""
     from mrguide.experiments import generalization as gen
     from mrguide.experiments import learning_curves as lc
     from mrguide.experiments import noise_robustness as nr
@@ -128,11 +136,9 @@ def _evaluate(
     """Every trained run not evaluated yet, one Ray task each (Fig. 6: the goal grid; sim-to-real: three conditions)."""
     from mrguide.experiments.execution import map_tasks
 
+    assert exp.evaluate is not None and exp.evaluated is not None  # called for experiments that evaluate
     todo = [r for r in exp.runs(cfg, base) if not exp.evaluated(r, out).exists()]
     map_tasks(exp.evaluate, [(r, str(out), cfg) for r in todo], workers, address, "evaluation", show_progress)
-
-
-NAMES = ("learning-curves", "long-baseline", "noise-robustness", "generalization", "person", "peers", "sim2real")
 
 
 def add_experiment_command(sub: argparse._SubParsersAction) -> None:

@@ -119,7 +119,7 @@ def evaluate(run: TrainRun, root: str, cfg: GeneralizationConfig) -> str:
     return str(out / "goals.csv")
 
 
-def bins(cfg: GeneralizationConfig, goal_rows: list[dict[str, str]]) -> list[dict[str, Any]]:
+def bins(cfg: GeneralizationConfig, goal_rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """Success per distance bin over all seeds: targets, episodes, success rate and its Wilson interval."""
     n_bins = int(np.ceil(cfg.max_distance / cfg.bin_width - 1e-9))
     table = []
@@ -148,7 +148,7 @@ def bins(cfg: GeneralizationConfig, goal_rows: list[dict[str, str]]) -> list[dic
 
 
 def generalization_report(cfg: GeneralizationConfig, root: Path, run_list: list[TrainRun]) -> dict[str, bytes]:
-    goal_rows = []
+    goal_rows: list[dict[str, Any]] = []  # goals.csv's rows (strings) and the run's seed
     for run in run_list:
         with (run.directory(root) / "goals.csv").open() as fh:
             goal_rows += [{**r, "seed": run.seed} for r in csv.DictReader(fh)]

@@ -79,7 +79,7 @@ def learning_curves_report(cfg: CurvesConfig, recs: dict[str, list[RunRecord]]) 
     table = []
     for v, rs in recs.items():
         conv = [r.converged.step for r in rs if r.converged.step is not None]
-        ann = [r.annotations_until_convergence for r in rs if r.converged.step is not None]
+        ann = [a for r in rs if (a := r.annotations_until_convergence) is not None]  # the converged runs
         table.append(
             {
                 "variant": v,

@@ -86,7 +86,7 @@ def noise_report(cfg: NoiseConfig, recs: dict[float, list[RunRecord]]) -> dict[s
     for sigma, rs in recs.items():
         conv = [r for r in rs if r.converged.step is not None]
         lo, hi = wilson(len(conv), len(rs))
-        ann = [r.annotations_until_convergence for r in conv]
+        ann = [a for r in conv if (a := r.annotations_until_convergence) is not None]  # all of them: converged
         table.append(
             {
                 "sigma_m": sigma,

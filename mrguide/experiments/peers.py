@@ -20,8 +20,8 @@ from mrguide.experiments import report
 from mrguide.experiments.run_records import RunRecord, read_run
 from mrguide.experiments.runs import TrainRun
 from mrguide.experiments.stats import person_minutes
+from mrguide.policies.choices import LEARNERS, Learner
 
-LEARNERS = ("ddpg", "sac")
 COLORS = {"ddpg": "tab:red", "sac": "tab:purple"}
 
 
@@ -31,7 +31,7 @@ class PeersConfig:
 
     seeds: int = 10
     steps: int = 20_000
-    learners: tuple[str, ...] = LEARNERS
+    learners: tuple[Learner, ...] = LEARNERS
     config: str = "../runs/person.toml"  # base training config, relative to the experiment file (the marks in process)
     marks_budget: int = 100  # compare the learners' evaluation success after this many marks ...
     time_budget_s: float = 180.0  # ... and after this much training wall time
@@ -80,7 +80,8 @@ def wall_until_convergence(rec: RunRecord) -> float | None:
 
 def peers_report(cfg: PeersConfig, recs: dict[str, list[RunRecord]]) -> dict[str, bytes]:
     """summary.csv, runs.csv, summary.md and the figure: success against marks and against wall time."""
-    rows, table = [], []
+    rows: list[dict[str, Any]] = []
+    table = []
     for learner, rs in recs.items():
         for r in rs:
             rows.append(

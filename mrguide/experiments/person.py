@@ -96,7 +96,7 @@ def person_report(cfg: PersonConfig, root: Path, run_list: list[TrainRun], episo
         for rec, f in zip(recs, fresh)
     ]
     conv = [r for r in recs if r.converged.step is not None]
-    marks = [r.annotations_until_convergence for r in conv]
+    marks = [a for r in conv if (a := r.annotations_until_convergence) is not None]  # all of them: converged
     lo, hi = wilson(len(conv), len(recs))
     summary = [
         {

@@ -146,11 +146,13 @@ def train(run: TrainRun, root: str, on_episode: Callable[[dict], None] | None = 
             tr.env.robot_spec,
             tr.env.task_cfg,
             tr.env.twin_cfg.decision_period,
-            {"trained": {"steps": tr.step, "seed": run.seed, "guidance": run.guided, "run": run.name}},
+            {"trained": {"steps": tr.counters.step, "seed": run.seed, "guidance": run.guided, "run": run.name}},
         )
         tmp = out / "done.tmp"
         tmp.write_text(
-            json.dumps({"wall_s": round(tr.wall_s(), 1), "update_ms": round(tr.update_ms(), 3), "steps": tr.step})
+            json.dumps(
+                {"wall_s": round(tr.wall_s(), 1), "update_ms": round(tr.update_ms(), 3), "steps": tr.counters.step}
+            )
             + "\n"
         )
         tmp.replace(out / "done")

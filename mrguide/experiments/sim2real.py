@@ -116,8 +116,9 @@ class ConditionResult:
         }
 
 
-def _cause(outcome: str) -> str:
-    return outcome if Outcome(outcome).from_task else Outcome.SAFETY_STOP.value
+def _cause(outcome: Outcome) -> str:
+    """What the report counts: the task model's outcome, or a safety stop for an episode the supervisor ended."""
+    return outcome.value if outcome.from_task else Outcome.SAFETY_STOP.value
 
 
 def run_sim(policy: ExportedPolicy, env_cfg: EnvConfig, seed: int, episodes: int) -> list[str]:

@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from mrguide.errors import InputError
-from mrguide.task import OBS_DIM, phase_from_progress
+from mrguide.task import OBS_DIM, OBS_GOAL, OBS_OBJECT, OBS_PROGRESS, Phase, phase_from_progress
 
 log = logging.getLogger(__name__)
 
@@ -66,9 +66,9 @@ class CacheHit:
 def anchor_key(obs: np.ndarray) -> np.ndarray:
     """What an annotation depends on: the phase's anchor position and the phase (scaled apart)."""
     obs = np.asarray(obs, dtype=float)
-    phase = phase_from_progress(obs[4])
-    anchor = obs[5:8].copy() if phase <= 2 else obs[8:11].copy()
-    if phase == 2:
+    phase = phase_from_progress(obs[OBS_PROGRESS])
+    anchor = obs[OBS_OBJECT].copy() if phase <= Phase.LIFT else obs[OBS_GOAL].copy()
+    if phase == Phase.LIFT:
         anchor[2] = 0.0
     return np.concatenate([anchor, [phase * 1e3]])  # phase scaled so that any difference exceeds any tolerance
 
@@ -83,8 +83,6 @@ class AnnotationCache:
         self._observations: list[np.ndarray] = []  # every record's observation, superseded ones included
         self._values: list[Annotation] = []
         self._matrix: np.ndarray | None = None
-        self.asked = 0
-        self.reused = 0
 
     def __len__(self) -> int:
         """Annotations in use (superseded ones not counted)."""

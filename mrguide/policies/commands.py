@@ -16,6 +16,7 @@ from typing import Any, Protocol
 from tqdm import tqdm
 
 from mrguide.cli_args import nonnegative_int, positive_int
+from mrguide.policies.choices import EXPERT_SOURCES
 
 
 class LiveSessionLike(Protocol):
@@ -42,9 +43,6 @@ class LivePlugin(Protocol):
     def open_session(self, args: argparse.Namespace, on_waiting: Callable[[bool], None]) -> LiveSessionLike: ...
 
 
-EXPERTS = ("oracle", "annotator", "file", "live")
-
-
 def add_train_command(sub: argparse._SubParsersAction, live: LivePlugin | None = None) -> None:
     """`mrguide train`; with `live`, also `--expert live` and its server options."""
     p = sub.add_parser("train", help="train DDPG in the twin, with or without MR-style expert guidance")
@@ -61,7 +59,7 @@ def add_train_command(sub: argparse._SubParsersAction, live: LivePlugin | None =
     p.add_argument("--no-guidance", action="store_true", help="baseline DDPG (guidance.enabled = false)")
     p.add_argument(
         "--expert",
-        choices=EXPERTS if live else EXPERTS[:-1],
+        choices=EXPERT_SOURCES if live else tuple(s for s in EXPERT_SOURCES if s != "live"),
         help="override guidance.source: the scripted oracle, the simulated MR annotator, a recorded "
         "annotation file (guidance.annotation_file), or a person through the live annotation page",
     )
@@ -73,9 +71,28 @@ def add_train_command(sub: argparse._SubParsersAction, live: LivePlugin | None =
         help="also write TensorBoard event files to OUT/tensorboard/: losses, Q, BC term, λ_t, expert ratio, "
         "annotation counters, evaluations (needs the tensorboard package: pip install 'mrguide[tensorboard]')",
     )
+    p.add_argument(
+        "--record",
+        nargs="?",
+        const=256.0,
+        type=_megabytes,
+        metavar="MB",
+        help="also record every training step (arm, object, cup, actions, ζ, annotation) to OUT/episodes.jsonl.gz, "
+        "for `mrguide replay` and `mrguide export lerobot`; recording stops when the file reaches MB (default 256)",
+    )
     if live is not None:
         live.add_arguments(p)
     p.set_defaults(func=partial(cmd_train, live=live))
+
+
+def _megabytes(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not 0 < value <= 1e6:
+        raise argparse.ArgumentTypeError(f"expected a size in MB in (0, 1e6], got {text!r}")
+    return value
 
 
 def _refuse(message: str) -> int:
@@ -123,10 +140,14 @@ def cmd_train(args: argparse.Namespace, live: LivePlugin | None = None) -> int:
                 tr.load_checkpoint()
             except CheckpointError as exc:
                 return _refuse(str(exc))
+        if args.record is not None:  # after a resume: the recording is cut back to the checkpoint
+            from mrguide.policies.episode_recorder import FILE_NAME, EpisodeRecorder
+
+            tr.recorder = EpisodeRecorder(tr, out / FILE_NAME, args.record)
         if args.tensorboard:  # on a resume, what was logged after the checkpoint is purged (it runs again)
-            tb = TensorBoardLog(out / "tensorboard", purge_step=tr.step + 1 if args.resume else None)
+            tb = TensorBoardLog(out / "tensorboard", purge_step=tr.counters.step + 1 if args.resume else None)
             tr.sinks.append(tb)
-        bar.n = tr.step
+        bar.n = tr.counters.step
         bar.refresh()
         with _stop_on_sigint(tr, session, bar):
             _run(tr, args.stop_after, bar, session)
@@ -142,6 +163,8 @@ def cmd_train(args: argparse.Namespace, live: LivePlugin | None = None) -> int:
         bar.close()
         if tb is not None:
             tb.close()
+        if tr.recorder is not None:
+            tr.recorder.close()
         tr.close()
         if session:
             session.close()
@@ -153,7 +176,7 @@ def _interrupted(tr, out: Path, bar: tqdm) -> int:
     tr.save_checkpoint()
     bar.close()
     print(
-        f"interrupted at step {tr.step}: checkpoint {out / 'checkpoint.pt'} written; "
+        f"interrupted at step {tr.counters.step}: checkpoint {out / 'checkpoint.pt'} written; "
         f"`mrguide train --out {out} --resume` continues",
         file=sys.stderr,
     )
@@ -194,17 +217,17 @@ def _run(tr, stop_after: int | None, bar: tqdm, session: LiveSessionLike | None)
 
     def status() -> dict:
         return {
-            "step": tr.step,
+            "step": tr.counters.step,
             "total_steps": tr.cfg.total_steps,
-            "episode": tr.episode,
+            "episode": tr.counters.episode,
             "lambda": round(tr.lam(), 4),
             "success_rate": sum(recent) / len(recent) if recent else None,
-            "asked": tr.cache.asked,
-            "reused": tr.cache.reused,
-            "remarks": tr.expert.remarks,
-            "skipped": tr.skipped,
-            "interventions": tr.interventions,
-            "person_interventions": tr.person_interventions,
+            "asked": tr.counters.asked,
+            "reused": tr.counters.reused,
+            "remarks": tr.counters.remarks,
+            "skipped": tr.counters.skipped,
+            "interventions": tr.counters.interventions,
+            "person_interventions": tr.counters.person_interventions,
         }
 
     def progress(row: dict) -> None:
@@ -214,7 +237,7 @@ def _run(tr, stop_after: int | None, bar: tqdm, session: LiveSessionLike | None)
             ret=f"{row['return']:.1f}",
             succ20=f"{sum(recent) / len(recent):.0%}",
             lam=f"{row['lambda']:.2f}",
-            interv=tr.interventions,
+            interv=tr.counters.interventions,
             asked=row["asked"],
         )
         if session:
@@ -235,12 +258,12 @@ def _finish(tr, tc, gc, out: Path) -> None:
         tr.env.robot_spec,
         tr.env.task_cfg,
         tr.env.twin_cfg.decision_period,
-        {"trained": {"steps": tr.step, "seed": tc.seed, "guidance": gc.enabled}},
+        {"trained": {"steps": tr.counters.step, "seed": tc.seed, "guidance": gc.enabled}},
     )
     print(
-        f"trained {tr.step} steps in {tr.wall_s():.0f} s ({tr.step / max(tr.wall_s(), 1e-9):.0f} steps/s); "
-        f"expert interventions {tr.interventions}, annotations asked {tr.cache.asked} / reused {tr.cache.reused}"
-        f" / re-marked {tr.expert.remarks}, demonstrations skipped {tr.skipped}"
+        f"trained {tr.counters.step} steps in {tr.wall_s():.0f} s ({tr.counters.step / max(tr.wall_s(), 1e-9):.0f} steps/s); "
+        f"expert interventions {tr.counters.interventions}, annotations asked {tr.counters.asked} / reused {tr.counters.reused}"
+        f" / re-marked {tr.counters.remarks}, demonstrations skipped {tr.counters.skipped}"
     )
     print(f"deterministic evaluation: {final['success_rate']:.0%} success over {tc.eval_episodes} episodes")
     print(f"policy: {policy}   metrics: {out / 'metrics.csv'}   checkpoint: {out / 'checkpoint.pt'}")

@@ -85,7 +85,7 @@ class DDPG:
         self.actor_opt = torch.optim.Adam(self.actor_params, lr=cfg.lr_actor, fused=True)
         self.critic_opt = torch.optim.Adam(self.critic.parameters(), lr=cfg.lr_critic, fused=True)
         self.updates = 0  # updates so far
-        self._soft_pairs = [
+        self._soft_pairs: list[tuple[list[torch.Tensor], list[torch.Tensor]]] = [
             (list(net.parameters()), list(tgt.parameters()))
             for net, tgt in ((self.actor, self.actor_target), (self.critic, self.critic_target))
         ]

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import logging
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Protocol
 
@@ -12,8 +13,16 @@ import numpy as np
 
 from mrguide.config import ConfigError, check_number
 from mrguide.policies.annotations import Annotation, AnnotationError
+from mrguide.policies.choices import (
+    EXPERT_SOURCES,
+    MARKS_MODES,
+    REFERENCES,
+    ExpertSourceName,
+    MarksMode,
+    ReferenceName,
+)
 from mrguide.policies.experts import AnnotatorNoise
-from mrguide.task import TaskConfig, phase_from_progress, phase_target
+from mrguide.task import N_PHASES, OBS_GOAL, OBS_OBJECT, OBS_PROGRESS, TaskConfig, phase_from_progress, phase_target
 
 log = logging.getLogger(__name__)
 
@@ -72,7 +81,7 @@ class NominalReference:
         self.task = task
 
     def reference(self, obs: np.ndarray) -> np.ndarray:
-        return phase_target(phase_from_progress(obs[4]), obs[5:8], obs[8:11], self.task)
+        return phase_target(phase_from_progress(obs[OBS_PROGRESS]), obs[OBS_OBJECT], obs[OBS_GOAL], self.task)
 
     def observe(self, obs: np.ndarray, annotation: Annotation) -> None:
         """Nothing to learn: the model is exact."""
@@ -88,17 +97,25 @@ class RunningMedianReference:
 
     def __init__(self, task: TaskConfig, window: int = 25):
         self.task = task
-        self.offsets: dict[int, deque] = {k: deque(maxlen=window) for k in range(5)}
+        self.offsets: dict[int, deque] = {k: deque(maxlen=window) for k in range(N_PHASES)}
 
     def reference(self, obs: np.ndarray) -> np.ndarray:
-        phase = phase_from_progress(obs[4])
-        nominal = phase_target(phase, obs[5:8], obs[8:11], self.task)
+        phase = phase_from_progress(obs[OBS_PROGRESS])
+        nominal = phase_target(phase, obs[OBS_OBJECT], obs[OBS_GOAL], self.task)
         offs = self.offsets[phase]
         return nominal + (np.median(np.array(offs), axis=0) if offs else 0.0)
 
     def observe(self, obs: np.ndarray, annotation: Annotation) -> None:
-        phase = phase_from_progress(obs[4])
-        self.offsets[phase].append(np.asarray(annotation.target) - phase_target(phase, obs[5:8], obs[8:11], self.task))
+        phase = phase_from_progress(obs[OBS_PROGRESS])
+        nominal = phase_target(phase, obs[OBS_OBJECT], obs[OBS_GOAL], self.task)
+        self.offsets[phase].append(np.asarray(annotation.target) - nominal)
+
+
+#: The reference of each guidance.reference.
+REFERENCE_POSES: dict[ReferenceName, Callable[[TaskConfig], ReferencePose]] = {
+    "nominal": NominalReference,
+    "running_median": RunningMedianReference,
+}
 
 
 @dataclass(frozen=True)
@@ -111,8 +128,8 @@ class GuidanceConfig:
     lam_max: float = 0.9  # λ_max (Table I)
     lam_min: float = 0.1  # λ_min (Table I)
     delta: float = 0.05  # Δ of Eq. 13, m (ours)
-    reference: str = (
-        "nominal"  # a^e of Eq. 13: "nominal" (the task model's target) or "running_median" (no ground truth)
+    reference: ReferenceName = (
+        "nominal"  # a^e of Eq. 13: the task model's target, or "running_median" (no ground truth)
     )
     cache_tolerance: float = 0.005  # m; observations this close reuse a cached annotation
     reask_after: int = 15  # expert steps on one waypoint without reaching it before it is asked again (0: never; ours)
@@ -120,8 +137,8 @@ class GuidanceConfig:
     #: fused with every earlier one as a measurement of one offset from the part (pick) or the goal (place), the
     #: five waypoints following from the fused marks (task.waypoint_from_mark). "phases" (the paper's): every
     #: phase's waypoint, used as marked. Both bounded by Eq. 13 around `reference`.
-    marks: str = "pick_place"
-    source: str = "annotator"  # "oracle", "annotator" (oracle + noise), "file", or "live" (a person: `--expert live`)
+    marks: MarksMode = "pick_place"
+    source: ExpertSourceName = "annotator"  # "oracle", "annotator" (oracle + noise), "file", "live" (`--expert live`)
     noise: AnnotatorNoise = field(default_factory=AnnotatorNoise)
     #: m, std per axis of fresh Gaussian noise on every stored expert action, after Eq. 13 (so the bound cannot
     #: filter it), while the arm follows the clean one: Fig. 7's "stored" reading (label noise). Not clipped to
@@ -131,12 +148,12 @@ class GuidanceConfig:
     annotation_file: str = ""  # for source = "file"
 
     def __post_init__(self) -> None:
-        if self.reference not in ("nominal", "running_median"):
-            raise ConfigError(f"guidance.reference must be 'nominal' or 'running_median', got {self.reference!r}")
-        if self.marks not in ("phases", "pick_place"):
-            raise ConfigError(f"guidance.marks must be 'phases' or 'pick_place', got {self.marks!r}")
-        if self.source not in ("oracle", "annotator", "file", "live"):
-            raise ConfigError(f"guidance.source must be 'oracle', 'annotator', 'file' or 'live', got {self.source!r}")
+        if self.reference not in REFERENCES:
+            raise ConfigError(f"guidance.reference must be {_either(REFERENCES)}, got {self.reference!r}")
+        if self.marks not in MARKS_MODES:
+            raise ConfigError(f"guidance.marks must be {_either(MARKS_MODES)}, got {self.marks!r}")
+        if self.source not in EXPERT_SOURCES:
+            raise ConfigError(f"guidance.source must be {_either(EXPERT_SOURCES)}, got {self.source!r}")
         if self.source == "file" and not self.annotation_file:
             raise ConfigError("guidance.source = 'file' needs guidance.annotation_file")
         if not 0.0 <= self.lam_min <= self.lam_max <= 1.0:
@@ -147,3 +164,9 @@ class GuidanceConfig:
         check_number("guidance.cache_tolerance", self.cache_tolerance, 0.0, 0.1, " m")
         check_number("guidance.reask_after", self.reask_after, 0, 10**6, integer=True)
         check_number("guidance.action_noise", self.action_noise, 0.0, 1.0, " m")
+
+
+def _either(choices: tuple[str, ...]) -> str:
+    """'a' or 'b'; 'a', 'b' or 'c'."""
+    quoted = [repr(c) for c in choices]
+    return f"{', '.join(quoted[:-1])} or {quoted[-1]}"

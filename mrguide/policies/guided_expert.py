@@ -3,17 +3,21 @@ bounded by Eq. 13, optionally perturbed, and turned into normalized actions."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
 
 from mrguide.config import ConfigError
 from mrguide.policies.annotations import AnnotationCache
+from mrguide.policies.choices import ExpertSourceName, MarksMode
 from mrguide.policies.experts import ANNOTATOR_SEED_OFFSET, ExpertSource, FileExpert, OracleExpert, SimulatedAnnotator
 from mrguide.policies.guidance import GuidanceConfig, ReferencePose, bounded_projection
 from mrguide.policies.mark_fusion import KINDS, MarkFusion, anchor
 from mrguide.task import (
     G_REQUIRED,
+    OBS_PROGRESS,
     TaskConfig,
     annotation_action,
     mark_phase,
@@ -34,6 +38,16 @@ class ExpertStep(NamedTuple):
 
     executed: np.ndarray
     stored: np.ndarray
+
+
+@dataclass
+class ExpertCounts:
+    """What the guided expert counted (the trainer's `TrainerCounters` extends it, so one object holds all)."""
+
+    asked: int = 0  # annotations asked of the source
+    reused: int = 0  # expert steps that reused a cached annotation (or a planned mark)
+    projected: int = 0  # annotations moved onto the Δ-sphere (Eq. 13)
+    remarks: int = 0  # waypoints asked again because the arm did not reach them
 
 
 class GuidedExpert:
@@ -61,8 +75,10 @@ class GuidedExpert:
         reask_after: int = 0,
         action_noise: float = 0.0,
         seed: int = 0,
-        marks: str = "pick_place",
+        marks: MarksMode = "pick_place",
+        counts: ExpertCounts | None = None,
     ):
+        """`counts` is what the expert counts into (default: counts of its own)."""
         self.source, self.reference, self.cache = source, reference, cache
         self.action_noise = action_noise
         self.rng = np.random.default_rng(seed + ACTION_NOISE_SEED_OFFSET)  # draws only when action_noise > 0
@@ -72,8 +88,7 @@ class GuidedExpert:
         self.reask_after = reask_after
         self.marks = marks
         self.fusion = MarkFusion()
-        self.projected = 0  # annotations moved onto the Δ-sphere
-        self.remarks = 0  # waypoints asked again because the arm did not reach them
+        self.counts = counts if counts is not None else ExpertCounts()
         self._streak = (
             -1,
             0,
@@ -83,6 +98,13 @@ class GuidedExpert:
     def begin_demonstration(self) -> None:
         self._streak = (-1, 0)
         self._plan = {}
+
+    def annotation_in_use(self, obs: np.ndarray) -> int | None:
+        """The annotation cache record the last `action(obs)` followed (its index in annotations.jsonl), or None."""
+        if self.marks == "pick_place":
+            planned = self._plan.get(mark_phase(phase_from_progress(obs[OBS_PROGRESS])))
+            return planned[0] if planned is not None else None
+        return self._streak[0] if self._streak[0] >= 0 else None
 
     def action(self, obs: np.ndarray) -> ExpertStep | None:
         """The expert's normalized action for `obs` (executed and stored), or None when nobody annotated."""
@@ -101,54 +123,55 @@ class GuidedExpert:
         """The paper's protocol: this phase's own mark, bounded by Eq. 13 around the reference."""
         hit = self.cache.lookup(obs)
         if hit is None or (self.reask_after and self._streak == (hit.index, self.reask_after)):
-            self.remarks += int(hit is not None)
+            self.counts.remarks += int(hit is not None)
             index = self._ask(obs, hit.index if hit else None)
             if index is None:
                 return None
             self._streak = (index, 1)
         else:
-            self.cache.reused += 1
+            self.counts.reused += 1
             index = hit.index
             self._streak = (index, self._streak[1] + 1 if self._streak[0] == index else 1)
         ann = self.cache.get(index)
         target = bounded_projection(ann.target, self.reference.reference(obs), self.delta)
-        self.projected += int(not np.allclose(target, ann.target))
+        self.counts.projected += int(not np.allclose(target, ann.target))
         return target, ann.grip
 
     def _pick_place_waypoint(self, obs: np.ndarray) -> tuple[np.ndarray, float] | None:
         """Two marks per demonstration: the phase's waypoint from the fused pick or place mark, fixed for the
         demonstration when first needed (so the lift rises above where the cup went down)."""
-        phase = phase_from_progress(obs[4])
+        phase = phase_from_progress(obs[OBS_PROGRESS])
         kind = mark_phase(phase)
         steps = self._streak[1] + 1 if self._streak[0] == phase else 1
-        asking = obs.copy()
-        asking[4] = progress(kind)  # the request names the mark's phase: the page asks for the grasp or set-down point
+        ask_obs = obs.copy()  # the request names the mark's phase: the page asks for the grasp or set-down point
+        ask_obs[OBS_PROGRESS] = progress(kind)
         planned = self._plan.get(kind)
         due = planned is not None and self.reask_after and steps > self.reask_after
         if planned is None or due:
-            hit = self.cache.lookup(asking) if planned is None else None
+            hit = self.cache.lookup(ask_obs) if planned is None else None
             if hit is not None:
-                self.cache.reused += 1
+                self.counts.reused += 1
                 index = hit.index
             else:
-                self.remarks += int(bool(due))
-                index = self._ask(asking, planned[0] if planned else None)
-                if index is None:
+                self.counts.remarks += int(bool(due))
+                asked = self._ask(ask_obs, planned[0] if planned else None)
+                if asked is None:
                     return None
+                index = asked
                 steps = 1
-            fused = self.fusion.point(kind, anchor(kind, asking))
-            bounded = bounded_projection(fused, self.reference.reference(asking), self.delta)
-            self.projected += int(not np.allclose(bounded, fused))
+            fused = self.fusion.point(kind, anchor(kind, ask_obs))
+            bounded = bounded_projection(fused, self.reference.reference(ask_obs), self.delta)
+            self.counts.projected += int(not np.allclose(bounded, fused))
             self._plan[kind] = (index, bounded)
         else:
-            self.cache.reused += 1
+            self.counts.reused += 1
         self._streak = (phase, steps)
         return waypoint_from_mark(phase, self._plan[kind][1], self.task), float(G_REQUIRED[phase])
 
     def _ask(self, obs: np.ndarray, previous: int | None) -> int | None:
         """Ask the source (a re-mark of cache record `previous` if given); the new record's index, or None."""
         ann = self.source.annotate(obs, self.cache.get(previous) if previous is not None else None)
-        self.cache.asked += 1
+        self.counts.asked += 1
         if ann is None:
             return None
         index = self.cache.insert(obs, ann, supersedes=previous)  # on disk (fsync'd) when this returns
@@ -156,7 +179,7 @@ class GuidedExpert:
         if recorded is not None:
             recorded(ann)
         if self.marks == "pick_place":
-            kind = phase_from_progress(obs[4])
+            kind = phase_from_progress(obs[OBS_PROGRESS])
             self.fusion.add(kind, anchor(kind, obs), ann.target)
         self.reference.observe(obs, ann)
         return index
@@ -166,18 +189,26 @@ class GuidedExpert:
         marks were made."""
         self.fusion = MarkFusion()
         for obs, ann in self.cache.history():
-            kind = phase_from_progress(obs[4])
+            kind = phase_from_progress(obs[OBS_PROGRESS])
             if self.marks == "pick_place" and kind in KINDS:
                 self.fusion.add(kind, anchor(kind, obs), ann.target)
             self.reference.observe(obs, ann)
 
 
+#: The in-process expert source of each guidance.source, built from (guidance, env, training seed). "live" is not
+#: among them: a person is attached by `mrguide train --expert live` (the trainer's `source_factory`).
+IN_PROCESS_SOURCES: dict[ExpertSourceName, Callable[[GuidanceConfig, PickPlaceEnv, int], ExpertSource]] = {
+    "oracle": lambda g, env, seed: OracleExpert(env.task_cfg),
+    "annotator": lambda g, env, seed: SimulatedAnnotator(
+        env.task_cfg, g.noise, env.workspace, seed=seed + ANNOTATOR_SEED_OFFSET
+    ),
+    "file": lambda g, env, seed: FileExpert(g.annotation_file, g.cache_tolerance),
+}
+
+
 def make_expert_source(g: GuidanceConfig, env: PickPlaceEnv, seed: int) -> ExpertSource:
     """The configured in-process expert source (a live person is attached by `mrguide train --expert live`)."""
-    if g.source == "oracle":
-        return OracleExpert(env.task_cfg)
-    if g.source == "annotator":
-        return SimulatedAnnotator(env.task_cfg, g.noise, env.workspace, seed=seed + ANNOTATOR_SEED_OFFSET)
-    if g.source == "file":
-        return FileExpert(g.annotation_file, g.cache_tolerance)
-    raise ConfigError("guidance.source = 'live' needs a person: run `mrguide train --expert live`")
+    build = IN_PROCESS_SOURCES.get(g.source)
+    if build is None:
+        raise ConfigError(f"guidance.source = {g.source!r} needs a person: run `mrguide train --expert live`")
+    return build(g, env, seed)

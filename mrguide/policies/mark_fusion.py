@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from mrguide.task import PICK_PHASE, PLACE_PHASE
+from mrguide.task import OBS_GOAL, OBS_OBJECT, PICK_PHASE, PLACE_PHASE
 
 KINDS = (PICK_PHASE, PLACE_PHASE)
 
@@ -22,7 +22,7 @@ KINDS = (PICK_PHASE, PLACE_PHASE)
 def anchor(kind: int, obs: np.ndarray) -> np.ndarray:
     """The position a mark of `kind` is measured from: the part's centre (pick) or the goal (place)."""
     obs = np.asarray(obs, dtype=float)
-    return obs[5:8].copy() if kind == PICK_PHASE else obs[8:11].copy()
+    return obs[OBS_OBJECT].copy() if kind == PICK_PHASE else obs[OBS_GOAL].copy()
 
 
 class MarkFusion:

@@ -17,7 +17,7 @@ import torch
 from torch import nn
 
 from mrguide.robot import Workspace
-from mrguide.task import OBS_DIM, OBS_GOAL, OBS_OBJECT, OBS_PROGRESS, OBS_TCP
+from mrguide.task import OBS_DIM, OBS_GOAL, OBS_GRIP, OBS_OBJECT, OBS_PROGRESS, OBS_TCP
 
 #: φ above which the actor anchors on the goal instead of the part: transport and release (φ = 3/5, 4/5, 1).
 CARRY_PROGRESS = 0.5
@@ -48,6 +48,9 @@ class ObsScaler(nn.Module):
     """Fixed affine input scaling x ↦ (x − offset) · scale, so positions in metres reach the first layer
     in about [-1, 1] (from the workspace box); not trained, folded into the first layer on export."""
 
+    offset: torch.Tensor  # buffers (registered in __init__)
+    scale: torch.Tensor
+
     def __init__(self, offset: np.ndarray, scale: np.ndarray):
         super().__init__()
         self.register_buffer("offset", torch.as_tensor(offset, dtype=torch.float32))
@@ -61,7 +64,7 @@ def anchor_features(anchor: slice) -> np.ndarray:
     """The fixed map (6 × 11) from the scaled observation to the actor's input: TCP height, g, φ and anchor − TCP
     (xyz), the anchor being the observation's `anchor` slice (OBS_OBJECT or OBS_GOAL)."""
     eye = np.eye(OBS_DIM)
-    rows = [eye[k] for k in (OBS_TCP.start + 2, OBS_TCP.stop, OBS_PROGRESS)]  # TCP z, g, φ
+    rows = [eye[k] for k in (OBS_TCP.start + 2, OBS_GRIP, OBS_PROGRESS)]  # TCP z, g, φ
     rows += [eye[anchor.start + i] - eye[OBS_TCP.start + i] for i in range(3)]
     return np.array(rows)
 
@@ -70,6 +73,9 @@ class Actor(nn.Module):
     """μ_θ(s) ∈ [-1, 1]^act_dim: the target = anchor + MAX_OFFSET · y[:3] (normalized to the workspace box), the
     gripper command y[3], with y = tanh(MLP(features)); `features` and `carry_features` map the scaled
     observation to the MLP's input before and after φ = CARRY_PROGRESS."""
+
+    features: torch.Tensor  # buffers (registered in __init__)
+    carry_features: torch.Tensor
 
     def __init__(self, scaler: ObsScaler, act_dim: int, hidden: tuple[int, ...]):
         super().__init__()

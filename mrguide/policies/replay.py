@@ -115,5 +115,7 @@ class TaggedReplay:
             parts.append(self.expert.index(rng.integers(0, self.expert.size, n_exp)))
         if n_agent:
             parts.append(self.agent.index(rng.integers(0, self.agent.size, n_agent)))
-        fields = [np.concatenate([p[k] for p in parts]) for k in range(5)]
-        return Batch(*fields, expert=np.arange(batch_size) < n_exp, expert_ratio=n_exp / batch_size)
+        obs, act, rew, next_obs, done = (np.concatenate([p[k] for p in parts]) for k in range(5))
+        return Batch(
+            obs, act, rew, next_obs, done, expert=np.arange(batch_size) < n_exp, expert_ratio=n_exp / batch_size
+        )

@@ -66,6 +66,7 @@ class GaussianActor(nn.Module):
         super().__init__()
         self.base = base
         mean_layer = base.net[-2]
+        assert isinstance(mean_layer, nn.Linear)
         self.log_std = nn.Linear(mean_layer.in_features, mean_layer.out_features)
 
     def sample(self, obs: torch.Tensor, eps: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -107,7 +108,10 @@ class SAC:
         self.critic_opt = torch.optim.Adam(self.critic.parameters(), lr=cfg.lr, fused=True)
         self.temperature_opt = torch.optim.Adam([self.log_temperature], lr=cfg.lr)
         self.updates = 0  # critic steps so far
-        self._soft = (list(self.critic.parameters()), list(self.critic_target.parameters()))
+        self._soft: tuple[list[torch.Tensor], list[torch.Tensor]] = (
+            list(self.critic.parameters()),
+            list(self.critic_target.parameters()),
+        )
 
     @property
     def policy_actor(self) -> Actor:

@@ -16,7 +16,9 @@ evaluation), `annotations.jsonl`, `checkpoint.pt`; with a `TensorBoardLog` attac
 from __future__ import annotations
 
 import csv
+import dataclasses
 import logging
+import os
 import threading
 import time
 from collections.abc import Callable
@@ -24,6 +26,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol
 
+import dacite
 import numpy as np
 import torch
 
@@ -31,27 +34,19 @@ from mrguide import __version__
 from mrguide.config import ConfigError, check_number, load_section, to_dict
 from mrguide.policies.annotations import AnnotationCache
 from mrguide.policies.checkpoint import CheckpointError, read_checkpoint, with_defaults, write_checkpoint
+from mrguide.policies.choices import LEARNERS, Learner
 from mrguide.policies.ddpg import DDPG, DDPGConfig
 from mrguide.policies.experts import ExpertSource
-from mrguide.policies.guidance import (
-    GuidanceConfig,
-    NominalReference,
-    ReferencePose,
-    RunningMedianReference,
-    ThresholdTrigger,
-    expert_ratio,
-)
-from mrguide.policies.guided_expert import GuidedExpert, make_expert_source
+from mrguide.policies.guidance import REFERENCE_POSES, GuidanceConfig, ThresholdTrigger, expert_ratio
+from mrguide.policies.guided_expert import ExpertCounts, GuidedExpert, make_expert_source
 from mrguide.policies.networks import obs_scaling
 from mrguide.policies.replay import TaggedReplay
 from mrguide.policies.sac import SAC, SACConfig
 from mrguide.robot import RobotSpec
-from mrguide.task import ACT_DIM, OBS_DIM, phase_from_progress
+from mrguide.task import ACT_DIM, OBS_DIM, OBS_PROGRESS, phase_from_progress
 from mrguide.twin.env import EnvConfig, PickPlaceEnv
 
 log = logging.getLogger(__name__)
-
-LEARNERS = ("ddpg", "sac")
 
 
 @dataclass(frozen=True)
@@ -60,7 +55,7 @@ class TrainConfig:
 
     total_steps: int = 20_000  # paper: 20k timesteps (Fig. 3)
     #: "ddpg" (the paper's learner, [ddpg]) or "sac" (the RLPD-style peer, [sac]; `mrguide experiment peers`).
-    learner: str = "ddpg"
+    learner: Learner = "ddpg"
     seed: int = 0
     batch_size: int = 256  # Table I
     buffer_size: int = 1_000_000  # Table I
@@ -130,7 +125,7 @@ EVAL_SEED_BASE = 1_000_000  # evaluation env seeds start here (training seeds co
 #: Update statistics in metrics.csv, each the mean over the updates since the previous row (see DDPG.update):
 #: critic loss, actor loss, mean and max Q_φ1(s, a) of the batch, BC loss (DDPG), temperature (SAC). Empty in a row with no update
 #: since the previous one (before learning_starts; the agent row of a triggered episode, which follows
-#: its expert row); the actor's are also empty when no actor step fell in the row (policy_delay > 1).
+#: its expert row).
 UPDATE_FIELDS = ("critic_loss", "actor_loss", "q_mean", "q_max", "bc_loss", "temperature")
 METRIC_FIELDS = (
     "step",
@@ -154,6 +149,37 @@ METRIC_FIELDS = (
 EVAL_FIELDS = ("step", "success_rate", "mean_return")
 
 
+@dataclass
+class TrainerCounters(ExpertCounts):
+    """Every counter of a run, saved in its checkpoint as one dict (`counters`) and restored as a whole: the guided
+    expert's (the base class: the expert counts into this object) and the trainer's own."""
+
+    step: int = 0  # environment steps, agent and expert
+    episode: int = 0  # agent episodes
+    interventions: int = 0  # demonstrations asked: threshold-triggered (Eq. 12) and person-triggered
+    person_interventions: int = 0  # of those, a person stepped in ("Intervene" on the page)
+    skipped: int = 0  # demonstrations dropped because nobody annotated
+    last_ratio: float = 0.0  # the expert share of the last minibatch
+    next_eval: int = 0  # the step at or after which the next evaluation runs
+    evaluations: int = 0  # evaluations so far (they choose the evaluation seeds)
+    wall_s: float = 0.0  # training wall time before this process (s); a checkpoint records it up to its writing
+    update_s: float = 0.0  # wall time spent in updates, minibatch sampling included (s)
+
+    def restore(self, saved: dict[str, Any]) -> None:
+        """Set every counter from a checkpoint's `counters`, in place (the expert holds this object). Each must be
+        there, with its type, and nothing else (KeyError or a dacite error otherwise)."""
+        missing = [f.name for f in dataclasses.fields(self) if f.name not in saved]
+        if missing:
+            raise KeyError(f"counters {', '.join(missing)}")
+        loaded = dacite.from_dict(type(self), saved, dacite.Config(strict=True, cast=[float]))
+        for f in dataclasses.fields(self):
+            setattr(self, f.name, getattr(loaded, f.name))
+
+
+#: A transition τ without its tag ζ: (s, a, r, s', done) (Eq. 7).
+Transition = tuple[np.ndarray, np.ndarray, float, np.ndarray, bool]
+
+
 class MetricSink(Protocol):
     """Receives what the trainer writes to metrics.csv and eval.csv, as it writes it (e.g. TensorBoardLog)."""
 
@@ -172,8 +198,28 @@ def _append_csv(path: Path, fields: tuple[str, ...], row: dict) -> None:
         w.writerow(row)
 
 
+def _replace_csv(path: Path, fields: tuple[str, ...], rows: list[dict]) -> None:
+    """Rewrite `path` with `rows` (and a header) atomically: a temporary file beside it, fsync'd, then renamed over
+    it. An interruption leaves the old file or the new one, never part of either."""
+    tmp = path.with_name(path.name + ".tmp")
+    try:
+        with tmp.open("w", newline="") as fh:
+            w = csv.DictWriter(fh, fields)
+            w.writeheader()
+            w.writerows(rows)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
 class Trainer:
     """One seed's training run, resumable from its checkpoint."""
+
+    #: Off by default; `mrguide train --record` attaches one (policies/episode_recorder.py): it sees every step.
+    recorder: Any = None
 
     def __init__(
         self,
@@ -202,12 +248,9 @@ class Trainer:
         self.replay = TaggedReplay(cfg.buffer_size, OBS_DIM, ACT_DIM)
         self.rng = np.random.default_rng(cfg.seed)
         self.source = source_factory(self.env) if source_factory else make_expert_source(guidance, self.env, cfg.seed)
-        reference: ReferencePose = (
-            NominalReference(self.env.task_cfg)
-            if guidance.reference == "nominal"
-            else RunningMedianReference(self.env.task_cfg)
-        )
+        reference = REFERENCE_POSES[guidance.reference](self.env.task_cfg)
         self.cache = AnnotationCache(guidance.cache_tolerance, self.out / "annotations.jsonl")
+        self.counters = TrainerCounters(next_eval=cfg.eval_every)
         self.expert = GuidedExpert(
             self.source,
             reference,
@@ -219,27 +262,18 @@ class Trainer:
             guidance.action_noise,
             cfg.seed,
             guidance.marks,
+            self.counters,
         )
         self.trigger = ThresholdTrigger(guidance.r_threshold)
-        self.step = 0
-        self.episode = 0
-        self.interventions = 0  # demonstrations asked: threshold-triggered (Eq. 12) and person-triggered
-        self.person_interventions = 0  # of those, a person stepped in ("Intervene" on the page)
-        self.skipped = 0  # demonstrations dropped because nobody annotated
         self.stop_requested = threading.Event()  # set (e.g. on Ctrl-C) to stop at the next step
-        self._segment: list[tuple] = []  # the demonstration's steps held until their phase completes
-        self.last_ratio = 0.0
+        self._segment: list[Transition] = []  # the demonstration's steps held until their phase completes
         self._ratio_sum, self._ratio_n = 0.0, 0
         self._stat_sum: dict[str, float] = {}  # update statistics summed since the last metrics row
         self._stat_n: dict[str, int] = {}
         self.sinks: list[MetricSink] = []  # also receive every metrics row and evaluation
-        self.update_s = 0.0
         self._next_checkpoint = cfg.checkpoint_every
-        self._next_eval = cfg.eval_every
         self.last_eval: dict = {}
-        self.evaluations = 0
         self._t0 = time.perf_counter()
-        self._wall_before = 0.0
 
     # -- the loop --------------------------------------------------------------------------------
     def run(self, progress: Callable[[dict], None] | None = None, stop_at: int | None = None) -> None:
@@ -250,28 +284,30 @@ class Trainer:
         """
         end = self.cfg.total_steps
         stop = min(end, stop_at or end)
-        while self.step < stop and not self.stop_requested.is_set():
+        while self.counters.step < stop and not self.stop_requested.is_set():
             row = self._agent_episode(end)
             self._log(row)
             if progress:
                 progress(row)
             if self.stop_requested.is_set():
                 break  # the caller checkpoints the state as it is
-            if self.step >= self._next_eval:
+            if self.counters.step >= self.counters.next_eval:
                 self.evaluate()
-                self._next_eval += self.cfg.eval_every
-            if self.step >= end and self.last_eval.get("step") != self.step:
+                self.counters.next_eval += self.cfg.eval_every
+            if self.counters.step >= end and self.last_eval.get("step") != self.counters.step:
                 self.evaluate()  # the final policy is always evaluated
-            if self.step >= self._next_checkpoint or self.step >= stop:
+            if self.counters.step >= self._next_checkpoint or self.counters.step >= stop:
                 self.save_checkpoint()
-                self._next_checkpoint = (self.step // self.cfg.checkpoint_every + 1) * self.cfg.checkpoint_every
+                self._next_checkpoint = (
+                    self.counters.step // self.cfg.checkpoint_every + 1
+                ) * self.cfg.checkpoint_every
 
     def _intake_open(self) -> bool:
-        return self.guidance.enabled and self.step < self.guidance.intake_steps
+        return self.guidance.enabled and self.counters.step < self.guidance.intake_steps
 
     def lam(self) -> float:
         return (
-            expert_ratio(self.step, self.cfg.total_steps, self.guidance.lam_max, self.guidance.lam_min)
+            expert_ratio(self.counters.step, self.cfg.total_steps, self.guidance.lam_max, self.guidance.lam_min)
             if self.guidance.enabled
             else 0.0
         )
@@ -280,17 +316,19 @@ class Trainer:
         """Execute `action`; store the transition with `stored` as its action (default: the executed one), tagged
         `zeta` — or, with zeta None, hold it in the demonstration's current phase (see `_expert_episode`)."""
         next_obs, r, term, trunc, info = self.env.step(action)
+        if self.recorder is not None:
+            self.recorder.step(self, obs, action, stored, zeta, r, next_obs, term, trunc, info)
         transition = (obs, action if stored is None else stored, r, next_obs, term)
         if zeta is None:
             self._segment.append(transition)
         else:
             self.replay.add(*transition, zeta)
-        self.step += 1
+        self.counters.step += 1
         if len(self.replay) >= self.cfg.learning_starts:
             t = time.perf_counter()
             stats, ratio = self.agent.learn(self.replay, self.lam(), self.cfg.batch_size, self.rng)
-            self.update_s += time.perf_counter() - t
-            self.last_ratio = ratio
+            self.counters.update_s += time.perf_counter() - t
+            self.counters.last_ratio = ratio
             self._ratio_sum += ratio
             self._ratio_n += 1
             for k, v in stats.items():
@@ -299,8 +337,8 @@ class Trainer:
         return next_obs, r, term, trunc, info
 
     def _flush_segment(self, zeta: int) -> None:
-        for transition in self._segment:
-            self.replay.add(*transition, zeta)
+        for obs, act, rew, next_obs, done in self._segment:
+            self.replay.add(obs, act, rew, next_obs, done, zeta)
         self._segment = []
 
     def _agent_episode(self, end: int) -> dict:
@@ -312,7 +350,7 @@ class Trainer:
         ret, length, info, triggered, stepped_in = 0.0, 0, {"outcome": None, "is_success": False}, False, False
         person = getattr(self.source, "intervention_requested", None) if guided else None
         try:
-            while self.step < end and not self.stop_requested.is_set():
+            while self.counters.step < end and not self.stop_requested.is_set():
                 action = self.agent.act(obs, self.rng)
                 obs, r, term, trunc, info = self._env_step(action, 0, obs)
                 ret += r
@@ -326,15 +364,15 @@ class Trainer:
                 if term or trunc:
                     break
             if triggered:
-                self.interventions += 1
-                self.person_interventions += int(stepped_in)
+                self.counters.interventions += 1
+                self.counters.person_interventions += int(stepped_in)
                 if start is not None:
                     obs = self.env.restore(start)
                 self._expert_episode(obs, end)
         finally:
             if start is not None:
                 self.env.discard(start)
-        self.episode += 1
+        self.counters.episode += 1
         success = bool(info["is_success"]) and not triggered
         return self._row(
             "agent", ret, success, info["outcome"] if not triggered else "guided", length, triggered, stepped_in
@@ -347,21 +385,22 @@ class Trainer:
         the steps of a phase it did not complete, and those that followed a mark that was then marked again, go to
         the agent pool (ζ = 0): the critic learns from them, nothing clones them (ours: a mark the arm cannot
         complete the phase with is no demonstration of it)."""
-        ret, length, info = 0.0, 0, {"outcome": None, "is_success": False}
+        ret, length = 0.0, 0
+        info: dict[str, Any] = {"outcome": None, "is_success": False}
         self.expert.begin_demonstration()
-        remarks = self.expert.remarks
-        while self.step < end and not self.stop_requested.is_set():
+        remarks = self.counters.remarks
+        while self.counters.step < end and not self.stop_requested.is_set():
             step = self.expert.action(obs)
             if step is None:
-                self.skipped += int(not self.stop_requested.is_set())
+                self.counters.skipped += int(not self.stop_requested.is_set())
                 info = {"outcome": "skipped", "is_success": False}
                 break
-            if self.expert.remarks != remarks:  # the phase's earlier mark did not complete it
+            if self.counters.remarks != remarks:  # the phase's earlier mark did not complete it
                 self._flush_segment(0)
-                remarks = self.expert.remarks
-            phase = phase_from_progress(obs[4])
+                remarks = self.counters.remarks
+            phase = phase_from_progress(obs[OBS_PROGRESS])
             obs, r, term, trunc, info = self._env_step(step.executed, None, obs, step.stored)
-            if info["is_success"] or phase_from_progress(obs[4]) > phase:
+            if info["is_success"] or phase_from_progress(obs[OBS_PROGRESS]) > phase:
                 self._flush_segment(1)
             ret += r
             length += 1
@@ -373,22 +412,22 @@ class Trainer:
     # -- bookkeeping -----------------------------------------------------------------------------
     def update_ms(self) -> float:
         """Mean wall time of one update (minibatch sampling included), ms."""
-        return self.update_s / max(self.agent.updates, 1) * 1e3
+        return self.counters.update_s / max(self.agent.updates, 1) * 1e3
 
     def wall_s(self) -> float:
-        return self._wall_before + time.perf_counter() - self._t0
+        return self.counters.wall_s + time.perf_counter() - self._t0
 
     def _row(
         self, kind: str, ret: float, success: bool, outcome, length: int, triggered: bool, intervened: bool = False
     ) -> dict:
         """A metrics row; `expert_ratio` and the UPDATE_FIELDS are means over the updates since the last row."""
-        ratio = self._ratio_sum / self._ratio_n if self._ratio_n else self.last_ratio
+        ratio = self._ratio_sum / self._ratio_n if self._ratio_n else self.counters.last_ratio
         self._ratio_sum, self._ratio_n = 0.0, 0
         means = {k: float(f"{self._stat_sum[k] / n:.6g}") for k, n in self._stat_n.items()}
         self._stat_sum, self._stat_n = {}, {}
         return {
-            "step": self.step,
-            "episode": self.episode,
+            "step": self.counters.step,
+            "episode": self.counters.episode,
             "kind": kind,
             "return": round(ret, 4),
             "success": int(success),
@@ -397,10 +436,10 @@ class Trainer:
             "triggered": int(triggered),
             "lambda": round(self.lam(), 4),
             "expert_ratio": round(ratio, 4),
-            "asked": self.cache.asked,
-            "reused": self.cache.reused,
-            "remarks": self.expert.remarks,
-            "skipped": self.skipped,
+            "asked": self.counters.asked,
+            "reused": self.counters.reused,
+            "remarks": self.counters.remarks,
+            "skipped": self.counters.skipped,
             "wall_s": round(self.wall_s(), 2),
             **{k: means.get(k, "") for k in UPDATE_FIELDS},
             "intervened": int(intervened),
@@ -421,7 +460,7 @@ class Trainer:
         successes, returns = 0, []
         n = self.cfg.eval_episodes
         for k in range(n):
-            obs, _ = self.env.reset(seed=EVAL_SEED_BASE + self.evaluations * n + k)
+            obs, _ = self.env.reset(seed=EVAL_SEED_BASE + self.counters.evaluations * n + k)
             ret = 0.0
             while True:
                 obs, r, term, trunc, info = self.env.step(self.agent.act(obs))
@@ -430,12 +469,12 @@ class Trainer:
                     break
             successes += int(info["is_success"])
             returns.append(ret)
-        self.evaluations += 1
-        res = {"step": self.step, "success_rate": successes / n, "mean_return": float(np.mean(returns))}
+        self.counters.evaluations += 1
+        res = {"step": self.counters.step, "success_rate": successes / n, "mean_return": float(np.mean(returns))}
         _append_csv(self.out / "eval.csv", EVAL_FIELDS, res)
         for sink in self.sinks:
             sink.evaluation(res)
-        log.info("eval at step %d: success %.0f%%", self.step, 100 * res["success_rate"])
+        log.info("eval at step %d: success %.0f%%", self.counters.step, 100 * res["success_rate"])
         self.last_eval = res
         return res
 
@@ -447,6 +486,7 @@ class Trainer:
 
     def save_checkpoint(self) -> Path:
         """Everything to resume: networks, optimizers, both pools, RNG states, counters. Written atomically."""
+        source_rng = self._source_rng()
         state = {
             "version": __version__,
             "config": self._fingerprint(),
@@ -455,26 +495,15 @@ class Trainer:
             "expert_pool": self.replay.expert.state(),
             "rng": self.rng.bit_generator.state,
             "torch_rng": torch.get_rng_state(),
-            "annotator_rng": getattr(self.source, "rng", None) and self.source.rng.bit_generator.state,
+            "annotator_rng": None if source_rng is None else source_rng.bit_generator.state,
             "expert_noise_rng": self.expert.rng.bit_generator.state,
-            "counters": {
-                "step": self.step,
-                "episode": self.episode,
-                "interventions": self.interventions,
-                "person_interventions": self.person_interventions,
-                "asked": self.cache.asked,
-                "reused": self.cache.reused,
-                "projected": self.expert.projected,
-                "remarks": self.expert.remarks,
-                "skipped": self.skipped,
-                "last_ratio": self.last_ratio,
-                "next_eval": self._next_eval,
-                "evaluations": self.evaluations,
-                "wall_s": self.wall_s(),
-                "update_s": self.update_s,
-            },
+            "counters": dataclasses.asdict(dataclasses.replace(self.counters, wall_s=self.wall_s())),
         }
         return write_checkpoint(self.out / "checkpoint.pt", state)
+
+    def _source_rng(self) -> Any:
+        """The expert source's random stream (the simulated annotator's; checkpointed with the run), or None."""
+        return getattr(self.source, "rng", None)
 
     def load_checkpoint(self, path: str | Path | None = None) -> None:
         """Resume from a checkpoint; a corrupt or mismatched file raises CheckpointError."""
@@ -496,21 +525,14 @@ class Trainer:
             self.rng.bit_generator.state = state["rng"]
             torch.set_rng_state(state["torch_rng"])
             if state["annotator_rng"] is not None:
-                self.source.rng.bit_generator.state = state["annotator_rng"]
+                self._source_rng().bit_generator.state = state["annotator_rng"]
             self.expert.rng.bit_generator.state = state["expert_noise_rng"]
-            c = state["counters"]
-            self.step, self.episode, self.interventions = c["step"], c["episode"], c["interventions"]
-            self.person_interventions = c["person_interventions"]
-            self.expert.projected, self.last_ratio, self._next_eval = c["projected"], c["last_ratio"], c["next_eval"]
-            self.evaluations, self.expert.remarks, self.skipped = c["evaluations"], c["remarks"], c["skipped"]
-            self._wall_before, self.update_s = c["wall_s"], c["update_s"]
-            asked, reused = c["asked"], c["reused"]
-        except (KeyError, TypeError, RuntimeError, ValueError, AttributeError) as exc:
+            self.counters.restore(state["counters"])
+        except (KeyError, TypeError, RuntimeError, ValueError, AttributeError, dacite.DaciteError) as exc:
             raise CheckpointError(f"{path}: does not fit this trainer: {type(exc).__name__}: {exc}") from exc
         self._t0 = time.perf_counter()
-        self._next_checkpoint = (self.step // self.cfg.checkpoint_every + 1) * self.cfg.checkpoint_every
+        self._next_checkpoint = (self.counters.step // self.cfg.checkpoint_every + 1) * self.cfg.checkpoint_every
         self._reload_annotations()
-        self.cache.asked, self.cache.reused = asked, reused
         self._truncate_logs()
 
     def _reload_annotations(self) -> None:
@@ -528,12 +550,8 @@ class Trainer:
             if not path.exists():
                 continue
             with path.open() as fh:
-                rows = [r for r in csv.DictReader(fh) if int(r["step"]) <= self.step]
-            fields = METRIC_FIELDS if name == "metrics.csv" else EVAL_FIELDS
-            with path.open("w", newline="") as fh:
-                w = csv.DictWriter(fh, fields)
-                w.writeheader()
-                w.writerows(rows)
+                rows = [r for r in csv.DictReader(fh) if int(r["step"]) <= self.counters.step]
+            _replace_csv(path, METRIC_FIELDS if name == "metrics.csv" else EVAL_FIELDS, rows)
 
     def close(self) -> None:
         self.env.close()

@@ -7,6 +7,7 @@ the robot base frame. Images come from PyBullet's TinyRenderer, so no display is
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Literal, overload
 
 import numpy as np
 import pybullet as pb
@@ -114,6 +115,12 @@ class Camera:
                 [0.0, 0.0, -1.0, 0.0],
             ]
         )
+
+    @overload
+    def render(self, with_depth: Literal[False] = False) -> np.ndarray: ...
+
+    @overload
+    def render(self, with_depth: Literal[True]) -> tuple[np.ndarray, np.ndarray]: ...
 
     def render(self, with_depth: bool = False) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
         """RGB image (H, W, 3) uint8; with `with_depth`, also metric depth along the optical axis (H, W)."""

@@ -19,7 +19,8 @@ import numpy as np
 from mrguide.config import load_section
 from mrguide.deploy.decision import ActionError, DecisionState, DecisionStep
 from mrguide.robot import RobotConfig, RobotSpec, load_robot, load_robot_config
-from mrguide.task import ACT_DIM, OBS_DIM, Outcome, TaskConfig, oracle_action
+from mrguide.task import ACT_DIM, OBS_DIM, OBS_GRIP, OBS_PROGRESS, Outcome, TaskConfig, oracle_action
+from mrguide.twin.camera import Camera
 from mrguide.twin.config import Region, TwinConfig
 from mrguide.twin.scene import Scene, SceneSnapshot
 
@@ -63,7 +64,8 @@ def _sample(rng: np.random.Generator, region: Region) -> np.ndarray:
 class PickPlaceEnv(gym.Env):
     """Five-phase vacuum pick-and-place in the twin (observation and action as in DESIGN.md)."""
 
-    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 10}
+    # gymnasium annotates Env.metadata as an instance attribute, though it is read from the class (gym.make)
+    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 10}  # type: ignore[misc]
 
     def __init__(self, config: EnvConfig | None = None, render_mode: str | None = None, spec: RobotSpec | None = None):
         self.config = config or EnvConfig()
@@ -77,13 +79,13 @@ class PickPlaceEnv(gym.Env):
         self.kin, self.streamer = self.decision.kin, self.decision.streamer
         self.action_space = gym.spaces.Box(-1.0, 1.0, (ACT_DIM,), np.float32)
         lim = np.full(OBS_DIM, 5.0, np.float32)
-        lim[3], lim[4] = 1.0, 1.0
+        lim[OBS_GRIP], lim[OBS_PROGRESS] = 1.0, 1.0
         low = -lim.copy()
-        low[4] = 0.0
+        low[OBS_PROGRESS] = 0.0
         self.observation_space = gym.spaces.Box(low, lim, (OBS_DIM,), np.float32)
         self.vacuum = False
         self._obs = np.zeros(OBS_DIM, np.float32)
-        self._camera = None
+        self._camera: Camera | None = None
 
     # -- gymnasium API ---------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
@@ -143,8 +145,9 @@ class PickPlaceEnv(gym.Env):
             "ik_failed": cmd.q_target is None,
             "ik_failures_total": state.ik_failures,
         }
-        done = res.outcome is not None
-        return self._obs.copy(), res.reward, done and res.outcome.terminated, done and res.outcome.truncated, info
+        terminated = res.outcome is not None and res.outcome.terminated
+        truncated = res.outcome is not None and res.outcome.truncated
+        return self._obs.copy(), res.reward, terminated, truncated, info
 
     def render(self) -> np.ndarray | None:
         if self.render_mode != "rgb_array":

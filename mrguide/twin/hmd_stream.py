@@ -155,6 +155,7 @@ class HmdPoseStream(ObjectPoseSource):
         self._generation = 0
         self.frames = self.misses = 0
         self._lost: str | None = None  # why the HMD process can give no more estimates
+        self._given: float | None = None  # when the scene behind the estimate last given was seen (monotonic)
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="hmd-stream", daemon=True)
@@ -184,10 +185,12 @@ class HmdPoseStream(ObjectPoseSource):
         return info
 
     def _run(self) -> None:
+        plant = self.plant
+        assert plant is not None  # the thread starts once a twin is attached
         while not self._stop.is_set():
             gen = self._generation
             try:
-                pos, orn, q = self.plant.view()
+                pos, orn, q = plant.view()
             except Exception as exc:  # the twin playing the robot was closed under us (end of a run) or failed
                 with self._lock:
                     self._lost = f"the twin that plays the robot is gone ({type(exc).__name__}: {exc})"
@@ -250,7 +253,16 @@ class HmdPoseStream(ObjectPoseSource):
         age = time.monotonic() - t
         if age > self.max_age:
             raise PoseUnavailable(f"the last HMD estimate is {age:.2f} s old")
+        self._given = t
         return pos.copy()
+
+    def pose_details(self) -> dict:
+        """For the run log: the age of the estimate `object_position` gave last (from the moment the HMD saw the
+        scene it was made from), and where the object is in the twin now."""
+        details: dict = {"age_s": None if self._given is None else time.monotonic() - self._given}
+        if self.plant is not None:
+            details["true"] = self.plant.object_position()
+        return details
 
     def close(self) -> None:
         self._stop.set()

@@ -79,11 +79,14 @@ def _slab_mesh(corners: np.ndarray, thickness: float, tex_shape: tuple[int, int]
     h, w = tex_shape
     white = [0.5 / w, 1.0 - 0.5 / h]
     centre = (corners.mean(axis=0) + back.mean(axis=0)) / 2.0
-    faces = [(corners, [[0, 1], [1, 1], [1, 0], [0, 0]])]
+    faces: list[tuple[np.ndarray, list[list[float]]]] = [(corners, [[0, 1], [1, 1], [1, 0], [0, 0]])]
     faces.append((back[::-1], [white] * 4))
     for a, b in ((0, 1), (1, 2), (2, 3), (3, 0)):
         faces.append((np.array([corners[a], back[a], back[b], corners[b]]), [white] * 4))
-    vertices, indices, normals, uvs = [], [], [], []
+    vertices: list[list[float]] = []
+    indices: list[int] = []
+    normals: list[list[float]] = []
+    uvs: list[list[float]] = []
     for quad, quad_uv in faces:
         normal = np.cross(quad[1] - quad[0], quad[2] - quad[0])
         normal /= np.linalg.norm(normal)
@@ -154,7 +157,7 @@ def add_board(client: int, board: Board, T_base_board: np.ndarray, px_per_m: flo
 
 def marker_on_cube_top(cube_size: float, thickness_m: float = MARKER_THICKNESS) -> np.ndarray:
     """T_object_marker of a marker stuck on the top face of a cube (object frame at the cube centre, z up)."""
-    return make_T(np.eye(3), [0.0, 0.0, cube_size / 2.0 + thickness_m])
+    return make_T(np.eye(3), np.array([0.0, 0.0, cube_size / 2.0 + thickness_m]))
 
 
 class MarkerOnBody:
@@ -306,7 +309,7 @@ class TwinCalibrationConfig:
 
     @property
     def T_base_hmd(self) -> np.ndarray:
-        return make_T(rotation_from_rpy_deg(*self.hmd_rpy_deg), self.hmd_xyz)
+        return make_T(rotation_from_rpy_deg(*self.hmd_rpy_deg), np.asarray(self.hmd_xyz, dtype=float))
 
 
 def add_targets(client: int, cfg: CalibrationConfig) -> list[int]:
@@ -315,6 +318,7 @@ def add_targets(client: int, cfg: CalibrationConfig) -> list[int]:
     layout = layout_from_config(cfg, detector)
     bodies = []
     if layout.board is not None:
+        assert layout.T_base_board is not None  # a layout with a board has its pose (layout_from_config)
         bodies.append(add_board(client, layout.board, layout.T_base_board))
     for marker_id, T_base_marker in layout.markers.items():
         bodies.append(

@@ -13,8 +13,10 @@ import hashlib
 import logging
 import os
 import tempfile
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pybullet as pb
@@ -57,7 +59,7 @@ class SceneSnapshot:
     applied: np.ndarray
     pending: list[np.ndarray]
     servo: tuple[np.ndarray, np.ndarray]
-    rng_state: dict
+    rng_state: Mapping[str, Any]  # the scene RNG's bit-generator state
 
 
 class Scene:

@@ -81,13 +81,15 @@ def test_nobody_answers_skip_drops_demonstrations_oracle_answers_tagged(tmp_path
     finally:
         tr.close()
         session.close()
-    assert tr.interventions > 0 and session.expert.counts.answers == 0
+    assert tr.counters.interventions > 0 and session.expert.counts.answers == 0
     ann = tmp_path / policy / "annotations.jsonl"
     if policy == "skip":
-        assert tr.skipped == tr.interventions and tr.replay.expert.size == 0  # no ζ = 1 transition without a person
+        assert (
+            tr.counters.skipped == tr.counters.interventions and tr.replay.expert.size == 0
+        )  # no ζ = 1 transition without a person
         assert not ann.exists()
     else:
-        assert tr.skipped == 0 and tr.replay.expert.size > 0
+        assert tr.counters.skipped == 0 and tr.replay.expert.size > 0
         recs = records(ann)
         assert recs and {r["source"] for r in recs} == {"oracle"} and all(r["fallback"] == "timeout" for r in recs)
         assert session.expert.counts.fallbacks == len(recs)

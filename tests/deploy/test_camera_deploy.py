@@ -14,9 +14,13 @@ from mrguide.task import Outcome
 from mrguide.twin.camera_feed import TwinCameraFeed, TwinCameraPoses
 from mrguide.twin.visual_arm import ArmDrawing
 
+#: No test here is about a pose's age: the twin renders every frame on the CPU, which a busy machine slows to
+#: seconds (the age limit itself: tests/deploy/test_camera_source.py, and its bad values below).
+AGE = 30.0
+
 
 def _poses(scene, **changes) -> TwinCameraPoses:
-    cfg = CameraSourceConfig(**{"calibration": str(scene.calibration), **changes})
+    cfg = CameraSourceConfig(**{"calibration": str(scene.calibration), "max_pose_age_s": AGE, **changes})
     return TwinCameraPoses(cfg, scene.calibration.parent, 0.05, ArmDrawing.of(load_robot()))
 
 
@@ -62,7 +66,15 @@ def test_camera_dying_mid_episode_ends_it_pose_lost_with_the_log_intact(run_dry,
 
     def kill_camera(obs, phase, action, cell):
         if not killed:
-            poses.sources[0].frames.read = lambda: None  # the device stops delivering frames
+            source = poses.sources[0]
+            lose = source._lose
+
+            def lose_and_go_stale(reason: str) -> None:  # once the capture thread knows, the last pose is stale
+                lose(reason)  # at once, however slowly a busy machine rendered it
+                source.max_age = 0.01
+
+            source._lose = lose_and_go_stale
+            source.frames.read = lambda: None  # the device stops delivering frames
             killed.append(True)
         return action
 
@@ -118,7 +130,7 @@ def test_cli_dry_run_with_the_camera_source(tmp_path, camera_cfg, run_cli, polic
             "--policy",
             policy,
             "--config",
-            camera_cfg(extra="[task]\nhorizon = 5\n"),
+            camera_cfg(camera=f"max_pose_age_s = {AGE}", extra="[task]\nhorizon = 5\n"),
             "--dry-run",
             "--episodes",
             1,

@@ -18,7 +18,7 @@ from mrguide.drivers.errors import DriverError
 from mrguide.drivers.interface import CobotInterface
 from mrguide.errors import InputError
 from mrguide.robot import load_robot
-from mrguide.task import TaskConfig, oracle_action
+from mrguide.task import Outcome, TaskConfig, oracle_action
 
 
 class IdealCobot:
@@ -76,7 +76,9 @@ def test_runtime_runs_on_any_cobot_interface(tmp_path):
         Runtime(cobot, policy, FixedObjectPose((0.5, -0.075, 0.025)), spec, task, log, 0.1, RuntimeConfig()) as rt,
     ):
         report = rt.run_episode(np.array([0.5, 0.21, 0.025]), 0)
-    assert report.outcome == "no_grasp" and report.decisions == task.horizon  # the cup never seals here
+    assert report.outcome is Outcome.NO_GRASP and report.decisions == task.horizon  # the cup never seals here
+    (end,) = [r for r in read_log(tmp_path / "log.jsonl") if r["kind"] == "episode_end"]
+    assert end["outcome"] == "no_grasp"  # the enum's value in the log
     assert len(cobot.streamed) >= task.horizon * 25
     first_phase = [r for r in read_log(tmp_path / "log.jsonl") if r["kind"] == "decision" and r.get("phase") == 1]
     assert first_phase  # the approach was reached by streaming through the interface

@@ -52,12 +52,13 @@ class Rig:
     sim: SimulatedCobot
     cobot: Cobot
 
-    def wait_until(self, predicate: Callable[[], bool], timeout: float = 1.0) -> bool:
+    def wait_until(self, predicate: Callable[[], bool], timeout: float = 10.0) -> bool:
         return _wait_until(predicate, timeout)
 
 
-def _wait_until(predicate: Callable[[], bool], timeout: float = 1.0) -> bool:
-    """Poll `predicate` every 2 ms; False if it is still false after `timeout` seconds."""
+def _wait_until(predicate: Callable[[], bool], timeout: float = 10.0) -> bool:
+    """Poll `predicate` every 2 ms; False if it is still false after `timeout` seconds (generous: what a test waits
+    for happens in milliseconds on an idle machine, and the bound only matters when it never happens)."""
     end = time.monotonic() + timeout
     while not predicate():
         if time.monotonic() > end:

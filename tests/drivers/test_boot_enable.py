@@ -37,7 +37,7 @@ def test_boot_configures_every_node_and_enable_reaches_operation_enabled(make_ri
     assert set(cobot.joint_state().drive_states) == {OPERATION_ENABLED}
     assert all(d.state == OPERATION_ENABLED for d in sim.drives)
     syncs = sim.sync_count
-    assert rig.wait_until(lambda: sim.sync_count >= syncs + 10, timeout=1.0)
+    assert rig.wait_until(lambda: sim.sync_count >= syncs + 10)
 
     cobot.disconnect()
     assert not cobot.status().connected

@@ -43,8 +43,8 @@ def test_bad_setpoint_is_refused_and_never_sent(rig, tap_on, make_bad, words):
         cobot.stream(make_bad(hold, cobot.limits))
     for word in words:
         assert word in str(info.value)
-    time.sleep(0.05)  # a dozen more cycles
-    assert len(tap.with_id(0x203)) >= 10
+    sent = len(tap.with_id(0x203))
+    assert rig.wait_until(lambda: len(tap.with_id(0x203)) >= sent + 12)  # a dozen more cycles
     assert _targets(tap, 3) == hold_counts  # drive 3 only ever got the held position
     np.testing.assert_array_equal(cobot.setpoint, hold)
     assert cobot.stats().refused_setpoints == 1

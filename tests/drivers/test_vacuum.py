@@ -14,20 +14,20 @@ def test_part_gripped_follows_the_plant(rig):
     assert not state.part_gripped and state.level_kpa < l1 and state.vacuum_on
 
     plant.place_part()  # a part seals the cup
-    assert rig.wait_until(lambda: cobot.vacuum_state().part_gripped, timeout=0.5)
+    assert rig.wait_until(lambda: cobot.vacuum_state().part_gripped)
     assert cobot.vacuum_state().level_kpa >= l1 and plant.part_present()
 
     sim.set_vacuum_leak(0.7)  # the line leaks: level drops below L1 - h1 with the vacuum still on
-    assert rig.wait_until(lambda: cobot.vacuum_state().part_lost, timeout=0.5)
+    assert rig.wait_until(lambda: cobot.vacuum_state().part_lost)
     state = cobot.vacuum_state()
     assert not state.part_gripped and state.level_kpa < l1 - rig.config.vacuum.grip_hysteresis_kpa
 
     sim.set_vacuum_leak(0.0)
-    assert rig.wait_until(lambda: cobot.vacuum_state().part_gripped, timeout=0.5)
+    assert rig.wait_until(lambda: cobot.vacuum_state().part_gripped)
     assert not cobot.vacuum_state().part_lost
 
     cobot.set_vacuum(False, blow_off=True)  # release
-    assert rig.wait_until(lambda: cobot.vacuum_state().level_kpa < 1.0, timeout=0.5)
+    assert rig.wait_until(lambda: cobot.vacuum_state().level_kpa < 1.0)
     state = cobot.vacuum_state()
     assert not state.part_gripped and not state.part_lost and state.blow_off
     assert not plant.part_present()
@@ -40,7 +40,7 @@ def test_vacuum_command_survives_a_drive_fault(rig):
     cobot, sim, plant = rig.cobot, rig.sim, rig.plant
     cobot.set_vacuum(True)
     plant.place_part()
-    assert rig.wait_until(lambda: cobot.vacuum_state().part_gripped, timeout=0.5)
+    assert rig.wait_until(lambda: cobot.vacuum_state().part_gripped)
     sim.inject_drive_fault(3)
     assert rig.wait_until(lambda: cobot.status().fault is not None)
     assert rig.wait_until(lambda: all(s != "OPERATION ENABLED" for s in cobot.status().drive_states.values()))
@@ -49,5 +49,5 @@ def test_vacuum_command_survives_a_drive_fault(rig):
     assert (state.vacuum_on, state.blow_off) == (True, False) and sim.vacuum.commands() == (True, False)
     assert state.part_gripped and state.age < 10 * cobot.period and plant.part_present()
     cobot.set_vacuum(False, blow_off=True)  # accepted during the fault, and sent
-    assert rig.wait_until(lambda: sim.vacuum.commands() == (False, True), timeout=0.5)
-    assert rig.wait_until(lambda: not plant.part_present(), timeout=0.5)
+    assert rig.wait_until(lambda: sim.vacuum.commands() == (False, True))
+    assert rig.wait_until(lambda: not plant.part_present())

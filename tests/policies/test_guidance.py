@@ -229,10 +229,19 @@ def test_a_waypoint_not_reached_is_asked_again_and_supersedes_the_first(tmp_path
     expert.begin_demonstration()
     obs = _obs(1)  # grasp phase; the arm never gets there, so the phase does not advance
     actions = [expert.action(obs).executed for _ in range(15)]  # the mark is followed for 15 steps
-    assert src.previous == [None] and cache.asked == 1 and cache.reused == 14 and expert.remarks == 0
+    assert (
+        src.previous == [None]
+        and expert.counts.asked == 1
+        and expert.counts.reused == 14
+        and expert.counts.remarks == 0
+    )
     assert np.allclose(actions[0], actions[14])
     again = expert.action(obs).executed  # 16th step on the same waypoint: asked again, with the old mark
-    assert expert.remarks == 1 and cache.asked == 2 and np.allclose(src.previous[1].target, [0.5, -0.1, 0.06])
+    assert (
+        expert.counts.remarks == 1
+        and expert.counts.asked == 2
+        and np.allclose(src.previous[1].target, [0.5, -0.1, 0.06])
+    )
     assert not np.allclose(again, actions[0]) and cache.lookup(obs).index == 1 and len(cache) == 1
     fresh = AnnotationCache(0.005)
     fresh.load(tmp_path / "ann.jsonl")
@@ -241,22 +250,22 @@ def test_a_waypoint_not_reached_is_asked_again_and_supersedes_the_first(tmp_path
 
 def test_reask_disabled_and_a_new_demonstration_restarts_the_count(tmp_path):
     src = _Recorder([[0.5, -0.1, 0.06]])
-    expert, cache = _guided(src, tmp_path, reask_after=0)
+    expert, _ = _guided(src, tmp_path, reask_after=0)
     for _ in range(40):
         expert.action(_obs(1))
-    assert cache.asked == 1 and expert.remarks == 0
+    assert expert.counts.asked == 1 and expert.counts.remarks == 0
     src = _Recorder([[0.5, -0.1, 0.06]])
-    expert, cache = _guided(src, tmp_path / "..", reask_after=15)
+    expert, _ = _guided(src, tmp_path / "..", reask_after=15)
     for _ in range(3):
         expert.begin_demonstration()
         for _ in range(10):  # 10 steps per demonstration: never 15 in a row
             expert.action(_obs(1))
-    assert cache.asked == 1 and expert.remarks == 0
+    assert expert.counts.asked == 1 and expert.counts.remarks == 0
 
 
 def test_nobody_answering_gives_no_action(tmp_path):
     expert, cache = _guided(_Recorder([None]), tmp_path, reask_after=15)
-    assert expert.action(_obs(0)) is None and len(cache) == 0 and cache.asked == 1
+    assert expert.action(_obs(0)) is None and len(cache) == 0 and expert.counts.asked == 1
 
 
 def test_action_noise_perturbs_every_action_afresh_after_the_projection(tmp_path):

@@ -126,7 +126,7 @@ def test_pick_place_bounds_the_fused_mark_around_the_reference(tmp_path):
     assert (
         np.linalg.norm(target - ref) == pytest.approx(0.05, abs=1e-6) and target[0] > ref[0] + 0.049
     )  # on the 5 cm sphere
-    assert expert.projected == 1 and np.allclose(
+    assert expert.counts.projected == 1 and np.allclose(
         expert.fusion.offsets[PICK_PHASE][0], [0.3, 0.0, 0.022]
     )  # kept as marked
 
@@ -171,24 +171,24 @@ def _target_m(action):
 
 def test_a_pick_place_demonstration_asks_two_marks_and_follows_the_five_waypoints(tmp_path):
     src = _Recorder()
-    expert, cache = _pick_place(src, tmp_path)
+    expert, _ = _pick_place(src, tmp_path)
     expert.begin_demonstration()
     task = TaskConfig()
     for phase in range(5):
         for _ in range(3):
             step = expert.action(_obs(phase, g=1 if phase in (2, 3) else -1))
             assert np.allclose(_target_m(step.executed), oracle_target(_obs(phase), task)[0], atol=1e-6), phase
-    assert src.asked == [PICK_PHASE, PLACE_PHASE] and cache.asked == 2 and cache.reused == 13
+    assert src.asked == [PICK_PHASE, PLACE_PHASE] and expert.counts.asked == 2 and expert.counts.reused == 13
     # the same start restored (a replayed demonstration) reuses both marks
     expert.begin_demonstration()
     for phase in range(5):
         expert.action(_obs(phase))
-    assert cache.asked == 2 and src.asked == [PICK_PHASE, PLACE_PHASE]
+    assert expert.counts.asked == 2 and src.asked == [PICK_PHASE, PLACE_PHASE]
     # another scene asks again, and the new marks' waypoints follow the new part and goal
     expert.begin_demonstration()
     other = OBJ + [0.05, 0.1, 0.0]
     step = expert.action(_obs(1, obj=other))
-    assert cache.asked == 3 and np.allclose(
+    assert expert.counts.asked == 3 and np.allclose(
         _target_m(step.executed), oracle_target(_obs(1, obj=other), task)[0], atol=1e-6
     )
 
@@ -198,24 +198,24 @@ def test_pick_place_fuses_the_marks_of_a_run(tmp_path):
     scenes = [OBJ + [0.0, 0.1 * k, 0.0] for k in range(3)]
     errors = [[0.0, 0.0, 0.01], [0.02, 0.0, 0.01], [0.03, 0.0, 0.01]]
     src = _Recorder(answers=[obj + [0.0, 0.0, 0.022] + err for obj, err in zip(scenes, errors)])
-    expert, cache = _pick_place(src, tmp_path)
+    expert, _ = _pick_place(src, tmp_path)
     offsets = []
     for obj in scenes:
         expert.begin_demonstration()
         offsets.append(_target_m(expert.action(_obs(1, obj=obj)).executed) - obj)
-    assert cache.asked == 3
+    assert expert.counts.asked == 3
     assert np.allclose([o[0] for o in offsets], [0.0, 0.01, 0.02], atol=1e-6)  # medians of 0; 0, 2; 0, 2, 3 cm
     assert np.allclose([o[2] for o in offsets], 0.032, atol=1e-6)
 
 
 def test_pick_place_remarks_an_unreached_phase_and_resume_rebuilds_the_fusion(tmp_path):
     src = _Recorder(answers=[OBJ + [0.0, 0.0, 0.04], OBJ + [0.0, 0.0, 0.022]])
-    expert, cache = _pick_place(src, tmp_path, reask_after=15)
+    expert, _ = _pick_place(src, tmp_path, reask_after=15)
     expert.begin_demonstration()
     first = [_target_m(expert.action(_obs(1)).executed) for _ in range(15)]
-    assert cache.asked == 1 and expert.remarks == 0
+    assert expert.counts.asked == 1 and expert.counts.remarks == 0
     again = _target_m(expert.action(_obs(1)).executed)
-    assert expert.remarks == 1 and cache.asked == 2 and src.previous[1] is not None
+    assert expert.counts.remarks == 1 and expert.counts.asked == 2 and src.previous[1] is not None
     assert np.allclose(src.previous[1].target, OBJ + [0.0, 0.0, 0.04])
     assert np.allclose(first[0][2], OBJ[2] + 0.04) and np.allclose(again[2], OBJ[2] + 0.031)  # median of 4 and 2.2 cm
     # a resumed trainer reloads the file and rebuilds the same fused estimate
@@ -229,7 +229,7 @@ def test_pick_place_remarks_an_unreached_phase_and_resume_rebuilds_the_fusion(tm
 def test_pick_place_nobody_answering_ends_the_demonstration(tmp_path):
     expert, cache = _pick_place(_Recorder(answers=[None]), tmp_path)
     expert.begin_demonstration()
-    assert expert.action(_obs(0)) is None and cache.asked == 1 and len(cache) == 0
+    assert expert.action(_obs(0)) is None and expert.counts.asked == 1 and len(cache) == 0
 
 
 def test_pick_place_in_a_short_guided_run_asks_about_two_marks_per_demonstration(tmp_path):
@@ -245,6 +245,6 @@ def test_pick_place_in_a_short_guided_run_asks_about_two_marks_per_demonstration
         tr.run()
     finally:
         tr.close()
-    demos = tr.interventions
-    assert demos > 3 and tr.cache.asked <= 2 * demos + tr.expert.remarks
-    assert tr.cache.asked >= demos  # every demonstration asked for its pick mark at least
+    demos = tr.counters.interventions
+    assert demos > 3 and tr.counters.asked <= 2 * demos + tr.counters.remarks
+    assert tr.counters.asked >= demos  # every demonstration asked for its pick mark at least

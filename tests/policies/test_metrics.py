@@ -82,7 +82,7 @@ def test_rows_hold_the_means_of_the_updates_since_the_previous_row(tmp_path, gui
                 assert payload[field] == "", (field, payload)
         since = []
     # updates start at the 64th stored transition (a demonstration's steps are stored as its phases complete)
-    assert n_updates == tr.agent.updates and 0 < tr.agent.updates <= tr.step - 63 and rows >= 5
+    assert n_updates == tr.agent.updates and 0 < tr.agent.updates <= tr.counters.step - 63 and rows >= 5
     csv_rows = read(tmp_path / "run" / "metrics.csv")
     assert tuple(csv_rows[0]) == METRIC_FIELDS and len(csv_rows) == rows
     assert [r["step"] for r in csv_rows] == [str(p["step"]) for k, p in rec.events if k == "row"]
@@ -116,7 +116,7 @@ def test_resume_keeps_earlier_rows_and_upgrades_an_old_metrics_file(tmp_path):
     with path.open("w", newline="") as fh:
         w = csv.DictWriter(fh, OLD_FIELDS, extrasaction="ignore")
         w.writeheader()
-        w.writerows(kept + [{**kept[-1], "step": str(first.step + 7)}])
+        w.writerows(kept + [{**kept[-1], "step": str(first.counters.step + 7)}])
     resumed = make(tmp_path, "run")
     resumed.load_checkpoint()
     try:
@@ -128,8 +128,47 @@ def test_resume_keeps_earlier_rows_and_upgrades_an_old_metrics_file(tmp_path):
     old, new = rows[: len(kept)], rows[len(kept) :]
     assert [r["step"] for r in old] == [r["step"] for r in kept]  # the row after the checkpoint is gone
     assert all(r[f] == "" for r in old for f in UPDATE_FIELDS)
-    assert new and int(new[0]["step"]) > first.step
+    assert new and int(new[0]["step"]) > first.counters.step
     assert all(
         math.isfinite(float(r[f])) for r in new if r["critic_loss"] != "" for f in UPDATE_FIELDS if f != "temperature"
     )
     assert any(r["critic_loss"] != "" for r in new)
+
+
+@pytest.mark.parametrize("fails", ["writing", "renaming"])
+def test_an_interrupted_truncation_leaves_the_log_as_it_was(tmp_path, monkeypatch, fails):
+    """Resuming rewrites metrics.csv without the rows after the checkpoint through a temporary file renamed over
+    it: a failure while writing the new one, or between writing and renaming, leaves the old file whole."""
+    import os
+
+    first = make(tmp_path, "run", guided=False)
+    first.run(stop_at=150)
+    first.close()
+    path = tmp_path / "run" / "metrics.csv"
+    kept = read(path)
+    with path.open("a", newline="") as fh:  # a row after the checkpoint: the resume drops it
+        csv.DictWriter(fh, METRIC_FIELDS).writerow({**kept[-1], "step": str(first.counters.step + 7)})
+    before = path.read_bytes()
+
+    def fail(*args, **kwargs):
+        raise OSError(28, "No space left on device")
+
+    if fails == "writing":
+        monkeypatch.setattr(csv.DictWriter, "writerows", fail)
+    else:
+        monkeypatch.setattr(os, "replace", fail)
+    resumed = make(tmp_path, "run", guided=False)
+    try:
+        with pytest.raises(OSError, match="No space left"):
+            resumed.load_checkpoint()
+    finally:
+        resumed.close()
+    assert path.read_bytes() == before
+    assert not (tmp_path / "run" / "metrics.csv.tmp").exists()  # the partial file is gone
+    monkeypatch.undo()
+    again = make(tmp_path, "run", guided=False)
+    try:
+        again.load_checkpoint()
+    finally:
+        again.close()
+    assert read(path) == kept  # the truncation, done

@@ -123,7 +123,7 @@ def test_a_short_guided_sac_run_trains_resumes_and_exports(tmp_path):
     again = Trainer(tc, dc, gc, ec, tmp_path, sac_cfg=sc)
     try:
         again.load_checkpoint()
-        assert again.step == tr.step and again.agent.updates == tr.agent.updates
+        assert again.counters.step == tr.counters.step and again.agent.updates == tr.agent.updates
         again.run()
         path = export_actor(
             again.agent.policy_actor,
@@ -135,7 +135,7 @@ def test_a_short_guided_sac_run_trains_resumes_and_exports(tmp_path):
         obs = again.replay.agent.obs[10]
         assert np.allclose(ExportedPolicy.load(path)(obs), again.agent.act(obs), atol=1e-5)
         rows = (tmp_path / "metrics.csv").read_text().splitlines()
-        assert "temperature" in rows[0] and again.step >= 400
+        assert "temperature" in rows[0] and again.counters.step >= 400
     finally:
         again.close()
     with pytest.raises(Exception, match="different configuration"):

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import torch
 
-from mrguide.policies.train import CheckpointError, Trainer, load_train_config
+from mrguide.policies.train import CheckpointError, Trainer, TrainerCounters, load_train_config
 
 
 def make(tmp_path, name, **train):
@@ -21,19 +21,22 @@ def make(tmp_path, name, **train):
 
 
 def counters(tr):
-    return (tr.step, tr.episode, tr.interventions, tr.cache.asked, tr.cache.reused, tr.expert.projected)
+    """Every counter but the wall times."""
+    c = dataclasses.asdict(tr.counters)
+    del c["wall_s"], c["update_s"]
+    return c
 
 
 def test_guidance_fires_and_expert_pool_fills(tmp_path):
     tr = make(tmp_path, "g")
     try:
         tr.run(stop_at=300)
-        assert tr.interventions > 0 and tr.replay.expert.size > 0
-        assert tr.cache.asked > 0 and tr.cache.reused > tr.cache.asked  # a demo asks once per waypoint
+        assert tr.counters.interventions > 0 and tr.replay.expert.size > 0
+        assert tr.counters.asked > 0 and tr.counters.reused > tr.counters.asked  # a demo asks once per waypoint
         with (tmp_path / "g" / "metrics.csv").open() as fh:
             kinds = {r["kind"] for r in csv.DictReader(fh)}
         assert kinds == {"agent", "expert"}
-        assert sum(1 for _ in (tmp_path / "g" / "annotations.jsonl").open()) == tr.cache.asked
+        assert sum(1 for _ in (tmp_path / "g" / "annotations.jsonl").open()) == tr.counters.asked
     finally:
         tr.close()
 
@@ -168,7 +171,12 @@ def test_a_baseline_never_calls_the_expert(tmp_path):
     )
     try:
         tr.run(stop_at=400)
-        assert tr.step >= 400 and tr.interventions == 0 and tr.replay.expert.size == 0 and tr.cache.asked == 0
+        assert (
+            tr.counters.step >= 400
+            and tr.counters.interventions == 0
+            and tr.replay.expert.size == 0
+            and tr.counters.asked == 0
+        )
     finally:
         tr.close()
 
@@ -192,7 +200,9 @@ def test_every_demonstration_restarts_its_episode(tmp_path):
         tr.run(stop_at=500)
     finally:
         tr.close()
-    assert tr.interventions > 0 and len(restored) == tr.interventions  # from its episode's first state
+    assert (
+        tr.counters.interventions > 0 and len(restored) == tr.counters.interventions
+    )  # from its episode's first state
 
 
 def test_a_demonstration_is_expert_data_only_for_the_phases_it_completed(tmp_path):
@@ -220,7 +230,7 @@ def test_a_demonstration_is_expert_data_only_for_the_phases_it_completed(tmp_pat
         held_back = [phase_from_progress(p) for p, a in zip(agent["obs"][:, 4], agent["act"][:, 3]) if a > 0]
     finally:
         tr.close()
-    assert tr.interventions > 0 and expert_phases == {0}  # only approaches were completed
+    assert tr.counters.interventions > 0 and expert_phases == {0}  # only approaches were completed
     assert 1 in held_back  # the vacuum-on grasp attempts are agent data
 
 
@@ -257,7 +267,7 @@ def test_a_checkpoint_from_before_a_new_setting_resumes_with_its_default(tmp_pat
     write_checkpoint(path, state)
     same = make(tmp_path, "old")
     same.load_checkpoint()
-    assert same.step == tr.step
+    assert same.counters.step == tr.counters.step
     same.close()
     base = make(tmp_path, "old")
     base.close()
@@ -295,7 +305,54 @@ def test_a_person_stepping_in_cuts_the_agents_episode_and_it_is_demonstrated(tmp
     finally:
         tr.close()
     rows = _rows(tmp_path / "i" / "metrics.csv")
-    assert tr.person_interventions == 1 == tr.interventions
+    assert tr.counters.person_interventions == 1 == tr.counters.interventions
     (cut,) = [r for r in rows if r["intervened"] == "1"]
     assert cut["kind"] == "agent" and cut["triggered"] == "1" and cut["length"] == "5"
     assert rows[rows.index(cut) - 1]["kind"] == "expert"  # its demonstration (logged before the agent's row)
+
+
+def test_every_counter_checkpointed_is_restored(tmp_path):
+    """Each counter set to a value of its own, checkpointed and resumed: one saved but not restored (or restored
+    into an object the trainer or its expert no longer counts into) keeps its fresh value and fails here."""
+    tr = make(tmp_path, "n")
+    for i, f in enumerate(dataclasses.fields(TrainerCounters), start=1):
+        setattr(tr.counters, f.name, type(getattr(tr.counters, f.name))(1000 + i))  # an int or a float of its own
+    tr.save_checkpoint()
+    tr.close()
+    resumed = make(tmp_path, "n")
+    try:
+        resumed.load_checkpoint()
+        got, want = dataclasses.asdict(resumed.counters), dataclasses.asdict(tr.counters)
+        assert got.pop("wall_s") >= want.pop("wall_s")  # plus the first process's time until the checkpoint
+        assert got == want
+        assert resumed.expert.counts is resumed.counters  # the expert counts on from the restored values
+        row = resumed._row("agent", 0.0, False, "timeout", 1, False)
+        assert {k: row[k] for k in ("step", "episode", "asked", "reused", "remarks", "skipped")} == {
+            k: want[k] for k in ("step", "episode", "asked", "reused", "remarks", "skipped")
+        }
+    finally:
+        resumed.close()
+
+
+@pytest.mark.parametrize("change", ["missing", "unknown", "wrong type"])
+def test_a_checkpoint_whose_counters_do_not_fit_is_refused(tmp_path, change):
+    from mrguide.policies.checkpoint import read_checkpoint, write_checkpoint
+
+    tr = make(tmp_path, "k")
+    tr.save_checkpoint()
+    tr.close()
+    path = tmp_path / "k" / "checkpoint.pt"
+    state = read_checkpoint(path)
+    if change == "missing":
+        del state["counters"]["person_interventions"]  # as written before people could step in
+    elif change == "unknown":
+        state["counters"]["retired"] = 3
+    else:
+        state["counters"]["step"] = "12"
+    write_checkpoint(path, state)
+    again = make(tmp_path, "k")
+    try:
+        with pytest.raises(CheckpointError, match="does not fit this trainer"):
+            again.load_checkpoint()
+    finally:
+        again.close()

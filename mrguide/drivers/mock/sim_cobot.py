@@ -16,6 +16,7 @@ devices' heartbeat consumers, which must also fire when no SYNC comes::
 from __future__ import annotations
 
 import logging
+import math
 import threading
 import time
 from dataclasses import dataclass, replace
@@ -41,21 +42,27 @@ DEFAULT_FAULT_CODE = 0x2310
 DEVICE_CLOCK_PERIOD = 0.01
 
 
+#: How long the simulated devices may go without sending feedback before the master calls it lost (s).
+SHARED_PC_FEEDBACK_TOLERANCE_S = 1.0
+
+
 def shared_pc_config(config: CobotBusConfig) -> CobotBusConfig:
     """The master's bus config when the simulated devices run on the same PC.
 
     They share the CPU (and Python's GIL) with the master on an OS without real-time guarantees: the
-    control and receive threads get SCHED_FIFO where allowed, and the supervision tolerates 100 ms
-    without feedback (real bus: 5 cycles) and 0.45 s without heartbeat (real bus: 0.18 s), so that a
-    busy machine is not mistaken for a dead drive. Injected faults still trip them.
+    control and receive threads get SCHED_FIFO where allowed, and the supervision tolerates 1 s
+    without feedback (real bus: 5 cycles, 20 ms) and 0.45 s without heartbeat (real bus: 0.18 s), so that a
+    busy machine is not mistaken for a dead drive: with two trainings beside it, a simulated drive has gone
+    unscheduled for more than 100 ms. Injected faults still trip them.
     """
     t = config.timing
+    feedback_cycles = math.ceil(SHARED_PC_FEEDBACK_TOLERANCE_S / t.control_period)
     return replace(
         config,
         timing=replace(
             t,
             realtime_priority=t.realtime_priority or 50,
-            max_missed_feedback=max(t.max_missed_feedback, 25),
+            max_missed_feedback=min(max(t.max_missed_feedback, feedback_cycles), 1000),  # the config allows 1000
             heartbeat_timeout_factor=3.0,
             heartbeat_period=max(t.heartbeat_period, 0.15),
         ),

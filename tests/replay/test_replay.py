@@ -1,0 +1,96 @@
+"""`mrguide replay`: a dry run's log (the scripted expert through the whole deploy stack against the simulated
+cell) replays into an .rrd whose entities and row counts, read back with Rerun's own reader
+(`rerun.chunk.RrdReader`), are what the log holds."""
+
+from __future__ import annotations
+
+import itertools
+from collections import Counter
+from pathlib import Path
+
+import pytest
+
+from mrguide.cli import main
+from mrguide.deploy.runlog import RunLog, read_log
+from mrguide.replay.runs import load_run
+from mrguide.twin.dry_run import dry_run
+from mrguide.twin.env import EnvConfig
+from tests.deploy.conftest import Expert, bus_config
+
+ROOT = Path(__file__).parents[2]
+
+
+@pytest.fixture(scope="module")
+def dry_log(tmp_path_factory) -> Path:
+    """Two episodes of the scripted expert, dry-run; the exact pose source logs the truth and its age."""
+    log = tmp_path_factory.mktemp("dry") / "deploy.jsonl"
+    cfg = EnvConfig()
+    with RunLog(log, {"command": "deploy", "dry_run": True, "decision_period": cfg.twin.decision_period}) as run_log:
+        dry_run(None, cfg, bus_config(), 2, 0, run_log, policy=Expert(cfg))
+    return log
+
+
+def _rows(rrd: Path) -> tuple[Counter, set[str]]:
+    """Rows per temporal entity (on the `decision` timeline) and every entity path, as Rerun reads the file."""
+    from rerun.chunk import RrdReader
+
+    rows: Counter = Counter()
+    entities = set()
+    for chunk in RrdReader(rrd).stream():
+        entities.add(chunk.entity_path)
+        if not chunk.is_static and "decision" in chunk.timeline_names:
+            rows[chunk.entity_path] += chunk.num_rows
+    return rows, entities
+
+
+def test_a_dry_run_replays_into_a_recording_of_what_the_log_holds(dry_log, tmp_path):
+    rrd = tmp_path / "run.rrd"
+    assert main(["replay", str(dry_log), "--save", str(rrd)]) == 0
+    by_episode: dict[int, list[dict]] = {}
+    for r in read_log(dry_log):  # the last decision of an episode (it only judges) names no episode
+        if r["kind"] == "episode_start":
+            current = by_episode.setdefault(r["episode"], [])
+        elif r["kind"] == "decision":
+            current.append(r)
+    decisions = [r for rs in by_episode.values() for r in rs]
+    assert all("pose" in r and "object_from" in r for r in decisions if "obs" in r)  # the truth is in the log
+    episodes = load_run(dry_log)
+    assert [e.index for e in episodes] == [0, 1] and all(e.outcome == "success" for e in episodes)
+    rows, entities = _rows(rrd)
+    for ep in episodes:
+        mine = by_episode[ep.index]
+        acting = [r for r in mine if "obs" in r]  # the last record only judges (tcp, outcome)
+        b = f"/{ep.label}"
+        assert rows[f"{b}/tcp"] == len(mine)
+        assert rows[f"{b}/trail"] == len(mine)
+        assert rows[f"{b}/joints"] == 6 * len(acting)  # the measured joints pose the arm, joint by joint
+        assert rows[f"{b}/target"] == sum("target" in r for r in mine)
+        assert rows[f"{b}/object/seen"] == len(acting)
+        assert rows[f"{b}/object/true"] == len(acting)
+        assert rows[f"/plots/vacuum_kpa/{ep.label}"] == len(acting)
+        assert rows[f"/plots/part/{ep.label}"] == len(acting)
+        assert rows[f"/plots/latency_ms/{ep.label}"] == sum("latency_ms" in r for r in mine)
+        assert rows[f"/plots/phi/{ep.label}"] == len(mine)
+        phases = [r["phase"] for r in mine]
+        changes = 1 + sum(a != b_ for a, b_ in itertools.pairwise(phases))
+        assert rows[f"/phase/{ep.label}"] == changes
+        assert rows[f"{b}/markers"] == 1  # the outcome; no safety event in these episodes
+        # the arm: its URDF frames and link meshes (static), its goal
+        assert f"{b}/tf_static" in entities and f"{b}/goal" in entities
+        assert {f"{b}/ur5/meshes/{link}" for link in ("base_link", "forearm_link", "wrist_3_link")} <= entities
+        assert f"{b}/ur5/visual_geometries/suction_cup/visual_0" in entities
+
+
+def test_episode_and_outcome_selection(dry_log, tmp_path):
+    rrd = tmp_path / "one.rrd"
+    assert main(["replay", f"{dry_log}:1", "--save", str(rrd), "--no-arm"]) == 0
+    _, entities = _rows(rrd)
+    labels = {p.split("/")[1] for p in entities if p.endswith("/tcp")}
+    assert labels == {load_run(dry_log)[1].label}
+    assert not any("/meshes/" in p for p in entities)
+
+
+def test_replay_refuses_a_selection_that_matches_nothing(dry_log, tmp_path, run_cli):
+    run_cli(["replay", dry_log, "--outcome", "dropped", "--save", tmp_path / "x.rrd"]).assert_refused("no episode")
+    run_cli(["replay", dry_log]).assert_refused("--save")
+    run_cli(["replay", tmp_path / "missing.jsonl", "--save", tmp_path / "x.rrd"]).assert_refused("missing.jsonl")
