@@ -75,7 +75,7 @@ def episode_layouts(env_cfg: EnvConfig, episodes: int, seed: int) -> list[tuple[
 
 
 def dry_run(
-    policy_path: str | Path,
+    policy_path: str | Path | None,
     env_cfg: EnvConfig,
     bus_cfg: CobotBusConfig,
     episodes: int,
@@ -100,9 +100,12 @@ def dry_run(
     """
     spec = load_robot(env_cfg.robot)
     if policy is None:
+        if policy_path is None:
+            raise ValueError("dry_run needs a policy file or a policy")
         policy = ExportedPolicy.load(policy_path, spec, env_cfg.task)
     if isinstance(policy, ExportedPolicy):
-        check_decision_period(policy, policy_path, bus_cfg.timing.control_period, env_cfg.twin.decision_period)
+        label = policy_path if policy_path is not None else "the given policy"
+        check_decision_period(policy, label, bus_cfg.timing.control_period, env_cfg.twin.decision_period)
     layouts = episode_layouts(env_cfg, episodes, seed)
     with simulated_cell(env_cfg, bus_cfg, seed) as cell:
         pose = pose_factory(cell) if pose_factory else TwinObjectPose(cell.plant)
