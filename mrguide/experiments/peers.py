@@ -103,7 +103,7 @@ def peers_report(cfg: PeersConfig, recs: dict[str, list[RunRecord]]) -> dict[str
         marks = [row["marks_until_convergence"] for row in conv]
 
         def median(key: str, of: list[dict[str, Any]]) -> float | None:
-            return float(np.median([row[key] for row in of])) if of else None
+            return round(float(np.median([row[key] for row in of])), 1) if of else None
 
         table.append(
             {
