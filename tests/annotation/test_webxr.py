@@ -202,9 +202,12 @@ def test_quest3_without_ar_falls_back_to_vr_and_places_in_front(browser, spec):
 
 
 def squeeze(page) -> None:
-    """A full squeeze of the right controller's grip: press, release, until the page counted it."""
+    """A full squeeze of the right controller's grip: press, held for a few XR frames (IWER samples the buttons
+    once per frame: a press released before the next frame never happened), release, until the page counted it."""
     n = page.state()["xr"]["squeezes"]
+    f = page.state()["xr"]["frames"]
     page.page.evaluate(RIGHT_SQUEEZE, 1)
+    page.wait_state(f"s.xr.frames > {f + 2}")
     page.page.evaluate(RIGHT_SQUEEZE, 0)
     page.wait_state(f"s.xr.squeezes > {n}")
 
