@@ -82,15 +82,16 @@ class EpisodeReport:
 
 
 class _FollowingMonitor:
-    """Cycle observer: how far the measured joints are from every setpoint sent in the last `depth` cycles
-    (the smallest of those distances), so servo lag, bus latency and late feedback are not counted as
-    following error, while an arm that stopped following its commands is."""
+    """Cycle observer: how far each measured joint is from the nearest of its setpoints sent in the last `depth`
+    cycles, so servo lag, bus latency and late feedback are not counted as following error, while an arm that
+    stopped following its commands is. Per joint, as a drive checks its own: each drive's feedback may be late
+    by its own amount (a silent drive's feedback freezes; the feedback and heartbeat checks name it)."""
 
     def __init__(self, depth: int):
         self.recent: np.ndarray | None = None  # ring of the last `depth` setpoints
         self.depth, self.count = depth, 0
         self.error = 0.0
-        self.joint = 0  # the joint furthest from the setpoint nearest to the measured joints
+        self.joint = 0  # the joint furthest from its nearest recent setpoint
 
     def __call__(self, sample: CycleSample) -> None:
         if sample.setpoint is not None:
@@ -99,10 +100,9 @@ class _FollowingMonitor:
             self.recent[self.count % self.depth] = sample.setpoint
             self.count += 1
         if self.recent is not None:
-            distance = np.abs(self.recent - sample.positions)
-            nearest = int(distance.max(axis=1).argmin())
-            self.joint = int(distance[nearest].argmax())
-            self.error = float(distance[nearest, self.joint])
+            per_joint = np.abs(self.recent - sample.positions).min(axis=0)
+            self.joint = int(per_joint.argmax())
+            self.error = float(per_joint[self.joint])
 
 
 class Runtime:
@@ -135,7 +135,11 @@ class Runtime:
         self.decision = DecisionStep(spec, task, period)
         self.kin, self.streamer = self.decision.kin, self.decision.streamer
         self.supervisor = Supervisor(spec, safety or SafetyConfig(), self._on_event)
-        self.following = _FollowingMonitor(depth=max(25, 2 * cobot.setpoint_queue_depth))  # 100 ms at 4 ms
+        # setpoints of the last 100 ms (at 4 ms) of servo lag, or as far back as the driver lets feedback lag
+        # before it calls it lost (a real bus: 5 cycles; simulated devices on a shared PC: 1 s)
+        self.following = _FollowingMonitor(
+            depth=max(25, 2 * cobot.setpoint_queue_depth, cobot.feedback_tolerance_cycles)
+        )
         self.watchdog = Watchdog(self.supervisor.cfg.stall_timeout, self._on_stall)
         self._episode_events: Counter[str] = Counter()
         self._t = 0

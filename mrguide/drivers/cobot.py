@@ -59,6 +59,11 @@ class Cobot:
         """Setpoints `stream` buffers ahead of the bus before it blocks."""
         return self.config.timing.setpoint_queue_depth
 
+    @property
+    def feedback_tolerance_cycles(self) -> int:
+        """Cycles without new feedback before the driver latches a fault (timing.max_missed_feedback)."""
+        return self.config.timing.max_missed_feedback
+
     # ------------------------------------------------------------------ lifecycle
 
     def connect(self) -> None:

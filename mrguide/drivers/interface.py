@@ -28,6 +28,11 @@ class CobotInterface(Protocol):
         ...
 
     @property
+    def feedback_tolerance_cycles(self) -> int:
+        """Control cycles the measured joints may lag behind before the driver calls the feedback lost."""
+        ...
+
+    @property
     def setpoint(self) -> np.ndarray:
         """Last accepted joint setpoint (rad): where the next streamed setpoint must start from."""
         ...

@@ -26,6 +26,7 @@ class IdealCobot:
 
     period = 0.004
     setpoint_queue_depth = 4
+    feedback_tolerance_cycles = 5
 
     def __init__(self, q):
         self.q, self.vacuum, self.streamed, self.observers = np.array(q, float), False, [], []

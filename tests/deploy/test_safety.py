@@ -250,7 +250,7 @@ def test_missing_pose_uses_the_last_one_a_few_times_then_stops_the_episode(run_d
     assert all(np.allclose(r["obs"][5:8], last, atol=1e-6) for r in blind)
     ends = [r for r in read_log(log) if r["kind"] == "episode_end"]
     assert ends[-1]["outcome"] == "pose_lost" and ends[-1]["events"] == {"pose_unavailable": 3, "pose_lost": 1}
-    assert cell.cobot.status().fault is None  # held (braked to rest), not quick-stopped
+    assert cell.cobot.status().fault is None, cell.cobot.status().fault  # held (braked to rest), not quick-stopped
 
 
 @pytest.mark.parametrize("lost_in", [0, 1, 3])

@@ -9,6 +9,7 @@ from mrguide.drivers import Cobot, CobotInterface
 MEMBERS = (
     "period",
     "setpoint_queue_depth",
+    "feedback_tolerance_cycles",
     "setpoint",
     "enable",
     "stream",
@@ -31,6 +32,7 @@ def test_the_protocol_is_what_the_runtime_uses():
 def test_a_connected_cobot_is_a_cobot_interface(rig):
     assert isinstance(rig.cobot, CobotInterface)
     assert rig.cobot.setpoint_queue_depth == rig.config.timing.setpoint_queue_depth
+    assert rig.cobot.feedback_tolerance_cycles == rig.config.timing.max_missed_feedback
 
 
 def test_cobot_methods_take_the_protocols_parameters():
