@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Quick start entry point: sets up .venv (first run only) and runs the main job or the tests.
 #   ./run.sh main [args]   the main job (see README)
-#   ./run.sh test [args]   the test suite (pytest args pass through)
+#   ./run.sh test [args]   the test suite; with args, one pytest run with them (e.g. -m slow, a file)
 set -euo pipefail
 cd "$(dirname "$0")"
 PY=${PYTHON:-python3}
@@ -54,6 +54,12 @@ case "$cmd" in
         echo "[run.sh] the browser tests need Chromium: 'sudo apt-get install chromium' (or set MRGUIDE_CHROMIUM)" >&2
       fi
     fi
-    exec "$VENV/bin/python" -m pytest -q "$@" ;;
+    if [ $# -gt 0 ]; then exec "$VENV/bin/python" -m pytest -q "$@"; fi
+    # The suite in two passes: most of it on two workers (pytest-xdist), then the tests that keep time with
+    # threads (simulated CAN bus, dry runs; marked `realtime` by tests/conftest.py) on their own.
+    rc=0
+    "$VENV/bin/python" -m pytest -q -n 2 -m "not slow and not realtime" || rc=$?
+    "$VENV/bin/python" -m pytest -q -m "not slow and realtime" || rc=$((rc ? rc : $?))
+    exit "$rc" ;;
   *) echo "usage: ./run.sh {main|test} [args]" >&2; exit 2 ;;
 esac

@@ -12,6 +12,26 @@ from typing import Any
 import numpy as np
 import pytest
 
+#: Tests that keep time with threads (simulated CANopen devices on the virtual bus, dry runs, the sim-to-real
+#: conditions): `./run.sh test` runs them on their own, after the rest has run on two workers, since a control
+#: cycle that another test process starves for 100 ms is a (correct) safety stop, not a failure of the code.
+REALTIME = (
+    "tests/deploy/",
+    "tests/drivers/",
+    "tests/sim2real/",
+    "tests/experiments/test_sim2real_experiment.py",
+    "tests/replay/test_replay.py",
+    "tests/test_install_profiles.py",
+    "tests/test_robot_pc_imports.py",
+)
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    root = Path(config.rootpath)
+    for item in items:
+        if item.path.relative_to(root).as_posix().startswith(REALTIME):
+            item.add_marker(pytest.mark.realtime)
+
 
 @dataclass
 class CliRun:

@@ -103,7 +103,7 @@ async def _answer_requests(url: str, n: int, seen: list[dict]) -> None:
         c = Client(ws)
         await c.send({"type": "hello", "protocol": 1, "client": "test"})
         for _ in range(n + 1):
-            req = await c.recv("request", timeout=60)
+            req = await c.recv("request", timeout=180)  # generous: a busy machine
             seen.append(req)
             if len(seen) > n:
                 return
@@ -158,7 +158,11 @@ def test_ctrl_c_while_waiting_checkpoints_and_resume_asks_nothing_twice(tmp_path
     proc = _start_train(out)
     try:
         seen: list[dict] = []
-        asyncio.run(_answer_requests(_page_url(proc), 6, seen))  # 6 answered, the 7th left waiting
+        try:
+            asyncio.run(_answer_requests(_page_url(proc), 6, seen))  # 6 answered, the 7th left waiting
+        except TimeoutError:
+            proc.kill()
+            raise AssertionError(f"{len(seen)} requests seen; the trainer's stderr: {proc.communicate()[1]}") from None
         proc.send_signal(signal.SIGINT)
         _stdout, stderr = proc.communicate(timeout=60)
     finally:
