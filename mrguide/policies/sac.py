@@ -42,6 +42,7 @@ class SACConfig:
     n_min: int = 2  # ... whose TD target is the minimum over a random 2
     utd: int = 2  # critic updates per environment step (RLPD's runs: 20; ours, for the CPU)
     expert_fraction: float = 0.5  # share of every batch drawn from the expert pool (RLPD's offline_ratio)
+    target_entropy: float = -2.0  # of the policy over the actor's y ∈ [-1, 1]^4 (RLPD: -|A|/2)
 
     def __post_init__(self) -> None:
         if not self.hidden or any(
@@ -55,6 +56,7 @@ class SACConfig:
         check_number("sac.n_min", self.n_min, 1, self.n_critics, integer=True)
         check_number("sac.utd", self.utd, 1, 100, integer=True)
         check_number("sac.expert_fraction", self.expert_fraction, 0.0, 1.0)
+        check_number("sac.target_entropy", self.target_entropy, -100.0, 100.0)
 
 
 class GaussianActor(nn.Module):
@@ -102,7 +104,7 @@ class SAC:
         # the temperature starts at 0.01 as in HIL-SERL (RLPD: 1.0, tuned for million-step runs; at this 20k-step
         # budget an entropy bonus of that size keeps the policy near uniform)
         self.log_temperature = torch.tensor(float(np.log(INITIAL_TEMPERATURE)), requires_grad=True)
-        self.target_entropy = -act_dim / 2  # RLPD
+        self.target_entropy = cfg.target_entropy
         self.actor_params = list(self.actor.parameters())
         self.actor_opt = torch.optim.Adam(self.actor_params, lr=cfg.lr, fused=True)
         self.critic_opt = torch.optim.Adam(self.critic.parameters(), lr=cfg.lr, fused=True)
