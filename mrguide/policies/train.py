@@ -280,7 +280,9 @@ class Trainer:
         """Train until `total_steps`, checkpointing and evaluating on the way.
 
         With `stop_at`, stop (and checkpoint) at the first episode end at or after that step, as an
-        interrupted run would: resuming from there reproduces the uninterrupted run exactly.
+        interrupted run would: resuming from there restores every counter, pool and RNG, but a resumed process
+        starts with fresh PyBullet solver caches, so its states differ from the uninterrupted run's by float noise
+        that a contact can grow (tests/policies/test_train.py), and a long run may then take another course.
         """
         end = self.cfg.total_steps
         stop = min(end, stop_at or end)
