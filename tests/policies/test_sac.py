@@ -77,7 +77,7 @@ def test_learning_fits_the_critic_and_tunes_the_temperature():
     for _ in range(150):
         last = agent.learn(replay, 0.5, 128, rng)[0]
     assert last["critic_loss"] < first["critic_loss"]
-    assert last["temperature"] < first["temperature"]  # the entropy starts above its target of -|A|/2
+    assert last["temperature"] < first["temperature"]  # the entropy starts above its target (sac.target_entropy)
 
 
 def test_state_round_trip_continues_identically():
@@ -98,7 +98,10 @@ def test_state_round_trip_continues_identically():
     assert sa == sb
 
 
-@pytest.mark.parametrize("field, value", [("n_min", 11), ("utd", 0), ("expert_fraction", 1.5), ("hidden", ())])
+@pytest.mark.parametrize(
+    "field, value",
+    [("n_min", 11), ("utd", 0), ("expert_fraction", 1.5), ("hidden", ()), ("target_entropy", float("nan"))],
+)
 def test_sac_config_refuses_bad_values(field, value):
     with pytest.raises(ConfigError, match=f"sac.{field}"):
         SACConfig(**{field: value})
