@@ -27,9 +27,8 @@ REALTIME = (
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    root = Path(config.rootpath)
     for item in items:
-        if item.path.relative_to(root).as_posix().startswith(REALTIME):
+        if item.path.relative_to(config.rootpath).as_posix().startswith(REALTIME):
             item.add_marker(pytest.mark.realtime)
 
 

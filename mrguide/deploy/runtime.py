@@ -89,6 +89,7 @@ class _FollowingMonitor:
 
     def __init__(self, depth: int):
         self.recent: np.ndarray | None = None  # ring of the last `depth` setpoints
+        self._distance: np.ndarray | None = None  # scratch of the ring's shape: no allocation per control cycle
         self.depth, self.count = depth, 0
         self.error = 0.0
         self.joint = 0  # the joint furthest from its nearest recent setpoint
@@ -97,10 +98,12 @@ class _FollowingMonitor:
         if sample.setpoint is not None:
             if self.recent is None:
                 self.recent = np.tile(sample.setpoint, (self.depth, 1))
+                self._distance = np.empty_like(self.recent)
             self.recent[self.count % self.depth] = sample.setpoint
             self.count += 1
-        if self.recent is not None:
-            per_joint = np.abs(self.recent - sample.positions).min(axis=0)
+        if self.recent is not None and self._distance is not None:
+            np.subtract(self.recent, sample.positions, out=self._distance)
+            per_joint = np.abs(self._distance, out=self._distance).min(axis=0)
             self.joint = int(per_joint.argmax())
             self.error = float(per_joint[self.joint])
 
