@@ -96,6 +96,9 @@ def peers_report(cfg: PeersConfig, recs: dict[str, list[RunRecord]]) -> dict[str
                     f"success_at_{cfg.time_budget_s:g}_s": success_at(r, r.row_wall, cfg.time_budget_s),
                     "final_eval_success": float(r.eval_rates[-1]),
                     "wall_s": r.wall_s,
+                    "exploring_no_grasp": r.exploring_outcomes["no_grasp"],
+                    "exploring_dropped": r.exploring_outcomes["dropped"],
+                    "final_temperature": r.final_temperature,
                 }
             )
         mine = [row for row in rows if row["learner"] == learner]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -26,6 +27,8 @@ class RunRecord:
     row_wall: np.ndarray  # training wall time (s) at each row
     converged: Convergence
     wall_s: float
+    exploring_outcomes: Counter[str]  # how the agent's own episodes ended (metrics.csv `outcome` of `agent` rows)
+    final_temperature: float | None  # SAC's entropy temperature at the last row that logged one (None: DDPG)
 
     @property
     def annotations_until_convergence(self) -> int | None:
@@ -81,4 +84,6 @@ def read_run(run: TrainRun, root: Path, episodes_per_eval: int) -> RunRecord:
         np.array([float(r["wall_s"]) for r in rows]),
         convergence(steps.tolist(), rates.tolist(), episodes_per_eval),
         finished(run, root).wall_s,
+        Counter(r["outcome"] for r in rows if r["kind"] == "agent" and r["outcome"]),
+        next((float(r["temperature"]) for r in reversed(rows) if r.get("temperature")), None),
     )

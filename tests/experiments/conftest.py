@@ -24,9 +24,9 @@ intake_steps = 300
 """
 
 
-def write_run(run: Path, eval_rates, asked_per_row, wall: float = 100.0) -> None:
+def write_run(run: Path, eval_rates, asked_per_row, wall: float = 100.0, rows=None) -> None:
     """A finished run: eval.csv (one evaluation per 1000 steps), metrics.csv (a row per 500 steps, the wall time
-    growing evenly to `wall`), done."""
+    growing evenly to `wall`, each row updated with `rows[i]` if given), done."""
     run.mkdir(parents=True)
     with (run / "eval.csv").open("w", newline="") as fh:
         w = csv.DictWriter(fh, ["step", "success_rate", "mean_return"])
@@ -44,6 +44,7 @@ def write_run(run: Path, eval_rates, asked_per_row, wall: float = 100.0) -> None
                     "asked": asked,
                     "expert_ratio": 0.5,
                     "wall_s": wall * (i + 1) / len(asked_per_row),
+                    **(rows[i] if rows else {}),
                 }
             )
     (run / "done").write_text(json.dumps({"wall_s": wall, "update_ms": 5.0, "steps": 1000 * len(eval_rates)}))

@@ -134,10 +134,30 @@ def test_peers_report_compares_at_equal_marks_and_equal_wall_time(tmp_path):
     assert [r.overrides["train.learner"] for r in peers.runs(cfg, None)] == ["ddpg", "sac"]
     # ddpg: cheap per step, many marks; sac: few marks, slow (wall time 5x)
     write_run(
-        tmp_path / "ddpg" / "seed0", [0.5, 0.9, 1.0, 1.0, 1.0], [10, 20, 25, 30, 45, 45, 45, 45, 45, 45], wall=100.0
+        tmp_path / "ddpg" / "seed0",
+        [0.5, 0.9, 1.0, 1.0, 1.0],
+        [10, 20, 25, 30, 45, 45, 45, 45, 45, 45],
+        wall=100.0,
+        rows=[{"temperature": ""}] * 10,  # DDPG logs none
     )
-    write_run(tmp_path / "sac" / "seed0", [0.0, 0.2, 0.6, 0.9, 1.0], [5, 8, 10, 12, 14, 15, 15, 15, 15, 15], wall=500.0)
+    # how the exploring episodes ended, and the temperature (blank before the first update, as SAC logs it)
+    ends = ["no_grasp", "dropped", "no_grasp", "success", "guided", "no_grasp", "dropped", "success", "", ""]
+    sac_rows = [
+        {"kind": "agent", "outcome": o, "temperature": t} for o, t in zip(ends, [""] * 2 + ["0.2"] * 7 + ["0.05"])
+    ]
+    sac_rows[3]["kind"] = "expert"  # an expert episode's outcome is not the agent's
+    write_run(
+        tmp_path / "sac" / "seed0",
+        [0.0, 0.2, 0.6, 0.9, 1.0],
+        [5, 8, 10, 12, 14, 15, 15, 15, 15, 15],
+        wall=500.0,
+        rows=sac_rows,
+    )
     files = peers.peers_report(cfg, peers.records(cfg, None, tmp_path, 10))
+    (tmp_path / "r.csv").write_bytes(files["runs.csv"])
+    per_run = {r["learner"]: r for r in read(tmp_path / "r.csv")}
+    assert (per_run["sac"]["exploring_no_grasp"], per_run["sac"]["exploring_dropped"]) == ("3", "2")
+    assert per_run["sac"]["final_temperature"] == "0.05" and per_run["ddpg"]["final_temperature"] == ""
     (tmp_path / "s.csv").write_bytes(files["summary.csv"])
     rows = {r["learner"]: r for r in read(tmp_path / "s.csv")}
     # after 25 marks: ddpg at its 1k evaluation (20 asked there, 30 by 2k), sac at its last (it never asked 25)
