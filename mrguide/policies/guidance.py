@@ -125,9 +125,6 @@ class GuidanceConfig:
     enabled: bool = True
     r_threshold: float = -5.0  # R_th of Eq. 12 (ours; the paper gives no value)
     intake_steps: int = 10_000  # expert intake window: the first 10k of 20k steps (paper, Sec. IV-B)
-    #: The intake pauses while the last two evaluations (2 × eval_episodes) succeed at least this often, and
-    #: reopens when they fall below it: nobody is asked while the robot is passing (ours; 0: never pauses).
-    pause_at: float = 0.0
     lam_max: float = 0.9  # λ_max (Table I)
     lam_min: float = 0.1  # λ_min (Table I)
     delta: float = 0.05  # Δ of Eq. 13, m (ours)
@@ -163,16 +160,10 @@ class GuidanceConfig:
             raise ConfigError(f"guidance: need 0 <= lam_min <= lam_max <= 1, got {self.lam_min}, {self.lam_max}")
         check_number("guidance.r_threshold", self.r_threshold, -1e4, 0.0)
         check_number("guidance.intake_steps", self.intake_steps, 0, 10**9, integer=True)
-        check_number("guidance.pause_at", self.pause_at, 0.0, 1.0)
         check_number("guidance.delta", self.delta, 1e-4, 1.0, " m")
         check_number("guidance.cache_tolerance", self.cache_tolerance, 0.0, 0.1, " m")
         check_number("guidance.reask_after", self.reask_after, 0, 10**6, integer=True)
         check_number("guidance.action_noise", self.action_noise, 0.0, 1.0, " m")
-
-    def pauses(self, evaluations: int, last: float, before: float) -> bool:
-        """Whether Eq. 12 asks nobody now: the last two evaluations' success (`last`, `before`) is at least
-        `pause_at` (never before two evaluations, never with `pause_at` 0)."""
-        return self.pause_at > 0 and evaluations >= 2 and (last + before) / 2 >= self.pause_at
 
 
 def _either(choices: tuple[str, ...]) -> str:

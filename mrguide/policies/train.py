@@ -162,8 +162,6 @@ class TrainerCounters(ExpertCounts):
     last_ratio: float = 0.0  # the expert share of the last minibatch
     next_eval: int = 0  # the step at or after which the next evaluation runs
     evaluations: int = 0  # evaluations so far (they choose the evaluation seeds)
-    last_success: float = 0.0  # the last evaluation's success rate
-    passing: bool = False  # the last two evaluations' success is at least guidance.pause_at (the intake pauses)
     wall_s: float = 0.0  # training wall time before this process (s); a checkpoint records it up to its writing
     update_s: float = 0.0  # wall time spent in updates, minibatch sampling included (s)
 
@@ -353,7 +351,6 @@ class Trainer:
         self.trigger.reset()
         ret, length, info, triggered, stepped_in = 0.0, 0, {"outcome": None, "is_success": False}, False, False
         person = getattr(self.source, "intervention_requested", None) if guided else None
-        paused = self.counters.passing  # Eq. 12 asks nobody while the robot passes; a person may still step in
         try:
             while self.counters.step < end and not self.stop_requested.is_set():
                 action = self.agent.act(obs, self.rng)
@@ -361,7 +358,7 @@ class Trainer:
                 ret += r
                 length += 1
                 if guided and not (term or trunc):
-                    fired = self.trigger.update(r) and not paused
+                    fired = self.trigger.update(r)
                     stepped_in = not fired and person is not None and person()  # a person stepped in: as Eq. 12 would
                     if fired or stepped_in:
                         triggered = True
@@ -475,10 +472,7 @@ class Trainer:
             successes += int(info["is_success"])
             returns.append(ret)
         self.counters.evaluations += 1
-        rate = successes / n
-        self.counters.passing = self.guidance.pauses(self.counters.evaluations, rate, self.counters.last_success)
-        self.counters.last_success = rate
-        res = {"step": self.counters.step, "success_rate": rate, "mean_return": float(np.mean(returns))}
+        res = {"step": self.counters.step, "success_rate": successes / n, "mean_return": float(np.mean(returns))}
         _append_csv(self.out / "eval.csv", EVAL_FIELDS, res)
         for sink in self.sinks:
             sink.evaluation(res)

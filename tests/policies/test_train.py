@@ -356,31 +356,3 @@ def test_a_checkpoint_whose_counters_do_not_fit_is_refused(tmp_path, change):
             again.load_checkpoint()
     finally:
         again.close()
-
-
-def test_the_intake_pauses_while_the_last_two_evaluations_pass():
-    from mrguide.policies.guidance import GuidanceConfig
-
-    g = GuidanceConfig(pause_at=0.8)
-    assert g.pauses(2, 0.9, 0.7) and g.pauses(5, 0.8, 0.8)
-    assert not g.pauses(5, 1.0, 0.5) and not g.pauses(1, 1.0, 1.0)  # a window below 80 %; one evaluation only
-    assert not GuidanceConfig().pauses(5, 1.0, 1.0)  # 0: never
-
-
-def test_while_paused_eq12_asks_nobody_and_reopening_asks_again(tmp_path):
-    tc, dc, gc, ec = load_train_config(None)
-    tc = dataclasses.replace(
-        tc, total_steps=300, learning_starts=64, batch_size=32, eval_every=10_000, checkpoint_every=10_000
-    )
-    tr = Trainer(
-        tc, dataclasses.replace(dc, hidden=(16, 16)), dataclasses.replace(gc, pause_at=0.8), ec, tmp_path / "p"
-    )
-    try:
-        tr.counters.passing = True
-        tr.run(stop_at=150)
-        assert tr.counters.interventions == 0 and tr.counters.asked == 0
-        tr.counters.passing = False  # an evaluation below the mark reopens it
-        tr.run(stop_at=300)
-        assert tr.counters.interventions > 0
-    finally:
-        tr.close()
