@@ -110,6 +110,8 @@ def noise_report(cfg: NoiseConfig, recs: dict[float, list[RunRecord]]) -> dict[s
             "annotations_until_convergence": r.annotations_until_convergence,
             "annotations_total": r.annotations_total,
             "final_eval_success": float(r.eval_rates[-1]),
+            "exploring_no_grasp": r.exploring_outcomes["no_grasp"],
+            "exploring_dropped": r.exploring_outcomes["dropped"],
         }
         for s, rs in recs.items()
         for r in rs

@@ -77,8 +77,10 @@ def test_noise_summary_with_wilson_intervals(tmp_path):
     for name, rates in zip(
         names, ([0.5, 0.9, 1.0, 1.0, 1.0], [0.0, 0.5, 0.9, 0.9, 0.9], [0.6, 0.9, 0.9, 0.8, 0.9], [0.0] * 5)
     ):
-        write_run(tmp_path / name, rates, list(range(10)))
+        write_run(tmp_path / name, rates, list(range(10)), rows=[{"kind": "agent", "outcome": "no_grasp"}] * 10)
     files = nr.noise_report(cfg, nr.records(cfg, None, tmp_path, 10))
+    (tmp_path / "r.csv").write_bytes(files["runs.csv"])
+    assert {(r["exploring_no_grasp"], r["exploring_dropped"]) for r in read(tmp_path / "r.csv")} == {("10", "0")}
     (tmp_path / "s.csv").write_bytes(files["summary.csv"])
     rows = read(tmp_path / "s.csv")
     assert list(rows[0]) == [
