@@ -12,7 +12,6 @@ p99 jitter <= 1 ms. The last line is one JSON object with the figures.
 from __future__ import annotations
 
 import argparse
-import gc
 import json
 import logging
 import os
@@ -26,7 +25,7 @@ import numpy as np
 from mrguide.drivers import Cobot, CobotBusConfig, CycleSample, DriverError
 from mrguide.drivers.config import BusConfig, TimingConfig
 from mrguide.drivers.mock import FirstOrderPlant, SimulatedCobot
-from mrguide.drivers.realtime import freeze_heap, make_current_thread_realtime
+from mrguide.drivers.realtime import make_current_thread_realtime, settled_heap
 from mrguide.drivers.tracking import TrackingRecorder
 from mrguide.robot import load_robot
 
@@ -51,20 +50,16 @@ def run_rate(rate: int, seconds: float, priority: int) -> dict[str, float]:
         lateness.append(sample.lateness)
         tracking(sample)
 
-    freeze_heap()
-    with SimulatedCobot(config, FirstOrderPlant(robot.q_home)) as sim, Cobot(config, robot) as cobot:
+    with settled_heap(), SimulatedCobot(config, FirstOrderPlant(robot.q_home)) as sim, Cobot(config, robot) as cobot:
         cobot.enable()
         q0 = cobot.setpoint
         before = cobot.stats()
         cobot.add_cycle_observer(observe)
         start = time.monotonic()
         k = 0
-        try:
-            while time.monotonic() - start < seconds:
-                k += 1
-                cobot.stream(q0 + AMPLITUDE * np.sin(2 * np.pi * k * cobot.period / PERIOD))
-        finally:
-            gc.unfreeze()
+        while time.monotonic() - start < seconds:
+            k += 1
+            cobot.stream(q0 + AMPLITUDE * np.sin(2 * np.pi * k * cobot.period / PERIOD))
         elapsed = time.monotonic() - start
         cobot.remove_cycle_observer(observe)
         after = cobot.stats()

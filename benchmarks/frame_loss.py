@@ -39,7 +39,7 @@ import numpy as np
 from mrguide.drivers import Cobot, CobotBusConfig, DriverError, load_cobot_bus_config
 from mrguide.drivers.mock import FirstOrderPlant, SimulatedCobot
 from mrguide.drivers.mock.drive_sim import OPERATION_ENABLED
-from mrguide.drivers.realtime import freeze_heap, make_current_thread_realtime
+from mrguide.drivers.realtime import make_current_thread_realtime, settled_heap
 from mrguide.robot import RobotSpec, load_robot
 
 REPO_CONFIG = Path(__file__).resolve().parents[1] / "configs" / "devices" / "cobot_bus.toml"
@@ -160,9 +160,13 @@ def main() -> int:
     config = load_cobot_bus_config(args.config)
     realtime = args.realtime_priority > 0 and make_current_thread_realtime(args.realtime_priority)
     config = replace(config, timing=replace(config.timing, realtime_priority=args.realtime_priority if realtime else 0))
-    t = config.timing
     robot = load_robot()
-    freeze_heap()
+    with settled_heap():
+        return _run(args, config, robot)
+
+
+def _run(args: argparse.Namespace, config, robot) -> int:
+    t = config.timing
     print(
         f"frame-loss benchmark, timing of {args.config}: {t.control_period * 1e3:g} ms cycle, heartbeats every "
         f"{t.heartbeat_ms} ms, consumer time {t.heartbeat_timeout_ms} ms (x{t.heartbeat_timeout_factor:g}), "

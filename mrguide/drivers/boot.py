@@ -97,7 +97,7 @@ def _open(core: CobotCore) -> None:
     vacuum_node = load_node(cfg.vacuum.node_id, cfg.vacuum.eds)
     network = canopen.Network(open_bus(cfg.bus))
     receiver = BusReceiver(network, "master", cfg.timing.realtime_priority)
-    hb = HeartbeatConsumer(cfg.timing.heartbeat_timeout)
+    hb = HeartbeatConsumer(cfg.timing.heartbeat_timeout, receiver.horizon)
     core.drives = [
         Cia402Drive(node, name, JointConversion.from_config(joint), cfg.drives, core.current_sync)
         for node, name, joint in zip(nodes, core.joint_names, cfg.joints)
@@ -106,8 +106,8 @@ def _open(core: CobotCore) -> None:
     receiver.expect(0x000, (2,))  # NMT commands from another master: legal, canopen tracks them
     for node in [*nodes, vacuum_node]:
         network.add_node(node)
-        hb.watch(node)
         nid = node_id_of(node)
+        hb.watch(network, nid)
         node.emcy.add_callback(partial(supervision.on_emcy, core, nid))
         receiver.expect(0x700 + nid, (1,))
         receiver.expect(0x080 + nid, (8,))

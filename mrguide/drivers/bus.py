@@ -3,12 +3,21 @@
 `BusReceiver` replaces canopen's python-can Notifier. Frames with unexpected CAN IDs or lengths, remote
 frames and error frames never reach canopen's callbacks (which would raise on a short frame); they are
 counted and logged instead, so garbage on the bus cannot crash or confuse the driver.
+
+It also keeps the bus's own clock (`horizon`): every frame carries its receive timestamp, taken by the interface
+(the kernel, the adapter, or python-can's virtual bus) when it arrived, not when this thread got round to it. A
+receiver that fell behind — its process stalled by the OS, the garbage collector or another thread holding the
+GIL — still has the frames that arrived meanwhile in its queue; judged on the horizon, a heartbeat waiting there is
+not a lost one, as a device's CAN controller stamps a frame on arrival, not when its firmware reads it.
 """
 
 from __future__ import annotations
 
 import logging
+import queue
+import select
 import threading
+import time
 from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any
@@ -26,6 +35,9 @@ logger = logging.getLogger(__name__)
 CAN_ERR_BUSOFF = 0x40
 #: Log the first few rejected frames at WARNING, then only every this many.
 _LOG_EVERY = 1000
+#: s: a receive timestamp this far from the wall clock is on another epoch (an adapter's own counter): the receiver
+#: then stamps frames itself when it dispatches them.
+FOREIGN_EPOCH_S = 3600.0
 
 
 def frame_bits(dlc: int, extended: bool = False) -> int:
@@ -49,6 +61,23 @@ def open_bus(config: BusConfig) -> can.BusABC:
         raise BusError(f"CAN interface {config.interface!r} is not usable here: {exc}") from exc
     except (can.CanError, OSError, ValueError, TypeError) as exc:
         raise BusError(f"cannot open CAN bus {where}: {exc}") from exc
+
+
+def frames_pending(bus: can.BusABC) -> bool | None:
+    """Whether frames wait in `bus`'s receive queue now; None if the interface cannot tell. A bus may answer itself
+    (a `frames_pending()` method, as the simulator's fault-injecting wrapper does); python-can's virtual bus holds a
+    queue; a selectable interface (SocketCAN, UDP multicast) is polled without waiting."""
+    own = getattr(bus, "frames_pending", None)
+    if callable(own):
+        return own()
+    waiting = getattr(bus, "queue", None)
+    if isinstance(waiting, queue.Queue):
+        return not waiting.empty()
+    try:
+        readable, _, _ = select.select([bus.fileno()], [], [], 0)
+    except (NotImplementedError, OSError, ValueError):
+        return None
+    return bool(readable)
 
 
 @dataclass(frozen=True)
@@ -91,6 +120,17 @@ class BusReceiver:
         self._frames_rx = self._bits_rx = 0
         self._unknown_id = self._bad_length = self._remote = self._error_frames = self._handler_errors = 0
         self._bus_off = False
+        self._horizon = time.time()
+        self._own_stamps = False  # the interface's timestamps are on another epoch: stamp at dispatch
+        self._waiting = False  # the thread waits in recv()
+
+    def horizon(self) -> float:
+        """The bus time (s, the epoch of the frames' receive timestamps) up to which every frame has been dispatched:
+        now while the thread waits on an empty queue, else the latest dispatched frame's timestamp (or when reception
+        last found the bus idle, for an interface that cannot tell whether frames wait)."""
+        if self._waiting and frames_pending(self._bus) is False:
+            self._horizon = max(self._horizon, time.time())  # never back: a later look sees at least this
+        return self._horizon
 
     def expect(self, can_id: int, lengths: Iterable[int] | None) -> None:
         """Accept frames on `can_id` whose data length is in `lengths` (None: any length)."""
@@ -111,16 +151,22 @@ class BusReceiver:
             make_current_thread_realtime(self._priority)
         while not self._stop.is_set():
             try:
+                self._waiting = True
                 msg = self._bus.recv(self.POLL)
+                self._waiting = False
             except Exception as exc:  # whatever the interface raises ends reception; the owner reports it
                 self.exception = exc
                 logger.error("%s: CAN receive failed, reception stopped: %s", self.label, exc)
                 return
             if msg is not None:
                 self.dispatch(msg)
+            else:  # nothing arrived for POLL: every frame up to now has been dispatched
+                self._horizon = max(self._horizon, time.time())
 
     def dispatch(self, msg: can.Message) -> None:
-        """Check one frame and hand it to canopen if it is expected."""
+        """Check one frame and hand it to canopen (with its receive timestamp) if it is expected."""
+        stamp = self._stamp(msg)
+        self._horizon = max(self._horizon, stamp)
         self._frames_rx += 1
         self._bits_rx += frame_bits(len(msg.data), msg.is_extended_id)
         if msg.is_error_frame:
@@ -143,10 +189,21 @@ class BusReceiver:
             self._reject(f"wrong length (expected {sorted(lengths)})", msg, self._bad_length)
             return
         try:
-            self._network.notify(msg.arbitration_id, msg.data, msg.timestamp)
+            self._network.notify(msg.arbitration_id, msg.data, stamp)
         except Exception:  # a callback bug must not stop reception of the next frame
             self._handler_errors += 1
             logger.exception("%s: handler for CAN ID 0x%03X failed", self.label, msg.arbitration_id)
+
+    def _stamp(self, msg: can.Message) -> float:
+        """The frame's receive time on the wall clock's epoch: the interface's timestamp, or now if it has none."""
+        now = time.time()
+        if not self._own_stamps and abs(msg.timestamp - now) > FOREIGN_EPOCH_S:
+            self._own_stamps = True
+            logger.warning(
+                "%s: the interface's receive timestamps are not on the wall clock: stamping frames on dispatch",
+                self.label,
+            )
+        return now if self._own_stamps else msg.timestamp
 
     def _reject(self, why: str, msg: can.Message, count: int) -> None:
         level = logging.WARNING if count <= 10 or count % _LOG_EVERY == 0 else logging.DEBUG

@@ -62,6 +62,7 @@ class CobotCore:
         self.fault_at: float | None = None
         self.sync_index = 0
         self.sync_sent = False
+        self.sync_wall = 0.0  # wall-clock time the last SYNC was sent (the epoch of the frames' receive timestamps)
         self.heartbeat_due = 1
         self.last_rx: dict[int, int] = {}
         self.misses: dict[int, int] = {}

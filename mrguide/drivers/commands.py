@@ -139,11 +139,17 @@ class _SimulatedDemo:
         self._robot = robot
         self._sim = SimulatedCobot(config, FirstOrderPlant(self._robot.q_home))
         self._stop = threading.Event()
+        self._streaming = threading.Event()
         self._thread = threading.Thread(target=self._master, name="mrguide-bus-demo", daemon=True)
 
     def start(self) -> None:
+        """Boot the devices and the master; return once the master streams (the monitor's duration then counts from
+        there, however long a busy machine took to boot: the boot's frames wait in the monitor's queue), or once it
+        gave up."""
         self._sim.start()
         self._thread.start()
+        timing = self._config.timing
+        self._streaming.wait(2 * timing.boot_timeout + timing.enable_timeout)
 
     def stop(self) -> None:
         self._stop.set()
@@ -157,6 +163,7 @@ class _SimulatedDemo:
         try:
             with Cobot(self._config, self._robot) as cobot:
                 cobot.enable()
+                self._streaming.set()
                 q0, t = cobot.setpoint, 0.0
                 while not self._stop.is_set():
                     t += cobot.period
@@ -164,3 +171,5 @@ class _SimulatedDemo:
                     cobot.set_vacuum(bool(np.sin(2 * np.pi * t / DEMO_PERIOD) > 0))
         except DriverError as exc:
             logger.error("monitor demo master stopped: %s", exc)
+        finally:
+            self._streaming.set()

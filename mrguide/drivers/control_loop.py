@@ -87,9 +87,11 @@ class ControlLoop:
             supervision.latch(core, BusError(f"CAN receive failed on {core.bus_name()}: {core.receiver.exception}"))
             return
         supervision.check_feedback(core)
+        sync_wall = time.time()
         if not self._send_frame(self._send_sync):
             core.sync_sent = False
             return
+        core.sync_wall = sync_wall
         lateness = time.monotonic() - tick.deadline
         core.cycle_stats.record(lateness, tick.skipped)
         core.sync_index = tick.index

@@ -1,8 +1,11 @@
 """Heartbeat consumer with a timeout, boot-up detection, and the devices' view of the master's heartbeat.
 
 canopen's `NmtMaster` records each node's last heartbeat state but never times out. This consumer
-hooks the same heartbeat frames (through `nmt.add_heartbeat_callback`), stamps them with a monotonic
-clock and reports nodes whose heartbeat is older than the consumer time.
+subscribes to the same heartbeat frames and judges them on the bus's own clock: a heartbeat counts from its
+receive timestamp, and "now" is the receiver's horizon (`BusReceiver.horizon`). A receive thread that fell behind
+its queue — its process stalled for a moment — thus finds the heartbeats that arrived meanwhile before it judges,
+and reports no node lost that was not; a node that really fell silent is still reported one consumer time after
+its last heartbeat, and a bus on which nothing arrives at all advances the horizon by the receiver's idle polls.
 
 The other direction: the master produces a heartbeat too, and every device consumes it through its
 object 0x1016 (CiA 301), so a device notices a dead or hung master by itself.
@@ -11,14 +14,11 @@ object 0x1016 (CiA 301), so a device notices a dead or hung master by itself.
 from __future__ import annotations
 
 import threading
-import time
 from collections.abc import Callable, Iterable
 from functools import partial
 
-from canopen import RemoteNode
+import canopen
 from canopen.nmt import NMT_STATES
-
-from mrguide.drivers.od_values import node_id_of
 
 #: NMT state reported in a boot-up message.
 BOOTUP = 0
@@ -51,10 +51,15 @@ def nmt_state_name(state: int | None) -> str:
     return "BOOT-UP" if state == BOOTUP else NMT_STATES.get(state, f"UNKNOWN ({state})")
 
 
-class HeartbeatConsumer:
-    """Tracks heartbeat age and NMT state per node; supervision starts when `arm()` is called."""
+#: Heartbeat data: the NMT state in bits 0-6 (bit 7 is the toggle bit of node guarding).
+STATE_MASK = 0x7F
 
-    def __init__(self, timeout: float, clock: Callable[[], float] = time.monotonic) -> None:
+
+class HeartbeatConsumer:
+    """Tracks heartbeat age and NMT state per node; supervision starts when `arm()` is called. `clock` gives the bus
+    time the frames' timestamps are on (the receiver's horizon)."""
+
+    def __init__(self, timeout: float, clock: Callable[[], float]) -> None:
         self.timeout = timeout
         self._clock = clock
         self._last: dict[int, float] = {}
@@ -62,15 +67,16 @@ class HeartbeatConsumer:
         self._bootups: dict[int, threading.Event] = {}
         self._armed = False
 
-    def watch(self, node: RemoteNode) -> None:
-        """Start following the heartbeats of `node`."""
-        nid = node_id_of(node)
-        self._state[nid] = None
-        self._bootups[nid] = threading.Event()
-        node.nmt.add_heartbeat_callback(partial(self._on_heartbeat, nid))
+    def watch(self, network: canopen.Network, node_id: int) -> None:
+        """Start following the heartbeats of node `node_id` on `network`."""
+        self._state[node_id] = None
+        self._bootups[node_id] = threading.Event()
+        network.subscribe(0x700 + node_id, partial(self.on_heartbeat, node_id))
 
-    def _on_heartbeat(self, node_id: int, state: int) -> None:
-        self._last[node_id] = self._clock()
+    def on_heartbeat(self, node_id: int, can_id: int, data: bytes, timestamp: float) -> None:
+        """A heartbeat frame of `node_id` received at `timestamp` (bus time)."""
+        state = data[0] & STATE_MASK
+        self._last[node_id] = max(self._last.get(node_id, timestamp), timestamp)
         self._state[node_id] = state
         if state == BOOTUP:
             self._bootups[node_id].set()

@@ -1,10 +1,13 @@
-"""Real-time hygiene for the control and receive threads: SCHED_FIFO when permitted, a settled heap."""
+"""Real-time hygiene for the control and receive threads: SCHED_FIFO when permitted, a settled heap while the bus runs."""
 
 from __future__ import annotations
 
+import contextlib
 import gc
 import logging
 import os
+import threading
+from collections.abc import Iterator
 
 logger = logging.getLogger(__name__)
 
@@ -28,12 +31,34 @@ def make_current_thread_realtime(priority: int) -> bool:
     return True
 
 
-def freeze_heap() -> None:
-    """Collect garbage now and exempt every object alive from later collections (call before the bus starts).
+_frozen = 0  # nesting depth of settled_heap blocks
+_frozen_lock = threading.Lock()
 
-    A full collection scans everything the process has loaded (torch, pinocchio, EDS dictionaries) with the
-    GIL held, and runs the finalizers of whatever garbage it finds, in the thread that triggered it, which
-    may be the control thread: tens of ms measured here, against a 4 ms cycle and a 100 ms heartbeat.
+
+@contextlib.contextmanager
+def settled_heap() -> Iterator[None]:
+    """Collect garbage now and exempt every object alive from collections while the block runs (enter it before the
+    bus starts); afterwards they are collectable again, and what the block left behind is collected and finalized
+    here, in the thread that leaves it.
+
+    A full collection scans everything the process has loaded (torch, pinocchio, EDS dictionaries) with the GIL held,
+    and runs the finalizers of whatever garbage it finds, in the thread that triggered it, which may be the control
+    thread: tens of ms measured here, against a 4 ms cycle and a 100 ms heartbeat. Frozen for good, though, the heap
+    also keeps every cycle that a frozen object came to reference (a finished run's runtime and its Ruckig objects,
+    reported as leaks when the interpreter exits), so the freeze ends with the block. Blocks nest: the outermost
+    freezes and thaws.
     """
-    gc.collect()
-    gc.freeze()
+    global _frozen
+    with _frozen_lock:
+        _frozen += 1
+        if _frozen == 1:
+            gc.collect()
+            gc.freeze()
+    try:
+        yield
+    finally:
+        with _frozen_lock:
+            _frozen -= 1
+            if _frozen == 0:
+                gc.unfreeze()
+                gc.collect()

@@ -73,8 +73,11 @@ def quick_stop(core: CobotCore) -> bool:
 
 
 def check_feedback(core: CobotCore) -> None:
-    """Every device must have answered the previous SYNC with its status TPDO."""
-    if not core.sync_sent:
+    """Every device must have answered the previous SYNC with its status TPDO. Judged only once the receiver has
+    dispatched what arrived up to when that SYNC went out (its horizon): a receive thread behind its queue has the
+    answers waiting in it, and they are not missing."""
+    assert core.receiver is not None
+    if not core.sync_sent or core.receiver.horizon() < core.sync_wall:
         return
     assert core.vacuum is not None
     limit = core.config.timing.max_missed_feedback

@@ -22,7 +22,7 @@ from mrguide.deploy.session import DeploySummary, run_session
 from mrguide.drivers.cobot import Cobot
 from mrguide.drivers.config import CobotBusConfig
 from mrguide.drivers.mock.sim_cobot import SimulatedCobot, shared_pc_config
-from mrguide.drivers.realtime import freeze_heap
+from mrguide.drivers.realtime import settled_heap
 from mrguide.pose_source import ObjectPoseSource
 from mrguide.robot import load_robot
 from mrguide.twin.env import EnvConfig
@@ -48,18 +48,18 @@ def simulated_cell(env_cfg: EnvConfig, bus_cfg: CobotBusConfig, seed: int = 0) -
     bus_cfg = shared_pc_config(bus_cfg)
     twin_cfg = replace(env_cfg.twin, control_period=bus_cfg.timing.control_period, gui=False)
     spec = load_robot(env_cfg.robot)
-    freeze_heap()
-    scene = Scene(spec, twin_cfg, env_cfg.task.object_height, seed=seed)
-    plant = TwinPlant(scene)
-    sim = SimulatedCobot(bus_cfg, plant, seed=seed)
-    sim.start()
-    try:
-        with Cobot(bus_cfg, spec) as cobot:
-            cobot.enable()
-            yield SimulatedCell(scene, plant, sim, cobot)
-    finally:
-        sim.stop()
-        scene.close()
+    with settled_heap():
+        scene = Scene(spec, twin_cfg, env_cfg.task.object_height, seed=seed)
+        plant = TwinPlant(scene)
+        sim = SimulatedCobot(bus_cfg, plant, seed=seed)
+        sim.start()
+        try:
+            with Cobot(bus_cfg, spec) as cobot:
+                cobot.enable()
+                yield SimulatedCell(scene, plant, sim, cobot)
+        finally:
+            sim.stop()
+            scene.close()
 
 
 def episode_layouts(env_cfg: EnvConfig, episodes: int, seed: int) -> list[tuple[np.ndarray, np.ndarray]]:

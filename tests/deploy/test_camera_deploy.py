@@ -32,7 +32,9 @@ def test_dry_run_with_the_camera_source_places_the_object(run_dry, camera_scene)
     finally:
         poses.close()
     assert summary.stopped is None and summary.successes == 1, summary.text()
-    assert stats.poses >= 3, stats  # not every frame: the arm hides the marker while it reaches for the part
+    # at least the pose the episode waited for after placing the part; how many more the renderer delivers depends on
+    # how fast the machine renders, and the arm hides the marker while it reaches for the part
+    assert stats.poses >= 1 and stats.lost is None, stats
     assert not summary.events().get("pose_lost")
 
 
@@ -69,12 +71,15 @@ def test_camera_dying_mid_episode_ends_it_pose_lost_with_the_log_intact(run_dry,
             source = poses.sources[0]
             lose = source._lose
 
-            def lose_and_go_stale(reason: str) -> None:  # once the capture thread knows, the last pose is stale
-                lose(reason)  # at once, however slowly a busy machine rendered it
+            def lose_and_go_stale(reason: str) -> None:  # once the source knows, the last pose is stale
+                lose(reason)
                 source.max_age = 0.01
 
             source._lose = lose_and_go_stale
             source.frames.read = lambda: None  # the device stops delivering frames
+            # what the capture thread finds at its next read: not whenever a busy machine's renderer finishes the frame
+            # the thread is waiting for now, which may come after the episode has ended
+            lose_and_go_stale("the camera source has no more frames")
             killed.append(True)
         return action
 
@@ -92,8 +97,7 @@ def test_camera_dying_mid_episode_ends_it_pose_lost_with_the_log_intact(run_dry,
         poses.close()
     assert summary.stopped is None
     assert summary.outcomes() == {Outcome.POSE_LOST.value: 1}, summary.text()
-    # slow renders on a busy machine may make a pose stale before the camera dies too: at least the 2 misses
-    assert summary.events()["pose_unavailable"] >= 2 and summary.events()["pose_lost"] == 1
+    assert summary.events()["pose_unavailable"] == 2 and summary.events()["pose_lost"] == 1
     assert stats.lost == "the camera source has no more frames"
     records = read_log(log)
     end = [r for r in records if r["kind"] == "episode_end"]

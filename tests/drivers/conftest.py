@@ -7,7 +7,6 @@ tests that exercise a watchdog set their own values.
 
 from __future__ import annotations
 
-import gc
 import threading
 import time
 import uuid
@@ -20,7 +19,7 @@ import pytest
 from mrguide.drivers import Cobot, CobotBusConfig
 from mrguide.drivers.config import BusConfig, TimingConfig
 from mrguide.drivers.mock import FirstOrderParams, FirstOrderPlant, SimulatedCobot
-from mrguide.drivers.realtime import freeze_heap
+from mrguide.drivers.realtime import settled_heap
 from mrguide.robot import RobotSpec, load_robot
 
 TEST_TIMING = TimingConfig(
@@ -78,7 +77,6 @@ def make_rig(robot: RobotSpec) -> Iterator[Callable[..., Rig]]:
     started: list[Rig] = []
 
     def factory(plant_params: FirstOrderParams | None = None, **timing: float | int) -> Rig:
-        freeze_heap()  # as the deploy does: no collection (and no finalizer of an old rig) in the bus threads
         config = _make_config(**timing)
         plant = FirstOrderPlant(robot.q_home, plant_params)
         sim = SimulatedCobot(config, plant)
@@ -89,12 +87,13 @@ def make_rig(robot: RobotSpec) -> Iterator[Callable[..., Rig]]:
         cobot.connect()
         return rig
 
-    yield factory
-    for rig in started:
-        rig.cobot.disconnect()
-        rig.sim.stop()
-    started.clear()
-    gc.collect()  # this rig's garbage is finalized here, not in the next rig's threads
+    with settled_heap():  # as the deploy does: no collection (and no finalizer of an old rig) in the bus threads
+        yield factory
+        for rig in started:
+            rig.cobot.disconnect()
+            rig.sim.stop()
+        started.clear()
+    # leaving the block collected this rig's garbage here, not in the next rig's threads
 
 
 @pytest.fixture

@@ -16,33 +16,54 @@ HB = 0.05  # heartbeat period of the test rigs (s)
 REPO_TOML = Path(__file__).resolve().parents[2] / "configs" / "devices" / "cobot_bus.toml"
 
 
-class _Node:
-    """Minimal stand-in for canopen's RemoteNode: an id and an NMT object taking heartbeat callbacks."""
+class _Network:
+    """Minimal stand-in for canopen's Network: heartbeat frames of one node, delivered with their bus time."""
 
-    def __init__(self, node_id):
-        self.id = node_id
-        self.nmt = self
+    def __init__(self, now):
+        self.now = now
         self.callbacks = []
 
-    def add_heartbeat_callback(self, callback):
+    def subscribe(self, can_id, callback):
         self.callbacks.append(callback)
+
+    def heartbeat(self, state=5, at=None):
+        self.callbacks[0](0x700, bytes([state]), self.now[0] if at is None else at)
 
 
 def test_consumer_times_out_only_after_arming():
     now = [0.0]
     consumer = HeartbeatConsumer(timeout=0.1, clock=lambda: now[0])
-    node = _Node(7)
-    consumer.watch(node)
+    node = _Network(now)
+    consumer.watch(node, 7)
     now[0] = 5.0
     assert consumer.expired() == []  # not armed: boot and configuration take their time
     consumer.arm()
-    node.callbacks[0](5)
+    node.heartbeat()
     now[0] = 5.09
     assert consumer.expired() == []
     now[0] = 5.11
     assert consumer.expired() == [(7, pytest.approx(0.11))]
-    node.callbacks[0](5)
+    node.heartbeat(5 | 0x80)  # the toggle bit is no part of the state
     assert consumer.expired() == [] and consumer.state(7) == 5
+
+
+def test_a_heartbeat_that_waited_in_the_queue_counts_from_its_arrival_not_from_its_dispatch():
+    """The receive thread fell behind (its process stalled): the bus clock (the receiver's horizon) advances only as
+    the queued frames are dispatched, so the heartbeat that arrived during the stall is found before anything is
+    judged lost; a real silence is still reported one consumer time after the last heartbeat's arrival."""
+    horizon = [10.0]
+    consumer = HeartbeatConsumer(timeout=0.1, clock=lambda: horizon[0])
+    node = _Network(horizon)
+    consumer.watch(node, 3)
+    consumer.arm()
+    node.heartbeat(at=10.0)
+    horizon[0] = 10.08  # dispatched up to here when the stall began; the wall clock runs on to 10.3 meanwhile
+    assert consumer.expired() == []
+    node.heartbeat(at=10.09)  # arrived during the stall, dispatched after it
+    horizon[0] = 10.15
+    assert consumer.expired() == []
+    horizon[0] = 10.2
+    assert consumer.expired() == [(3, pytest.approx(0.11))]
 
 
 @pytest.mark.parametrize("config", [None, REPO_TOML], ids=["defaults", "cobot_bus.toml"])
@@ -53,13 +74,13 @@ def test_real_timing_tolerates_three_lost_heartbeats_and_jitter_but_not_silence(
     timing = load_cobot_bus_config(config).timing
     period, now = timing.heartbeat_period, [0.0]
     consumer = HeartbeatConsumer(timing.heartbeat_timeout, clock=lambda: now[0])
-    node = _Node(3)
-    consumer.watch(node)
+    node = _Network(now)
+    consumer.watch(node, 3)
     consumer.arm()
-    node.callbacks[0](5)
+    node.heartbeat()
     for now[0] in np.arange(0.0, 4.5 * period, 0.001):  # heartbeats 1..3 lost, the 4th 0.5 period late
         assert consumer.expired() == [], f"tripped {now[0] * 1000:.0f} ms after the last heartbeat"
-    node.callbacks[0](5)
+    node.heartbeat()
     now[0] += timing.heartbeat_timeout + 0.001  # then silence
     assert [n for n, _ in consumer.expired()] == [3]
     assert timing.heartbeat_timeout <= 0.2  # a dead PC or node is still noticed within 200 ms

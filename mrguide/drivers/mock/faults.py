@@ -18,6 +18,8 @@ from dataclasses import dataclass
 
 import can
 
+from mrguide.drivers.bus import frames_pending
+
 logger = logging.getLogger(__name__)
 
 HEARTBEAT_BASE = 0x700
@@ -176,6 +178,10 @@ class FaultyBus(can.BusABC):
             self._delay_line.put(msg, time.monotonic() + faults.delay)
             return
         self._inner.send(msg, timeout)
+
+    def frames_pending(self) -> bool | None:
+        """Whether frames wait in the wrapped bus's receive queue (for `BusReceiver.horizon`)."""
+        return frames_pending(self._inner)
 
     def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
         msg = self._inner.recv(timeout)

@@ -2,8 +2,9 @@
 
 All devices share one python-can bus (normally the in-process `virtual` interface, on the channel of the
 cobot's bus config) wrapped in fault injection, and one plant that is stepped once per SYNC from the
-simulator's receive thread (the world's time advances with SYNC). A device clock thread checks the
-devices' heartbeat consumers, which must also fire when no SYNC comes::
+simulator's receive thread (the world's time advances with SYNC). The devices judge the master's heartbeat on the
+bus clock (`BusReceiver.horizon`): at every SYNC, in frame order, and from a device clock thread, which must also
+fire when no SYNC comes::
 
     plant = FirstOrderPlant(robot.q_home)
     with SimulatedCobot(config, plant) as sim:      # devices boot and wait in PRE-OPERATIONAL
@@ -18,7 +19,6 @@ from __future__ import annotations
 import logging
 import math
 import threading
-import time
 from dataclasses import dataclass, replace
 
 import canopen
@@ -166,10 +166,10 @@ class SimulatedCobot:
         return SimStats(self.sync_count, self._receiver.stats(), self.faults.stats())
 
     def _device_clock(self) -> None:
-        assert self.vacuum is not None
-        slaves = (*self.drives, self.vacuum)
+        assert self.vacuum is not None and self._receiver is not None
+        slaves, receiver = (*self.drives, self.vacuum), self._receiver
         while not self._stop_clock.wait(DEVICE_CLOCK_PERIOD):
-            now = time.monotonic()
+            now = receiver.horizon()
             with self.lock:
                 for slave in slaves:
                     if not slave.silent:
@@ -178,6 +178,9 @@ class SimulatedCobot:
     def _on_sync(self, can_id: int, data: bytearray, timestamp: float) -> None:
         assert self.vacuum is not None
         with self.lock:
+            for slave in (*self.drives, self.vacuum):  # in frame order: a SYNC after a silent master finds it lost
+                if not slave.silent:
+                    slave.check_heartbeats(timestamp)
             self.sync_count += 1
             plant = self.plant
             dt = self.drives[0].interpolation_period

@@ -5,14 +5,15 @@ not apply received RPDOs, send TPDOs on SYNC, reboot on NMT reset or consume hea
 does, as a real device would: RPDOs received between two SYNCs are applied at the next SYNC, synchronous
 TPDOs are sent on it. A producer configured in 0x1016 is supervised from its first heartbeat on; when it
 falls silent for the consumer time the device sends EMCY 0x8130 and, if OPERATIONAL, enters
-PRE-OPERATIONAL (the CiA 301 default error behaviour). Process data lives in `image` (keyed by
+PRE-OPERATIONAL (the CiA 301 default error behaviour). As a device's CAN controller stamps a frame on arrival,
+heartbeats are judged on the bus clock (the receiver's horizon): a simulator thread behind its queue does not
+count a heartbeat still waiting in it as lost. Process data lives in `image` (keyed by
 (index, subindex)) and is served to SDO reads and writes too.
 """
 
 from __future__ import annotations
 
 import logging
-import time
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from pathlib import Path
@@ -52,7 +53,7 @@ class _ConsumedHeartbeat:
     """One producer the device supervises (an entry of 0x1016)."""
 
     timeout: float
-    last: float | None = None  # monotonic time of the latest heartbeat; None = not yet started
+    last: float | None = None  # bus time of the latest heartbeat; None = not yet started
     lost: bool = False
 
 
@@ -180,10 +181,11 @@ class SimulatedSlave(ABC):
     def _on_consumed_heartbeat(self, can_id: int, data: bytearray, timestamp: float) -> None:
         entry = self._consumed.get(can_id - 0x700)
         if entry is not None and not self.silent:
-            entry.last, entry.lost = time.monotonic(), False
+            entry.last, entry.lost = max(entry.last or timestamp, timestamp), False
 
     def check_heartbeats(self, now: float) -> None:
-        """Heartbeat consumer time-out: EMCY 0x8130 once per loss, and OPERATIONAL -> PRE-OPERATIONAL."""
+        """Heartbeat consumer time-out at bus time `now`: EMCY 0x8130 once per loss, and OPERATIONAL ->
+        PRE-OPERATIONAL."""
         for producer_id, entry in self._consumed.items():
             if entry.lost or entry.last is None or now - entry.last <= entry.timeout:
                 continue
