@@ -6,6 +6,8 @@ Two readings of "perturbing expert actions with Gaussian noise" (Sec. V-E), chos
   per axis (the simulated MR annotator); the marks are fused and bounded by Eq. 13 as any marks are;
 - "stored": the arm follows the exact marks, and every stored expert action is perturbed afresh after
   Eq. 13 (label noise), so no reference can bound it.
+And beside the paper: "bias", a person's registration bias of σ per axis drawn once per run (on top of the base
+config's person: configs/experiments/noise_robustness_bias.toml).
 """
 
 from __future__ import annotations
@@ -22,7 +24,9 @@ from mrguide.experiments.run_records import RunRecord, read_run
 from mrguide.experiments.runs import TrainRun
 from mrguide.experiments.stats import person_minutes, wilson
 
-READINGS = ("marks", "stored")
+READINGS = ("marks", "stored", "bias")
+#: The config key each reading's σ sets.
+NOISE_KEYS = {"marks": "guidance.noise.sigma", "stored": "guidance.action_noise", "bias": "guidance.noise.bias_sigma"}
 #: The paper's Fig. 7 in words: 75-85 % up to σ = 0.05 m, more than two thirds at 0.07 m.
 PAPER_BAND = (0.75, 0.85, 0.05)
 PAPER_AT_007 = 2 / 3
@@ -51,9 +55,7 @@ class NoiseConfig:
 
 
 def _noise(reading: str, sigma: float) -> dict[str, Any]:
-    if reading == "marks":
-        return {"guidance.noise.sigma": sigma}
-    return {"guidance.action_noise": sigma}
+    return {NOISE_KEYS[reading]: sigma}
 
 
 def runs(cfg: NoiseConfig, base_config: str | None) -> list[TrainRun]:
@@ -95,6 +97,8 @@ def noise_report(cfg: NoiseConfig, recs: dict[float, list[RunRecord]]) -> dict[s
                 "probability": round(len(conv) / len(rs), 3),
                 "median_annotations": int(np.median(ann)) if ann else None,
                 "median_person_minutes": person_minutes(float(np.median(ann))) if ann else None,
+                "median_marks_total": int(np.median([r.annotations_total for r in rs])),
+                "median_person_minutes_total": person_minutes(float(np.median([r.annotations_total for r in rs]))),
                 "ci_low": round(lo, 3),
                 "ci_high": round(hi, 3),
                 "median_step": int(np.median([r.converged.step for r in conv])) if conv else None,
@@ -109,6 +113,7 @@ def noise_report(cfg: NoiseConfig, recs: dict[float, list[RunRecord]]) -> dict[s
             "reached_at_end": int(r.converged.at_end),
             "annotations_until_convergence": r.annotations_until_convergence,
             "annotations_total": r.annotations_total,
+            "person_minutes_total": person_minutes(r.annotations_total),
             "final_eval_success": float(r.eval_rates[-1]),
             "exploring_no_grasp": r.exploring_outcomes["no_grasp"],
             "exploring_dropped": r.exploring_outcomes["dropped"],
@@ -116,10 +121,14 @@ def noise_report(cfg: NoiseConfig, recs: dict[float, list[RunRecord]]) -> dict[s
         for s, rs in recs.items()
         for r in rs
     ]
+    paper = (
+        " Paper: 75–85 % up to 0.05 m, more than two thirds at 0.07 m."
+        if cfg.reading != "bias"
+        else " Not in the paper."
+    )
     md = (
         f"Noise robustness (reading: {cfg.reading}): {cfg.seeds} guided seeds × {cfg.steps} steps per σ; convergence "
-        "within the horizon with the learning-curves rule; 95 % Wilson intervals. Paper: 75–85 % up to 0.05 m, more than "
-        "two thirds at 0.07 m.\n\n"
+        f"within the horizon with the learning-curves rule; 95 % Wilson intervals.{paper}\n\n"
         + report.markdown(
             table,
             [
@@ -132,13 +141,25 @@ def noise_report(cfg: NoiseConfig, recs: dict[float, list[RunRecord]]) -> dict[s
                 ("median_step", "median step"),
                 ("median_annotations", "annotations until convergence (median)"),
                 ("median_person_minutes", "person-minutes until convergence (median)"),
+                ("median_marks_total", "marks per run (median)"),
+                ("median_person_minutes_total", "person-minutes per run (median)"),
                 ("reached_at_end", "reached only at the end"),
             ],
         )
     )
     return {
         "summary.csv": report.csv_bytes(
-            table, ["sigma_m", "seeds", "converged", "probability", "median_annotations", "median_person_minutes"]
+            table,
+            [
+                "sigma_m",
+                "seeds",
+                "converged",
+                "probability",
+                "median_annotations",
+                "median_person_minutes",
+                "median_marks_total",
+                "median_person_minutes_total",
+            ],
         ),
         "runs.csv": report.csv_bytes(runs_rows, list(runs_rows[0])),
         "summary.md": md.encode(),
@@ -147,11 +168,12 @@ def noise_report(cfg: NoiseConfig, recs: dict[float, list[RunRecord]]) -> dict[s
 
 
 def _figure(table: list[dict[str, Any]], reading: str) -> bytes:
-    fig, ax = report.figure(
-        f"Convergence under noisy expert actions (Fig. 7, reading: {reading})",
-        "noise σ per axis (m)",
-        "convergence probability",
+    title = (
+        "Convergence under a person's registration bias"
+        if reading == "bias"
+        else f"Convergence under noisy expert actions (Fig. 7, reading: {reading})"
     )
+    fig, ax = report.figure(title, "noise σ per axis (m)", "convergence probability")
     x = np.array([t["sigma_m"] for t in table])
     p = np.array([t["probability"] for t in table])
     ax.errorbar(
@@ -163,11 +185,17 @@ def _figure(table: list[dict[str, Any]], reading: str) -> bytes:
         capsize=3,
         label="ours, 95 % Wilson CI",
     )
-    lo, hi, up_to = PAPER_BAND
-    ax.fill_between([0.0, up_to], lo, hi, color=report.PAPER_COLOR, alpha=0.2, label="paper: 75–85 % up to 0.05 m")
-    ax.plot(
-        [0.07], [PAPER_AT_007], marker="^", color=report.PAPER_COLOR, linestyle="none", label="paper: > 2/3 at 0.07 m"
-    )
+    if reading != "bias":
+        lo, hi, up_to = PAPER_BAND
+        ax.fill_between([0.0, up_to], lo, hi, color=report.PAPER_COLOR, alpha=0.2, label="paper: 75–85 % up to 0.05 m")
+        ax.plot(
+            [0.07],
+            [PAPER_AT_007],
+            marker="^",
+            color=report.PAPER_COLOR,
+            linestyle="none",
+            label="paper: > 2/3 at 0.07 m",
+        )
     ax.set_ylim(-0.02, 1.02)
     ax.legend(loc="lower left")
     return report.png_bytes(fig)

@@ -65,11 +65,15 @@ class AnnotatorNoise:
     viewpoint: tuple[float, float, float] = DEFAULT_VIEWPOINT  # m, the person's eyes, robot base frame
     outlier_rate: float = 0.0  # fraction of annotations that are gross mistakes (slips)
     outlier_scale: float = 0.15  # m, std per axis of an outlier's error
+    #: Which person of this model marks: 0 the first draw of the bias and of the marks' errors for a training seed,
+    #: another number an independent one (a second panel of people)
+    draw: int = 0
 
     def __post_init__(self) -> None:
         for name in ("sigma", "bias_sigma", "sigma_across", "sigma_along", "outlier_scale"):
             check_number(f"guidance.noise.{name}", getattr(self, name), 0.0, 1.0, " m")
         check_number("guidance.noise.outlier_rate", self.outlier_rate, 0.0, 1.0)
+        check_number("guidance.noise.draw", self.draw, 0, 2**32 - 1, integer=True)
         for field_name, vec, limit in (("bias", self.bias, 1.0), ("viewpoint", self.viewpoint, 100.0)):
             if len(vec) != 3:
                 raise ConfigError(f"guidance.noise.{field_name} = {list(vec)!r}: expected 3 numbers (m)")
@@ -90,7 +94,7 @@ class SimulatedAnnotator:
         self.oracle = OracleExpert(task)
         self.noise = noise
         self.workspace = workspace
-        self.rng = np.random.default_rng(seed)
+        self.rng = np.random.default_rng(seed if not noise.draw or seed is None else [seed, noise.draw])
         self.run_bias = np.asarray(noise.bias, dtype=float)
         if noise.bias_sigma > 0:
             self.run_bias = self.run_bias + self.rng.normal(0.0, noise.bias_sigma, 3)

@@ -119,6 +119,20 @@ REFERENCE_POSES: dict[ReferenceName, Callable[[TaskConfig], ReferencePose]] = {
 
 
 @dataclass(frozen=True)
+class PoseError:
+    """How the cell perceives the part's position in the expert path ([guidance.pose]; zero: as observed). Where a
+    person or a noisy annotator marks, the figures set the HMD pipeline's assumed errors (configs/runs/person.toml):
+    a registration bias drawn once per run and a fresh error per look, as the sim-to-real HMD condition has them."""
+
+    sigma: float = 0.0  # m, std per axis of each look's error (HMD tracking noise: 3 mm in the real cell)
+    bias_sigma: float = 0.0  # m, std per axis of the run's registration bias (HMD calibration error: ~5 mm norm)
+
+    def __post_init__(self) -> None:
+        check_number("guidance.pose.sigma", self.sigma, 0.0, 0.1, " m")
+        check_number("guidance.pose.bias_sigma", self.bias_sigma, 0.0, 0.1, " m")
+
+
+@dataclass(frozen=True)
 class GuidanceConfig:
     """Expert guidance ([guidance] in a TOML config)."""
 
@@ -128,9 +142,9 @@ class GuidanceConfig:
     lam_max: float = 0.9  # λ_max (Table I)
     lam_min: float = 0.1  # λ_min (Table I)
     delta: float = 0.05  # Δ of Eq. 13, m (ours)
-    reference: ReferenceName = (
-        "nominal"  # a^e of Eq. 13: the task model's target, or "running_median" (no ground truth)
-    )
+    #: a^e of Eq. 13: "running_median" (ours), the task model's target shifted by the median offset of the recent
+    #: marks, so no ground truth corrects a mark; or "nominal", the task model's target itself (simulation only).
+    reference: ReferenceName = "running_median"
     cache_tolerance: float = 0.005  # m; observations this close reuse a cached annotation
     reask_after: int = 15  # expert steps on one waypoint without reaching it before it is asked again (0: never; ours)
     #: What a person marks per demonstration. "pick_place" (ours): the grasp point and the set-down point, each
@@ -140,6 +154,11 @@ class GuidanceConfig:
     marks: MarksMode = "pick_place"
     source: ExpertSourceName = "annotator"  # "oracle", "annotator" (oracle + noise), "file", "live" (`--expert live`)
     noise: AnnotatorNoise = field(default_factory=AnnotatorNoise)
+    pose: PoseError = field(default_factory=PoseError)
+    #: m: a kind of mark (pick or place) is not asked again once the median of its marks is known to within this per
+    #: axis (its standard error, from the marks' own spread; at least 3 marks), nor the pick once a grasp sealed
+    #: (ours: a person's time goes where an answer carries information; mark_fusion.py).
+    mark_precision: float = 0.005
     #: m, std per axis of fresh Gaussian noise on every stored expert action, after Eq. 13 (so the bound cannot
     #: filter it), while the arm follows the clean one: Fig. 7's "stored" reading (label noise). Not clipped to
     #: the action box: near its floor — the grasp target lies 2 mm above it — clipping would bias the grasp
@@ -164,6 +183,7 @@ class GuidanceConfig:
         check_number("guidance.cache_tolerance", self.cache_tolerance, 0.0, 0.1, " m")
         check_number("guidance.reask_after", self.reask_after, 0, 10**6, integer=True)
         check_number("guidance.action_noise", self.action_noise, 0.0, 1.0, " m")
+        check_number("guidance.mark_precision", self.mark_precision, 0.0, 1.0, " m")
 
 
 def _either(choices: tuple[str, ...]) -> str:

@@ -1,8 +1,13 @@
 """The expert side of guided training: annotations from a source, cached, re-marked when unreached,
-bounded by Eq. 13, optionally perturbed, and turned into normalized actions."""
+bounded by Eq. 13, optionally perturbed, and turned into normalized actions.
+
+The expert sees the part where the cell would: through the configured pose error (`PerceivedPose`), never the
+twin's exact pose, wherever the part's pose enters the expert path (Eq. 13's reference, the marks' anchors, the
+seals' offsets). A person marks the real part: the source is asked with the observation as it is."""
 
 from __future__ import annotations
 
+import zlib
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import NamedTuple
@@ -13,21 +18,26 @@ from mrguide.config import ConfigError
 from mrguide.policies.annotations import AnnotationCache
 from mrguide.policies.choices import ExpertSourceName, MarksMode
 from mrguide.policies.experts import ANNOTATOR_SEED_OFFSET, ExpertSource, FileExpert, OracleExpert, SimulatedAnnotator
-from mrguide.policies.guidance import GuidanceConfig, ReferencePose, bounded_projection
+from mrguide.policies.guidance import GuidanceConfig, PoseError, ReferencePose, bounded_projection
 from mrguide.policies.mark_fusion import KINDS, MarkFusion, anchor
+from mrguide.policies.pick_place_demo import PickPlaceDemo
 from mrguide.task import (
     G_REQUIRED,
+    OBS_OBJECT,
     OBS_PROGRESS,
+    PICK_PHASE,
+    PLACE_PHASE,
+    Phase,
     TaskConfig,
     annotation_action,
     mark_phase,
     phase_from_progress,
     progress,
-    waypoint_from_mark,
 )
 from mrguide.twin.env import PickPlaceEnv
 
 ACTION_NOISE_SEED_OFFSET = 104_729  # the expert-action noise of training seed s draws from RNG seed s + this
+POSE_SEED_OFFSET = 15_485_863  # the perceived part's registration bias of training seed s: RNG seed (s, this)
 
 
 class ExpertStep(NamedTuple):
@@ -48,6 +58,29 @@ class ExpertCounts:
     reused: int = 0  # expert steps that reused a cached annotation (or a planned mark)
     projected: int = 0  # annotations moved onto the Δ-sphere (Eq. 13)
     remarks: int = 0  # waypoints asked again because the arm did not reach them
+    probes: int = 0  # targets a demonstration's search tried beyond a waypoint that did not complete its phase
+    measured: int = 0  # seals and placements the cell measured (recorded as pick and place measurements)
+
+
+class PerceivedPose:
+    """The part's position as the cell perceives it: the observed one plus a registration bias drawn once per run
+    and an error per look (guidance.pose: both zero, the pose as observed). A look's error is drawn from the run's
+    seed and the observation itself, so the same observation is always seen alike: a resumed run, rebuilding its
+    fused marks from the annotation file, sees every mark's part where the interrupted run saw it."""
+
+    def __init__(self, error: PoseError, seed: int):
+        self.error, self.seed = error, seed
+        rng = np.random.default_rng([seed, POSE_SEED_OFFSET])
+        self.bias = rng.normal(0.0, error.bias_sigma, 3) if error.bias_sigma > 0 else np.zeros(3)
+
+    def __call__(self, obs: np.ndarray) -> np.ndarray:
+        """`obs` with the part where the cell sees it (a float64 copy)."""
+        seen = np.array(obs, dtype=np.float64)
+        seen[OBS_OBJECT] += self.bias
+        if self.error.sigma > 0:
+            look = np.random.default_rng([self.seed, zlib.crc32(np.asarray(obs, dtype=np.float32).tobytes())])
+            seen[OBS_OBJECT] += look.normal(0.0, self.error.sigma, 3)
+        return seen
 
 
 class GuidedExpert:
@@ -77,8 +110,11 @@ class GuidedExpert:
         seed: int = 0,
         marks: MarksMode = "pick_place",
         counts: ExpertCounts | None = None,
+        pose_error: PoseError | None = None,
+        mark_precision: float = 0.0,
     ):
-        """`counts` is what the expert counts into (default: counts of its own)."""
+        """`counts` is what the expert counts into (default: counts of its own). A kind of mark whose fused value is
+        known to within `mark_precision` (m, per axis) is not asked again (`MarkFusion.settled`)."""
         self.source, self.reference, self.cache = source, reference, cache
         self.action_noise = action_noise
         self.rng = np.random.default_rng(seed + ACTION_NOISE_SEED_OFFSET)  # draws only when action_noise > 0
@@ -89,15 +125,25 @@ class GuidedExpert:
         self.marks = marks
         self.fusion = MarkFusion()
         self.counts = counts if counts is not None else ExpertCounts()
+        self.perceived = PerceivedPose(pose_error or PoseError(), seed)
+        self.mark_precision = mark_precision
+        self.demo = PickPlaceDemo(task)
         self._streak = (
             -1,
             0,
         )  # phases: (cache index in use, consecutive expert steps on it); pick_place: (phase, steps)
-        self._plan: dict[int, tuple[int, np.ndarray]] = {}  # pick_place: mark phase → (cache index, fused mark in m)
+        #: pick_place: mark phase → (cache index or None, fused mark in m, the perceived anchor it was fused at)
+        self._plan: dict[int, tuple[int | None, np.ndarray, np.ndarray]] = {}
 
     def begin_demonstration(self) -> None:
         self._streak = (-1, 0)
         self._plan = {}
+        self.demo = PickPlaceDemo(self.task)
+
+    def end_demonstration(self, success: bool) -> None:
+        """A successful demonstration's set-down point is a measurement of the place (pick_place marks)."""
+        if success and self.demo.released is not None and PLACE_PHASE in self._plan:
+            self._measured(PLACE_PHASE, self.demo.released)
 
     def annotation_in_use(self, obs: np.ndarray) -> int | None:
         """The annotation cache record the last `action(obs)` followed (its index in annotations.jsonl), or None."""
@@ -113,6 +159,8 @@ class GuidedExpert:
             return None
         target, grip = waypoint
         clean = annotation_action(obs, target, grip, self.task, self.to_normalized)
+        if self.marks == "pick_place" and self.demo.phase == Phase.RELEASE:
+            clean[3] = -1.0 if self.demo.opens_now(obs, target, clean[3] < 0) else 1.0
         if self.action_noise == 0:
             return ExpertStep(clean, clean)
         noisy = clean.copy()  # the label's motion is perturbed; the vacuum command stays the annotation's
@@ -133,40 +181,73 @@ class GuidedExpert:
             index = hit.index
             self._streak = (index, self._streak[1] + 1 if self._streak[0] == index else 1)
         ann = self.cache.get(index)
-        target = bounded_projection(ann.target, self.reference.reference(obs), self.delta)
+        target = bounded_projection(ann.target, self.reference.reference(self.perceived(obs)), self.delta)
         self.counts.projected += int(not np.allclose(target, ann.target))
         return target, ann.grip
 
     def _pick_place_waypoint(self, obs: np.ndarray) -> tuple[np.ndarray, float] | None:
-        """Two marks per demonstration: the phase's waypoint from the fused pick or place mark, fixed for the
-        demonstration when first needed (so the lift rises above where the cup went down)."""
+        """Two marks per demonstration: the phase's waypoint from the fused pick or place point, fixed for the
+        demonstration when first needed, searched around and corrected by the demonstration (`PickPlaceDemo`)."""
         phase = phase_from_progress(obs[OBS_PROGRESS])
         kind = mark_phase(phase)
+        if phase != self.demo.phase:
+            sealed = self.demo.enter(phase, obs)
+            if sealed is not None:
+                self._measured(PICK_PHASE, sealed)
         steps = self._streak[1] + 1 if self._streak[0] == phase else 1
-        ask_obs = obs.copy()  # the request names the mark's phase: the page asks for the grasp or set-down point
-        ask_obs[OBS_PROGRESS] = progress(kind)
         planned = self._plan.get(kind)
-        due = planned is not None and self.reask_after and steps > self.reask_after
+        due = planned is not None and self.demo.search is None and self.reask_after and steps > self.reask_after
         if planned is None or due:
-            hit = self.cache.lookup(ask_obs) if planned is None else None
-            if hit is not None:
-                self.counts.reused += 1
-                index = hit.index
-            else:
-                self.counts.remarks += int(bool(due))
-                asked = self._ask(ask_obs, planned[0] if planned else None)
-                if asked is None:
-                    return None
-                index = asked
-                steps = 1
-            fused = self.fusion.point(kind, anchor(kind, ask_obs))
-            bounded = bounded_projection(fused, self.reference.reference(ask_obs), self.delta)
-            self.counts.projected += int(not np.allclose(bounded, fused))
-            self._plan[kind] = (index, bounded)
+            if not self._plan_mark(obs, kind, None if planned is None else planned[0]):
+                return None
+            steps = 1
         else:
             self.counts.reused += 1
         self._streak = (phase, steps)
-        return waypoint_from_mark(phase, self._plan[kind][1], self.task), float(G_REQUIRED[phase])
+        probe = self.demo.probe
+        target = self.demo.next_target(self._plan[kind][1])
+        if target is None:  # nothing around the waypoint completes the phase: the person marks again
+            self.counts.remarks += 1
+            if not self._plan_mark(obs, kind, self._plan[kind][0], force=True):
+                return None
+            self.demo.restart_phase()
+            target = self.demo.next_target(self._plan[kind][1])
+            assert target is not None
+        elif self.demo.probe != probe:
+            self.counts.probes += 1
+        return target, float(G_REQUIRED[phase])
+
+    def _plan_mark(self, obs: np.ndarray, kind: int, previous: int | None, force: bool = False) -> bool:
+        """Fix this demonstration's fused `kind` mark: from a cached mark for this observation, from the fusion alone
+        once it is settled, or from a fresh mark (a re-mark of record `previous`); False when nobody answered."""
+        ask_obs = obs.copy()  # the request names the mark's phase: the page asks for the grasp or set-down point
+        ask_obs[OBS_PROGRESS] = progress(kind)
+        hit = self.cache.lookup(ask_obs) if previous is None else None
+        index: int | None
+        if hit is not None:
+            self.counts.reused += 1
+            index = hit.index
+        elif not force and previous is None and self.fusion.settled(kind, self.mark_precision):
+            self.counts.reused += 1
+            index = None
+        else:
+            self.counts.remarks += int(previous is not None and not force)
+            index = self._ask(ask_obs, previous)
+            if index is None:
+                return False
+        seen = self.perceived(ask_obs)
+        at = anchor(kind, seen)
+        fused = self.fusion.point(kind, at)
+        bounded = bounded_projection(fused, self.reference.reference(seen), self.delta)
+        self.counts.projected += int(not np.allclose(bounded, fused))
+        self._plan[kind] = (index, bounded, at)
+        return True
+
+    def _measured(self, kind: int, point: np.ndarray) -> None:
+        """The cell found the pick (a seal) or the place (a success) at `point`, planned from this demonstration's
+        perceived anchor."""
+        self.fusion.add_measurement(kind, self._plan[kind][2], point)
+        self.counts.measured += 1
 
     def _ask(self, obs: np.ndarray, previous: int | None) -> int | None:
         """Ask the source (a re-mark of cache record `previous` if given); the new record's index, or None."""
@@ -178,21 +259,24 @@ class GuidedExpert:
         recorded = getattr(self.source, "recorded", None)
         if recorded is not None:
             recorded(ann)
+        seen = self.perceived(obs)
         if self.marks == "pick_place":
             kind = phase_from_progress(obs[OBS_PROGRESS])
-            self.fusion.add(kind, anchor(kind, obs), ann.target)
-        self.reference.observe(obs, ann)
+            self.fusion.add(kind, anchor(kind, seen), ann.target)
+        self.reference.observe(seen, ann)
         return index
 
     def reload(self) -> None:
         """Rebuild the fused marks and the reference from the cache (after it was loaded on resume), in the order the
         marks were made."""
-        self.fusion = MarkFusion()
+        measured, self.fusion = self.fusion.measured, MarkFusion()
+        self.fusion.measured = measured  # not in the annotation file: the checkpoint restores them (Trainer)
         for obs, ann in self.cache.history():
+            seen = self.perceived(obs)
             kind = phase_from_progress(obs[OBS_PROGRESS])
             if self.marks == "pick_place" and kind in KINDS:
-                self.fusion.add(kind, anchor(kind, obs), ann.target)
-            self.reference.observe(obs, ann)
+                self.fusion.add(kind, anchor(kind, seen), ann.target)
+            self.reference.observe(seen, ann)
 
 
 #: The in-process expert source of each guidance.source, built from (guidance, env, training seed). "live" is not

@@ -8,6 +8,12 @@ is outvoted, and what remains is what all marks share — what the person means,
 registration bias, which no number of marks can reveal (the reward can: see the learner). A median needs no
 bound to outvote a slip; Eq. 13 bounds the fused mark around the reference (GuidedExpert), not each mark
 around the earlier ones, which would let an early wild mark hold every later one back.
+
+Two things end the need for more marks of a kind. A grasp that sealed (`add_seal`) measures the pick offset
+without the person's bias, a part set down where the episode succeeded (`add_placement`) the place offset: from
+then on the pick or the place is the median of those measurements. And once the median of the marks
+is known to within `precision` per axis (its standard error, from the marks' own spread), another mark of that
+kind tells the learner nothing new: `settled` says so, and the person is not asked.
 """
 
 from __future__ import annotations
@@ -17,6 +23,11 @@ import numpy as np
 from mrguide.task import OBS_GOAL, OBS_OBJECT, PICK_PHASE, PLACE_PHASE
 
 KINDS = (PICK_PHASE, PLACE_PHASE)
+#: Marks of a kind before its median may count as settled, however tight they are.
+MIN_MARKS = 3
+#: Standard error of a median per standard deviation per √n (normal errors: √(π/2)), and the normal-consistent
+#: MAD scale: SE ≈ 1.2533 · 1.4826 · MAD / √n.
+_MEDIAN_SE, _MAD_SIGMA = 1.2533, 1.4826
 
 
 def anchor(kind: int, obs: np.ndarray) -> np.ndarray:
@@ -30,11 +41,31 @@ class MarkFusion:
 
     def __init__(self) -> None:
         self.offsets: dict[int, list[np.ndarray]] = {k: [] for k in KINDS}
+        #: Offsets of what the cell measured: the grasp targets that sealed (from the part), the set-down points of
+        #: successful placements (from the goal).
+        self.measured: dict[int, list[np.ndarray]] = {k: [] for k in KINDS}
 
     def estimate(self, kind: int) -> np.ndarray | None:
-        """The fused offset of `kind` (coordinate-wise median), or None before its first mark."""
-        offs = self.offsets[kind]
+        """The fused offset of `kind` (coordinate-wise median of the measurements once there are any, else of the
+        marks), or None before its first mark."""
+        offs = self.measured[kind] or self.offsets[kind]
         return np.median(np.array(offs), axis=0) if offs else None
+
+    def settled(self, kind: int, precision: float) -> bool:
+        """Whether another mark of `kind` would tell nothing new: once the cell measured it; or once MIN_MARKS marks
+        put the median's standard error within `precision` (m) on every axis."""
+        if self.measured[kind]:
+            return True
+        offs = np.array(self.offsets[kind])
+        if len(offs) < MIN_MARKS:
+            return False
+        mad = np.median(np.abs(offs - np.median(offs, axis=0)), axis=0)
+        return bool(np.all(_MEDIAN_SE * _MAD_SIGMA * mad / np.sqrt(len(offs)) <= precision))
+
+    def add_measurement(self, kind: int, at: np.ndarray, point: np.ndarray) -> None:
+        """Record where the cell found the pick (a grasp target that sealed, the part's centre at `at`) or the place
+        (a set-down point of a success, the goal at `at`)."""
+        self.measured[kind].append(np.asarray(point, dtype=float) - np.asarray(at, dtype=float))
 
     def point(self, kind: int, at: np.ndarray) -> np.ndarray:
         """The fused mark (m) for an anchor at `at`; needs at least one mark of `kind`."""

@@ -263,6 +263,8 @@ class Trainer:
             cfg.seed,
             guidance.marks,
             self.counters,
+            guidance.pose,
+            guidance.mark_precision,
         )
         self.trigger = ThresholdTrigger(guidance.r_threshold)
         self.stop_requested = threading.Event()  # set (e.g. on Ctrl-C) to stop at the next step
@@ -390,16 +392,16 @@ class Trainer:
         ret, length = 0.0, 0
         info: dict[str, Any] = {"outcome": None, "is_success": False}
         self.expert.begin_demonstration()
-        remarks = self.counters.remarks
+        attempt = self._attempt()
         while self.counters.step < end and not self.stop_requested.is_set():
             step = self.expert.action(obs)
             if step is None:
                 self.counters.skipped += int(not self.stop_requested.is_set())
                 info = {"outcome": "skipped", "is_success": False}
                 break
-            if self.counters.remarks != remarks:  # the phase's earlier mark did not complete it
+            if self._attempt() != attempt:  # the earlier mark or probe did not complete the phase
                 self._flush_segment(0)
-                remarks = self.counters.remarks
+                attempt = self._attempt()
             phase = phase_from_progress(obs[OBS_PROGRESS])
             obs, r, term, trunc, info = self._env_step(step.executed, None, obs, step.stored)
             if info["is_success"] or phase_from_progress(obs[OBS_PROGRESS]) > phase:
@@ -409,7 +411,12 @@ class Trainer:
             if term or trunc:
                 break
         self._flush_segment(0)
+        self.expert.end_demonstration(bool(info["is_success"]))
         self._log(self._row("expert", ret, bool(info["is_success"]), info["outcome"], length, False))
+
+    def _attempt(self) -> tuple[int, int]:
+        """Which attempt at its phase the demonstration is on: a new mark or a new probe of the search starts one."""
+        return self.counters.remarks, self.counters.probes
 
     # -- bookkeeping -----------------------------------------------------------------------------
     def update_ms(self) -> float:
@@ -499,6 +506,7 @@ class Trainer:
             "torch_rng": torch.get_rng_state(),
             "annotator_rng": None if source_rng is None else source_rng.bit_generator.state,
             "expert_noise_rng": self.expert.rng.bit_generator.state,
+            "measured": {str(k): [m.tolist() for m in v] for k, v in self.expert.fusion.measured.items()},
             "counters": dataclasses.asdict(dataclasses.replace(self.counters, wall_s=self.wall_s())),
         }
         return write_checkpoint(self.out / "checkpoint.pt", state)
@@ -529,6 +537,9 @@ class Trainer:
             if state["annotator_rng"] is not None:
                 self._source_rng().bit_generator.state = state["annotator_rng"]
             self.expert.rng.bit_generator.state = state["expert_noise_rng"]
+            self.expert.fusion.measured = {
+                int(k): [np.array(m, dtype=float) for m in v] for k, v in state["measured"].items()
+            }
             self.counters.restore(state["counters"])
         except (KeyError, TypeError, RuntimeError, ValueError, AttributeError, dacite.DaciteError) as exc:
             raise CheckpointError(f"{path}: does not fit this trainer: {type(exc).__name__}: {exc}") from exc

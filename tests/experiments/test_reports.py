@@ -90,6 +90,8 @@ def test_noise_summary_with_wilson_intervals(tmp_path):
         "probability",
         "median_annotations",
         "median_person_minutes",
+        "median_marks_total",
+        "median_person_minutes_total",
     ]
     assert [(r["sigma_m"], r["converged"], r["probability"]) for r in rows] == [
         ("0.0", "2", "1.0"),

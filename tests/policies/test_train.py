@@ -206,8 +206,9 @@ def test_every_demonstration_restarts_its_episode(tmp_path):
 
 
 def test_a_demonstration_is_expert_data_only_for_the_phases_it_completed(tmp_path):
-    """A mark that puts the cup beside the part never completes the grasp: the approach it completed is stored
-    with ζ = 1, the grasp attempt with ζ = 0 (the critic learns from it, the BC term never clones it)."""
+    """A mark that puts the cup beside the part does not seal: those grasp attempts are stored with ζ = 0 (the critic
+    learns from them, the BC term never clones them); the search's probe that sealed, and the phases completed
+    after it, with ζ = 1."""
     from mrguide.policies.annotations import Annotation
     from mrguide.task import oracle_target, phase_from_progress
 
@@ -225,13 +226,12 @@ def test_a_demonstration_is_expert_data_only_for_the_phases_it_completed(tmp_pat
     tr = Trainer(tc, dataclasses.replace(dc, hidden=(16, 16)), gc, ec, tmp_path / "f", lambda env: BesideThePart())
     try:
         tr.run(stop_at=300)
-        expert_phases = {phase_from_progress(p) for p in tr.replay.expert.state()["obs"][:, 4]}
         agent = tr.replay.agent.state()
         held_back = [phase_from_progress(p) for p, a in zip(agent["obs"][:, 4], agent["act"][:, 3]) if a > 0]
     finally:
         tr.close()
-    assert tr.counters.interventions > 0 and expert_phases == {0}  # only approaches were completed
-    assert 1 in held_back  # the vacuum-on grasp attempts are agent data
+    assert tr.counters.interventions > 0 and tr.counters.probes > 0 and tr.counters.measured > 0
+    assert 1 in held_back  # the vacuum-on grasp attempts that did not seal are agent data
 
 
 def test_terminal_transitions_stop_bootstrapping_truncated_ones_do_not(tmp_path):

@@ -1,0 +1,97 @@
+"""One pick-and-place demonstration's course through the five phases, from its fused pick and place points.
+
+Each phase's waypoint follows from its point (`task.waypoint_from_mark`), moved by what the demonstration's earlier
+phases found: an approach completed beside the pick point moves the grasp there, the lift rises above where the
+grasp sealed, a transport completed beside the place point moves the release there. Where a waypoint does not
+complete its phase, the demonstration searches around it (`waypoint_search`). The release sets the part down
+towards `RELEASE_DEPTH` below the place point and opens the vacuum where the descent stops (the part stands on the
+table), as a cell program sets a part down: a place mark above or below where the part comes to rest releases it
+where it stands.
+
+What a demonstration measured goes back to the fusion (`MarkFusion.add_seal`, `add_placement`): where the grasp
+sealed and where the part was set down, each relative to its perceived anchor.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from mrguide.policies.waypoint_search import PATTERNS, WaypointSearch
+from mrguide.task import OBS_TCP, PICK_PHASE, PLACE_PHASE, Phase, TaskConfig, mark_phase, waypoint_from_mark
+
+#: m: a release descent that moved less than this in one decision has stopped: the part stands on the table.
+CONTACT_STALL = 0.002
+#: m: a grasp repeated where one sealed goes this far below where the cup rested on the part (ours; the scripted grasp
+#: presses 3 mm, the seal holds within 6 mm).
+SEAL_PRESS = 0.005
+#: m: the release sets down this far below the place point and opens where the descent stops (ours).
+RELEASE_DEPTH = 0.005
+
+
+class PickPlaceDemo:
+    """The phase, the search and the corrections of the demonstration in progress."""
+
+    def __init__(self, task: TaskConfig) -> None:
+        self.task = task
+        self.phase = -1
+        self.search: WaypointSearch | None = None
+        #: m, the lateral corrections the demonstration's searches found so far, per kind of mark
+        self.shift: dict[int, np.ndarray] = {PICK_PHASE: np.zeros(3), PLACE_PHASE: np.zeros(3)}
+        self.sealed: np.ndarray | None = None  # the grasp target that sealed (m)
+        self.released: np.ndarray | None = None  # where the part was set down (m)
+        self._last_z: float | None = None  # the TCP height at the last release decision
+        self._descending = False  # the release descent has begun (the TCP went down by CONTACT_STALL at least once)
+        self._waypoint = np.zeros(3)  # this phase's waypoint before the search moved it
+
+    def enter(self, phase: int, obs: np.ndarray) -> np.ndarray | None:
+        """The observation `obs` is in `phase` now: close the phase it left. Where the grasp sealed: laterally the probe
+        that sealed (the commanded point: a measured one fed back as the next target would let the arm's lag
+        accumulate), in height `SEAL_PRESS` below where the cup is now, resting on the part's top; it is returned once
+        the part was held through the lift (a grasp at the seal's edge drops it)."""
+        sealed = None
+        tcp = np.asarray(obs[OBS_TCP], dtype=float)
+        if phase == Phase.TRANSPORT and self.phase == Phase.LIFT and self.sealed is not None:
+            sealed = self.sealed
+        if phase > self.phase >= 0 and self.search is not None:
+            if self.phase == Phase.GRASP:
+                self.sealed = self._waypoint + self.search.pressed_offset()
+                self.sealed[2] = tcp[2] - SEAL_PRESS
+            elif self.search.probe > 0:  # approach, transport completed by the search: where, against the waypoint
+                self.shift[mark_phase(self.phase)][:2] += tcp[:2] - self._waypoint[:2]
+        self.phase = phase
+        self.restart_phase()
+        return sealed
+
+    def restart_phase(self) -> None:
+        """Search this phase afresh (entering it, or after a new mark)."""
+        pattern = PATTERNS.get(self.phase)
+        self.search = WaypointSearch(pattern) if pattern is not None else None
+
+    @property
+    def probe(self) -> int:
+        return self.search.probe if self.search is not None else 0
+
+    def next_target(self, point: np.ndarray) -> np.ndarray | None:
+        """The target (m) for this decision from this phase's fused point; None when its search found nothing."""
+        kind = mark_phase(self.phase)
+        if self.phase == Phase.LIFT and self.sealed is not None:
+            point = self.sealed
+        else:
+            point = np.asarray(point, dtype=float) + self.shift[kind]
+        waypoint = self._waypoint = waypoint_from_mark(self.phase, point, self.task)
+        if self.phase == Phase.RELEASE:
+            waypoint = waypoint - [0.0, 0.0, RELEASE_DEPTH]
+        return self.search.next_target(waypoint) if self.search is not None else waypoint
+
+    def opens_now(self, obs: np.ndarray, target: np.ndarray, opening: bool) -> bool:
+        """Release: whether the vacuum opens at this decision — at the waypoint (`opening`, the annotation's rule) or
+        where the descent towards it stopped short; the first opening is where the part was set down."""
+        z = float(obs[OBS_TCP][2])
+        drop = np.inf if self._last_z is None else self._last_z - z
+        stalled = self._descending and drop < CONTACT_STALL and z - float(target[2]) > 0.5 * self.task.epsilon
+        self._descending = self._descending or CONTACT_STALL <= drop < np.inf
+        self._last_z = z
+        opens = opening or stalled
+        if opens and self.released is None:  # where the part comes to rest: the contact's height, not a lag's
+            self.released = np.array([target[0], target[1], z])
+        return opens

@@ -1,0 +1,103 @@
+"""Where a person's waypoint does not complete its phase, the demonstration searches, as a cell program would.
+
+A person's marks carry a bias of their own (registration, depth): a pick mark 11 mm above the part's top or
+15 mm beside its centre never seals (the cup's lip must rest within 6 mm of the top and 13 mm of the centre per
+axis), and a waypoint more than ε = 2 cm from the task model's target never completes its phase. The cell says
+which: the vacuum generator's part signal completes the grasp, the part's pose the other phases. So a
+demonstration holds each waypoint for its phase's first dwell, then tries the points of a 3 × 3 grid around it
+(`Pattern`), nearest first, until the phase completes:
+
+- approach: a lateral grid at the approach height;
+- grasp: each grid point first from `clearance` above, then pressed `depth` below the pick point (the workspace
+  floor stops it), the way a suction cell's grasp searches for "vacuum OK";
+- transport: a lateral grid at the lift height.
+
+Lift and release have no search: the lift rises above where the cup sealed, and the release sets down under where
+the transport arrived (a part set down on the table before the vacuum opens is released where it stands; see
+`GuidedExpert`). Where a phase completed is a measurement of the person's bias, free of it: the guided expert
+moves the rest of the demonstration by it, and records where the grasp sealed and where the part was placed.
+A grid's pitch is below the width of what completes its phase, so a waypoint off by up to 1.5 pitches per axis
+lies within some probe's reach.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from mrguide.task import Phase
+
+#: Offsets of the probes in units of the pitch (lateral) and of the vertical step, nearest first: the grasp's and the
+#: transport's grid; the approach's tries below and above the waypoint before the grid.
+GRID = ((0, 0, 0), (1, 0, 0), (0, 1, 0), (-1, 0, 0), (0, -1, 0), (1, 1, 0), (-1, 1, 0), (-1, -1, 0), (1, -1, 0))
+APPROACH_GRID = ((0, 0, -1), (0, 0, 1), *GRID[1:])
+
+
+@dataclass(frozen=True)
+class Pattern:
+    """How one phase searches: dwell on the waypoint, then a grid of probes of `hover` + `press` decisions each."""
+
+    first_dwell: int  # decisions on the waypoint itself (the scripted expert completes each phase within 7)
+    pitch: float  # m, spacing of the grid (laterally, and vertically where the grid has vertical offsets)
+    hover: int  # decisions `clearance` above each probe, so that moving over does not push the part
+    press: int  # decisions at each probe, `depth` below the waypoint
+    depth: float = 0.0  # m
+    clearance: float = 0.0  # m
+    grid: tuple[tuple[int, int, int], ...] = GRID
+
+
+#: The searches (ours). The grasp's pitch is below twice the cup's 13 mm lateral seal margin; the approach's and
+#: the transport's below √2 × the 2 cm phase tolerance ε, less for a waypoint also off in height.
+PATTERNS: dict[int, Pattern] = {
+    Phase.APPROACH: Pattern(first_dwell=8, pitch=0.024, hover=0, press=2, grid=APPROACH_GRID),
+    Phase.GRASP: Pattern(first_dwell=8, pitch=0.02, hover=1, press=2, depth=0.02, clearance=0.01),
+    Phase.TRANSPORT: Pattern(first_dwell=9, pitch=0.025, hover=0, press=2),
+}
+
+
+class WaypointSearch:
+    """The targets of one phase of one demonstration, one per decision, around a fixed waypoint."""
+
+    def __init__(self, pattern: Pattern) -> None:
+        self.pattern = pattern
+        self.steps = 0
+        self.offset = np.zeros(3)  # the last target's offset from the waypoint (m)
+
+    @property
+    def probe(self) -> int:
+        """The probe the last target belonged to: 0 for the waypoint itself, 1.. for the grid's points."""
+        p = self.pattern
+        if self.steps <= p.first_dwell:
+            return 0
+        return 1 + (self.steps - 1 - p.first_dwell) // (p.hover + p.press)
+
+    def pressed_offset(self) -> np.ndarray:
+        """The offset from the waypoint of the last pressed target: the probe that completed the phase when it is found
+        complete now. A target that only hovered over the next probe cannot have sealed; the part signal comes a
+        decision after the press that made it."""
+        p, last = self.pattern, self.steps - 1
+        if last < p.first_dwell:
+            return np.zeros(3)
+        k, dwell = divmod(last - p.first_dwell, p.hover + p.press)
+        if dwell < p.hover:
+            k -= 1
+        if k < 0:
+            return np.zeros(3)
+        dx, dy, dz = p.grid[min(k, len(p.grid) - 1)]
+        return np.array([dx * p.pitch, dy * p.pitch, dz * p.pitch - p.depth])
+
+    def next_target(self, waypoint: np.ndarray) -> np.ndarray | None:
+        """The target (m) for this decision, or None once every probe was tried without completing the phase."""
+        p, step = self.pattern, self.steps
+        self.steps += 1
+        if step < p.first_dwell:
+            self.offset = np.zeros(3)
+        else:
+            k, dwell = divmod(step - p.first_dwell, p.hover + p.press)
+            if k >= len(p.grid):
+                return None
+            dx, dy, dz = p.grid[k]
+            height = dz * p.pitch + (-p.depth if dwell >= p.hover else p.clearance)
+            self.offset = np.array([dx * p.pitch, dy * p.pitch, height])
+        return np.asarray(waypoint, dtype=float) + self.offset
