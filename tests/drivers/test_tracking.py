@@ -54,14 +54,15 @@ def test_csp_tracks_a_ruckig_trajectory(rig, robot):
     does (the first-order lag of the plant, to 1e-9 rad)."""
     log = _PlantLog(rig.plant)
     recorder, final, path = _run_trajectory(rig, robot)
-    targets = np.array(log.targets)
+    with rig.sim.lock:  # the simulator goes on stepping the plant: one consistent look at the log
+        targets, positions = np.array(log.targets), np.array(log.positions)
     moving = targets[np.any(np.abs(np.diff(targets, axis=0, prepend=targets[:1])) > 0, axis=1)]
     index = [int(np.argmin(np.abs(path - t).max(axis=1))) for t in moving]
     assert all(np.abs(path[i] - t).max() < 1e-6 for i, t in zip(index, moving))  # each one a setpoint streamed
     assert index == sorted(index) and index[-1] == len(path) - 1  # in order, to the end
     assert len(set(index)) > 0.9 * len(path)  # and almost every setpoint arrived on its own SYNC
     alpha = 1.0 - np.exp(-rig.cobot.period / rig.plant.params.joint_time_constant)
-    before, after = np.array(log.positions)[:, 0], np.array(log.positions)[:, 1]
+    before, after = positions[:, 0], positions[:, 1]
     assert np.abs(after - (before + (targets - before) * alpha)).max() < 1e-9
     assert final.max() < FINAL_TOLERANCE
     stats = rig.cobot.stats()
