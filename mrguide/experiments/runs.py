@@ -87,6 +87,18 @@ def sac_config(run: TrainRun, where: str = "experiment"):
     return sc
 
 
+def run_record(run: TrainRun) -> dict[str, Any]:
+    """What a run's run.json holds: first the whole configuration it trains with (every section, defaults and
+    overrides resolved), then the run as the experiment described it."""
+    from mrguide.config import to_dict
+
+    tc, dc, gc, ec = configs(run)
+    effective = {"train": to_dict(tc), "ddpg": to_dict(dc), "guidance": to_dict(gc), "env": to_dict(ec)}
+    if tc.learner == "sac":
+        effective["sac"] = to_dict(sac_config(run))
+    return {"effective_config": effective, **dataclasses.asdict(run)}
+
+
 def is_done(run: TrainRun, root: Path) -> bool:
     return (run.directory(root) / "done").exists()
 
@@ -116,7 +128,7 @@ def train(run: TrainRun, root: str, on_episode: Callable[[dict], None] | None = 
     if not (out / "checkpoint.pt").exists():
         for stale in ("metrics.csv", "eval.csv", "annotations.jsonl"):  # a start that never checkpointed
             (out / stale).unlink(missing_ok=True)
-    (out / "run.json").write_text(json.dumps(dataclasses.asdict(run), indent=1) + "\n")
+    (out / "run.json").write_text(json.dumps(run_record(run), indent=1) + "\n")
     bot, factory = None, None
     if run.client == "bot":
         from mrguide.annotation.bot_session import BotSession

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import json
 import os
 import signal
 import subprocess
@@ -38,6 +39,10 @@ def test_tiny_learning_curves_on_local_ray_then_report_again(tiny_experiment, ca
         for s in (0, 1):
             run = out / v / f"seed{s}"
             assert (run / "done").exists() and steps_of(run)[-1] == 300
+            record = json.loads((run / "run.json").read_text())  # the whole configuration the run trained with, first
+            assert next(iter(record)) == "effective_config" and record["seed"] == s
+            assert record["effective_config"]["guidance"]["enabled"] is (v == "guided")
+            assert record["effective_config"]["guidance"]["reference"] == "running_median"
     summary = (out / "summary.csv").read_text().splitlines()
     assert (
         summary[0]
