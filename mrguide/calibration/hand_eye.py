@@ -85,12 +85,13 @@ def _opencv(A: list[np.ndarray], B: list[np.ndarray]) -> tuple[np.ndarray, np.nd
     """X, Z through cv2.calibrateRobotWorldHandEye (its 'camera' is our marker, its 'world' our HMD frame)."""
     world2cam = [invert(b) for b in B]  # T_marker_hmd
     base2gripper = [invert(a) for a in A]  # T_tcp_base
-    # not in the 5.0.0 bindings nor their stubs (opencv#29565): called only where the installed cv2 has it
-    R_b2w, t_b2w, R_g2c, t_g2c = cv2.calibrateRobotWorldHandEye(  # type: ignore[attr-defined]
+    # not in the 5.0.0 bindings nor their stubs (opencv#29565): called only where the installed cv2 has it. The
+    # translations go as 3 x 1 columns: 5.1 refuses flat vectors (an assertion in gemm), 4.x took either.
+    R_b2w, t_b2w, R_g2c, t_g2c = cv2.calibrateRobotWorldHandEye(  # type: ignore[attr-defined,unused-ignore]
         [m[:3, :3] for m in world2cam],
-        [m[:3, 3] for m in world2cam],
+        [m[:3, 3:4] for m in world2cam],
         [m[:3, :3] for m in base2gripper],
-        [m[:3, 3] for m in base2gripper],
+        [m[:3, 3:4] for m in base2gripper],
         method=cv2.CALIB_ROBOT_WORLD_HAND_EYE_SHAH,
     )
     return invert(make_T(R_g2c, t_g2c.reshape(3))), invert(make_T(R_b2w, t_b2w.reshape(3)))

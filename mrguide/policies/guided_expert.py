@@ -190,7 +190,7 @@ class GuidedExpert:
         demonstration when first needed, searched around and corrected by the demonstration (`PickPlaceDemo`)."""
         phase = phase_from_progress(obs[OBS_PROGRESS])
         kind = mark_phase(phase)
-        if phase != self.demo.phase:
+        if not self.demo.started or phase != self.demo.phase:
             sealed = self.demo.enter(phase, obs)
             if sealed is not None:
                 self._measured(PICK_PHASE, sealed)

@@ -33,7 +33,8 @@ class PickPlaceDemo:
 
     def __init__(self, task: TaskConfig) -> None:
         self.task = task
-        self.phase = -1
+        self.phase: int = Phase.APPROACH
+        self.started = False  # the demonstration has made its first decision
         self.search: WaypointSearch | None = None
         #: m, the lateral corrections the demonstration's searches found so far, per kind of mark
         self.shift: dict[int, np.ndarray] = {PICK_PHASE: np.zeros(3), PLACE_PHASE: np.zeros(3)}
@@ -52,13 +53,13 @@ class PickPlaceDemo:
         tcp = np.asarray(obs[OBS_TCP], dtype=float)
         if phase == Phase.TRANSPORT and self.phase == Phase.LIFT and self.sealed is not None:
             sealed = self.sealed
-        if phase > self.phase >= 0 and self.search is not None:
+        if self.started and phase > self.phase and self.search is not None:
             if self.phase == Phase.GRASP:
                 self.sealed = self._waypoint + self.search.pressed_offset()
                 self.sealed[2] = tcp[2] - SEAL_PRESS
             elif self.search.probe > 0:  # approach, transport completed by the search: where, against the waypoint
                 self.shift[mark_phase(self.phase)][:2] += tcp[:2] - self._waypoint[:2]
-        self.phase = phase
+        self.phase, self.started = phase, True
         self.restart_phase()
         return sealed
 

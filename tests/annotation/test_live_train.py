@@ -159,7 +159,7 @@ def test_ctrl_c_while_waiting_checkpoints_and_resume_asks_nothing_twice(tmp_path
     try:
         seen: list[dict] = []
         try:
-            asyncio.run(_answer_requests(_page_url(proc), 6, seen))  # 6 answered, the 7th left waiting
+            asyncio.run(_answer_requests(_page_url(proc), 1, seen))  # the pick answered, the place left waiting
         except TimeoutError:
             proc.kill()
             raise AssertionError(f"{len(seen)} requests seen; the trainer's stderr: {proc.communicate()[1]}") from None
@@ -170,7 +170,7 @@ def test_ctrl_c_while_waiting_checkpoints_and_resume_asks_nothing_twice(tmp_path
     assert proc.returncode == 130, stderr
     assert "checkpoint" in stderr and (out / "checkpoint.pt").exists()
     first = records(out / "annotations.jsonl")
-    assert [r["request"] for r in first] == [r["id"] for r in seen[:6]]  # every answer on disk, nothing else
+    assert [r["request"] for r in first] == [r["id"] for r in seen[:1]]  # every answer on disk, nothing else
     proc = _start_train(out, "--resume", "--stop-after", "600")
     try:
         url = _page_url(proc)
@@ -186,7 +186,7 @@ def test_ctrl_c_while_waiting_checkpoints_and_resume_asks_nothing_twice(tmp_path
         proc.kill()
     assert proc.returncode == 0 and bot.returncode == 0, (proc.stderr.read(), bot.stderr)
     after = records(out / "annotations.jsonl")
-    assert after[:6] == first and len(after) > 6
+    assert after[:1] == first and len(after) > 1
     keys = [anchor_key(np.array(r["obs"])) for r in after if r["supersedes"] is None]
     for i, k in enumerate(keys):  # no waypoint asked twice (re-marks aside)
         assert all(np.abs(k - other).max() > 0.005 for other in keys[:i])
@@ -221,7 +221,8 @@ def test_a_persons_marks_over_the_wire_in_pick_place_equal_the_in_process_person
         live.close()
         bot.close()
     a, b = records(tmp_path / "local" / "annotations.jsonl"), records(tmp_path / "live" / "annotations.jsonl")
-    assert len(a) == len(b) > 3 and bot.error is None and bot.report.answers == len(b)
+    # a pick and a place at least; then the cell's measurements (a seal, a placement) stand for them
+    assert len(a) == len(b) >= 2 and bot.error is None and bot.report.answers == len(b)
     assert [r["target"] for r in a] == [r["target"] for r in b]
     assert {round(r["obs"][4] * 5) for r in b} == {1, 4}  # only pick (grasp) and place (release) marks were asked
     assert rows(tmp_path / "local" / "metrics.csv") == rows(tmp_path / "live" / "metrics.csv")

@@ -133,10 +133,13 @@ def test_a_recorded_run_exports_to_a_lerobot_dataset(recorded, tmp_path):
     zeta1 = [f for f in data if f["zeta"] == 1]
     np.testing.assert_array_equal(np.array([f["observation.state"] for f in zeta1], np.float32), expert_pool["obs"])
     np.testing.assert_array_equal(np.array([f["action"] for f in zeta1], np.float32), expert_pool["act"])
-    # every demonstration frame names the annotation it followed, as annotations.jsonl has it
+    # every demonstration frame names the annotation it followed, as annotations.jsonl has it, or -1 where it followed
+    # what the cell measured (a seal, a placement) and no mark
     annotations = {r["id"]: r for r in map(json.loads, (rec / "annotations.jsonl").read_text().splitlines())}
-    assert {f["annotation.id"] for f in data} == set(annotations)
+    assert {f["annotation.id"] for f in data} - {-1} == set(annotations)
     for f in data:
+        if f["annotation.id"] == -1:
+            continue
         ann = annotations[f["annotation.id"]]
         assert f["annotation.source"] == ann["source"] == "simulated"
         assert f["annotation.latency_s"] == ann.get("latency_s", -1.0)
