@@ -82,45 +82,75 @@ def records(
     }
 
 
+#: summary.md's columns: (key, header).
+SUMMARY_COLUMNS = (
+    ("sigma_m", "σ (m)"),
+    ("seeds", "seeds"),
+    ("converged", "converged"),
+    ("probability", "probability"),
+    ("ci_low", "95 % CI low"),
+    ("ci_high", "95 % CI high"),
+    ("median_step", "median step"),
+    ("median_annotations", "annotations until convergence (median)"),
+    ("median_person_minutes", "person-minutes until convergence (median)"),
+    ("median_marks_total", "marks per run (median)"),
+    ("median_person_minutes_total", "person-minutes per run (median)"),
+    ("reached_at_end", "reached only at the end"),
+)
+#: summary.csv's columns (issue 16's, then the marks per run).
+SUMMARY_CSV = (
+    "sigma_m",
+    "seeds",
+    "converged",
+    "probability",
+    "median_annotations",
+    "median_person_minutes",
+    "median_marks_total",
+    "median_person_minutes_total",
+)
+
+
+def _level_row(sigma: float, rs: list[RunRecord]) -> dict[str, Any]:
+    """One σ's line of the summary: convergence with its Wilson interval, marks until convergence and per run."""
+    conv = [r for r in rs if r.converged.step is not None]
+    lo, hi = wilson(len(conv), len(rs))
+    ann = [a for r in conv if (a := r.annotations_until_convergence) is not None]  # all of them: converged
+    total = float(np.median([r.annotations_total for r in rs]))
+    return {
+        "sigma_m": sigma,
+        "seeds": len(rs),
+        "converged": len(conv),
+        "probability": round(len(conv) / len(rs), 3),
+        "median_annotations": int(np.median(ann)) if ann else None,
+        "median_person_minutes": person_minutes(float(np.median(ann))) if ann else None,
+        "median_marks_total": int(total),
+        "median_person_minutes_total": person_minutes(total),
+        "ci_low": round(lo, 3),
+        "ci_high": round(hi, 3),
+        "median_step": int(np.median([r.converged.step for r in conv])) if conv else None,
+        "reached_at_end": sum(r.converged.at_end for r in rs),
+    }
+
+
+def _run_row(sigma: float, r: RunRecord) -> dict[str, Any]:
+    return {
+        "sigma_m": sigma,
+        "seed": r.run.seed,
+        "convergence_step": r.converged.step,
+        "reached_at_end": int(r.converged.at_end),
+        "annotations_until_convergence": r.annotations_until_convergence,
+        "annotations_total": r.annotations_total,
+        "person_minutes_total": person_minutes(r.annotations_total),
+        "final_eval_success": float(r.eval_rates[-1]),
+        "exploring_no_grasp": r.exploring_outcomes["no_grasp"],
+        "exploring_dropped": r.exploring_outcomes["dropped"],
+    }
+
+
 def noise_report(cfg: NoiseConfig, recs: dict[float, list[RunRecord]]) -> dict[str, bytes]:
-    """summary.csv (issue 16's columns), runs.csv, summary.md and Fig. 7."""
-    table = []
-    for sigma, rs in recs.items():
-        conv = [r for r in rs if r.converged.step is not None]
-        lo, hi = wilson(len(conv), len(rs))
-        ann = [a for r in conv if (a := r.annotations_until_convergence) is not None]  # all of them: converged
-        table.append(
-            {
-                "sigma_m": sigma,
-                "seeds": len(rs),
-                "converged": len(conv),
-                "probability": round(len(conv) / len(rs), 3),
-                "median_annotations": int(np.median(ann)) if ann else None,
-                "median_person_minutes": person_minutes(float(np.median(ann))) if ann else None,
-                "median_marks_total": int(np.median([r.annotations_total for r in rs])),
-                "median_person_minutes_total": person_minutes(float(np.median([r.annotations_total for r in rs]))),
-                "ci_low": round(lo, 3),
-                "ci_high": round(hi, 3),
-                "median_step": int(np.median([r.converged.step for r in conv])) if conv else None,
-                "reached_at_end": sum(r.converged.at_end for r in rs),
-            }
-        )
-    runs_rows = [
-        {
-            "sigma_m": s,
-            "seed": r.run.seed,
-            "convergence_step": r.converged.step,
-            "reached_at_end": int(r.converged.at_end),
-            "annotations_until_convergence": r.annotations_until_convergence,
-            "annotations_total": r.annotations_total,
-            "person_minutes_total": person_minutes(r.annotations_total),
-            "final_eval_success": float(r.eval_rates[-1]),
-            "exploring_no_grasp": r.exploring_outcomes["no_grasp"],
-            "exploring_dropped": r.exploring_outcomes["dropped"],
-        }
-        for s, rs in recs.items()
-        for r in rs
-    ]
+    """summary.csv, runs.csv, summary.md and Fig. 7 (or, for the bias reading, its figure beside the paper)."""
+    table = [_level_row(sigma, rs) for sigma, rs in recs.items()]
+    runs_rows = [_run_row(s, r) for s, rs in recs.items() for r in rs]
     paper = (
         " Paper: 75–85 % up to 0.05 m, more than two thirds at 0.07 m."
         if cfg.reading != "bias"
@@ -129,38 +159,10 @@ def noise_report(cfg: NoiseConfig, recs: dict[float, list[RunRecord]]) -> dict[s
     md = (
         f"Noise robustness (reading: {cfg.reading}): {cfg.seeds} guided seeds × {cfg.steps} steps per σ; convergence "
         f"within the horizon with the learning-curves rule; 95 % Wilson intervals.{paper}\n\n"
-        + report.markdown(
-            table,
-            [
-                ("sigma_m", "σ (m)"),
-                ("seeds", "seeds"),
-                ("converged", "converged"),
-                ("probability", "probability"),
-                ("ci_low", "95 % CI low"),
-                ("ci_high", "95 % CI high"),
-                ("median_step", "median step"),
-                ("median_annotations", "annotations until convergence (median)"),
-                ("median_person_minutes", "person-minutes until convergence (median)"),
-                ("median_marks_total", "marks per run (median)"),
-                ("median_person_minutes_total", "person-minutes per run (median)"),
-                ("reached_at_end", "reached only at the end"),
-            ],
-        )
+        + report.markdown(table, list(SUMMARY_COLUMNS))
     )
     return {
-        "summary.csv": report.csv_bytes(
-            table,
-            [
-                "sigma_m",
-                "seeds",
-                "converged",
-                "probability",
-                "median_annotations",
-                "median_person_minutes",
-                "median_marks_total",
-                "median_person_minutes_total",
-            ],
-        ),
+        "summary.csv": report.csv_bytes(table, list(SUMMARY_CSV)),
         "runs.csv": report.csv_bytes(runs_rows, list(runs_rows[0])),
         "summary.md": md.encode(),
         "fig7_noise_robustness.png": _figure(table, cfg.reading),

@@ -77,6 +77,28 @@ def fresh_success(run: TrainRun, root: Path) -> float:
     return float(np.mean([r["outcome"] == "success" for r in rows]))
 
 
+def _summary(recs: list[RunRecord], fresh: list[float]) -> dict[str, Any]:
+    """The panel in one line: convergence with its Wilson interval, marks until convergence and per run, fresh success."""
+    conv = [r for r in recs if r.converged.step is not None]
+    marks = [a for r in conv if (a := r.annotations_until_convergence) is not None]  # all of them: converged
+    lo, hi = wilson(len(conv), len(recs))
+    total = float(np.median([r.annotations_total for r in recs]))
+    return {
+        "seeds": len(recs),
+        "converged": len(conv),
+        "ci_low": round(lo, 3),
+        "ci_high": round(hi, 3),
+        "median_step": int(np.median([r.converged.step for r in conv])) if conv else None,
+        "median_marks": int(np.median(marks)) if marks else None,
+        "median_person_minutes": person_minutes(float(np.median(marks))) if marks else None,
+        "median_marks_total": int(total),
+        "median_person_minutes_total": person_minutes(total),
+        "fresh_success_median": round(float(np.median(fresh)), 3),
+        "fresh_success_min": round(min(fresh), 3),
+        "fresh_success_max": round(max(fresh), 3),
+    }
+
+
 def person_report(cfg: PersonConfig, root: Path, run_list: list[TrainRun], episodes_per_eval: int) -> dict[str, bytes]:
     """summary.csv, runs.csv, summary.md and a figure of evaluation success against the marks asked."""
     recs = [read_run(r, root, episodes_per_eval) for r in run_list]
@@ -96,25 +118,7 @@ def person_report(cfg: PersonConfig, root: Path, run_list: list[TrainRun], episo
         }
         for rec, f in zip(recs, fresh)
     ]
-    conv = [r for r in recs if r.converged.step is not None]
-    marks = [a for r in conv if (a := r.annotations_until_convergence) is not None]  # all of them: converged
-    lo, hi = wilson(len(conv), len(recs))
-    summary = [
-        {
-            "seeds": len(recs),
-            "converged": len(conv),
-            "ci_low": round(lo, 3),
-            "ci_high": round(hi, 3),
-            "median_step": int(np.median([r.converged.step for r in conv])) if conv else None,
-            "median_marks": int(np.median(marks)) if marks else None,
-            "median_person_minutes": person_minutes(float(np.median(marks))) if marks else None,
-            "median_marks_total": int(np.median([r.annotations_total for r in recs])),
-            "median_person_minutes_total": person_minutes(float(np.median([r.annotations_total for r in recs]))),
-            "fresh_success_median": round(float(np.median(fresh)), 3),
-            "fresh_success_min": round(min(fresh), 3),
-            "fresh_success_max": round(max(fresh), 3),
-        }
-    ]
+    summary = [_summary(recs, fresh)]
     md = (
         f"A person's marks over the wire (the annotation bot): {cfg.seeds} seeds × {cfg.steps} steps; "
         f"convergence with the learning-curves rule; person-minutes at {PERSON_SECONDS_PER_MARK:.0f} s per mark; every final "
