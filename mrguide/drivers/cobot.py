@@ -30,6 +30,9 @@ from mrguide.robot import RobotSpec, load_robot
 
 logger = logging.getLogger(__name__)
 
+#: Control periods past the queue's depth that `stream` waits for room before it calls the cycle stalled.
+STALL_CYCLES = 25
+
 
 class Cobot:
     """Joint drives + vacuum generator of one cobot on one CAN bus.
@@ -122,11 +125,15 @@ class Cobot:
         Refused with SetpointError (nothing queued, nothing sent) unless finite, within the joint limits
         and at most v_max * period away from the previous setpoint. Blocks while the queue is full; raises
         the latched fault if one occurs, NotReadyError if the drives are not enabled, DriverError if the
-        control cycle stalls (queue still full after `timeout`) or hangs (driver lock held).
+        control cycle stalls (queue still full after `timeout`) or hangs (driver lock held). The default
+        timeout is the queue's depth plus `STALL_CYCLES` control periods, or plus `timing.max_missed_feedback`
+        where the bus config tolerates more (the simulated devices on a shared PC): a control thread that
+        skips cycles is judged no stricter than the feedback it would miss.
         """
         core = self._core
         depth = self.setpoint_queue_depth
-        timeout = self.period * (depth + 25) if timeout is None else timeout
+        if timeout is None:
+            timeout = self.period * (depth + max(STALL_CYCLES, self.config.timing.max_missed_feedback))
         try:
             q = setpoint_array(q)
         except (TypeError, ValueError) as exc:

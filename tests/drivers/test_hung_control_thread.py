@@ -74,3 +74,25 @@ def test_stop_and_stream_return_while_the_control_thread_hangs_holding_the_lock(
     # the thread is back: the quick stop requested while it hung is carried out
     assert wait_until(lambda: all(s != OPERATION_ENABLED for s in cobot.status().drive_states.values()))
     assert cobot.status().fault is None and not cobot.status().enabled
+
+
+def test_a_control_cycle_that_stops_taking_setpoints_is_called_stalled_no_sooner_than_feedback_would_be(
+    make_config, robot
+):
+    """The control thread stops (without the lock): `stream` fills the queue, then waits for room as long as the bus
+    config tolerates missing feedback before it calls the cycle stalled (a shared PC's tolerance, not a robot's)."""
+    config = replace(make_config(max_missed_feedback=100), master=MasterConfig(heartbeat=False))
+    with SimulatedCobot(config, FirstOrderPlant(robot.q_home)), Cobot(config, robot) as cobot:
+        cobot.enable()
+        q, release = cobot.setpoint, threading.Event()
+        cobot._loop.cycle = lambda tick: release.wait()  # the next cycle never returns
+        try:
+            time.sleep(0.05)  # the thread is in it
+            for _ in range(cobot.setpoint_queue_depth):
+                cobot.stream(q)
+            finished, error, took = _call_with_deadline(lambda: cobot.stream(q))
+        finally:
+            release.set()
+    wait = config.timing.control_period * (config.timing.setpoint_queue_depth + 100)
+    assert finished and isinstance(error, DriverError) and "stalled" in str(error), error
+    assert took >= wait  # never sooner than the feedback tolerance: a wall-clock lower bound, whatever the load
