@@ -175,7 +175,8 @@ def _figure(table: list[dict[str, Any]], reading: str) -> bytes:
         if reading == "bias"
         else f"Convergence under noisy expert actions (Fig. 7, reading: {reading})"
     )
-    fig, ax = report.figure(title, "noise σ per axis (m)", "convergence probability")
+    x_label = "registration bias σ per axis (m)" if reading == "bias" else "noise σ per axis (m)"
+    fig, ax = report.figure(title, x_label, "convergence probability")
     x = np.array([t["sigma_m"] for t in table])
     p = np.array([t["probability"] for t in table])
     ax.errorbar(
