@@ -240,6 +240,7 @@ def _fig_effort(rs: list[RunRecord], grid: np.ndarray) -> bytes:
     a = np.array([r.asked_on(grid) for r in rs])
     ax.plot(grid, a.mean(0), color="tab:red", label="cumulative annotations asked")
     ax.fill_between(grid, a.min(0), a.max(0), color="tab:red", alpha=0.2)
+    ax.set_ylim(0, max(1.1 * float(a.max()), 1.0))  # from zero: a flat line of two marks is two marks, not a slope
     ax2 = ax.twinx()
     ratio = np.array([r.ratio_on(grid, int(grid[0])) for r in rs])
     ax2.plot(grid, np.nanmean(ratio, 0), color="tab:green", label="realized expert ratio per batch")
