@@ -21,9 +21,6 @@ from mrguide.task import OBS_TCP, PICK_PHASE, PLACE_PHASE, Phase, TaskConfig, ma
 
 #: m: a release descent that moved less than this in one decision has stopped: the part stands on the table.
 CONTACT_STALL = 0.002
-#: m: a grasp repeated where one sealed goes this far below where the cup rested on the part (ours; the scripted grasp
-#: presses 3 mm, the seal holds within 6 mm).
-SEAL_PRESS = 0.005
 #: m: the release sets down this far below the place point and opens where the descent stops (ours).
 RELEASE_DEPTH = 0.005
 
@@ -45,18 +42,21 @@ class PickPlaceDemo:
         self._waypoint = np.zeros(3)  # this phase's waypoint before the search moved it
 
     def enter(self, phase: int, obs: np.ndarray) -> np.ndarray | None:
-        """The observation `obs` is in `phase` now: close the phase it left. Where the grasp sealed: laterally the probe
-        that sealed (the commanded point: a measured one fed back as the next target would let the arm's lag
-        accumulate), in height `SEAL_PRESS` below where the cup is now, resting on the part's top; it is returned once
-        the part was held through the lift (a grasp at the seal's edge drops it)."""
+        """The observation `obs` is in `phase` now: close the phase it left. Where the grasp sealed: the pick point
+        itself when it sealed as it was (no reason to move it); else laterally the probe that sealed (the commanded
+        point: a measured one fed back as the next target would let the arm's lag accumulate), in height where the
+        cup rests on the part now, its lip on the part's top. It is returned once the part was held through the lift
+        (a grasp at the seal's edge drops it)."""
         sealed = None
         tcp = np.asarray(obs[OBS_TCP], dtype=float)
         if phase == Phase.TRANSPORT and self.phase == Phase.LIFT and self.sealed is not None:
             sealed = self.sealed
         if self.started and phase > self.phase and self.search is not None:
             if self.phase == Phase.GRASP:
-                self.sealed = self._waypoint + self.search.pressed_offset()
-                self.sealed[2] = tcp[2] - SEAL_PRESS
+                offset = self.search.pressed_offset()
+                self.sealed = self._waypoint + offset
+                if np.any(offset):  # a probe sealed: press as far as the cup came down on the part
+                    self.sealed[2] = tcp[2]
             elif self.search.probe > 0:  # approach, transport completed by the search: where, against the waypoint
                 self.shift[mark_phase(self.phase)][:2] += tcp[:2] - self._waypoint[:2]
         self.phase, self.started = phase, True

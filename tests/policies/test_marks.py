@@ -10,7 +10,7 @@ from mrguide.policies.experts import AnnotatorNoise, OracleExpert, SimulatedAnno
 from mrguide.policies.guidance import NominalReference
 from mrguide.policies.guided_expert import GuidedExpert
 from mrguide.policies.mark_fusion import MarkFusion
-from mrguide.policies.pick_place_demo import RELEASE_DEPTH, SEAL_PRESS
+from mrguide.policies.pick_place_demo import RELEASE_DEPTH
 from mrguide.robot import Workspace, load_robot
 from mrguide.task import (
     GRASP_PRESS,
@@ -177,7 +177,7 @@ def test_a_pick_place_demonstration_asks_two_marks_and_follows_the_five_waypoint
     expert, _ = _pick_place(src, tmp_path)
     expert.begin_demonstration()
     task = TaskConfig()
-    resting = OBJ + [0.0, 0.0, 0.025 + SEAL_PRESS - GRASP_PRESS]  # where the cup rests on the part's top when sealed
+    resting = OBJ + [0.0, 0.0, 0.025 - GRASP_PRESS]  # where the cup rests when sealed (the mark: its lip pressed in)
     for phase in range(5):
         for _ in range(3):
             tcp = resting if phase == 2 else (0.5, 0.1, 0.3)
@@ -276,8 +276,8 @@ def test_where_the_grasp_sealed_becomes_the_pick_of_later_demonstrations(tmp_pat
     assert expert.counts.measured == 0  # not yet: only a part held through the lift counts
     expert.action(_obs(3, tcp=resting + [0.0, 0.0, 0.1], g=1))
     assert expert.counts.measured == 1
-    measured = expert.fusion.measured[PICK_PHASE][0]  # laterally the probe, in height SEAL_PRESS below the resting cup
-    assert np.allclose(measured, [*(sealed_at - OBJ)[:2], 0.026 - SEAL_PRESS], atol=1e-6)
+    measured = expert.fusion.measured[PICK_PHASE][0]  # laterally the probe, in height as far as the cup came down
+    assert np.allclose(measured, [*(sealed_at - OBJ)[:2], 0.026], atol=1e-6)
     expert.begin_demonstration()
     other = OBJ + [0.04, -0.03, 0.0]
     first = _target_m(expert.action(_obs(1, obj=other)).executed)
