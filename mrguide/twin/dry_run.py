@@ -96,7 +96,7 @@ def dry_run(
     log (its header written; the caller closes it). `on_placed` runs after the object was put in place for
     an episode (e.g. to wait for a fresh HMD estimate). `max_recoveries` safety stops may be followed by a fault
     reset and the next episode (see `run_session`). `runtime_cfg` sets the runtime (its decision period is
-    the twin's).
+    the twin's). The pose source `pose_factory` gives is closed, if it can be, before the cell is torn down.
     """
     spec = load_robot(env_cfg.robot)
     if policy is None:
@@ -128,7 +128,8 @@ def dry_run(
             if on_placed:
                 on_placed()
 
-        with runtime:
+        # the pose source stops before the cell does (a camera whose world closed mid-frame would report itself lost)
+        with contextlib.closing(pose) if hasattr(pose, "close") else contextlib.nullcontext(), runtime:
             return run_session(
                 runtime,
                 [g for _, g in layouts],

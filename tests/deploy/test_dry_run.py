@@ -28,6 +28,26 @@ def test_expert_succeeds_through_the_full_stack(run_dry):
     assert {"episode_start", "decision", "episode_end"} <= kinds
 
 
+def test_the_pose_source_is_closed_while_the_cell_still_runs(run_dry):
+    """A camera reading the twin must stop before the twin does: closed after the cell, it would find its world
+    gone mid-frame and report itself lost at the end of every fault-free run."""
+    closed_with = []
+
+    class Source:
+        def __init__(self, cell):
+            self.cell = cell
+
+        def object_position(self):
+            return self.cell.plant.object_position()
+
+        def close(self):
+            closed_with.append(self.cell.plant.object_position())  # raises once the twin is gone
+
+    summary, _log, _cell = run_dry(episodes=1, seed=1, pose=Source)
+    assert summary.stopped is None and summary.successes == 1, summary.text()
+    assert len(closed_with) == 1
+
+
 @pytest.mark.slow
 def test_expert_success_rate_over_40_episodes(run_dry):
     summary, log, _ = run_dry(episodes=40, seed=2)
