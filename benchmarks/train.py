@@ -15,7 +15,8 @@ import platform
 import tempfile
 import time
 
-from mrguide.policies.train import Trainer, load_sac_config, load_train_config
+from mrguide.policies.train import Trainer
+from mrguide.policies.train_config import load_sac_config, load_train_config
 from mrguide.task import oracle_action
 from mrguide.twin.env import EnvConfig, PickPlaceEnv
 

@@ -10,7 +10,7 @@ from mrguide.calibration.config import load_calibration_config
 from mrguide.config import RUN_SECTIONS, ConfigError, load_section
 from mrguide.deploy.safety import SafetyConfig
 from mrguide.deploy.session import DeployConfig
-from mrguide.policies.train import load_sac_config, load_train_config
+from mrguide.policies.train_config import load_sac_config, load_train_config
 from mrguide.robot import load_robot_config
 from mrguide.twin.markers import TwinCalibrationConfig
 from tests import shipped_files

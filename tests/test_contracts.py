@@ -280,7 +280,7 @@ def test_a_value_outside_its_choices_gets_the_keys_own_message(section, key, val
     from mrguide.config import ConfigError, from_dict
     from mrguide.experiments.peers import PeersConfig
     from mrguide.policies.guidance import GuidanceConfig
-    from mrguide.policies.train import TrainConfig
+    from mrguide.policies.train_config import TrainConfig
 
     cls = {"guidance": GuidanceConfig, "train": TrainConfig, "peers": PeersConfig}[section]
     with pytest.raises(ConfigError) as err:

@@ -51,7 +51,7 @@ class RunResult:
 
 def configs(run: TrainRun, where: str = "experiment"):
     """(TrainConfig, DDPGConfig, GuidanceConfig, EnvConfig) of `run`: its file, its overrides, its seed/steps."""
-    from mrguide.policies.train import load_train_config
+    from mrguide.policies.train_config import load_train_config
 
     tc, dc, gc, ec = load_train_config(run.config)
     tc = dataclasses.replace(tc, total_steps=run.steps, seed=run.seed)
@@ -77,7 +77,7 @@ def configs(run: TrainRun, where: str = "experiment"):
 
 def sac_config(run: TrainRun, where: str = "experiment"):
     """The SACConfig of `run` (the peer learner): its file's [sac] and its "sac.*" overrides."""
-    from mrguide.policies.train import load_sac_config
+    from mrguide.policies.train_config import load_sac_config
 
     sc = load_sac_config(run.config)
     for key, value in run.overrides.items():

@@ -103,7 +103,8 @@ def _refuse(message: str) -> int:
 def cmd_train(args: argparse.Namespace, live: LivePlugin | None = None) -> int:
     """Train (or resume), show progress, export the policy; Ctrl-C checkpoints and exits 130."""
     from mrguide.policies.tensorboard_log import TensorBoardLog, summary_writer_class
-    from mrguide.policies.train import CheckpointError, Trainer, load_sac_config, load_train_config
+    from mrguide.policies.train import CheckpointError, Trainer
+    from mrguide.policies.train_config import load_sac_config, load_train_config
 
     if args.tensorboard:
         try:

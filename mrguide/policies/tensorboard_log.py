@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import ClassVar
 
-from mrguide.policies.train import UPDATE_FIELDS
+from mrguide.policies.train_log import UPDATE_FIELDS
 
 
 def summary_writer_class() -> type:

@@ -18,201 +18,46 @@ from __future__ import annotations
 import csv
 import dataclasses
 import logging
-import os
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any
 
 import dacite
 import numpy as np
 import torch
 
 from mrguide import __version__
-from mrguide.config import ConfigError, check_number, load_section, to_dict
 from mrguide.policies.annotations import AnnotationCache
 from mrguide.policies.checkpoint import CheckpointError, read_checkpoint, with_defaults, write_checkpoint
-from mrguide.policies.choices import LEARNERS, Learner
-from mrguide.policies.ddpg import DDPG, DDPGConfig
+from mrguide.policies.ddpg import DDPGConfig
 from mrguide.policies.experts import ExpertSource
 from mrguide.policies.guidance import REFERENCE_POSES, GuidanceConfig, ThresholdTrigger, expert_ratio
-from mrguide.policies.guided_expert import ExpertCounts, GuidedExpert, make_expert_source
+from mrguide.policies.guided_expert import GuidedExpert, make_expert_source
+from mrguide.policies.learners import Learner, make_learner
 from mrguide.policies.networks import obs_scaling
 from mrguide.policies.replay import TaggedReplay
-from mrguide.policies.sac import SAC, SACConfig
-from mrguide.robot import RobotSpec
+from mrguide.policies.sac import SACConfig
+from mrguide.policies.train_config import TrainConfig, arm_record, run_fingerprint
+from mrguide.policies.train_log import (
+    EVAL_FIELDS,
+    METRIC_FIELDS,
+    UPDATE_FIELDS,
+    MetricSink,
+    TrainerCounters,
+    append_csv,
+    replace_csv,
+)
 from mrguide.task import ACT_DIM, OBS_DIM, OBS_PROGRESS, phase_from_progress
 from mrguide.twin.env import EnvConfig, PickPlaceEnv
 
 log = logging.getLogger(__name__)
 
 
-@dataclass(frozen=True)
-class TrainConfig:
-    """A training run ([train] in a TOML config, with [ddpg] and [guidance] beside it)."""
-
-    total_steps: int = 20_000  # paper: 20k timesteps (Fig. 3)
-    #: "ddpg" (the paper's learner, [ddpg]) or "sac" (the RLPD-style peer, [sac]; `mrguide experiment peers`).
-    learner: Learner = "ddpg"
-    seed: int = 0
-    batch_size: int = 256  # Table I
-    buffer_size: int = 1_000_000  # Table I
-    learning_starts: int = 256  # updates begin once this many transitions are stored (ours)
-    eval_every: int = 1_000  # steps between deterministic evaluations (convergence is judged on them)
-    eval_episodes: int = 10  # per evaluation; each evaluation draws new start states (see Trainer.evaluate)
-    checkpoint_every: int = 2_000  # steps; checkpoints are written at the next episode end
-    torch_threads: int = 1
-
-    def __post_init__(self) -> None:
-        check_number("train.total_steps", self.total_steps, 1, 10**9, integer=True)
-        if self.learner not in LEARNERS:
-            raise ConfigError(f"train.learner = {self.learner!r}: expected one of {', '.join(LEARNERS)}")
-        check_number("train.seed", self.seed, 0, 2**32 - 1, integer=True)
-        check_number("train.batch_size", self.batch_size, 1, 1 << 20, integer=True)
-        check_number("train.buffer_size", self.buffer_size, 1, 10**8, integer=True)
-        check_number("train.learning_starts", self.learning_starts, 1, 10**9, integer=True)
-        check_number("train.eval_every", self.eval_every, 1, 10**9, integer=True)
-        check_number("train.eval_episodes", self.eval_episodes, 1, 10**5, integer=True)
-        check_number("train.checkpoint_every", self.checkpoint_every, 1, 10**9, integer=True)
-        check_number("train.torch_threads", self.torch_threads, 1, 1024, integer=True)
-
-
-def load_sac_config(path: str | Path | None) -> SACConfig:
-    """[sac] of a training config (the peer learner's settings)."""
-    return load_section(SACConfig, path, "sac")
-
-
-def load_train_config(path: str | Path | None) -> tuple[TrainConfig, DDPGConfig, GuidanceConfig, EnvConfig]:
-    return (
-        load_section(TrainConfig, path, "train"),
-        load_section(DDPGConfig, path, "ddpg"),
-        load_section(GuidanceConfig, path, "guidance"),
-        EnvConfig.load(path),
-    )
-
-
-def _arm_record(spec: RobotSpec) -> dict[str, Any]:
-    """The arm a run trains, resolved from its arm file and overrides, in the form checkpoints recorded before
-    arm files (the [robot] values then), so a UR5 run checkpointed before them still resumes."""
-    values = {
-        k: tuple(float(v) for v in getattr(spec, k))
-        for k in ("q_lower", "q_upper", "v_max", "a_max", "j_max", "q_home")
-    }
-    return {
-        "name": spec.name,
-        "tool_offset": float(spec.T_flange_tcp[2, 3]),
-        **values,
-        "workspace": to_dict(spec.workspace),
-    }
-
-
-def _fingerprint(
-    tc: TrainConfig, dc: DDPGConfig, gc: GuidanceConfig, ec: EnvConfig, arm: dict[str, Any], sc: SACConfig
-) -> dict:
-    """The configuration a checkpoint must match to be resumed (the run's length and cadences may change)."""
-    return {
-        "train": {k: v for k, v in to_dict(tc).items() if k not in ("total_steps", "checkpoint_every", "eval_every")},
-        "ddpg": to_dict(dc),
-        "guidance": to_dict(gc),
-        "env": {**to_dict(ec), "robot": arm},
-        "sac": to_dict(sc),
-    }
-
-
 EVAL_SEED_BASE = 1_000_000  # evaluation env seeds start here (training seeds come from the run's RNG)
-#: Update statistics in metrics.csv, each the mean over the updates since the previous row (see DDPG.update):
-#: critic loss, actor loss, mean and max Q_φ1(s, a) of the batch, BC loss (DDPG), temperature (SAC). Empty in a row with no update
-#: since the previous one (before learning_starts; the agent row of a triggered episode, which follows
-#: its expert row).
-UPDATE_FIELDS = ("critic_loss", "actor_loss", "q_mean", "q_max", "bc_loss", "temperature")
-METRIC_FIELDS = (
-    "step",
-    "episode",
-    "kind",
-    "return",
-    "success",
-    "outcome",
-    "length",
-    "triggered",
-    "lambda",
-    "expert_ratio",
-    "asked",
-    "reused",
-    "remarks",
-    "skipped",
-    "wall_s",
-    *UPDATE_FIELDS,
-    "intervened",
-)  # new columns go at the end
-EVAL_FIELDS = ("step", "success_rate", "mean_return")
-
-
-@dataclass
-class TrainerCounters(ExpertCounts):
-    """Every counter of a run, saved in its checkpoint as one dict (`counters`) and restored as a whole: the guided
-    expert's (the base class: the expert counts into this object) and the trainer's own."""
-
-    step: int = 0  # environment steps, agent and expert
-    episode: int = 0  # agent episodes
-    interventions: int = 0  # demonstrations asked: threshold-triggered (Eq. 12) and person-triggered
-    person_interventions: int = 0  # of those, a person stepped in ("Intervene" on the page)
-    skipped: int = 0  # demonstrations dropped because nobody annotated
-    last_ratio: float = 0.0  # the expert share of the last minibatch
-    next_eval: int = 0  # the step at or after which the next evaluation runs
-    evaluations: int = 0  # evaluations so far (they choose the evaluation seeds)
-    wall_s: float = 0.0  # training wall time before this process (s); a checkpoint records it up to its writing
-    update_s: float = 0.0  # wall time spent in updates, minibatch sampling included (s)
-
-    def restore(self, saved: dict[str, Any]) -> None:
-        """Set every counter from a checkpoint's `counters`, in place (the expert holds this object). Each must be
-        there, with its type, and nothing else (KeyError or a dacite error otherwise)."""
-        missing = [f.name for f in dataclasses.fields(self) if f.name not in saved]
-        if missing:
-            raise KeyError(f"counters {', '.join(missing)}")
-        loaded = dacite.from_dict(type(self), saved, dacite.Config(strict=True, cast=[float]))
-        for f in dataclasses.fields(self):
-            setattr(self, f.name, getattr(loaded, f.name))
-
-
 #: A transition τ without its tag ζ: (s, a, r, s', done) (Eq. 7).
 Transition = tuple[np.ndarray, np.ndarray, float, np.ndarray, bool]
-
-
-class MetricSink(Protocol):
-    """Receives what the trainer writes to metrics.csv and eval.csv, as it writes it (e.g. TensorBoardLog)."""
-
-    def row(self, row: dict) -> None: ...
-
-    def evaluation(self, res: dict) -> None: ...
-
-
-def _append_csv(path: Path, fields: tuple[str, ...], row: dict) -> None:
-    """Append one row (with a header when the file is new); each row is on disk when this returns."""
-    new = not path.exists()
-    with path.open("a", newline="") as fh:
-        w = csv.DictWriter(fh, fields)
-        if new:
-            w.writeheader()
-        w.writerow(row)
-
-
-def _replace_csv(path: Path, fields: tuple[str, ...], rows: list[dict]) -> None:
-    """Rewrite `path` with `rows` (and a header) atomically: a temporary file beside it, fsync'd, then renamed over
-    it. An interruption leaves the old file or the new one, never part of either."""
-    tmp = path.with_name(path.name + ".tmp")
-    try:
-        with tmp.open("w", newline="") as fh:
-            w = csv.DictWriter(fh, fields)
-            w.writeheader()
-            w.writerows(rows)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
 
 
 class Trainer:
@@ -240,11 +85,8 @@ class Trainer:
         torch.set_num_threads(cfg.torch_threads)
         self.env = PickPlaceEnv(env_cfg)
         scaling = obs_scaling(self.env.workspace)
-        self.agent: DDPG | SAC = (
-            SAC(*scaling, ACT_DIM, self.sac_cfg, seed=cfg.seed)
-            if cfg.learner == "sac"
-            else DDPG(*scaling, ACT_DIM, ddpg_cfg, seed=cfg.seed)
-        )
+        settings = {"ddpg": ddpg_cfg, "sac": self.sac_cfg}
+        self.agent: Learner = make_learner(cfg.learner, settings, *scaling, ACT_DIM, cfg.seed)
         self.replay = TaggedReplay(cfg.buffer_size, OBS_DIM, ACT_DIM)
         self.rng = np.random.default_rng(cfg.seed)
         self.source = source_factory(self.env) if source_factory else make_expert_source(guidance, self.env, cfg.seed)
@@ -455,7 +297,7 @@ class Trainer:
         }
 
     def _log(self, row: dict) -> None:
-        _append_csv(self.out / "metrics.csv", METRIC_FIELDS, row)
+        append_csv(self.out / "metrics.csv", METRIC_FIELDS, row)
         for sink in self.sinks:
             sink.row(row)
 
@@ -480,7 +322,7 @@ class Trainer:
             returns.append(ret)
         self.counters.evaluations += 1
         res = {"step": self.counters.step, "success_rate": successes / n, "mean_return": float(np.mean(returns))}
-        _append_csv(self.out / "eval.csv", EVAL_FIELDS, res)
+        append_csv(self.out / "eval.csv", EVAL_FIELDS, res)
         for sink in self.sinks:
             sink.evaluation(res)
         log.info("eval at step %d: success %.0f%%", self.counters.step, 100 * res["success_rate"])
@@ -489,8 +331,8 @@ class Trainer:
 
     # -- checkpoints -----------------------------------------------------------------------------
     def _fingerprint(self) -> dict:
-        return _fingerprint(
-            self.cfg, self.ddpg_cfg, self.guidance, self.env_cfg, _arm_record(self.env.robot_spec), self.sac_cfg
+        return run_fingerprint(
+            self.cfg, self.ddpg_cfg, self.guidance, self.env_cfg, arm_record(self.env.robot_spec), self.sac_cfg
         )
 
     def save_checkpoint(self) -> Path:
@@ -519,8 +361,8 @@ class Trainer:
         """Resume from a checkpoint; a corrupt or mismatched file raises CheckpointError."""
         path = Path(path) if path else self.out / "checkpoint.pt"
         state = read_checkpoint(path)
-        defaults = _fingerprint(
-            TrainConfig(), DDPGConfig(), GuidanceConfig(), EnvConfig(), _arm_record(self.env.robot_spec), SACConfig()
+        defaults = run_fingerprint(
+            TrainConfig(), DDPGConfig(), GuidanceConfig(), EnvConfig(), arm_record(self.env.robot_spec), SACConfig()
         )
         stored = with_defaults(state["config"], defaults)
         if stored != self._fingerprint():
@@ -564,7 +406,7 @@ class Trainer:
                 continue
             with path.open() as fh:
                 rows = [r for r in csv.DictReader(fh) if int(r["step"]) <= self.counters.step]
-            _replace_csv(path, METRIC_FIELDS if name == "metrics.csv" else EVAL_FIELDS, rows)
+            replace_csv(path, METRIC_FIELDS if name == "metrics.csv" else EVAL_FIELDS, rows)
 
     def close(self) -> None:
         self.env.close()

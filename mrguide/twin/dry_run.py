@@ -128,8 +128,11 @@ def dry_run(
             if on_placed:
                 on_placed()
 
-        # the pose source stops before the cell does (a camera whose world closed mid-frame would report itself lost)
-        with contextlib.closing(pose) if hasattr(pose, "close") else contextlib.nullcontext(), runtime:
+        with contextlib.ExitStack() as stack:
+            # the pose source stops before the cell does (a camera whose world closed mid-frame would report itself lost)
+            if callable(close := getattr(pose, "close", None)):
+                stack.callback(close)
+            stack.enter_context(runtime)
             return run_session(
                 runtime,
                 [g for _, g in layouts],

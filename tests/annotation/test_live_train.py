@@ -21,7 +21,8 @@ from mrguide.annotation.bot import AnnotationBot, BotOptions
 from mrguide.annotation.live import LiveOptions, LiveSession
 from mrguide.policies.annotations import anchor_key
 from mrguide.policies.experts import AnnotatorNoise
-from mrguide.policies.train import Trainer, load_train_config
+from mrguide.policies.train import Trainer
+from mrguide.policies.train_config import load_train_config
 from tests.annotation.conftest import Client
 
 SIGMA = 0.02

@@ -14,7 +14,8 @@ import pytest
 from mrguide.annotation.headless import HeadlessBrowser, chromium_path
 from mrguide.annotation.live import LiveOptions, LiveSession
 from mrguide.annotation.server import WEB_DIR
-from mrguide.policies.train import Trainer, load_train_config
+from mrguide.policies.train import Trainer
+from mrguide.policies.train_config import load_train_config
 
 
 @pytest.fixture(scope="module")

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from mrguide.policies.train import METRIC_FIELDS
+from mrguide.policies.train_log import METRIC_FIELDS
 
 TINY_TRAINING = """
 [train]

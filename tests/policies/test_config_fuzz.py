@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 from mrguide.config import ConfigError, from_dict
 from mrguide.policies.ddpg import DDPGConfig
 from mrguide.policies.guidance import GuidanceConfig
-from mrguide.policies.train import TrainConfig
+from mrguide.policies.train_config import TrainConfig
 from mrguide.task import TaskConfig
 from mrguide.twin.config import TwinConfig
 

@@ -343,7 +343,8 @@ def test_pick_place_nobody_answering_ends_the_demonstration(tmp_path):
 def test_a_short_guided_run_asks_two_marks_and_then_uses_what_the_cell_measured(tmp_path):
     import dataclasses
 
-    from mrguide.policies.train import Trainer, load_train_config
+    from mrguide.policies.train import Trainer
+    from mrguide.policies.train_config import load_train_config
 
     tc, dc, gc, ec = load_train_config(None)
     tc = dataclasses.replace(tc, total_steps=600, eval_every=10_000, checkpoint_every=10_000)

@@ -7,7 +7,9 @@ import math
 
 import pytest
 
-from mrguide.policies.train import METRIC_FIELDS, UPDATE_FIELDS, Trainer, load_train_config
+from mrguide.policies.train import Trainer
+from mrguide.policies.train_config import load_train_config
+from mrguide.policies.train_log import METRIC_FIELDS, UPDATE_FIELDS
 
 OLD_FIELDS = (
     "step",

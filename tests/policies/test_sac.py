@@ -110,7 +110,8 @@ def test_sac_config_refuses_bad_values(field, value):
 def test_a_short_guided_sac_run_trains_resumes_and_exports(tmp_path):
     from mrguide.deploy.policy import ExportedPolicy
     from mrguide.policies.export import export_actor
-    from mrguide.policies.train import Trainer, load_train_config
+    from mrguide.policies.train import Trainer
+    from mrguide.policies.train_config import load_train_config
 
     tc, dc, gc, ec = load_train_config(None)
     tc = dataclasses.replace(

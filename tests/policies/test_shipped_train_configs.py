@@ -4,7 +4,7 @@ from pathlib import Path
 
 import pytest
 
-from mrguide.policies.train import load_sac_config, load_train_config
+from mrguide.policies.train_config import load_sac_config, load_train_config
 from tests import shipped_files
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -54,9 +54,9 @@ def test_short_guided_training_with_the_ur10(tmp_path, capsys):
 
 def test_checkpoints_record_the_arm_as_before_arm_files():
     """A UR5 run records the arm as the [robot] defaults did, so runs checkpointed before arm files resume."""
-    from mrguide.policies.train import _arm_record
+    from mrguide.policies.train_config import arm_record
 
-    assert _arm_record(load_robot()) == {
+    assert arm_record(load_robot()) == {
         "name": "ur5",
         "tool_offset": 0.1,
         "q_lower": (-2.6, -3.0, -2.8, -3.8, -2.8, -3.2),

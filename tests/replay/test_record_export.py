@@ -15,7 +15,8 @@ import pytest
 
 from mrguide.cli import main
 from mrguide.policies.episode_recorder import FILE_NAME, EpisodeRecorder, read_episodes
-from mrguide.policies.train import Trainer, load_train_config
+from mrguide.policies.train import Trainer
+from mrguide.policies.train_config import load_train_config
 from mrguide.replay.runs import load_run
 
 STEPS = 300

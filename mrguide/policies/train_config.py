@@ -1,0 +1,88 @@
+"""What a training run is configured with: [train] of a TOML config beside the learner's and the guidance's sections,
+and the fingerprint a checkpoint must match to be resumed."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from mrguide.config import ConfigError, check_number, load_section, to_dict
+from mrguide.policies.choices import LEARNERS, Learner
+from mrguide.policies.ddpg import DDPGConfig
+from mrguide.policies.guidance import GuidanceConfig
+from mrguide.policies.sac import SACConfig
+from mrguide.robot import RobotSpec
+from mrguide.twin.env import EnvConfig
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """A training run ([train] in a TOML config, with [ddpg] and [guidance] beside it)."""
+
+    total_steps: int = 20_000  # paper: 20k timesteps (Fig. 3)
+    #: "ddpg" (the paper's learner, [ddpg]) or "sac" (the RLPD-style peer, [sac]; `mrguide experiment peers`).
+    learner: Learner = "ddpg"
+    seed: int = 0
+    batch_size: int = 256  # Table I
+    buffer_size: int = 1_000_000  # Table I
+    learning_starts: int = 256  # updates begin once this many transitions are stored (ours)
+    eval_every: int = 1_000  # steps between deterministic evaluations (convergence is judged on them)
+    eval_episodes: int = 10  # per evaluation; each evaluation draws new start states (see Trainer.evaluate)
+    checkpoint_every: int = 2_000  # steps; checkpoints are written at the next episode end
+    torch_threads: int = 1
+
+    def __post_init__(self) -> None:
+        check_number("train.total_steps", self.total_steps, 1, 10**9, integer=True)
+        if self.learner not in LEARNERS:
+            raise ConfigError(f"train.learner = {self.learner!r}: expected one of {', '.join(LEARNERS)}")
+        check_number("train.seed", self.seed, 0, 2**32 - 1, integer=True)
+        check_number("train.batch_size", self.batch_size, 1, 1 << 20, integer=True)
+        check_number("train.buffer_size", self.buffer_size, 1, 10**8, integer=True)
+        check_number("train.learning_starts", self.learning_starts, 1, 10**9, integer=True)
+        check_number("train.eval_every", self.eval_every, 1, 10**9, integer=True)
+        check_number("train.eval_episodes", self.eval_episodes, 1, 10**5, integer=True)
+        check_number("train.checkpoint_every", self.checkpoint_every, 1, 10**9, integer=True)
+        check_number("train.torch_threads", self.torch_threads, 1, 1024, integer=True)
+
+
+def load_sac_config(path: str | Path | None) -> SACConfig:
+    """[sac] of a training config (the peer learner's settings)."""
+    return load_section(SACConfig, path, "sac")
+
+
+def load_train_config(path: str | Path | None) -> tuple[TrainConfig, DDPGConfig, GuidanceConfig, EnvConfig]:
+    return (
+        load_section(TrainConfig, path, "train"),
+        load_section(DDPGConfig, path, "ddpg"),
+        load_section(GuidanceConfig, path, "guidance"),
+        EnvConfig.load(path),
+    )
+
+
+def arm_record(spec: RobotSpec) -> dict[str, Any]:
+    """The arm a run trains, resolved from its arm file and overrides, in the form checkpoints recorded before
+    arm files (the [robot] values then), so a UR5 run checkpointed before them still resumes."""
+    values = {
+        k: tuple(float(v) for v in getattr(spec, k))
+        for k in ("q_lower", "q_upper", "v_max", "a_max", "j_max", "q_home")
+    }
+    return {
+        "name": spec.name,
+        "tool_offset": float(spec.T_flange_tcp[2, 3]),
+        **values,
+        "workspace": to_dict(spec.workspace),
+    }
+
+
+def run_fingerprint(
+    tc: TrainConfig, dc: DDPGConfig, gc: GuidanceConfig, ec: EnvConfig, arm: dict[str, Any], sc: SACConfig
+) -> dict:
+    """The configuration a checkpoint must match to be resumed (the run's length and cadences may change)."""
+    return {
+        "train": {k: v for k, v in to_dict(tc).items() if k not in ("total_steps", "checkpoint_every", "eval_every")},
+        "ddpg": to_dict(dc),
+        "guidance": to_dict(gc),
+        "env": {**to_dict(ec), "robot": arm},
+        "sac": to_dict(sc),
+    }
