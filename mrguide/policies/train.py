@@ -15,7 +15,6 @@ evaluation), `annotations.jsonl`, `checkpoint.pt`; with a `TensorBoardLog` attac
 
 from __future__ import annotations
 
-import csv
 import dataclasses
 import logging
 import threading
@@ -40,15 +39,8 @@ from mrguide.policies.networks import obs_scaling
 from mrguide.policies.replay import TaggedReplay
 from mrguide.policies.sac import SACConfig
 from mrguide.policies.train_config import TrainConfig, arm_record, run_fingerprint
-from mrguide.policies.train_log import (
-    EVAL_FIELDS,
-    METRIC_FIELDS,
-    UPDATE_FIELDS,
-    MetricSink,
-    TrainerCounters,
-    append_csv,
-    replace_csv,
-)
+from mrguide.policies.train_counters import TrainerCounters
+from mrguide.policies.train_log import EVAL_FIELDS, METRIC_FIELDS, UPDATE_FIELDS, MetricSink, append_csv, truncate_logs
 from mrguide.task import ACT_DIM, OBS_DIM, OBS_PROGRESS, phase_from_progress
 from mrguide.twin.env import EnvConfig, PickPlaceEnv
 
@@ -388,7 +380,7 @@ class Trainer:
         self._t0 = time.perf_counter()
         self._next_checkpoint = (self.counters.step // self.cfg.checkpoint_every + 1) * self.cfg.checkpoint_every
         self._reload_annotations()
-        self._truncate_logs()
+        truncate_logs(self.out, self.counters.step)
 
     def _reload_annotations(self) -> None:
         """All annotations on disk, including those after the checkpoint: none is asked twice."""
@@ -397,16 +389,6 @@ class Trainer:
             n = self.cache.load(path, repair=True)
             self.expert.reload()
             log.info("reloaded %d annotations from %s", n, path)
-
-    def _truncate_logs(self) -> None:
-        """Drop metric rows written after the checkpoint (they will be produced again)."""
-        for name in ("metrics.csv", "eval.csv"):
-            path = self.out / name
-            if not path.exists():
-                continue
-            with path.open() as fh:
-                rows = [r for r in csv.DictReader(fh) if int(r["step"]) <= self.counters.step]
-            replace_csv(path, METRIC_FIELDS if name == "metrics.csv" else EVAL_FIELDS, rows)
 
     def close(self) -> None:
         self.env.close()

@@ -1,18 +1,12 @@
-"""What a training run counts and writes: its counters (saved whole in the checkpoint), the columns of metrics.csv
-and eval.csv, and the sinks that receive the same rows (e.g. TensorBoard)."""
+"""What a training run writes: the columns of metrics.csv and eval.csv, and the sinks that receive the same rows
+(e.g. TensorBoard). Light to import: the TensorBoard log reads its columns without loading the trainer."""
 
 from __future__ import annotations
 
 import csv
-import dataclasses
 import os
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Protocol
-
-import dacite
-
-from mrguide.policies.guided_expert import ExpertCounts
+from typing import Protocol
 
 #: Update statistics in metrics.csv, each the mean over the updates since the previous row (see DDPG.update):
 #: critic loss, actor loss, mean and max Q_φ1(s, a) of the batch, BC loss (DDPG), temperature (SAC). Empty in a row with no update
@@ -39,33 +33,6 @@ METRIC_FIELDS = (
     "intervened",
 )  # new columns go at the end
 EVAL_FIELDS = ("step", "success_rate", "mean_return")
-
-
-@dataclass
-class TrainerCounters(ExpertCounts):
-    """Every counter of a run, saved in its checkpoint as one dict (`counters`) and restored as a whole: the guided
-    expert's (the base class: the expert counts into this object) and the trainer's own."""
-
-    step: int = 0  # environment steps, agent and expert
-    episode: int = 0  # agent episodes
-    interventions: int = 0  # demonstrations asked: threshold-triggered (Eq. 12) and person-triggered
-    person_interventions: int = 0  # of those, a person stepped in ("Intervene" on the page)
-    skipped: int = 0  # demonstrations dropped because nobody annotated
-    last_ratio: float = 0.0  # the expert share of the last minibatch
-    next_eval: int = 0  # the step at or after which the next evaluation runs
-    evaluations: int = 0  # evaluations so far (they choose the evaluation seeds)
-    wall_s: float = 0.0  # training wall time before this process (s); a checkpoint records it up to its writing
-    update_s: float = 0.0  # wall time spent in updates, minibatch sampling included (s)
-
-    def restore(self, saved: dict[str, Any]) -> None:
-        """Set every counter from a checkpoint's `counters`, in place (the expert holds this object). Each must be
-        there, with its type, and nothing else (KeyError or a dacite error otherwise)."""
-        missing = [f.name for f in dataclasses.fields(self) if f.name not in saved]
-        if missing:
-            raise KeyError(f"counters {', '.join(missing)}")
-        loaded = dacite.from_dict(type(self), saved, dacite.Config(strict=True, cast=[float]))
-        for f in dataclasses.fields(self):
-            setattr(self, f.name, getattr(loaded, f.name))
 
 
 class MetricSink(Protocol):
@@ -101,3 +68,14 @@ def replace_csv(path: Path, fields: tuple[str, ...], rows: list[dict]) -> None:
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+
+
+def truncate_logs(out: Path, step: int) -> None:
+    """Drop the rows of metrics.csv and eval.csv in `out` written after `step` (a resumed run writes them again)."""
+    for name, fields in (("metrics.csv", METRIC_FIELDS), ("eval.csv", EVAL_FIELDS)):
+        path = out / name
+        if not path.exists():
+            continue
+        with path.open() as fh:
+            rows = [r for r in csv.DictReader(fh) if int(r["step"]) <= step]
+        replace_csv(path, fields, rows)

@@ -9,7 +9,7 @@ import torch
 
 from mrguide.policies.train import CheckpointError, Trainer
 from mrguide.policies.train_config import load_train_config
-from mrguide.policies.train_log import TrainerCounters
+from mrguide.policies.train_counters import TrainerCounters
 
 
 def make(tmp_path, name, **train):
