@@ -10,7 +10,7 @@ from pathlib import Path
 PACKAGE = Path(__file__).resolve().parents[1] / "mrguide"
 
 #: Each subpackage's layer, lowest first; the package's top-level modules (task, robot, config, ...) are layer 0
-#: and `cli` is above everything. The order of the README: task/robot ◀ motion ◀ drivers ◀ deploy ◀ twin ◀
+#: and `cli` is above everything. The order of the README: task/robot ◀ motion ◀ drivers ◀ deploy ◀ mujoco_cell ◀ twin ◀
 #: policies ◀ annotation, experiments; calibration is used by deploy, twin and annotation; replay reads what
 #: deploy, policies and annotation write.
 LAYERS = {
@@ -18,12 +18,13 @@ LAYERS = {
     "calibration": 1,
     "drivers": 2,
     "deploy": 3,
-    "twin": 4,
-    "policies": 5,
-    "annotation": 6,
-    "experiments": 7,
-    "replay": 7,
-    "cli": 8,
+    "mujoco_cell": 4,
+    "twin": 5,
+    "policies": 6,
+    "annotation": 7,
+    "experiments": 8,
+    "replay": 8,
+    "cli": 9,
 }
 
 

@@ -24,7 +24,7 @@ ROOT = Path(__file__).parents[1]
 BLOCKER = """
 import sys
 
-BLOCKED = ("torch", "pybullet", "pybullet_data", "pybullet_utils")
+BLOCKED = ("torch", "pybullet", "pybullet_data", "pybullet_utils", "mujoco")
 
 
 class _Blocker:
@@ -158,7 +158,9 @@ FORBIDDEN = (
     "pybullet",
     "pybullet_data",
     "pybullet_utils",
+    "mujoco",
     "mrguide.twin",
+    "mrguide.mujoco_cell",
     "mrguide.policies",
     "mrguide.annotation",
     "mrguide.experiments",

@@ -30,6 +30,7 @@ from aiohttp import WSMsgType, web
 
 from mrguide.annotation import page_assets
 from mrguide.annotation.broker import AnnotationBroker
+from mrguide.cell_layout import CUP_RADIUS
 from mrguide.config import ConfigError
 from mrguide.robot import RobotSpec, urdf_with_tool
 
@@ -38,7 +39,6 @@ log = logging.getLogger(__name__)
 WEB_DIR = Path(__file__).with_name("web")
 #: File types of the robot package that the page may load (meshes and their textures).
 MESH_SUFFIXES = {".dae", ".stl", ".obj", ".png", ".jpg", ".jpeg"}
-CUP_RADIUS = 0.02  # m, as the twin's cup
 #: A client that does not read its messages is dropped once this many are queued.
 MAX_QUEUED = 1000
 #: An HTTP connection that sends no request for this long is closed, s (aiohttp's default: an hour).

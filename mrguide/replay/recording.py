@@ -22,12 +22,12 @@ from typing import Any
 import numpy as np
 import rerun as rr
 
+from mrguide.cell_layout import CUP_RADIUS
 from mrguide.replay.runs import Episode
 from mrguide.robot import RobotSpec, urdf_with_tool
 from mrguide.task import PHASES
 
 APPLICATION_ID = "mrguide_replay"
-CUP_RADIUS = 0.02  # m, as the twin draws it (twin/scene.py)
 OBJECT_HALF = 0.025  # m, half the default object edge (task.object_height)
 
 COLORS = {

@@ -21,12 +21,12 @@ import numpy as np
 import pybullet as pb
 
 from mrguide.calibration.camera_model import CameraModel
+from mrguide.cell_layout import TABLE_CENTER, TABLE_HALF_EXTENTS
 from mrguide.deploy.camera import CameraPoseSource, CameraSourceConfig, CameraStats, load_marker_pipeline
 from mrguide.deploy.frames import Frame
 from mrguide.twin.camera import Camera, Intrinsics
 from mrguide.twin.hmd_stream import stop_render_process
 from mrguide.twin.markers import MarkerOnBody, marker_on_cube_top
-from mrguide.twin.scene import TABLE_CENTER, TABLE_HALF_EXTENTS
 from mrguide.twin.visual_arm import ArmDrawing, VisualArm
 
 #: How long a dry run waits for the camera to see the object after it was placed (s).

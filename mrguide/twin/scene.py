@@ -21,16 +21,13 @@ from typing import Any
 import numpy as np
 import pybullet as pb
 
+from mrguide.cell_layout import CUP_RADIUS, TABLE_CENTER, TABLE_HALF_EXTENTS
 from mrguide.robot import RobotSpec, urdf_with_tool
 from mrguide.twin.camera import Camera
 from mrguide.twin.config import TwinConfig
 from mrguide.twin.suction import SuctionCup, SuctionState
 
 log = logging.getLogger(__name__)
-
-CUP_RADIUS = 0.02  # m
-TABLE_CENTER = (0.45, 0.10, -0.02)
-TABLE_HALF_EXTENTS = (0.55, 0.60, 0.02)  # top face at z = 0
 
 
 def urdf_with_cup(spec: RobotSpec, stroke: float = 0.0) -> Path:
