@@ -165,6 +165,7 @@ RUN_SECTIONS = (
     "safety",
     "calibration",
     "calibration_twin",
+    "plant",
 )
 
 

@@ -2,7 +2,7 @@
 and the suction cup.
 
 - The arm: the same URDF as the twin and Pinocchio (example-robot-data's, or the arm file's), with the cup and
-  the `tcp` link added (`robot.urdf_with_tool`), its STL collision meshes, inertias and effort limits (MuJoCo
+  the `tcp` link added (`robot.urdf_with_tool`; on a spring level-compensator if the cell's cup has a stroke), its STL collision meshes, inertias and effort limits (MuJoCo
   clamps each joint's actuator torque to the URDF's effort). The bodies are gravity-compensated
   (`gravcomp`): the cobot's controller feeds its model's gravity torque forward, as a UR controller does.
 - The drives: per joint a position actuator (kp) and a velocity actuator (kv), i.e. a PD position loop with
@@ -10,7 +10,9 @@ and the suction cup.
   joint's inertia at home.
 - The cup: an adhesion actuator on the cup's body: an attractive force at its contacts, ctrl the vacuum level
   (kPa), gain the cup's area, so that the holding force is F = Δp · A (about 82 N at 65 kPa for a 2 cm lip).
-- Contact, friction and solver: MuJoCo's defaults (elliptic cones are not needed: pyramidal, friction 1).
+- Contact, friction and solver: MuJoCo's defaults (pyramidal cones, friction 1, solimp), but contacts as stiff as
+  its manual allows at this timestep (`CONTACT_TIMECONST_STEPS`); the integrator is `implicitfast`, MuJoCo's
+  recommendation for position actuators with damping.
 """
 
 from __future__ import annotations
@@ -23,7 +25,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from mrguide.cell_layout import CUP_RADIUS, TABLE_CENTER, TABLE_HALF_EXTENTS
+from mrguide.cell_layout import CUP_RADIUS, TABLE_CENTER, TABLE_HALF_EXTENTS, CupConfig
 from mrguide.mujoco_cell.config import MujocoCellConfig
 from mrguide.robot import RobotSpec, urdf_with_tool
 
@@ -31,6 +33,14 @@ from mrguide.robot import RobotSpec, urdf_with_tool
 PA_PER_KPA = 1000.0
 #: Where a new part waits until `place_objects` puts it in the cell (upright on the table).
 PART_START = (0.5, -0.1)
+#: Contacts' time constant, in physics steps: MuJoCo's manual asks for at least 2 (stability); its default of 20 ms
+#: (10 steps of its default 2 ms) is a soft contact, which let a held part drift 4.6 mm across the lip during a
+#: scripted transport; 4 steps (4 ms at 1 ms) left 0.8 mm. A rubber lip on a rigid part deflects well under 1 mm.
+CONTACT_TIMECONST_STEPS = 4
+#: The cup touches a part with its lip: a ring of this many small spheres of radius LIP_RADIUS on the lip's circle,
+#: so that the adhesion pulls all round the lip and the seal resists a moment as a cup does (a rigid cylinder
+#: touches a face at one or two points, about which a held part pivots).
+LIP_POINTS, LIP_RADIUS = 12, 0.002
 
 
 class CellModelError(RuntimeError):
@@ -47,7 +57,7 @@ class CellModel:
     position_actuators: np.ndarray
     velocity_actuators: np.ndarray
     cup_actuator: int
-    cup_geom: int
+    lip_geoms: np.ndarray  # the cup's lip ring: what touches a part
     tcp_body: int
     part_body: int
     part_geom: int
@@ -64,8 +74,8 @@ def _collision_mesh_dir(urdf: str) -> Path:
     return dirs.pop()
 
 
-def _arm_spec(spec: RobotSpec, cfg: MujocoCellConfig) -> mujoco.MjSpec:
-    urdf = urdf_with_tool(spec, f"{spec.package_dir.as_posix()}/", CUP_RADIUS)
+def _arm_spec(spec: RobotSpec, cfg: MujocoCellConfig, cup: CupConfig) -> mujoco.MjSpec:
+    urdf = urdf_with_tool(spec, f"{spec.package_dir.as_posix()}/", CUP_RADIUS, cup.stroke)
     root = ET.fromstring(urdf)
     ext = ET.SubElement(root, "mujoco")
     ET.SubElement(
@@ -85,6 +95,10 @@ def _arm_spec(spec: RobotSpec, cfg: MujocoCellConfig) -> mujoco.MjSpec:
     for body in s.bodies:
         if body.name != "world":
             body.gravcomp = 1.0
+    if cup.stroke > 0:  # the level-compensator: a spring pushing the cup out with `preload` at full extension
+        joint = s.joint("flange_cup_joint")
+        joint.stiffness = [cup.spring_rate, 0.0, 0.0]  # linear: k, then no quadratic or cubic terms
+        joint.springref = cup.preload / cup.spring_rate
     return s
 
 
@@ -103,6 +117,25 @@ def _add_cell(s: mujoco.MjSpec, part_size: float, part_mass: float) -> None:
     part.add_geom(name="part", type=mujoco.mjtGeom.mjGEOM_BOX, size=[h, h, h], mass=part_mass, rgba=[0.85, 0.1, 0.1, 1])
 
 
+def _add_lip(s: mujoco.MjSpec, length: float, seal_gap: float) -> None:
+    """The cup's lip: the ring of spheres at the TCP end of the cup (`length` from the flange). Contacts of the lip within `seal_gap`
+    are found but push nothing: there the adhesion pulls a sealed part against the lip, as the vacuum does across
+    the lip's compliance."""
+    cup = s.body("suction_cup")
+    ring = CUP_RADIUS - LIP_RADIUS
+    for i in range(LIP_POINTS):
+        a = 2.0 * math.pi * i / LIP_POINTS
+        cup.add_geom(
+            name=f"lip{i}",
+            type=mujoco.mjtGeom.mjGEOM_SPHERE,
+            size=[LIP_RADIUS, 0.0, 0.0],
+            pos=[ring * math.cos(a), ring * math.sin(a), length - LIP_RADIUS],
+            margin=seal_gap,
+            gap=seal_gap,
+            mass=0.0,
+        )
+
+
 def _servo_gains(s: mujoco.MjSpec, spec: RobotSpec, cfg: MujocoCellConfig) -> tuple[np.ndarray, np.ndarray]:
     """(kp, kv) per joint: a second-order loop of the configured bandwidth and damping on the joint's inertia at
     home (the diagonal of the mass matrix there)."""
@@ -118,9 +151,10 @@ def _servo_gains(s: mujoco.MjSpec, spec: RobotSpec, cfg: MujocoCellConfig) -> tu
     return inertia * omega**2, 2.0 * cfg.servo_damping_ratio * inertia * omega
 
 
-def build_cell(spec: RobotSpec, cfg: MujocoCellConfig, part_size: float) -> CellModel:
-    """Compile the cell for the arm `spec` with a cube part of edge `part_size` (m)."""
-    s = _arm_spec(spec, cfg)
+def build_cell(spec: RobotSpec, cfg: MujocoCellConfig, part_size: float, cup: CupConfig) -> CellModel:
+    """Compile the cell for the arm `spec` with a cube part of edge `part_size` (m) and the cup mounted as `cup`
+    says (rigid, or on a spring level-compensator)."""
+    s = _arm_spec(spec, cfg, cup)
     _add_cell(s, part_size, cfg.part_mass)
     kp, kv = _servo_gains(s, spec, cfg)
     for name, p, v in zip(spec.joint_names, kp, kv, strict=True):
@@ -128,17 +162,17 @@ def build_cell(spec: RobotSpec, cfg: MujocoCellConfig, part_size: float) -> Cell
         pos.set_to_position(kp=float(p))
         vel = s.add_actuator(name=f"{name}_velocity", target=name, trntype=mujoco.mjtTrn.mjTRN_JOINT)
         vel.set_to_velocity(kv=float(v))
-    cup = s.add_actuator(name="cup", target="suction_cup", trntype=mujoco.mjtTrn.mjTRN_BODY)
-    cup.set_to_adhesion(gain=math.pi * CUP_RADIUS**2 * PA_PER_KPA)
-    cup.ctrlrange = [0.0, 101.3]
+    adhesion = s.add_actuator(name="cup", target="suction_cup", trntype=mujoco.mjtTrn.mjTRN_BODY)
+    adhesion.set_to_adhesion(gain=math.pi * CUP_RADIUS**2 * PA_PER_KPA)
+    adhesion.ctrlrange = [0.0, 101.3]
+    _add_lip(s, float(spec.T_flange_tcp[2, 3]), cfg.seal_gap)
     model = s.compile()
     part = model.body("part")
-    cup_geoms = [g for g in range(model.ngeom) if model.geom_bodyid[g] == model.body("suction_cup").id]
-    if len(cup_geoms) != 1:
-        raise CellModelError(f"the cup link should have one collision geom, it has {len(cup_geoms)}")
-    # contacts of the cup within `seal_gap` are found but push nothing: there the adhesion pulls a sealed part up
-    # against the lip, as the vacuum does across the lip's compliance
-    model.geom_margin[cup_geoms[0]] = model.geom_gap[cup_geoms[0]] = cfg.seal_gap
+    lips = np.array([model.geom(f"lip{i}").id for i in range(LIP_POINTS)])
+    model.geom_solref[:] = (CONTACT_TIMECONST_STEPS * cfg.timestep, 1.0)  # critically damped, stiff (above)
+    for g in range(model.ngeom):  # the cup's cylinder: mass and shape, no contact (the lip touches)
+        if model.geom_bodyid[g] == model.body("suction_cup").id and g not in lips:
+            model.geom_contype[g] = model.geom_conaffinity[g] = 0
     joints = [model.joint(n) for n in spec.joint_names]
     return CellModel(
         model=model,
@@ -147,7 +181,7 @@ def build_cell(spec: RobotSpec, cfg: MujocoCellConfig, part_size: float) -> Cell
         position_actuators=np.array([model.actuator(f"{n}_position").id for n in spec.joint_names]),
         velocity_actuators=np.array([model.actuator(f"{n}_velocity").id for n in spec.joint_names]),
         cup_actuator=model.actuator("cup").id,
-        cup_geom=cup_geoms[0],
+        lip_geoms=lips,
         tcp_body=model.body("tcp").id,
         part_body=part.id,
         part_geom=model.geom("part").id,

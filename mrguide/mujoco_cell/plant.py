@@ -20,7 +20,7 @@ import threading
 import mujoco
 import numpy as np
 
-from mrguide.cell_layout import CUP_RADIUS
+from mrguide.cell_layout import CUP_RADIUS, CupConfig
 from mrguide.drivers.mock.first_order_plant import FirstOrderParams
 from mrguide.drivers.mock.plant import Plant
 from mrguide.mujoco_cell.config import MujocoCellConfig
@@ -40,10 +40,11 @@ class MujocoPlant(Plant):
         cfg: MujocoCellConfig | None = None,
         part_size: float = 0.05,
         vacuum: FirstOrderParams | None = None,
+        cup: CupConfig | None = None,
     ):
         self.spec, self.cfg = spec, cfg or MujocoCellConfig()
         self.vacuum = vacuum or FirstOrderParams()
-        self.cell = build_cell(spec, self.cfg, part_size)
+        self.cell = build_cell(spec, self.cfg, part_size, cup or CupConfig())
         self.model, self.data = self.cell.model, mujoco.MjData(self.cell.model)
         self.half = 0.5 * part_size
         self.lock = threading.Lock()
@@ -152,8 +153,12 @@ class MujocoPlant(Plant):
 
     def _cup_touches_part(self) -> bool:
         c, d = self.cell, self.data
-        pair = {c.cup_geom, c.part_geom}
-        return any({int(d.contact.geom1[i]), int(d.contact.geom2[i])} == pair for i in range(d.ncon))
+        lips = set(c.lip_geoms.tolist())
+        for i in range(d.ncon):
+            a, b = int(d.contact.geom1[i]), int(d.contact.geom2[i])
+            if (a == c.part_geom and b in lips) or (b == c.part_geom and a in lips):
+                return True
+        return False
 
     def _sealed(self) -> bool:
         """The cup's lip rests whole on one face of the part: square to it, within `seal_gap`, not over its edge."""

@@ -4,7 +4,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from mrguide.cell_layout import CupConfig
 from mrguide.config import ConfigError, check_number
+from mrguide.mujoco_cell.config import MujocoCellConfig
 from mrguide.twin.camera import CameraConfig
 
 
@@ -67,20 +69,6 @@ class VacuumConfig:
 
 
 @dataclass(frozen=True)
-class CupConfig:
-    """The suction cup's mounting: rigid, or on a spring level-compensator that absorbs height error."""
-
-    stroke: float = 0.0  # m the cup may retract towards the flange; 0 = rigid (trained so far)
-    spring_rate: float = 1000.0  # N/m
-    preload: float = 5.0  # N pushing the cup out at full extension
-
-    def __post_init__(self) -> None:
-        check_number("twin.cup.stroke", self.stroke, 0.0, 0.05, " m")
-        check_number("twin.cup.spring_rate", self.spring_rate, 1.0, 1e6, " N/m")
-        check_number("twin.cup.preload", self.preload, 0.0, 1000.0, " N")
-
-
-@dataclass(frozen=True)
 class TwinConfig:
     """The twin of the cell ([twin] in a TOML config)."""
 
@@ -107,3 +95,20 @@ class TwinConfig:
     @property
     def cycles_per_decision(self) -> int:
         return round(self.decision_period / self.control_period)
+
+
+#: The physics engines a simulated cell can run on ([plant] engine; twin/dry_run.py builds each).
+PLANT_ENGINES = ("pybullet", "mujoco")
+
+
+@dataclass(frozen=True)
+class PlantConfig:
+    """[plant] of a cell config: the engine that plays the robot behind the simulated drives in dry runs and the
+    sim-to-real conditions (the twin trains in PyBullet whatever this says), and the MuJoCo cell's physics."""
+
+    engine: str = "pybullet"
+    mujoco: MujocoCellConfig = field(default_factory=MujocoCellConfig)
+
+    def __post_init__(self) -> None:
+        if self.engine not in PLANT_ENGINES:
+            raise ConfigError(f"plant.engine = {self.engine!r}: expected one of {', '.join(PLANT_ENGINES)}")

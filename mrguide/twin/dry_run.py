@@ -10,6 +10,7 @@ import contextlib
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -24,33 +25,56 @@ from mrguide.drivers.config import CobotBusConfig
 from mrguide.drivers.mock.sim_cobot import SimulatedCobot, shared_pc_config
 from mrguide.drivers.realtime import settled_heap
 from mrguide.pose_source import ObjectPoseSource
-from mrguide.robot import load_robot
+from mrguide.robot import RobotSpec, load_robot
+from mrguide.twin.config import TwinConfig
 from mrguide.twin.env import EnvConfig
 from mrguide.twin.plant import TwinObjectPose, TwinPlant
 from mrguide.twin.scene import Scene
 
+if TYPE_CHECKING:
+    from mrguide.mujoco_cell.plant import MujocoPlant
+
 
 @dataclass
 class SimulatedCell:
-    """A twin on the virtual bus, with the master-side `Cobot` connected and enabled."""
+    """A plant on the virtual bus, with the master-side `Cobot` connected and enabled. `scene` is the PyBullet
+    twin's scene when the engine is PyBullet, else None."""
 
-    scene: Scene
-    plant: TwinPlant
+    scene: Scene | None
+    plant: TwinPlant | MujocoPlant
     sim: SimulatedCobot
     cobot: Cobot
 
 
+def _pybullet_plant(env_cfg: EnvConfig, twin_cfg: TwinConfig, spec: RobotSpec, seed: int) -> tuple[TwinPlant, Scene]:
+    scene = Scene(spec, twin_cfg, env_cfg.task.object_height, seed=seed)
+    return TwinPlant(scene), scene
+
+
+def _mujoco_plant(env_cfg: EnvConfig, twin_cfg: TwinConfig, spec: RobotSpec, seed: int) -> tuple[MujocoPlant, None]:
+    from mrguide.mujoco_cell.plant import MujocoPlant  # the `mujoco` extra: only for a cell that asks for it
+
+    return MujocoPlant(spec, env_cfg.plant.mujoco, env_cfg.task.object_height, cup=twin_cfg.cup), None
+
+
+#: How each engine of [plant] engine builds the plant behind the simulated drives (and the twin's scene, if any).
+PLANT_BUILDERS: dict[str, Callable[..., tuple[TwinPlant | MujocoPlant, Scene | None]]] = {
+    "pybullet": _pybullet_plant,
+    "mujoco": _mujoco_plant,
+}
+
+
 @contextlib.contextmanager
 def simulated_cell(env_cfg: EnvConfig, bus_cfg: CobotBusConfig, seed: int = 0) -> Iterator[SimulatedCell]:
-    """Start the twin + simulated devices, connect and enable the cobot; tear everything down on exit."""
+    """Start the cell's plant ([plant] engine) + simulated devices, connect and enable the cobot; tear everything
+    down on exit."""
     if bus_cfg.bus.interface != "virtual":
         raise ConfigError(f"a dry run needs the virtual CAN interface, the bus config says {bus_cfg.bus.interface!r}")
     bus_cfg = shared_pc_config(bus_cfg)
     twin_cfg = replace(env_cfg.twin, control_period=bus_cfg.timing.control_period, gui=False)
     spec = load_robot(env_cfg.robot)
     with settled_heap():
-        scene = Scene(spec, twin_cfg, env_cfg.task.object_height, seed=seed)
-        plant = TwinPlant(scene)
+        plant, scene = PLANT_BUILDERS[env_cfg.plant.engine](env_cfg, twin_cfg, spec, seed)
         sim = SimulatedCobot(bus_cfg, plant, seed=seed)
         sim.start()
         try:
@@ -59,7 +83,8 @@ def simulated_cell(env_cfg: EnvConfig, bus_cfg: CobotBusConfig, seed: int = 0) -
                 yield SimulatedCell(scene, plant, sim, cobot)
         finally:
             sim.stop()
-            scene.close()
+            if scene is not None:
+                scene.close()
 
 
 def episode_layouts(env_cfg: EnvConfig, episodes: int, seed: int) -> list[tuple[np.ndarray, np.ndarray]]:

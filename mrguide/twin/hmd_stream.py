@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from mrguide.pose_source import ObjectPoseSource, PoseUnavailable
-from mrguide.twin.plant import TwinPlant
+from mrguide.twin.plant import CellView
 from mrguide.twin.visual_arm import ArmDrawing
 
 log = logging.getLogger(__name__)
@@ -118,7 +118,7 @@ class HmdPoseStream(ObjectPoseSource):
 
     def __init__(
         self,
-        plant: TwinPlant | None,
+        plant: CellView | None,
         calibration_path: str | Path | None,
         object_size: float,
         arm: ArmDrawing,
@@ -162,7 +162,7 @@ class HmdPoseStream(ObjectPoseSource):
         if plant is not None:
             self._thread.start()
 
-    def attach(self, plant: TwinPlant) -> HmdPoseStream:
+    def attach(self, plant: CellView) -> HmdPoseStream:
         """Stream the object of `plant` (once; the process was started and calibrated without it)."""
         if self.plant is not None:
             raise RuntimeError("the HMD stream already follows a twin")

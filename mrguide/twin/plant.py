@@ -8,6 +8,7 @@ thread-safe, so every access (also the exact object pose read by the deploy runt
 from __future__ import annotations
 
 import threading
+from typing import Protocol
 
 import numpy as np
 
@@ -89,10 +90,19 @@ class TwinPlant(Plant):
             return pos, orn, self.scene.joint_positions(noisy=False)
 
 
+class CellView(Protocol):
+    """What pose sources and cameras read of a simulated cell's plant, whatever its engine (`TwinPlant`, the MuJoCo
+    cell's `MujocoPlant`)."""
+
+    def object_position(self) -> np.ndarray: ...
+
+    def view(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
+
+
 class TwinObjectPose(ObjectPoseSource):
     """Exact object position from the environment model (sim-to-real conditions 1 and 2)."""
 
-    def __init__(self, plant: TwinPlant):
+    def __init__(self, plant: CellView):
         self.plant = plant
 
     def object_position(self) -> np.ndarray:

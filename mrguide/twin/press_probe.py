@@ -19,12 +19,13 @@ from pathlib import Path
 
 import numpy as np
 
+from mrguide.cell_layout import CupConfig
 from mrguide.config import load_section
 from mrguide.deploy.runlog import RunLog
 from mrguide.drivers.config import BusConfig, CobotBusConfig
 from mrguide.robot import load_robot
 from mrguide.task import OBS_OBJECT, OBS_PROGRESS, Phase, oracle_action, phase_from_progress
-from mrguide.twin.config import CupConfig, TwinConfig
+from mrguide.twin.config import TwinConfig
 from mrguide.twin.dry_run import dry_run
 from mrguide.twin.env import EnvConfig
 

@@ -60,3 +60,15 @@ def test_real_cell_gap_config_loads():
 
     cfg = EnvConfig.load(Path(__file__).parents[2] / "configs" / "cells" / "real_cell.toml")
     assert cfg.twin.reality_gap.actuator_latency == 2
+
+
+def test_the_scripted_expert_places_parts_in_the_mujoco_cell(run_dry):
+    """The whole deploy stack against the cell on the second engine ([plant] engine = "mujoco"): boot, enable,
+    decisions, seal, lift, place, judged on MuJoCo's ground truth."""
+    from pathlib import Path
+
+    cell = Path(__file__).parents[2] / "configs" / "cells" / "mujoco_cell.toml"
+    summary, log, used = run_dry(episodes=4, seed=1, env_cfg=EnvConfig.load(cell))
+    assert type(used.plant).__name__ == "MujocoPlant" and used.scene is None
+    assert summary.stopped is None and summary.successes == 4, summary.text()
+    _check_logged_trajectory(log)
