@@ -26,7 +26,9 @@ from mrguide.experiments.runs import configs, sac_config
 from mrguide.shipped_configs import shipped_config
 
 #: The three sim-to-real conditions (run by mrguide.experiments.sim2real; named here to check them without PyBullet).
-CONDITIONS = ("sim", "real_exact", "real_hmd")
+CONDITIONS = ("sim", "real_exact", "real_hmd", "mujoco_exact")
+#: The paper's three (Fig. 8): what `mrguide sim2real` runs unless --conditions says otherwise.
+PAPER_CONDITIONS = CONDITIONS[:3]
 GAP_PARAMS = (
     "object_mass",
     "object_friction",
@@ -176,11 +178,14 @@ def _setup(args: argparse.Namespace) -> tuple[Experiment, Any, str | None, Path]
         if not base_path.is_file():
             raise ConfigError(f"{path} [experiment]: config = {cfg.config!r}: no such file {base_path}")
         base = str(base_path)
-    if getattr(cfg, "real_config", ""):
-        real = (path.parent / cfg.real_config).resolve()
-        if not real.is_file():
-            raise ConfigError(f"{path} [experiment]: real_config = {cfg.real_config!r}: no such file {real}")
-        cfg = dataclasses.replace(cfg, real_config=str(real))
+    for key in ("real_config", "mujoco_config"):  # the cells of the sim-to-real experiment, relative to its file
+        if key == "mujoco_config" and "mujoco_exact" not in getattr(cfg, "conditions", ()):
+            continue  # no condition plays the MuJoCo cell
+        if getattr(cfg, key, ""):
+            cell = (path.parent / getattr(cfg, key)).resolve()
+            if not cell.is_file():
+                raise ConfigError(f"{path} [experiment]: {key} = {getattr(cfg, key)!r}: no such file {cell}")
+            cfg = dataclasses.replace(cfg, **{key: str(cell)})
     out = Path(args.out or exp.default_out)
     for run in exp.runs(cfg, base):  # every run's configuration is checked before anything starts
         configs(run, f"{path} [experiment]")
@@ -238,13 +243,18 @@ def add_sim2real_command(sub: argparse._SubParsersAction) -> None:
         default=None,
         help="TOML of the 'real' cell: [twin.reality_gap], [deploy] bus_config, [calibration.hmd] (conditions 2, 3)",
     )
+    p.add_argument(
+        "--mujoco-config",
+        default=None,
+        help="TOML of the MuJoCo cell (condition mujoco_exact); default: configs/cells/mujoco_cell.toml",
+    )
     p.add_argument("--seeds", type=positive_int, default=3)
     p.add_argument("--episodes", type=positive_int, default=10, help="episodes per seed and condition")
     p.add_argument(
         "--conditions",
         type=conditions_arg,
-        default=list(CONDITIONS),
-        help=f"comma-separated, from {', '.join(CONDITIONS)} (default: all)",
+        default=list(PAPER_CONDITIONS),
+        help=f"comma-separated, from {', '.join(CONDITIONS)} (default: the paper's {', '.join(PAPER_CONDITIONS)})",
     )
     p.add_argument(
         "--sweep",
@@ -306,7 +316,10 @@ def cmd_sim2real(args: argparse.Namespace) -> int:
     out = check_output_dir(args.out, "--out")
     train_cfg = EnvConfig.load(args.config)
     cell = s2r.load_real_cell(args.real_config or shipped_config("cells", "real_cell.toml"))
-    real_cfg, real_path, bus, hmd = cell.env, cell.path, cell.bus, cell.hmd
+    cells = {"real": cell}
+    if "mujoco_exact" in args.conditions:
+        cells["mujoco"] = s2r.load_real_cell(args.mujoco_config or shipped_config("cells", "mujoco_cell.toml"))
+    real_cfg, real_path, hmd = cell.env, cell.path, cell.hmd
     policy = s2r.load_policy(args.policy, train_cfg, cell)
     _check_sweeps(args.sweep, real_cfg, hmd)
     runs = (
@@ -328,20 +341,23 @@ def cmd_sim2real(args: argparse.Namespace) -> int:
                     res.outcomes[seed] = s2r.run_sim(policy, train_cfg, seed, args.episodes)
                     bar.update(args.episodes)
                     continue
-                cfg = s2r.replace_gap(real_cfg, **{name: value}) if name in GAP_PARAMS else real_cfg
+                which, use_hmd = s2r.CELL_CONDITIONS[cond]
+                played = cells[which]
+                cfg = s2r.replace_gap(played.env, **{name: value}) if name in GAP_PARAMS else played.env
                 res.outcomes[seed] = s2r.run_real(
                     Path(args.policy),
                     cfg,
-                    bus,
+                    played.bus,
                     seed,
                     args.episodes,
                     out / f"log-{cond}-{name or 'default'}-{value}-seed{seed}-{time.strftime('%H%M%S')}.jsonl",
-                    real_path,
-                    cell.safety,
+                    played.path,
+                    played.safety,
                     on_episode=lambda o: bar.update(1),
-                    use_hmd=cond == "real_hmd",
+                    use_hmd=use_hmd,
                     hmd_overrides={name: value} if name in HMD_PARAMS else None,
                     recover=not args.no_recovery,
+                    condition=cond,
                 )
             results.append(res)
     md = s2r.write_report(results, out, s2r.gap_description(real_cfg, real_path))

@@ -16,7 +16,7 @@ from mrguide.config import ConfigError, check_number
 from mrguide.experiments import report
 from mrguide.experiments.runs import TrainRun, configs
 
-CONDITIONS = ("sim", "real_exact", "real_hmd")
+CONDITIONS = ("sim", "real_exact", "real_hmd", "mujoco_exact")
 OUTCOME_FIELDS = ["condition", "eval_seed", "episode", "outcome"]
 
 
@@ -29,8 +29,9 @@ class Sim2RealConfig:
     eval_seeds: int = 3  # evaluation seeds per policy and condition (object and goal layouts)
     episodes: int = 10  # per evaluation seed and condition
     conditions: tuple[str, ...] = CONDITIONS
-    #: The 'real' cell, relative to the experiment file (made absolute on load).
+    #: The 'real' cell and the MuJoCo cell, relative to the experiment file (made absolute on load).
     real_config: str = "../cells/real_cell.toml"
+    mujoco_config: str = "../cells/mujoco_cell.toml"
     config: str = ""  # base training config (TOML), relative to the experiment file; "" = defaults
     overrides: dict[str, Any] = field(default_factory=dict)
 
@@ -64,15 +65,19 @@ def evaluate(run: TrainRun, root: str, cfg: Sim2RealConfig) -> str:
     if path.exists():
         return str(path)
     train_cfg = configs(run)[3]
-    cell = s2r.load_real_cell(cfg.real_config)
+    cells = {"real": s2r.load_real_cell(cfg.real_config)}
+    if "mujoco_exact" in cfg.conditions:
+        cells["mujoco"] = s2r.load_real_cell(cfg.mujoco_config)
     policy_file = run.directory(Path(root)) / "policy.npz"
-    policy = s2r.load_policy(policy_file, train_cfg, cell)
+    policy = s2r.load_policy(policy_file, train_cfg, cells["real"])
     rows = []
     for cond in cfg.conditions:
         for seed in range(cfg.eval_seeds):
             if cond == "sim":
                 outcomes = s2r.run_sim(policy, train_cfg, seed, cfg.episodes)
             else:
+                which, use_hmd = s2r.CELL_CONDITIONS[cond]
+                cell = cells[which]
                 outcomes = s2r.run_real(
                     policy_file,
                     cell.env,
@@ -82,7 +87,8 @@ def evaluate(run: TrainRun, root: str, cfg: Sim2RealConfig) -> str:
                     path.parent / f"log-{cond}-seed{seed}.jsonl",
                     cell.path,
                     cell.safety,
-                    use_hmd=cond == "real_hmd",
+                    use_hmd=use_hmd,
+                    condition=cond,
                 )
             rows += [{"condition": cond, "eval_seed": seed, "episode": i, "outcome": o} for i, o in enumerate(outcomes)]
     report.write_report(path.parent, {path.name: report.csv_bytes(rows, OUTCOME_FIELDS)})

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import json
 from pathlib import Path
 
 import pytest
@@ -12,6 +13,7 @@ from mrguide.config import ConfigError
 from mrguide.experiments.sim2real_runs import Sim2RealConfig
 
 REAL_CELL = Path(__file__).resolve().parents[2] / "configs" / "cells" / "real_cell.toml"
+MUJOCO_CELL = REAL_CELL.with_name("mujoco_cell.toml")
 
 
 def test_tiny_sim2real_experiment_on_local_ray_evaluates_each_run_once(tiny_experiment, capsys):
@@ -51,3 +53,28 @@ def test_bad_sim2real_experiment_configs_are_refused(tiny_experiment, capsys):
     cfg = write("s2r", 'seeds = 1\nsteps = 150\nreal_config = "no_such_cell.toml"\n')
     assert main(["experiment", "sim2real", "--config", str(cfg), "--out", str(out)]) == 2
     assert "no_such_cell.toml" in capsys.readouterr().err and not out.exists()
+
+
+def test_the_mujoco_condition_plays_the_policy_in_the_mujoco_cell(tiny_experiment):
+    write, out = tiny_experiment
+    cfg = write(
+        "s2r",
+        f'seeds = 1\nsteps = 150\neval_seeds = 1\nepisodes = 1\nconditions = ["mujoco_exact"]\n'
+        f'real_config = "{REAL_CELL}"\nmujoco_config = "{MUJOCO_CELL}"\n',
+    )
+    assert main(["experiment", "sim2real", "--config", str(cfg), "--out", str(out), "--workers", "1", "--quiet"]) == 0
+    log = out / "guided" / "seed0" / "sim2real" / "log-mujoco_exact-seed0.jsonl"
+    header = json.loads(log.read_text().splitlines()[0])
+    assert '"condition": "mujoco_exact"' in json.dumps(header) and '"engine": "mujoco"' in json.dumps(header)
+    assert "mujoco_exact" in (out / "summary.csv").read_text()
+
+
+def test_a_missing_mujoco_cell_is_refused_only_where_a_condition_plays_it(tiny_experiment, capsys):
+    write, out = tiny_experiment
+    cfg = write(
+        "s2r",
+        f'seeds = 1\nsteps = 150\nconditions = ["sim", "mujoco_exact"]\nreal_config = "{REAL_CELL}"\n'
+        'mujoco_config = "no_such_mujoco_cell.toml"\n',
+    )
+    assert main(["experiment", "sim2real", "--config", str(cfg), "--out", str(out)]) == 2
+    assert "no_such_mujoco_cell.toml" in capsys.readouterr().err and not out.exists()
