@@ -1,8 +1,8 @@
 """Deploy benchmark: decision latency, policy inference time and control-cycle jitter during a dry run.
 
-Run: python benchmarks/deploy.py [--episodes N] [--robot ur10]. The dry run drives the scripted expert through
-the whole stack (IK, Ruckig, CANopen over the virtual bus, simulated drives, the "real" twin of
-configs/cells/real_cell.toml with the chosen arm, default the UR5); inference is timed on an exported actor of the
+Run: python benchmarks/deploy.py [--episodes N] [--robot ur10] [--cell configs/cells/mujoco_cell.toml]. The dry
+run drives the scripted expert through the whole stack (IK, Ruckig, CANopen over the virtual bus, simulated drives,
+the cell of --cell with the chosen arm: default the "real" twin of configs/cells/real_cell.toml and the UR5); inference is timed on an exported actor of the
 default size. Prints a table; the last line is one JSON object.
 """
 
@@ -56,8 +56,14 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--episodes", type=positive_int, default=10)
     ap.add_argument("--robot", default="", help="a shipped arm (ur5, ur10) in place of the real cell's (the UR5)")
+    ap.add_argument(
+        "--cell",
+        type=Path,
+        default=Path(__file__).parents[1] / "configs" / "cells" / "real_cell.toml",
+        help="the cell's TOML ([plant] engine: the PyBullet twin or the MuJoCo cell)",
+    )
     args = ap.parse_args()
-    cfg = EnvConfig.load(Path(__file__).parents[1] / "configs" / "cells" / "real_cell.toml")
+    cfg = EnvConfig.load(args.cell)
     if args.robot:
         cfg = dataclasses.replace(cfg, robot=RobotConfig(name=args.robot))
     spec = load_robot(cfg.robot)
@@ -76,6 +82,7 @@ def main() -> None:
     inference_ms, hidden = bench_inference()
     res = {
         "robot": spec.name,
+        "engine": cfg.plant.engine,
         "decision_latency_p50_ms": float(np.percentile(lat, 50)),
         "decision_latency_p99_ms": float(np.percentile(lat, 99)),
         "policy_inference_ms": inference_ms,
@@ -84,7 +91,10 @@ def main() -> None:
         "dry_run_success": summary.successes / max(len(summary.episodes), 1),
         "episodes": len(summary.episodes),
     }
-    print(f"machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}; arm {spec.name}")
+    print(
+        f"machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}; arm {spec.name}, "
+        f"cell {args.cell.name} ({cfg.plant.engine})"
+    )
     for name, key, target in (
         ("decision latency p50 (state read -> first setpoint)", "decision_latency_p50_ms", ""),
         ("decision latency p99", "decision_latency_p99_ms", "<= 5 ms"),
