@@ -34,8 +34,9 @@ PA_PER_KPA = 1000.0
 #: Where a new part waits until `place_objects` puts it in the cell (upright on the table).
 PART_START = (0.5, -0.1)
 #: Contacts' time constant, in physics steps: MuJoCo's manual asks for at least 2 (stability); its default of 20 ms
-#: (10 steps of its default 2 ms) is a soft contact, which let a held part drift 4.6 mm across the lip during a
-#: scripted transport; 4 steps (4 ms at 1 ms) left 0.8 mm. A rubber lip on a rigid part deflects well under 1 mm.
+#: (10 steps of its default 2 ms) is a soft contact, which let a held part drift 4.7 mm across the lip during a
+#: scripted transport; 4 steps (4 ms at 1 ms) left 0.8 mm (`slip_probe`). A rubber lip on a rigid part deflects
+#: well under 1 mm.
 CONTACT_TIMECONST_STEPS = 4
 #: The cup touches a part with its lip: a ring of this many small spheres of radius LIP_RADIUS on the lip's circle,
 #: so that the adhesion pulls all round the lip and the seal resists a moment as a cup does (a rigid cylinder

@@ -145,7 +145,7 @@ class MujocoPlant(Plant):
         if self._blow_off:
             goal, tau = 0.0, p.blow_off_time_constant
         elif self._vacuum_on:
-            goal = (p.sealed_level_kpa if self._sealed() else p.open_level_kpa) * (1.0 - self._leak)
+            goal = (p.sealed_level_kpa if self.lip_sealed() else p.open_level_kpa) * (1.0 - self._leak)
             tau = p.evacuation_time_constant
         else:
             goal, tau = 0.0, p.release_time_constant
@@ -160,7 +160,7 @@ class MujocoPlant(Plant):
                 return True
         return False
 
-    def _sealed(self) -> bool:
+    def lip_sealed(self) -> bool:
         """The cup's lip rests whole on one face of the part: square to it, within `seal_gap`, not over its edge."""
         c, d = self.cell, self.data
         rot = d.xmat[c.part_body].reshape(3, 3)  # columns: the part's axes in the world
