@@ -21,9 +21,10 @@ import numpy as np
 
 from mrguide.config import ConfigError, check_number
 from mrguide.deploy.decision import NON_FINITE, ActionError, DecisionStep
+from mrguide.deploy.following import FollowingMonitor
 from mrguide.deploy.runlog import RunLog
 from mrguide.deploy.safety import Event, Reaction, SafetyConfig, Supervisor, Watchdog
-from mrguide.drivers.cobot_state import CycleSample, JointState, VacuumState
+from mrguide.drivers.cobot_state import JointState, VacuumState
 from mrguide.drivers.errors import DriverError
 from mrguide.drivers.interface import CobotInterface
 from mrguide.motion.trajectory import TrajectoryError
@@ -81,33 +82,6 @@ class EpisodeReport:
     wall_s: float = 0.0
 
 
-class _FollowingMonitor:
-    """Cycle observer: how far each measured joint is from the nearest of its setpoints sent in the last `depth`
-    cycles, so servo lag, bus latency and late feedback are not counted as following error, while an arm that
-    stopped following its commands is. Per joint, as a drive checks its own: each drive's feedback may be late
-    by its own amount (a silent drive's feedback freezes; the feedback and heartbeat checks name it)."""
-
-    def __init__(self, depth: int):
-        self.recent: np.ndarray | None = None  # ring of the last `depth` setpoints
-        self._distance: np.ndarray | None = None  # scratch of the ring's shape: no allocation per control cycle
-        self.depth, self.count = depth, 0
-        self.error = 0.0
-        self.joint = 0  # the joint furthest from its nearest recent setpoint
-
-    def __call__(self, sample: CycleSample) -> None:
-        if sample.setpoint is not None:
-            if self.recent is None:
-                self.recent = np.tile(sample.setpoint, (self.depth, 1))
-                self._distance = np.empty_like(self.recent)
-            self.recent[self.count % self.depth] = sample.setpoint
-            self.count += 1
-        if self.recent is not None and self._distance is not None:
-            np.subtract(self.recent, sample.positions, out=self._distance)
-            per_joint = np.abs(self._distance, out=self._distance).min(axis=0)
-            self.joint = int(per_joint.argmax())
-            self.error = float(per_joint[self.joint])
-
-
 class Runtime:
     """Runs episodes of an exported policy on a connected, enabled cobot (any `CobotInterface`).
 
@@ -140,7 +114,7 @@ class Runtime:
         self.supervisor = Supervisor(spec, safety or SafetyConfig(), self._on_event)
         # setpoints of the last 100 ms (at 4 ms) of servo lag, or as far back as the driver lets feedback lag
         # before it calls it lost (a real bus: 5 cycles; simulated devices on a shared PC: 1 s)
-        self.following = _FollowingMonitor(
+        self.following = FollowingMonitor(
             depth=max(25, 2 * cobot.setpoint_queue_depth, cobot.feedback_tolerance_cycles)
         )
         self.watchdog = Watchdog(self.supervisor.cfg.stall_timeout, self._on_stall)

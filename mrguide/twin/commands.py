@@ -106,6 +106,7 @@ def run_twin_calibration(config: Path | None, cfg: Any) -> tuple[Any, np.ndarray
     would be; returns the calibration run and the true T_base_hmd of [calibration_twin]."""
     import pybullet as pb
 
+    from mrguide.cell_layout import TABLE_CENTER, TABLE_HALF_EXTENTS
     from mrguide.config import load_section
     from mrguide.twin.camera import look_at
     from mrguide.twin.markers import TwinCalibrationConfig, TwinHmd, calibrate_twin_hmd
@@ -114,9 +115,9 @@ def run_twin_calibration(config: Path | None, cfg: Any) -> tuple[Any, np.ndarray
     client = pb.connect(pb.DIRECT)
     try:
         table = pb.createVisualShape(
-            pb.GEOM_BOX, halfExtents=[0.55, 0.6, 0.02], rgbaColor=[0.75, 0.72, 0.66, 1], physicsClientId=client
+            pb.GEOM_BOX, halfExtents=TABLE_HALF_EXTENTS, rgbaColor=[0.75, 0.72, 0.66, 1], physicsClientId=client
         )
-        pb.createMultiBody(0, -1, table, [0.45, 0.1, -0.02], physicsClientId=client)
+        pb.createMultiBody(0, -1, table, TABLE_CENTER, physicsClientId=client)
         first = look_at(np.array(twin.views[0]), np.array(twin.look_at), np.array([0.0, 0.0, 1.0]))
         hmd = TwinHmd(client, twin.T_base_hmd, first, twin.intrinsics, twin.supersample)
         run = calibrate_twin_hmd(hmd, cfg, twin.views, twin.look_at, cfg.hmd)

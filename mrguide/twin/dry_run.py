@@ -99,6 +99,20 @@ def episode_layouts(env_cfg: EnvConfig, episodes: int, seed: int) -> list[tuple[
     return out
 
 
+def _checked_policy(
+    policy_path: str | Path | None, policy, spec: RobotSpec, env_cfg: EnvConfig, bus_cfg: CobotBusConfig
+) -> Callable[[np.ndarray], np.ndarray]:
+    """The policy to run: `policy` if given, else the file's; an exported one checked against the cell's timing."""
+    if policy is None:
+        if policy_path is None:
+            raise ValueError("dry_run needs a policy file or a policy")
+        policy = ExportedPolicy.load(policy_path, spec, env_cfg.task)
+    if isinstance(policy, ExportedPolicy):
+        label = policy_path if policy_path is not None else "the given policy"
+        check_decision_period(policy, label, bus_cfg.timing.control_period, env_cfg.twin.decision_period)
+    return policy
+
+
 def dry_run(
     policy_path: str | Path | None,
     env_cfg: EnvConfig,
@@ -124,13 +138,7 @@ def dry_run(
     the twin's). The pose source `pose_factory` gives is closed, if it can be, before the cell is torn down.
     """
     spec = load_robot(env_cfg.robot)
-    if policy is None:
-        if policy_path is None:
-            raise ValueError("dry_run needs a policy file or a policy")
-        policy = ExportedPolicy.load(policy_path, spec, env_cfg.task)
-    if isinstance(policy, ExportedPolicy):
-        label = policy_path if policy_path is not None else "the given policy"
-        check_decision_period(policy, label, bus_cfg.timing.control_period, env_cfg.twin.decision_period)
+    policy = _checked_policy(policy_path, policy, spec, env_cfg, bus_cfg)
     layouts = episode_layouts(env_cfg, episodes, seed)
     with simulated_cell(env_cfg, bus_cfg, seed) as cell:
         pose = pose_factory(cell) if pose_factory else TwinObjectPose(cell.plant)
