@@ -26,7 +26,7 @@ from mrguide.experiments.runs import configs, sac_config
 from mrguide.shipped_configs import shipped_config
 
 #: The three sim-to-real conditions (run by mrguide.experiments.sim2real; named here to check them without PyBullet).
-CONDITIONS = ("sim", "real_exact", "real_hmd", "mujoco_exact")
+CONDITIONS = ("sim", "real_exact", "real_hmd", "mujoco_exact", "mujoco_hmd")
 #: The paper's three (Fig. 8): what `mrguide sim2real` runs unless --conditions says otherwise.
 PAPER_CONDITIONS = CONDITIONS[:3]
 GAP_PARAMS = (
@@ -179,7 +179,7 @@ def _setup(args: argparse.Namespace) -> tuple[Experiment, Any, str | None, Path]
             raise ConfigError(f"{path} [experiment]: config = {cfg.config!r}: no such file {base_path}")
         base = str(base_path)
     for key in ("real_config", "mujoco_config"):  # the cells of the sim-to-real experiment, relative to its file
-        if key == "mujoco_config" and "mujoco_exact" not in getattr(cfg, "conditions", ()):
+        if key == "mujoco_config" and not {"mujoco_exact", "mujoco_hmd"} & set(getattr(cfg, "conditions", ())):
             continue  # no condition plays the MuJoCo cell
         if getattr(cfg, key, ""):
             cell = (path.parent / getattr(cfg, key)).resolve()
@@ -246,7 +246,7 @@ def add_sim2real_command(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--mujoco-config",
         default=None,
-        help="TOML of the MuJoCo cell (condition mujoco_exact); default: configs/cells/mujoco_cell.toml",
+        help="TOML of the MuJoCo cell (conditions mujoco_exact, mujoco_hmd); default: configs/cells/mujoco_cell.toml",
     )
     p.add_argument("--seeds", type=positive_int, default=3)
     p.add_argument("--episodes", type=positive_int, default=10, help="episodes per seed and condition")
@@ -317,7 +317,7 @@ def cmd_sim2real(args: argparse.Namespace) -> int:
     train_cfg = EnvConfig.load(args.config)
     cell = s2r.load_real_cell(args.real_config or shipped_config("cells", "real_cell.toml"))
     cells = {"real": cell}
-    if "mujoco_exact" in args.conditions:
+    if {"mujoco_exact", "mujoco_hmd"} & set(args.conditions):
         cells["mujoco"] = s2r.load_real_cell(args.mujoco_config or shipped_config("cells", "mujoco_cell.toml"))
     real_cfg, real_path, hmd = cell.env, cell.path, cell.hmd
     policy = s2r.load_policy(args.policy, train_cfg, cell)

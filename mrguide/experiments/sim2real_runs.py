@@ -16,7 +16,7 @@ from mrguide.config import ConfigError, check_number
 from mrguide.experiments import report
 from mrguide.experiments.runs import TrainRun, configs
 
-CONDITIONS = ("sim", "real_exact", "real_hmd", "mujoco_exact")
+CONDITIONS = ("sim", "real_exact", "real_hmd", "mujoco_exact", "mujoco_hmd")
 OUTCOME_FIELDS = ["condition", "eval_seed", "episode", "outcome"]
 
 
@@ -66,7 +66,7 @@ def evaluate(run: TrainRun, root: str, cfg: Sim2RealConfig) -> str:
         return str(path)
     train_cfg = configs(run)[3]
     cells = {"real": s2r.load_real_cell(cfg.real_config)}
-    if "mujoco_exact" in cfg.conditions:
+    if {"mujoco_exact", "mujoco_hmd"} & set(cfg.conditions):
         cells["mujoco"] = s2r.load_real_cell(cfg.mujoco_config)
     policy_file = run.directory(Path(root)) / "policy.npz"
     policy = s2r.load_policy(policy_file, train_cfg, cells["real"])
