@@ -42,6 +42,7 @@ from mrguide.drivers.nmt import (
     set_master_consumer,
     sign_off,
 )
+from mrguide.drivers.objects import VACUUM_COMMAND
 from mrguide.drivers.od_values import node_id_of
 from mrguide.drivers.vacuum import BLOW_OFF_BIT, VACUUM_ON_BIT, VacuumGenerator
 
@@ -154,7 +155,7 @@ def _boot(core: CobotCore) -> None:
 def _vacuum_command_on_device(vacuum: VacuumGenerator) -> tuple[bool, bool]:
     """Keep whatever the vacuum generator is doing (a held part must not drop on reconnect)."""
     try:
-        bits = vacuum.node.sdo[0x2000].raw
+        bits = vacuum.node.sdo[VACUUM_COMMAND].raw
     except SdoError as exc:
         raise BootError(f"{vacuum.label}: cannot read vacuum command 0x2000: {exc}") from exc
     return bool(bits & VACUUM_ON_BIT), bool(bits & BLOW_OFF_BIT)

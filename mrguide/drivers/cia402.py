@@ -23,6 +23,23 @@ from canopen.sdo.exceptions import SdoError
 from mrguide.drivers.config import DriveConfig, TimingConfig
 from mrguide.drivers.conversion import JointConversion
 from mrguide.drivers.errors import BootError
+from mrguide.drivers.objects import (
+    CONTROLWORD,
+    DEVICE_TYPE,
+    FOLLOWING_ERROR_TIME_OUT,
+    FOLLOWING_ERROR_WINDOW,
+    INTERPOLATION_TIME_PERIOD,
+    MODES_OF_OPERATION,
+    MODES_OF_OPERATION_DISPLAY,
+    POSITION_ACTUAL_VALUE,
+    PRODUCER_HEARTBEAT_TIME,
+    QUICK_STOP_DECELERATION,
+    QUICK_STOP_OPTION_CODE,
+    STATUSWORD,
+    SUPPORTED_DRIVE_MODES,
+    TARGET_POSITION,
+    VELOCITY_ACTUAL_VALUE,
+)
 from mrguide.drivers.od_values import node_id_of, od_int
 from mrguide.drivers.pdo_setup import PdoEntries, map_pdos
 
@@ -33,9 +50,9 @@ CSP_SUPPORTED_BIT = OperationMode.SUPPORTED["CYCLIC SYNCHRONOUS POSITION"]
 #: Low word of object 0x1000 for devices following CiA 402.
 CIA402_PROFILE = 402
 
-RPDO_LAYOUT: dict[int, PdoEntries] = {1: ((0x6040, 0), (0x607A, 0))}
-TPDO_STATUS: PdoEntries = ((0x6041, 0), (0x6064, 0))
-TPDO_VELOCITY: PdoEntries = ((0x606C, 0),)
+RPDO_LAYOUT: dict[int, PdoEntries] = {1: ((CONTROLWORD, 0), (TARGET_POSITION, 0))}
+TPDO_STATUS: PdoEntries = ((STATUSWORD, 0), (POSITION_ACTUAL_VALUE, 0))
+TPDO_VELOCITY: PdoEntries = ((VELOCITY_ACTUAL_VALUE, 0),)
 
 OPERATION_ENABLED = "OPERATION ENABLED"
 QUICK_STOP_ACTIVE = "QUICK STOP ACTIVE"
@@ -160,21 +177,21 @@ class Cia402Drive:
         sdo.RESPONSE_TIMEOUT = timing.sdo_timeout
         conv, cfg = self.conversion, self.config
         try:
-            device_type = sdo[0x1000].raw
+            device_type = sdo[DEVICE_TYPE].raw
             if device_type & 0xFFFF != CIA402_PROFILE:
                 raise BootError(f"{self.label}: device type 0x{device_type:08X} is not a CiA 402 device")
-            if not sdo[0x6502].raw & CSP_SUPPORTED_BIT:
+            if not sdo[SUPPORTED_DRIVE_MODES].raw & CSP_SUPPORTED_BIT:
                 raise BootError(f"{self.label}: drive does not support cyclic synchronous position mode")
-            sdo[0x1017].raw = timing.heartbeat_ms
+            sdo[PRODUCER_HEARTBEAT_TIME].raw = timing.heartbeat_ms
             value, index = interpolation_period(timing.control_period)
-            sdo[0x60C2][1].raw = value
-            sdo[0x60C2][2].raw = index
-            sdo[0x6065].raw = min(conv.magnitude_to_counts(cfg.following_error_window), 0xFFFFFFFF)
-            sdo[0x6066].raw = cfg.following_error_timeout_ms
-            sdo[0x605A].raw = cfg.quick_stop_option
-            sdo[0x6085].raw = min(conv.magnitude_to_counts(cfg.quick_stop_deceleration), 0xFFFFFFFF)
-            sdo[0x6060].raw = CSP_MODE
-            shown = sdo[0x6061].raw
+            sdo[INTERPOLATION_TIME_PERIOD][1].raw = value
+            sdo[INTERPOLATION_TIME_PERIOD][2].raw = index
+            sdo[FOLLOWING_ERROR_WINDOW].raw = min(conv.magnitude_to_counts(cfg.following_error_window), 0xFFFFFFFF)
+            sdo[FOLLOWING_ERROR_TIME_OUT].raw = cfg.following_error_timeout_ms
+            sdo[QUICK_STOP_OPTION_CODE].raw = cfg.quick_stop_option
+            sdo[QUICK_STOP_DECELERATION].raw = min(conv.magnitude_to_counts(cfg.quick_stop_deceleration), 0xFFFFFFFF)
+            sdo[MODES_OF_OPERATION].raw = CSP_MODE
+            shown = sdo[MODES_OF_OPERATION_DISPLAY].raw
             if shown != CSP_MODE:
                 raise BootError(f"{self.label}: mode of operation display is {shown}, expected {CSP_MODE} (CSP)")
             rx = map_pdos(self.node.rpdo, RPDO_LAYOUT, self.label)

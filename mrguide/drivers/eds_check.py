@@ -12,28 +12,64 @@ from pathlib import Path
 import canopen
 
 from mrguide.config import ConfigError
+from mrguide.drivers.objects import (
+    CONSUMER_HEARTBEAT_TIME,
+    CONTROLWORD,
+    DEVICE_TYPE,
+    FOLLOWING_ERROR_TIME_OUT,
+    FOLLOWING_ERROR_WINDOW,
+    GRIP_HYSTERESIS,
+    GRIP_THRESHOLD,
+    INTERPOLATION_TIME_PERIOD,
+    MODES_OF_OPERATION,
+    MODES_OF_OPERATION_DISPLAY,
+    PART_GRIPPED,
+    PART_LOST,
+    POSITION_ACTUAL_VALUE,
+    PRODUCER_HEARTBEAT_TIME,
+    QUICK_STOP_DECELERATION,
+    QUICK_STOP_OPTION_CODE,
+    RPDO_COMMUNICATION,
+    RPDO_MAPPING,
+    STATUSWORD,
+    SUPPORTED_DRIVE_MODES,
+    TARGET_POSITION,
+    TPDO_COMMUNICATION,
+    TPDO_MAPPING,
+    VACUUM_COMMAND,
+    VACUUM_LEVEL,
+    VELOCITY_ACTUAL_VALUE,
+)
 
 #: Objects the master reads or writes on every device: device type, heartbeat consumer/producer time,
 #: RPDO1 and TPDO1 communication and mapping parameters.
-_COMMON = (0x1000, 0x1016, 0x1017, 0x1400, 0x1600, 0x1800, 0x1A00)
+_COMMON = (
+    DEVICE_TYPE,
+    CONSUMER_HEARTBEAT_TIME,
+    PRODUCER_HEARTBEAT_TIME,
+    RPDO_COMMUNICATION,
+    RPDO_MAPPING,
+    TPDO_COMMUNICATION,
+    TPDO_MAPPING,
+)
 #: Objects of a CiA 402 joint drive used by `cia402.py` (TPDO2 for the velocity, when mapped, is added).
 DRIVE_OBJECTS = _COMMON + (
-    0x6040,
-    0x6041,
-    0x605A,
-    0x6060,
-    0x6061,
-    0x6064,
-    0x6065,
-    0x6066,
-    0x607A,
-    0x6085,
-    0x60C2,
-    0x6502,
+    CONTROLWORD,
+    STATUSWORD,
+    QUICK_STOP_OPTION_CODE,
+    MODES_OF_OPERATION,
+    MODES_OF_OPERATION_DISPLAY,
+    POSITION_ACTUAL_VALUE,
+    FOLLOWING_ERROR_WINDOW,
+    FOLLOWING_ERROR_TIME_OUT,
+    TARGET_POSITION,
+    QUICK_STOP_DECELERATION,
+    INTERPOLATION_TIME_PERIOD,
+    SUPPORTED_DRIVE_MODES,
 )
-VELOCITY_TPDO_OBJECTS = (0x1801, 0x1A01, 0x606C)
+VELOCITY_TPDO_OBJECTS = (0x1801, 0x1A01, VELOCITY_ACTUAL_VALUE)
 #: Objects of the vacuum generator used by `vacuum.py`.
-VACUUM_OBJECTS = _COMMON + (0x2000, 0x2001, 0x2003, 0x2020, 0x2100, 0x2101)
+VACUUM_OBJECTS = _COMMON + (VACUUM_COMMAND, PART_GRIPPED, PART_LOST, VACUUM_LEVEL, GRIP_THRESHOLD, GRIP_HYSTERESIS)
 
 
 def check_eds(path: Path, required: tuple[int, ...], key: str) -> None:

@@ -25,7 +25,6 @@ BOOTUP = 0
 #: NMT state OPERATIONAL as carried in heartbeats.
 OPERATIONAL = 5
 #: Consumer heartbeat time object (CiA 301); sub-index 1 holds the entry for the master.
-CONSUMER_HEARTBEAT = 0x1016
 #: EMCY error code of a heartbeat consumer time-out (CiA 301: life guard or heartbeat error).
 HEARTBEAT_ERROR = 0x8130
 

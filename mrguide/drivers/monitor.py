@@ -22,6 +22,17 @@ from mrguide.drivers.cia402 import RPDO_LAYOUT, decode_state, tpdo_layout
 from mrguide.drivers.config import CobotBusConfig, eds_path
 from mrguide.drivers.conversion import JointConversion
 from mrguide.drivers.heartbeat import nmt_state_name
+from mrguide.drivers.objects import (
+    CONTROLWORD,
+    PART_GRIPPED,
+    PART_LOST,
+    POSITION_ACTUAL_VALUE,
+    STATUSWORD,
+    TARGET_POSITION,
+    VACUUM_COMMAND,
+    VACUUM_LEVEL,
+    VELOCITY_ACTUAL_VALUE,
+)
 from mrguide.drivers.pdo_setup import PdoEntries
 
 _NMT_NAMES = {code: name for name, code in NMT_COMMANDS.items() if name != "INITIALISING"}
@@ -60,20 +71,20 @@ class _PdoField:
         if not isinstance(value, int):  # a string or a real: none of the integer objects below
             return f"{self.var.name}={value}"
         conv, key = self.conversion, (self.var.index, self.var.subindex)
-        if key == (0x6040, 0):
+        if key == (CONTROLWORD, 0):
             return f"controlword=0x{value:04X}"
-        if key == (0x6041, 0):
+        if key == (STATUSWORD, 0):
             return f"statusword=0x{value:04X} ({decode_state(value)})"
-        if key in ((0x607A, 0), (0x6064, 0)) and conv is not None:
-            name = "target" if key[0] == 0x607A else "position"
+        if key in ((TARGET_POSITION, 0), (POSITION_ACTUAL_VALUE, 0)) and conv is not None:
+            name = "target" if key[0] == TARGET_POSITION else "position"
             return f"{name}={value} ({conv.to_rad(value):+.4f} rad)"
-        if key == (0x606C, 0) and conv is not None:
+        if key == (VELOCITY_ACTUAL_VALUE, 0) and conv is not None:
             return f"velocity={value} ({conv.velocity_to_rad(value):+.3f} rad/s)"
-        if key == (0x2000, 0):
+        if key == (VACUUM_COMMAND, 0):
             return f"vacuum={'on' if value & vac.VACUUM_ON_BIT else 'off'} blow_off={'on' if value & vac.BLOW_OFF_BIT else 'off'}"
-        if key == (0x2020, 1):
+        if key == (VACUUM_LEVEL, 1):
             return f"level={value * vac.LEVEL_UNIT_KPA:.1f} kPa"
-        if key in ((0x2001, 0), (0x2003, 0)):
+        if key in ((PART_GRIPPED, 0), (PART_LOST, 0)):
             return f"{'gripped' if key[0] == 0x2001 else 'lost'}={'yes' if value & vac.MODULE0_BIT else 'no'}"
         return f"{self.var.name}={value}"
 

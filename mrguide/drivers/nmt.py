@@ -18,7 +18,8 @@ from canopen.sdo.exceptions import SdoError
 
 from mrguide.drivers.bus import BusReceiver
 from mrguide.drivers.cia402 import Cia402Drive
-from mrguide.drivers.heartbeat import CONSUMER_HEARTBEAT, HeartbeatConsumer, consumer_heartbeat_entry
+from mrguide.drivers.heartbeat import HeartbeatConsumer, consumer_heartbeat_entry
+from mrguide.drivers.objects import CONSUMER_HEARTBEAT_TIME
 from mrguide.drivers.vacuum import VacuumGenerator
 
 logger = logging.getLogger(__name__)
@@ -35,7 +36,7 @@ def send_nmt(network: canopen.Network, command: int, node_id: int) -> None:
 
 def set_master_consumer(node: RemoteNode, master_id: int, time_ms: int) -> None:
     """Make a device consume the master's heartbeat with consumer time `time_ms` by SDO (0 switches it off)."""
-    node.sdo[CONSUMER_HEARTBEAT][1].raw = consumer_heartbeat_entry(master_id, time_ms)
+    node.sdo[CONSUMER_HEARTBEAT_TIME][1].raw = consumer_heartbeat_entry(master_id, time_ms)
 
 
 def sign_off(devices: Iterable[Cia402Drive | VacuumGenerator], hb: HeartbeatConsumer, master_id: int) -> None:

@@ -19,13 +19,23 @@ from canopen.sdo.exceptions import SdoError
 
 from mrguide.drivers.config import TimingConfig, VacuumConfig
 from mrguide.drivers.errors import BootError
+from mrguide.drivers.objects import (
+    DEVICE_TYPE,
+    GRIP_HYSTERESIS,
+    GRIP_THRESHOLD,
+    PART_GRIPPED,
+    PART_LOST,
+    PRODUCER_HEARTBEAT_TIME,
+    VACUUM_COMMAND,
+    VACUUM_LEVEL,
+)
 from mrguide.drivers.od_values import node_id_of, od_int
 from mrguide.drivers.pdo_setup import PdoEntries, map_pdos
 
 logger = logging.getLogger(__name__)
 
-RPDO_LAYOUT: dict[int, PdoEntries] = {1: ((0x2000, 0),)}
-TPDO_LAYOUT: dict[int, PdoEntries] = {1: ((0x2020, 1), (0x2001, 0), (0x2003, 0))}
+RPDO_LAYOUT: dict[int, PdoEntries] = {1: ((VACUUM_COMMAND, 0),)}
+TPDO_LAYOUT: dict[int, PdoEntries] = {1: ((VACUUM_LEVEL, 1), (PART_GRIPPED, 0), (PART_LOST, 0))}
 
 #: 0x2000 bit for "vacuum on", module 0 (LEMCOM: byte 3 = vacuum, modules 0..7).
 VACUUM_ON_BIT = 1 << 24
@@ -76,19 +86,19 @@ class VacuumGenerator:
         """Configure by SDO (node PRE-OPERATIONAL); returns {TPDO COB-ID: length}."""
         sdo = self.node.sdo
         sdo.RESPONSE_TIMEOUT = timing.sdo_timeout
-        device_type_object = self.node.object_dictionary[0x1000]
+        device_type_object = self.node.object_dictionary[DEVICE_TYPE]
         assert isinstance(device_type_object, ODVariable), "0x1000 is a variable (CiA 301)"
         expected_type = device_type_object.default
         try:
-            device_type = sdo[0x1000].raw
+            device_type = sdo[DEVICE_TYPE].raw
             if device_type != expected_type:
                 raise BootError(
                     f"{self.label}: device type 0x{device_type:08X}, EDS "
                     f"{self.config.eds} expects 0x{expected_type:08X}"
                 )
-            sdo[0x1017].raw = timing.heartbeat_ms
-            sdo[0x2100].raw = round(self.config.grip_threshold_kpa / LEVEL_UNIT_KPA)
-            sdo[0x2101].raw = round(self.config.grip_hysteresis_kpa / LEVEL_UNIT_KPA)
+            sdo[PRODUCER_HEARTBEAT_TIME].raw = timing.heartbeat_ms
+            sdo[GRIP_THRESHOLD].raw = round(self.config.grip_threshold_kpa / LEVEL_UNIT_KPA)
+            sdo[GRIP_HYSTERESIS].raw = round(self.config.grip_hysteresis_kpa / LEVEL_UNIT_KPA)
             rx = map_pdos(self.node.rpdo, RPDO_LAYOUT, self.label)
             tx = map_pdos(self.node.tpdo, TPDO_LAYOUT, self.label)
         except SdoError as exc:

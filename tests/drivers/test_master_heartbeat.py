@@ -17,9 +17,10 @@ import pytest
 
 from mrguide.drivers import Cobot, DeviceFaultError
 from mrguide.drivers.config import MasterConfig, eds_path
-from mrguide.drivers.heartbeat import CONSUMER_HEARTBEAT, HEARTBEAT_ERROR, consumer_heartbeat_entry
+from mrguide.drivers.heartbeat import HEARTBEAT_ERROR, consumer_heartbeat_entry
 from mrguide.drivers.mock import FirstOrderPlant, SimulatedCobot
 from mrguide.drivers.mock.drive_sim import OPERATION_ENABLED, SWITCH_ON_DISABLED
+from mrguide.drivers.objects import CONSUMER_HEARTBEAT_TIME
 
 HB = 0.05  # heartbeat period of the test rigs (s); consumer time: config.timing.heartbeat_timeout
 MASTER = 127
@@ -32,7 +33,7 @@ def _emcy_codes(tap, node_id: int) -> list[int]:
 def test_every_device_consumes_the_master_heartbeat_sent_every_period(rig, tap_on):
     tap = tap_on(rig.config.bus.channel)
     for slave in (*rig.sim.drives, rig.sim.vacuum):
-        assert slave.value((CONSUMER_HEARTBEAT, 1)) == consumer_heartbeat_entry(
+        assert slave.value((CONSUMER_HEARTBEAT_TIME, 1)) == consumer_heartbeat_entry(
             MASTER, rig.config.timing.heartbeat_timeout_ms
         )
     time.sleep(20 * HB)
@@ -92,7 +93,7 @@ def test_planned_disconnect_is_not_a_master_loss(make_rig, tap_on):
     rig.cobot.enable()
     rig.cobot.disconnect()
     for slave in (*rig.sim.drives, rig.sim.vacuum):
-        assert slave.value((CONSUMER_HEARTBEAT, 1)) == 0
+        assert slave.value((CONSUMER_HEARTBEAT_TIME, 1)) == 0
     time.sleep(2 * rig.config.timing.heartbeat_timeout)
     assert not any(HEARTBEAT_ERROR in _emcy_codes(tap, n) for n in rig.config.node_ids)
 
@@ -104,7 +105,7 @@ def test_master_heartbeat_can_be_switched_off(make_config, robot, tap_on):
         cobot.enable()
         time.sleep(2 * config.timing.heartbeat_timeout)
         assert tap.with_id(0x700 + MASTER) == []
-        assert all(slave.value((CONSUMER_HEARTBEAT, 1)) == 0 for slave in sim.drives)
+        assert all(slave.value((CONSUMER_HEARTBEAT_TIME, 1)) == 0 for slave in sim.drives)
         assert all(d.state == OPERATION_ENABLED for d in sim.drives)
 
 
@@ -117,7 +118,7 @@ def test_consumer_starts_with_the_first_heartbeat_and_reports_a_loss_once(make_c
         network.connect(interface="virtual", channel=config.bus.channel)
         try:
             node = network.add_node(3, str(eds_path(config.drives.eds)))
-            node.sdo[CONSUMER_HEARTBEAT][1].raw = consumer_heartbeat_entry(MASTER, 100)
+            node.sdo[CONSUMER_HEARTBEAT_TIME][1].raw = consumer_heartbeat_entry(MASTER, 100)
             node.nmt.send_command(0x01)  # NMT start
             drive = sim.drives[0]
             assert wait_until(lambda: drive.operational)

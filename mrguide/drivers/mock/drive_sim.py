@@ -22,6 +22,22 @@ from mrguide.drivers.conversion import JointConversion
 from mrguide.drivers.mock.faults import FaultInjector
 from mrguide.drivers.mock.pdo_image import Key
 from mrguide.drivers.mock.slave import SimulatedSlave
+from mrguide.drivers.objects import (
+    CONTROLWORD,
+    ERROR_CODE,
+    ERROR_REGISTER,
+    FOLLOWING_ERROR_TIME_OUT,
+    FOLLOWING_ERROR_WINDOW,
+    INTERPOLATION_TIME_PERIOD,
+    MODES_OF_OPERATION,
+    MODES_OF_OPERATION_DISPLAY,
+    POSITION_ACTUAL_VALUE,
+    QUICK_STOP_DECELERATION,
+    QUICK_STOP_OPTION_CODE,
+    STATUSWORD,
+    TARGET_POSITION,
+    VELOCITY_ACTUAL_VALUE,
+)
 
 logger = logging.getLogger(__name__)
 
@@ -59,15 +75,15 @@ STANDSTILL = 1e-3
 _KEYS = {
     name: (index, 0)
     for name, index in (
-        ("controlword", 0x6040),
-        ("statusword", 0x6041),
-        ("mode", 0x6060),
-        ("mode_display", 0x6061),
-        ("position", 0x6064),
-        ("velocity", 0x606C),
-        ("target", 0x607A),
-        ("error_code", 0x603F),
-        ("error_register", 0x1001),
+        ("controlword", CONTROLWORD),
+        ("statusword", STATUSWORD),
+        ("mode", MODES_OF_OPERATION),
+        ("mode_display", MODES_OF_OPERATION_DISPLAY),
+        ("position", POSITION_ACTUAL_VALUE),
+        ("velocity", VELOCITY_ACTUAL_VALUE),
+        ("target", TARGET_POSITION),
+        ("error_code", ERROR_CODE),
+        ("error_register", ERROR_REGISTER),
     )
 }
 
@@ -136,21 +152,27 @@ class SimulatedDrive(SimulatedSlave):
         self._reload_parameters()
 
     def _reload_parameters(self) -> None:
-        value, exponent = self.value((0x60C2, 1)), self.value((0x60C2, 2))
+        value, exponent = self.value((INTERPOLATION_TIME_PERIOD, 1)), self.value((INTERPOLATION_TIME_PERIOD, 2))
         self.interpolation_period = value * 10.0**exponent
-        self._window = self.value((0x6065, 0))
-        self._window_time = self.value((0x6066, 0)) / 1000.0
-        self._quick_stop_option = self.value((0x605A, 0))
-        self._quick_stop_decel = self.value((0x6085, 0)) / self.conversion.counts_per_rad
+        self._window = self.value((FOLLOWING_ERROR_WINDOW, 0))
+        self._window_time = self.value((FOLLOWING_ERROR_TIME_OUT, 0)) / 1000.0
+        self._quick_stop_option = self.value((QUICK_STOP_OPTION_CODE, 0))
+        self._quick_stop_decel = self.value((QUICK_STOP_DECELERATION, 0)) / self.conversion.counts_per_rad
 
     def validate_write(self, key: Key, value: int) -> None:
         if key == _KEYS["mode"] and value not in (0, CSP_MODE):
             raise SdoAbortedError(0x06090030)  # value range of parameter exceeded
 
     def after_write(self, index: int, subindex: int) -> None:
-        if index == 0x6060:
+        if index == MODES_OF_OPERATION:
             self.image[_KEYS["mode_display"]] = self.image[_KEYS["mode"]]
-        elif index in (0x6065, 0x6066, 0x605A, 0x6085, 0x60C2):
+        elif index in (
+            FOLLOWING_ERROR_WINDOW,
+            FOLLOWING_ERROR_TIME_OUT,
+            QUICK_STOP_OPTION_CODE,
+            QUICK_STOP_DECELERATION,
+            INTERPOLATION_TIME_PERIOD,
+        ):
             self._reload_parameters()
 
     def on_nmt_state(self) -> None:

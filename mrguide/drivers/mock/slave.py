@@ -23,7 +23,7 @@ from canopen import LocalNode
 from canopen.objectdictionary import ODVariable
 
 from mrguide.drivers.bus import BusReceiver
-from mrguide.drivers.heartbeat import CONSUMER_HEARTBEAT, HEARTBEAT_ERROR, parse_consumer_heartbeat_entry
+from mrguide.drivers.heartbeat import HEARTBEAT_ERROR, parse_consumer_heartbeat_entry
 from mrguide.drivers.mock.faults import FaultInjector
 from mrguide.drivers.mock.pdo_image import (
     RPDO_COMM,
@@ -35,6 +35,7 @@ from mrguide.drivers.mock.pdo_image import (
     PdoLayout,
     read_layouts,
 )
+from mrguide.drivers.objects import CONSUMER_HEARTBEAT_TIME
 from mrguide.drivers.od_values import node_id_of, od_int
 
 logger = logging.getLogger(__name__)
@@ -160,7 +161,7 @@ class SimulatedSlave(ABC):
             self.validate_write(key, value)
             self.image[key] = value
         self.node.data_store.setdefault(index, {})[subindex] = bytes(data)
-        if index == CONSUMER_HEARTBEAT:
+        if index == CONSUMER_HEARTBEAT_TIME:
             self._reload_consumers()
         self.after_write(index, subindex)
 
@@ -171,7 +172,7 @@ class SimulatedSlave(ABC):
         for producer_id in self._consumed:
             self.network.unsubscribe(0x700 + producer_id, self._on_consumed_heartbeat)
         self._consumed = {}
-        parsed = parse_consumer_heartbeat_entry(self.value((CONSUMER_HEARTBEAT, 1)))
+        parsed = parse_consumer_heartbeat_entry(self.value((CONSUMER_HEARTBEAT_TIME, 1)))
         if parsed is not None:
             producer_id, timeout = parsed
             self._consumed[producer_id] = _ConsumedHeartbeat(timeout)

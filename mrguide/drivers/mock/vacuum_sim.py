@@ -8,16 +8,25 @@ the vacuum is switched off or the part is gripped again.
 
 from __future__ import annotations
 
+from mrguide.drivers import objects
 from mrguide.drivers.mock.slave import SimulatedSlave
+from mrguide.drivers.objects import (
+    GRIP_HYSTERESIS,
+    GRIP_THRESHOLD,
+    PART_GRIPPED,
+    PART_LOST,
+    VACUUM_COMMAND,
+    VACUUM_LEVEL,
+)
 from mrguide.drivers.vacuum import BLOW_OFF_BIT, LEVEL_UNIT_KPA, MODULE0_BIT, VACUUM_ON_BIT
 
-COMMAND = (0x2000, 0)
-GRIPPED = (0x2001, 0)
-LOST = (0x2003, 0)
-LEVEL = (0x2020, 1)
-THRESHOLD = (0x2100, 0)
-HYSTERESIS = (0x2101, 0)
-ERROR_REGISTER = (0x1001, 0)
+COMMAND = (VACUUM_COMMAND, 0)
+GRIPPED = (PART_GRIPPED, 0)
+LOST = (PART_LOST, 0)
+LEVEL = (VACUUM_LEVEL, 1)
+THRESHOLD = (GRIP_THRESHOLD, 0)
+HYSTERESIS = (GRIP_HYSTERESIS, 0)
+ERROR_REGISTER = (objects.ERROR_REGISTER, 0)
 
 
 class SimulatedVacuumGenerator(SimulatedSlave):
