@@ -119,3 +119,22 @@ def test_render_gives_an_image():
         assert img.shape == (cam.height, cam.width, 3) and img.std() > 5
     finally:
         e.close()
+
+
+def test_gymnasium_make_builds_the_env_and_its_checker_passes():
+    import warnings
+
+    import gymnasium as gym
+    from gymnasium.utils.env_checker import check_env
+
+    env = gym.make("mrguide.twin.env:mrguide/PickPlace-v0")
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # any warning of the checker fails the test
+            check_env(env.unwrapped)
+        obs, _ = env.reset(seed=3)
+        assert env.observation_space.contains(obs)
+        obs, reward, terminated, truncated, _ = env.step(env.action_space.sample())
+        assert env.observation_space.contains(obs) and isinstance(reward, float)
+    finally:
+        env.close()
