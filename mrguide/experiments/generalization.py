@@ -35,7 +35,7 @@ class GeneralizationConfig:
     workspace_low: tuple[float, float, float] = (0.16, -0.20, 0.045)  # wide enough for goals 0.21 m from the region
     workspace_high: tuple[float, float, float] = (0.72, 0.54, 0.35)
     grid_step: float = 0.05  # m between goal targets (119 targets: 20 episodes each per seed ≈ 1 h of one core)
-    max_distance: float = 0.21  # m from the training goal region (issue 16: at least 0.21)
+    max_distance: float = 0.21  # m from the training goal region (the target: at least 0.21)
     bin_width: float = 0.03  # m
     episodes: int = 20  # per target and seed
     config: str = ""

@@ -75,7 +75,7 @@ def per_run_rows(recs: dict[str, list[RunRecord]]) -> list[dict[str, Any]]:
 
 
 def learning_curves_report(cfg: CurvesConfig, recs: dict[str, list[RunRecord]]) -> dict[str, bytes]:
-    """summary.csv (issue 16's columns), runs.csv, summary.md and Fig. 3, 5, 9."""
+    """summary.csv, runs.csv, summary.md and Fig. 3, 5, 9."""
     table = []
     for v, rs in recs.items():
         conv = [r.converged.step for r in rs if r.converged.step is not None]
@@ -147,7 +147,7 @@ def learning_curves_report(cfg: CurvesConfig, recs: dict[str, list[RunRecord]]) 
 
 
 def long_baseline_report(cfg: CurvesConfig, recs: dict[str, list[RunRecord]]) -> dict[str, bytes]:
-    """summary.csv (issue 16's columns), runs.csv, summary.md and Fig. 4."""
+    """summary.csv, runs.csv, summary.md and Fig. 4."""
     table = []
     for v, rs in recs.items():
         conv = [r.converged.step for r in rs if r.converged.step is not None]

@@ -38,7 +38,7 @@ class NoiseConfig:
 
     seeds: int = 10  # paper: 10
     steps: int = 20_000  # "within the training horizon": 20k
-    sigmas: tuple[float, ...] = (0.0, 0.01, 0.02, 0.03, 0.05, 0.07, 0.1)  # m (issue 16)
+    sigmas: tuple[float, ...] = (0.0, 0.01, 0.02, 0.03, 0.05, 0.07, 0.1)  # m (the paper's Fig. 7 range)
     reading: str = "marks"  # ours: a person's marks, each off by σ per axis
     config: str = ""  # base training config (TOML), relative to the experiment file; "" = defaults
     overrides: dict[str, Any] = field(default_factory=dict)
@@ -97,7 +97,7 @@ SUMMARY_COLUMNS = (
     ("median_person_minutes_total", "person-minutes per run (median)"),
     ("reached_at_end", "reached only at the end"),
 )
-#: summary.csv's columns (issue 16's, then the marks per run).
+#: summary.csv's columns (convergence, then the marks per run).
 SUMMARY_CSV = (
     "sigma_m",
     "seeds",

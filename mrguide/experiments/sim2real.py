@@ -258,7 +258,7 @@ def _unplayed(
     return outcomes
 
 
-#: Our targets for the three conditions (issue 17), and the paper's Fig. 8 (Sec. V-F: 100 %, 100 %, 86 ± 10 %).
+#: Our targets for the conditions, and the paper's Fig. 8 (Sec. V-F: 100 %, 100 %, 86 ± 10 %).
 TARGETS = {"sim": 0.98, "real_exact": 0.95, "real_hmd": 0.90, "mujoco_exact": 0.95, "mujoco_hmd": 0.90}
 PAPER = {"sim": 1.0, "real_exact": 1.0, "real_hmd": 0.86}
 COLORS = {

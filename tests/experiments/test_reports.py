@@ -1,4 +1,4 @@
-"""Reports built from run directories: the summary columns issue 16 asks for, the convergence rule, figures."""
+"""Reports built from run directories: the summary columns, the convergence rule, figures."""
 
 import csv
 import dataclasses
