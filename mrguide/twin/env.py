@@ -210,4 +210,4 @@ class PickPlaceEnv(gym.Env):
 #: The env's Gymnasium id: `gymnasium.make("mrguide.twin.env:mrguide/PickPlace-v0")` imports this module (which
 #: registers it) and builds a `PickPlaceEnv` with the default config (`config=EnvConfig.load(path)` for another).
 ENV_ID = "mrguide/PickPlace-v0"
-gym.register(id=ENV_ID, entry_point=PickPlaceEnv)
+gym.register(id=ENV_ID, entry_point="mrguide.twin.env:PickPlaceEnv")

@@ -134,7 +134,7 @@ def test_gymnasium_make_builds_the_env_and_its_checker_passes():
             check_env(env.unwrapped)
         obs, _ = env.reset(seed=3)
         assert env.observation_space.contains(obs)
-        obs, reward, terminated, truncated, _ = env.step(env.action_space.sample())
+        obs, reward, *_ = env.step(env.action_space.sample())
         assert env.observation_space.contains(obs) and isinstance(reward, float)
     finally:
         env.close()
