@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 import math
+import tomllib
+from typing import Any
 
 
 class ArgumentParser(argparse.ArgumentParser):
@@ -67,3 +69,16 @@ def _int(text: str) -> int:
         return int(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
+
+
+def override_arg(text: str) -> tuple[str, Any]:
+    """argparse type of --set: KEY=VALUE, the value a TOML value (`0.001`, `true`, `[64, 64]`, `"live"`) or else
+    the text as it is (`guidance.source=oracle`). Whether the key exists and the value fits is the config's check."""
+    key, sep, raw = text.partition("=")
+    if not sep or not key.strip() or "." not in key:
+        raise argparse.ArgumentTypeError(f"expected SECTION.KEY=VALUE (e.g. ddpg.lr_actor=0.001), got {text!r}")
+    try:
+        value = tomllib.loads(f"v = {raw}")["v"]
+    except tomllib.TOMLDecodeError:
+        value = raw
+    return key.strip(), value

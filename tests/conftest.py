@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import fcntl
 import json
 import subprocess
 import sys
+import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -113,7 +115,15 @@ def policy_file():
 
 def build_wheel(dest: Path) -> Path:
     """The wheel of this checkout, as `pip install .` builds it (the annotation page's scripts included), built
-    into `dest` by the running interpreter without build isolation (no download of setuptools)."""
+    into `dest` by the running interpreter without build isolation (no download of setuptools). One build at a
+    time: pip builds in the checkout (its build/ and egg-info), and two pytest-xdist workers building at once
+    broke each other's build."""
+    with open(Path(tempfile.gettempdir()) / "mrguide-wheel-build.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        return _build_wheel(dest)
+
+
+def _build_wheel(dest: Path) -> Path:
     subprocess.run(
         [
             sys.executable,

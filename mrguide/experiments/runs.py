@@ -15,11 +15,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from mrguide.config import ConfigError, replace_path
-
-#: Which config an override key's first part addresses: train, ddpg, sac, guidance, or the env's robot/twin/task.
-SECTIONS = ("train", "ddpg", "sac", "guidance", "robot", "twin", "task")
-
 
 @dataclass(frozen=True)
 class TrainRun:
@@ -49,42 +44,24 @@ class RunResult:
     steps: int
 
 
-def configs(run: TrainRun, where: str = "experiment"):
-    """(TrainConfig, DDPGConfig, GuidanceConfig, EnvConfig) of `run`: its file, its overrides, its seed/steps."""
-    from mrguide.policies.train_config import load_train_config
+def _all_configs(run: TrainRun, where: str):
+    """Every config of `run`: its file's sections with its seed, steps, guidance and overrides applied."""
+    from mrguide.policies.train_config import apply_overrides, load_sac_config, load_train_config
 
     tc, dc, gc, ec = load_train_config(run.config)
     tc = dataclasses.replace(tc, total_steps=run.steps, seed=run.seed)
     gc = dataclasses.replace(gc, enabled=run.guided)
-    for key, value in run.overrides.items():
-        section, _, path = key.partition(".")
-        if section not in SECTIONS or not path:
-            raise ConfigError(
-                f"{where}: override {key!r}: expected '<section>.<key>' with section one of {', '.join(SECTIONS)}"
-            )
-        if section == "train":
-            tc = replace_path(tc, path, value, where)
-        elif section == "ddpg":
-            dc = replace_path(dc, path, value, where)
-        elif section == "guidance":
-            gc = replace_path(gc, path, value, where)
-        elif section == "sac":
-            continue  # sac_config
-        else:
-            ec = dataclasses.replace(ec, **{section: replace_path(getattr(ec, section), path, value, where)})
-    return tc, dc, gc, ec
+    return apply_overrides((tc, dc, gc, ec, load_sac_config(run.config)), run.overrides, f"{where}: override")
+
+
+def configs(run: TrainRun, where: str = "experiment"):
+    """(TrainConfig, DDPGConfig, GuidanceConfig, EnvConfig) of `run`: its file, its overrides, its seed/steps."""
+    return _all_configs(run, where)[:4]
 
 
 def sac_config(run: TrainRun, where: str = "experiment"):
     """The SACConfig of `run` (the peer learner): its file's [sac] and its "sac.*" overrides."""
-    from mrguide.policies.train_config import load_sac_config
-
-    sc = load_sac_config(run.config)
-    for key, value in run.overrides.items():
-        section, _, path = key.partition(".")
-        if section == "sac":
-            sc = replace_path(sc, path, value, where)
-    return sc
+    return _all_configs(run, where)[4]
 
 
 def run_record(run: TrainRun) -> dict[str, Any]:

@@ -25,3 +25,7 @@ REFERENCES: tuple[ReferenceName, ...] = get_args(ReferenceName)
 #: guidance.marks: a mark per phase (the paper's protocol) or a pick and a place mark per demonstration (ours).
 MarksMode = Literal["phases", "pick_place"]
 MARKS_MODES: tuple[MarksMode, ...] = get_args(MarksMode)
+
+#: The first part of an override key (`mrguide train --set ddpg.lr_actor=0.001`, an experiment's overrides): the
+#: config it addresses — train, the learners' sections, guidance, or the env's robot, twin, task and plant.
+OVERRIDE_SECTIONS = ("train", "ddpg", "sac", "guidance", "robot", "twin", "task", "plant")

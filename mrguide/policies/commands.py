@@ -15,8 +15,8 @@ from typing import Any, Protocol
 
 from tqdm import tqdm
 
-from mrguide.cli_args import nonnegative_int, positive_int
-from mrguide.policies.choices import EXPERT_SOURCES
+from mrguide.cli_args import nonnegative_int, override_arg, positive_int
+from mrguide.policies.choices import EXPERT_SOURCES, OVERRIDE_SECTIONS
 
 
 class LiveSessionLike(Protocol):
@@ -55,6 +55,15 @@ def add_train_command(sub: argparse._SubParsersAction, live: LivePlugin | None =
         type=positive_int,
         metavar="N",
         help="stop (checkpoint, export) after N steps, keeping the schedule of total_steps; --resume continues",
+    )
+    p.add_argument(
+        "--set",
+        type=override_arg,
+        action="append",
+        default=[],
+        metavar="SECTION.KEY=VALUE",
+        help="set any config key for this run, after --config (e.g. --set ddpg.lr_actor=0.001 --set "
+        "guidance.noise.sigma=0.02); repeatable; sections: " + ", ".join(OVERRIDE_SECTIONS),
     )
     p.add_argument("--no-guidance", action="store_true", help="baseline DDPG (guidance.enabled = false)")
     p.add_argument(
@@ -104,14 +113,17 @@ def cmd_train(args: argparse.Namespace, live: LivePlugin | None = None) -> int:
     """Train (or resume), show progress, export the policy; Ctrl-C checkpoints and exits 130."""
     from mrguide.policies.tensorboard_log import TensorBoardLog, summary_writer_class
     from mrguide.policies.train import CheckpointError, Trainer
-    from mrguide.policies.train_config import load_sac_config, load_train_config
+    from mrguide.policies.train_config import apply_overrides, load_sac_config, load_train_config
 
     if args.tensorboard:
         try:
             summary_writer_class()
         except ImportError as exc:
             return _refuse(f"--tensorboard needs the tensorboard package (pip install 'mrguide[tensorboard]'): {exc}")
-    tc, dc, gc, ec = _train_configs(args, load_train_config(args.config))
+    tc, dc, gc, ec, sc = apply_overrides(
+        (*load_train_config(args.config), load_sac_config(args.config)), dict(args.set), "--set"
+    )
+    tc, dc, gc, ec = _train_configs(args, (tc, dc, gc, ec))
     out = Path(args.out)
     refusal = _output_refusal(out, args.resume)
     if refusal:
@@ -126,7 +138,7 @@ def cmd_train(args: argparse.Namespace, live: LivePlugin | None = None) -> int:
             args, lambda waiting: bar.set_description_str("train | waiting for an annotation" if waiting else "train")
         )
     try:
-        tr = Trainer(tc, dc, gc, ec, out, session.source_factory if session else None, load_sac_config(args.config))
+        tr = Trainer(tc, dc, gc, ec, out, session.source_factory if session else None, sc)
     except BaseException:
         if session:
             session.close()

@@ -3,12 +3,14 @@ and the fingerprint a checkpoint must match to be resumed."""
 
 from __future__ import annotations
 
+import dataclasses
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from mrguide.config import ConfigError, check_number, load_section, to_dict
-from mrguide.policies.choices import LEARNERS, Learner
+from mrguide.config import ConfigError, check_number, load_section, replace_path, to_dict
+from mrguide.policies.choices import LEARNERS, OVERRIDE_SECTIONS, Learner
 from mrguide.policies.ddpg import DDPGConfig
 from mrguide.policies.guidance import GuidanceConfig
 from mrguide.policies.sac import SACConfig
@@ -86,3 +88,29 @@ def run_fingerprint(
         "env": {**to_dict(ec), "robot": arm},
         "sac": to_dict(sc),
     }
+
+
+RunConfigs = tuple[TrainConfig, DDPGConfig, GuidanceConfig, EnvConfig, SACConfig]
+
+
+def apply_overrides(configs: RunConfigs, overrides: Mapping[str, Any], where: str = "override") -> RunConfigs:
+    """`configs` with each dotted override ("<section>.<key>[.<key>…]" → value) set and checked exactly as a value
+    read from a file (ConfigError naming `where` and the key otherwise)."""
+    tc, dc, gc, ec, sc = configs
+    for key, value in overrides.items():
+        section, _, path = key.partition(".")
+        if section not in OVERRIDE_SECTIONS or not path:
+            raise ConfigError(
+                f"{where}: {key!r}: expected '<section>.<key>' with section one of {', '.join(OVERRIDE_SECTIONS)}"
+            )
+        if section == "train":
+            tc = replace_path(tc, path, value, where)
+        elif section == "ddpg":
+            dc = replace_path(dc, path, value, where)
+        elif section == "guidance":
+            gc = replace_path(gc, path, value, where)
+        elif section == "sac":
+            sc = replace_path(sc, path, value, where)
+        else:
+            ec = dataclasses.replace(ec, **{section: replace_path(getattr(ec, section), path, value, where)})
+    return tc, dc, gc, ec, sc

@@ -42,3 +42,12 @@ def test_train_exports_the_target_actor(tmp_path):
         target, online = (net(torch.as_tensor(obs)).numpy() for net in (agent.actor_target, agent.actor))
     exported = ExportedPolicy.load(out / "policy.npz").batch(obs)
     assert np.abs(exported - target).max() < 1e-5 < np.abs(exported - online).max()
+
+
+def test_set_changes_any_config_key_for_the_run_and_refuses_a_bad_one(tmp_path, capsys):
+    out = tmp_path / "run"
+    argv = ["train", "--out", str(out), "--quiet", "--set", "train.total_steps=150", "--set", "ddpg.hidden=[24, 24]"]
+    assert main(argv) == 0
+    assert ExportedPolicy.load(out / "policy.npz").weights[0].shape[0] == 24  # the first layer's width
+    assert main(["train", "--out", str(tmp_path / "bad"), "--quiet", "--set", "ddpg.lr_actor=-1"]) == 2
+    assert "--set: ddpg.lr_actor" in capsys.readouterr().err and not (tmp_path / "bad").exists()
