@@ -27,6 +27,7 @@ from mrguide.deploy.runlog import RunLog
 from mrguide.deploy.runtime import EpisodeReport
 from mrguide.deploy.safety import SafetyConfig
 from mrguide.drivers.config import CobotBusConfig
+from mrguide.drivers.errors import DriverError
 from mrguide.experiments import report
 from mrguide.experiments.stats import wilson
 from mrguide.output_files import write_files_atomically
@@ -217,20 +218,27 @@ def run_real(
 
     try:
         with RunLog(log_path, header) as run_log:
-            summary = dry_run(
-                policy_path,
-                real_cfg,
-                bus_cfg,
-                episodes,
-                seed,
-                run_log,
-                safety,
-                pose_factory=pose_factory,
-                after_episode=judge,
-                on_placed=refresh,
-                policy=policy,
-                max_recoveries=episodes if recover else 0,
-            )
+            try:
+                summary = dry_run(
+                    policy_path,
+                    real_cfg,
+                    bus_cfg,
+                    episodes,
+                    seed,
+                    run_log,
+                    safety,
+                    pose_factory=pose_factory,
+                    after_episode=judge,
+                    on_placed=refresh,
+                    policy=policy,
+                    max_recoveries=episodes if recover else 0,
+                )
+            except DriverError as exc:  # the cell did not start (drives not enabled in time on a starved PC)
+                if outcomes:
+                    raise
+                run_log.write("run_stopped", reason=f"the simulated cell did not start: {exc}")
+                log.warning("seed %d not run: the simulated cell did not start: %s", seed, exc)
+                return _count(["safety_stop"] * episodes, on_episode)
     finally:
         for s in streams:
             s.close()
@@ -251,7 +259,11 @@ def _unplayed(
     with RunLog(log_path, header) as run_log:
         run_log.write("run_stopped", reason=reason)
     log.warning("seed %d not run: %s", header["seed"], reason)
-    outcomes = [Outcome.SAFETY_STOP.value] * episodes
+    return _count([Outcome.SAFETY_STOP.value] * episodes, on_episode)
+
+
+def _count(outcomes: list[str], on_episode: Callable[[str], None] | None) -> list[str]:
+    """`outcomes`, each handed to `on_episode` (the progress bar) first."""
     if on_episode:
         for outcome in outcomes:
             on_episode(outcome)

@@ -47,6 +47,27 @@ def test_real_exact_condition(tmp_path):
     assert out == ["success", "success"]
 
 
+def test_a_cell_whose_drives_do_not_enable_counts_its_episodes_and_says_why(tmp_path, monkeypatch):
+    """A simulated cell that cannot start (its drives not enabled in time, as on a starved PC) costs that seed's
+    episodes, counted as safety stops with the reason in the run log; it does not end the experiment."""
+    from mrguide.deploy.runlog import read_log
+    from mrguide.drivers.errors import DriverError
+
+    def no_enable(*args, **kwargs):
+        raise DriverError("drives did not reach OPERATION ENABLED within 1.0 s")
+
+    monkeypatch.setattr(s2r, "dry_run", no_enable)
+    cfg = EnvConfig.load(REAL)
+    bus = CobotBusConfig(bus=BusConfig(channel="s2r-no-enable"))
+    seen = []
+    out = s2r.run_real(
+        None, cfg, bus, 0, 3, tmp_path / "log.jsonl", REAL, None, on_episode=seen.append, policy=expert(cfg)
+    )
+    assert out == seen == ["safety_stop"] * 3
+    stopped = [r for r in read_log(tmp_path / "log.jsonl") if r["kind"] == "run_stopped"]
+    assert len(stopped) == 1 and "did not start" in stopped[0]["reason"] and "OPERATION ENABLED" in stopped[0]["reason"]
+
+
 def test_real_hmd_condition_uses_marker_pipeline_poses(tmp_path, monkeypatch):
     cfg = EnvConfig.load(REAL)
     bus = CobotBusConfig(bus=BusConfig(channel="s2r-hmd"))
