@@ -205,9 +205,3 @@ class PickPlaceEnv(gym.Env):
 
     def discard(self, snap: EnvSnapshot) -> None:
         self.scene.discard(snap.scene)
-
-
-#: The env's Gymnasium id: `gymnasium.make("mrguide.twin.env:mrguide/PickPlace-v0")` imports this module (which
-#: registers it) and builds a `PickPlaceEnv` with the default config (`config=EnvConfig.load(path)` for another).
-ENV_ID = "mrguide/PickPlace-v0"
-gym.register(id=ENV_ID, entry_point="mrguide.twin.env:PickPlaceEnv")

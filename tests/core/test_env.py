@@ -127,7 +127,9 @@ def test_gymnasium_make_builds_the_env_and_its_checker_passes():
     import gymnasium as gym
     from gymnasium.utils.env_checker import check_env
 
-    env = gym.make("mrguide.twin.env:mrguide/PickPlace-v0")
+    import mrguide
+
+    env = gym.make(mrguide.ENV_ID)  # "mrguide/PickPlace-v0", registered by `import mrguide`
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("error")  # any warning of the checker fails the test
