@@ -112,6 +112,9 @@ def build_parser() -> argparse.ArgumentParser:
     from mrguide.annotation.commands import LiveTrainPlugin, add_annotate_command
 
     add_train_command(sub, LiveTrainPlugin())
+    from mrguide.policies.config_command import add_config_command
+
+    add_config_command(sub)
     add_annotate_command(sub)
     add_experiment_command(sub)
     from mrguide.replay.commands import add_export_command, add_replay_command  # lazy: Rerun/pyarrow when run

@@ -51,3 +51,17 @@ def test_set_changes_any_config_key_for_the_run_and_refuses_a_bad_one(tmp_path, 
     assert ExportedPolicy.load(out / "policy.npz").weights[0].shape[0] == 24  # the first layer's width
     assert main(["train", "--out", str(tmp_path / "bad"), "--quiet", "--set", "ddpg.lr_actor=-1"]) == 2
     assert "--set: ddpg.lr_actor" in capsys.readouterr().err and not (tmp_path / "bad").exists()
+
+
+def test_config_show_prints_every_section_with_the_file_and_set_applied(tmp_path, capsys):
+    import json
+
+    cfg = tmp_path / "run.toml"
+    cfg.write_text("[guidance]\nmarks = 'phases'\n\n[twin.reality_gap]\nobject_mass = 0.3\n")
+    assert main(["config", "show", "--config", str(cfg), "--set", "ddpg.lr_actor=0.001"]) == 0
+    shown = json.loads(capsys.readouterr().out)
+    assert set(shown) == {"train", "ddpg", "sac", "guidance", "robot", "twin", "task", "plant"}
+    assert shown["ddpg"]["lr_actor"] == 0.001 and shown["guidance"]["marks"] == "phases"
+    assert shown["twin"]["reality_gap"]["object_mass"] == 0.3 and shown["train"]["total_steps"] == 20_000
+    assert main(["config", "show", "--set", "twin.reality_gap.object_mass=-1"]) == 2
+    assert "object_mass" in capsys.readouterr().err
