@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Iterator
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -19,30 +20,20 @@ from mrguide.drivers.mock import SimulatedCobot
 from mrguide.drivers.realtime import settled_heap
 from mrguide.motion.kinematics import Kinematics
 from mrguide.motion.trajectory import point_to_point
+from mrguide.twin.dry_run import PLANT_BUILDERS
+from mrguide.twin.env import EnvConfig
 
-ENGINES = ("pybullet", "mujoco")
 PART = np.array([0.50, -0.10, 0.025])  # on the table, in reach
 GOAL = np.array([0.45, 0.20, 0.025])
 
 
-def _plant(engine: str, robot, period: float):
-    if engine == "mujoco":
-        from mrguide.mujoco_cell.plant import MujocoPlant
-
-        return MujocoPlant(robot), None
-    from mrguide.twin.config import TwinConfig
-    from mrguide.twin.plant import TwinPlant
-    from mrguide.twin.scene import Scene
-
-    scene = Scene(robot, TwinConfig(control_period=period), 0.05, seed=0)
-    return TwinPlant(scene), scene
-
-
-@pytest.fixture(params=ENGINES)
+@pytest.fixture(params=sorted(PLANT_BUILDERS))
 def cell(request, make_config, robot) -> Iterator[tuple]:
-    """(config, plant, simulated devices, enabled master) around the engine's plant, the part placed."""
+    """(config, plant, simulated devices, enabled master) around each registered engine's plant, the part placed."""
     config = make_config()
-    plant, scene = _plant(request.param, robot, config.timing.control_period)
+    env_cfg = EnvConfig()
+    twin_cfg = replace(env_cfg.twin, control_period=config.timing.control_period, gui=False)
+    plant, scene = PLANT_BUILDERS[request.param](env_cfg, twin_cfg, robot, 0)
     plant.place_objects(PART, GOAL)
     with settled_heap():
         sim = SimulatedCobot(config, plant)
