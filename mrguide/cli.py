@@ -96,7 +96,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     from mrguide.calibration.commands import add_calibrate_command
     from mrguide.experiments.commands import add_experiment_command
-    from mrguide.policies.commands import add_train_command
+    from mrguide.policies.commands import add_config_command, add_train_command
 
     add_calibrate_command(sub, run_twin_calibration)
     from mrguide.deploy.camera_check import add_camera_command
@@ -112,8 +112,6 @@ def build_parser() -> argparse.ArgumentParser:
     from mrguide.annotation.commands import LiveTrainPlugin, add_annotate_command
 
     add_train_command(sub, LiveTrainPlugin())
-    from mrguide.policies.config_command import add_config_command
-
     add_config_command(sub)
     add_annotate_command(sub)
     add_experiment_command(sub)
