@@ -22,13 +22,10 @@ from canopen.objectdictionary import (
 from canopen.pdo.base import PDO_NOT_VALID
 from canopen.sdo import SdoArray, SdoRecord
 
-from mrguide.drivers.objects import RPDO_COMMUNICATION, RPDO_MAPPING, TPDO_COMMUNICATION, TPDO_MAPPING
 from mrguide.drivers.od_values import od_int
 
 logger = logging.getLogger(__name__)
 
-RPDO_COMM, RPDO_MAP = RPDO_COMMUNICATION, RPDO_MAPPING
-TPDO_COMM, TPDO_MAP = TPDO_COMMUNICATION, TPDO_MAPPING
 #: Transmission types 1..240: synchronous, every n-th SYNC (CiA 301).
 SYNC_TYPES = range(1, 241)
 

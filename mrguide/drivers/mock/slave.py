@@ -25,17 +25,14 @@ from canopen.objectdictionary import ODVariable
 from mrguide.drivers.bus import BusReceiver
 from mrguide.drivers.heartbeat import HEARTBEAT_ERROR, parse_consumer_heartbeat_entry
 from mrguide.drivers.mock.faults import FaultInjector
-from mrguide.drivers.mock.pdo_image import (
-    RPDO_COMM,
-    RPDO_MAP,
-    SYNC_TYPES,
-    TPDO_COMM,
-    TPDO_MAP,
-    Key,
-    PdoLayout,
-    read_layouts,
+from mrguide.drivers.mock.pdo_image import SYNC_TYPES, Key, PdoLayout, read_layouts
+from mrguide.drivers.objects import (
+    CONSUMER_HEARTBEAT_TIME,
+    RPDO_COMMUNICATION,
+    RPDO_MAPPING,
+    TPDO_COMMUNICATION,
+    TPDO_MAPPING,
 )
-from mrguide.drivers.objects import CONSUMER_HEARTBEAT_TIME
 from mrguide.drivers.od_values import node_id_of, od_int
 
 logger = logging.getLogger(__name__)
@@ -153,7 +150,7 @@ class SimulatedSlave(ABC):
         return self.image.get((index, subindex))
 
     def _on_write(self, index: int, subindex: int, od: ODVariable, data: bytes) -> None:
-        if RPDO_COMM <= index < 0x1C00:
+        if RPDO_COMMUNICATION <= index < 0x1C00:
             self._pdo_dirty = True
         key = (index, subindex)
         if key in self.image:
@@ -210,8 +207,10 @@ class SimulatedSlave(ABC):
             return
         for layout in self._rpdos:
             self.network.unsubscribe(layout.cob_id, self._on_rpdo)
-        self._rpdos = read_layouts(self.node, RPDO_COMM, RPDO_MAP)
-        self._tpdos = [t for t in read_layouts(self.node, TPDO_COMM, TPDO_MAP) if t.trans_type in SYNC_TYPES]
+        self._rpdos = read_layouts(self.node, RPDO_COMMUNICATION, RPDO_MAPPING)
+        self._tpdos = [
+            t for t in read_layouts(self.node, TPDO_COMMUNICATION, TPDO_MAPPING) if t.trans_type in SYNC_TYPES
+        ]
         for layout in self._rpdos:
             self.network.subscribe(layout.cob_id, self._on_rpdo)
             self.receiver.expect(layout.cob_id, (layout.size,))
