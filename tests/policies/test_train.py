@@ -88,19 +88,19 @@ def test_checkpoint_resume_continues_as_the_uninterrupted_run(tmp_path):
     resumed.load_checkpoint()
     resumed.run(stop_at=350)
     try:
-        # The same episodes, counted alike. Not the same states to the bit: a resumed process starts with fresh
+        # The same start, then the same task. Not the same states to the bit: a resumed process starts with fresh
         # PyBullet solver caches (and a process that ran other PyBullet clients before has other ones), so the first
-        # step after the resume differs by ~4e-8 m, and a contact event (a grasp) can grow that to a few mm and an
-        # episode a few steps longer or shorter (seen: 359 against 365 steps at the stop). The start states come
-        # from the restored RNG: a wrong RNG or pool would draw other goals.
-        a, b = counters(straight), counters(resumed)
-        assert abs(a.pop("step") - b.pop("step")) <= straight.env.task_cfg.horizon
-        assert a == b
-        for pool in ("agent", "expert"):
-            ga = goals_in_order(getattr(straight.replay, pool).state()["obs"])
-            gb = goals_in_order(getattr(resumed.replay, pool).state()["obs"])
-            assert len(ga) == len(gb) and ga == gb, pool
-        assert len(goals_in_order(resumed.replay.agent.state()["obs"])) > first.counters.episode  # some after it
+        # step after the resume differs by ~4e-8 m, and a contact event (a grasp) can grow that to a few mm: an
+        # episode a few steps longer or shorter (seen: 359 against 365 steps at the stop), and then other
+        # exploration draws, other marks asked, other counts (seen: 9 against 10 episodes by step 350). What does
+        # not depend on the solver: the first episode after the resume starts from the restored RNG, so its goal
+        # is the uninterrupted run's (a wrong RNG or pool draws another), and the run goes on to the same step.
+        before = len(goals_in_order(first.replay.agent.state()["obs"]))
+        ga = goals_in_order(straight.replay.agent.state()["obs"])
+        gb = goals_in_order(resumed.replay.agent.state()["obs"])
+        assert len(gb) > before and ga[: before + 1] == gb[: before + 1]
+        assert abs(straight.counters.step - resumed.counters.step) <= straight.env.task_cfg.horizon
+        assert abs(straight.counters.episode - resumed.counters.episode) <= 1
     finally:
         straight.close()
         resumed.close()
