@@ -15,8 +15,7 @@ import numpy as np
 import pytest
 
 #: Tests that keep time with threads (simulated CANopen devices on the virtual bus, dry runs, the sim-to-real
-#: conditions): `./run.sh test` runs them on their own, after the rest has run on two workers, since a control
-#: cycle that another test process starves for 100 ms is a (correct) safety stop, not a failure of the code.
+#: conditions), marked `realtime`.
 REALTIME = (
     "tests/deploy/",
     "tests/drivers/",
@@ -26,12 +25,26 @@ REALTIME = (
     "tests/test_install_profiles.py",
     "tests/test_robot_pc_imports.py",
 )
+#: Tests that start a local Ray with two workers: several busy processes at once.
+RAY = (
+    "tests/experiments/test_ray_experiment.py",
+    "tests/experiments/test_generalization.py::test_tiny_generalization_on_local_ray",
+)
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """`./run.sh test` runs the suite on two pytest-xdist workers with `--dist loadgroup`: the realtime tests and
+    the Ray tests form one group that runs one test after another on one worker, while the other worker takes the
+    rest. A realtime test thus never runs beside another one or beside a Ray experiment, only beside one ordinary
+    test process, a load the realtime path must hold anyway (a control cycle starved for longer than the shared-PC
+    tolerances is a correct safety stop, not a failure of the code)."""
     for item in items:
-        if item.path.relative_to(config.rootpath).as_posix().startswith(REALTIME):
+        path = item.path.relative_to(config.rootpath).as_posix()
+        realtime = path.startswith(REALTIME)
+        if realtime:
             item.add_marker(pytest.mark.realtime)
+        if realtime or f"{path}::{item.name}".startswith(RAY):
+            item.add_marker(pytest.mark.xdist_group("realtime"))
 
 
 @dataclass
