@@ -30,21 +30,33 @@ RAY = (
     "tests/experiments/test_ray_experiment.py",
     "tests/experiments/test_generalization.py::test_tiny_generalization_on_local_ray",
 )
+#: The one work unit of `--dist loadgroup` that holds every realtime and Ray test.
+ONE_AT_A_TIME = "realtime"
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """`./run.sh test` runs the suite on two pytest-xdist workers with `--dist loadgroup`: the realtime tests and
-    the Ray tests form one group that runs one test after another on one worker, while the other worker takes the
-    rest. A realtime test thus never runs beside another one or beside a Ray experiment, only beside one ordinary
-    test process, a load the realtime path must hold anyway (a control cycle starved for longer than the shared-PC
-    tolerances is a correct safety stop, not a failure of the code)."""
     for item in items:
-        path = item.path.relative_to(config.rootpath).as_posix()
-        realtime = path.startswith(REALTIME)
-        if realtime:
+        if item.path.relative_to(config.rootpath).as_posix().startswith(REALTIME):
             item.add_marker(pytest.mark.realtime)
-        if realtime or f"{path}::{item.name}".startswith(RAY):
-            item.add_marker(pytest.mark.xdist_group("realtime"))
+
+
+@pytest.hookimpl(optionalhook=True)  # a pytest-xdist hook: absent with `-p no:xdist`
+def pytest_xdist_make_scheduler(config: pytest.Config, log: Any) -> Any:
+    """`./run.sh test` runs the suite on two pytest-xdist workers with `--dist loadgroup`, grouped here: the realtime
+    and the Ray tests are one work unit, run one test after another on one worker (the largest unit, it starts first),
+    while the other worker takes the rest. A realtime test thus never runs beside another one or beside a Ray
+    experiment, only beside one ordinary test process, a load the realtime path must hold anyway. (pytest-xdist 3.8's own
+    `xdist_group` mark groups by renaming `item._nodeid`, which pytest 9's `Node.nodeid` no longer reads: it groups
+    nothing here.)"""
+    if config.getvalue("dist") != "loadgroup":
+        return None
+    from xdist.scheduler import LoadScopeScheduling
+
+    class OneAtATime(LoadScopeScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            return ONE_AT_A_TIME if nodeid.startswith(REALTIME + RAY) else nodeid
+
+    return OneAtATime(config, log)
 
 
 @dataclass
