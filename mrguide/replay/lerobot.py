@@ -93,6 +93,41 @@ def _stats(values: np.ndarray) -> dict[str, list]:
 
 def export_lerobot(run: Path, out: Path, all_episodes: bool = False, task: str = "pick and place") -> str:
     """Write the dataset; returns a one-paragraph summary."""
+    run_dir, header, chosen, truncated = _chosen_episodes(run, out, all_episodes)
+    annotations = _annotations(run_dir / "annotations.jsonl")
+    fps = round(1.0 / float(header.get("decision_period") or 0.1))
+    cols, bounds = _frame_columns(chosen, annotations, fps)
+    table = _frame_table(cols)
+
+    tmp = out.with_name(out.name + ".tmp")
+    shutil.rmtree(tmp, ignore_errors=True)
+    _write_frames(tmp / "data" / f"{CHUNK}.parquet", table, bounds)
+
+    numeric = [n for n, ft in features().items() if ft["dtype"] != "string"]
+    stacked = {n: np.array(cols[n], dtype=np.float64) for n in numeric}
+    ep_cols = _episode_columns(chosen, bounds, task, stacked)
+    episodes_path = tmp / "meta" / "episodes" / f"{CHUNK}.parquet"
+    episodes_path.parent.mkdir(parents=True)
+    pq.write_table(pa.table(ep_cols), episodes_path, compression="snappy")
+    _write_tasks(pa, pq, tmp / "meta" / "tasks.parquet", [task])
+    stats = {n: _stats(stacked[n]) for n in numeric}
+    (tmp / "meta" / "stats.json").write_text(json.dumps(stats, indent=4))
+    info = _info(header, fps, len(chosen), len(cols["index"]))
+    (tmp / "meta" / "info.json").write_text(json.dumps(info, indent=4))
+    if out.exists():
+        out.rmdir()
+    tmp.replace(out)
+    demos = sum(e["type"] == "expert" for e in chosen)
+    return (
+        f"LeRobot dataset ({CODEBASE_VERSION}) at {out}: {len(chosen)} episodes ({demos} demonstrations), "
+        f"{len(cols['index'])} frames at {fps} fps, task {task!r}; no camera frames were recorded, so no videos"
+        + ("; the recording was cut at its size bound, so later episodes are missing" if truncated else "")
+    )
+
+
+def _chosen_episodes(run: Path, out: Path, all_episodes: bool) -> tuple[Path, dict, list[dict], bool]:
+    """(run directory, recording header, episodes to export, truncated); ExportError if there is nothing to export
+    or `out` is in the way."""
     from mrguide.policies.episode_recorder import FILE_NAME, read_episodes
 
     recorded = run / FILE_NAME if run.is_dir() else run
@@ -105,9 +140,13 @@ def export_lerobot(run: Path, out: Path, all_episodes: bool = False, task: str =
     chosen = [e for e in episodes if all_episodes or e["type"] == "expert"]
     if not chosen:
         raise ExportError(f"{recorded}: no {'recorded episode' if all_episodes else 'demonstration'} to export")
-    annotations = _annotations(run_dir / "annotations.jsonl")
-    fps = round(1.0 / float(header.get("decision_period") or 0.1))
+    return run_dir, header, chosen, truncated
 
+
+def _frame_columns(
+    chosen: list[dict], annotations: dict[int, dict], fps: int
+) -> tuple[dict[str, list], list[tuple[int, int]]]:
+    """The frames' values per feature, and each episode's (first, end) frame index."""
     cols: dict[str, list] = {k: [] for k in features()}
     bounds = []
     for k, ep in enumerate(chosen):
@@ -129,7 +168,11 @@ def export_lerobot(run: Path, out: Path, all_episodes: bool = False, task: str =
             cols["index"].append(start + t)
             cols["task_index"].append(0)
         bounds.append((start, len(cols["index"])))
+    return cols, bounds
 
+
+def _frame_table(cols: dict[str, list]) -> pa.Table:
+    """The frame columns as an arrow table with the features' types."""
     schema = {
         "observation.state": pa.list_(pa.float32(), len(OBS_LAYOUT)),
         "action": pa.list_(pa.float32(), len(ACT_LAYOUT)),
@@ -139,18 +182,21 @@ def export_lerobot(run: Path, out: Path, all_episodes: bool = False, task: str =
     for name, ft in features().items():
         typ = schema.get(name) or (pa.float32() if ft["dtype"] == "float32" else pa.int64())
         arrays[name] = pa.array(cols[name], type=typ)
-    table = pa.table(arrays)
+    return pa.table(arrays)
 
-    tmp = out.with_name(out.name + ".tmp")
-    shutil.rmtree(tmp, ignore_errors=True)
-    data = tmp / "data" / f"{CHUNK}.parquet"
+
+def _write_frames(data: Path, table: pa.Table, bounds: list[tuple[int, int]]) -> None:
+    """The data parquet file at `data`, one row group per episode."""
     data.parent.mkdir(parents=True)
     with pq.ParquetWriter(data, table.schema, compression="snappy") as writer:
         for a, b in bounds:  # one row group per episode, as lerobot writes them
             writer.write_table(table.slice(a, b - a))
 
-    numeric = [n for n, ft in features().items() if ft["dtype"] != "string"]
-    stacked = {n: np.array(cols[n], dtype=np.float64) for n in numeric}
+
+def _episode_columns(
+    chosen: list[dict], bounds: list[tuple[int, int]], task: str, stacked: dict[str, np.ndarray]
+) -> dict[str, list]:
+    """meta/episodes' columns: one row per episode, with its per-feature stats over the `stacked` features."""
     ep_cols: dict[str, list] = {
         "episode_index": list(range(len(chosen))),
         "tasks": [[task] for _ in chosen],
@@ -167,22 +213,21 @@ def export_lerobot(run: Path, out: Path, all_episodes: bool = False, task: str =
         "mrguide/outcome": [e["outcome"] or "" for e in chosen],
         "mrguide/first_step": [int(e["steps"][0]["step"]) for e in chosen],
     }
-    per_episode = [{n: _stats(stacked[n][a:b]) for n in numeric} for a, b in bounds]
-    for n in numeric:
+    per_episode = [{n: _stats(values[a:b]) for n, values in stacked.items()} for a, b in bounds]
+    for n in stacked:
         for stat in per_episode[0][n]:
             ep_cols[f"stats/{n}/{stat}"] = [s[n][stat] for s in per_episode]
-    episodes_path = tmp / "meta" / "episodes" / f"{CHUNK}.parquet"
-    episodes_path.parent.mkdir(parents=True)
-    pq.write_table(pa.table(ep_cols), episodes_path, compression="snappy")
-    _write_tasks(pa, pq, tmp / "meta" / "tasks.parquet", [task])
-    stats = {n: _stats(stacked[n]) for n in numeric}
-    (tmp / "meta" / "stats.json").write_text(json.dumps(stats, indent=4))
-    info = {
+    return ep_cols
+
+
+def _info(header: dict, fps: int, total_episodes: int, total_frames: int) -> dict:
+    """meta/info.json's content."""
+    return {
         "codebase_version": CODEBASE_VERSION,
         "fps": fps,
         "features": features(),
-        "total_episodes": len(chosen),
-        "total_frames": len(cols["index"]),
+        "total_episodes": total_episodes,
+        "total_frames": total_frames,
         "total_tasks": 1,
         "chunks_size": 1000,
         "data_files_size_in_mb": 100,
@@ -190,18 +235,8 @@ def export_lerobot(run: Path, out: Path, all_episodes: bool = False, task: str =
         "data_path": "data/chunk-{chunk_index:03d}/file-{file_index:03d}.parquet",
         "video_path": None,
         "robot_type": header.get("robot"),
-        "splits": {"train": f"0:{len(chosen)}"},
+        "splits": {"train": f"0:{total_episodes}"},
     }
-    (tmp / "meta" / "info.json").write_text(json.dumps(info, indent=4))
-    if out.exists():
-        out.rmdir()
-    tmp.replace(out)
-    demos = sum(e["type"] == "expert" for e in chosen)
-    return (
-        f"LeRobot dataset ({CODEBASE_VERSION}) at {out}: {len(chosen)} episodes ({demos} demonstrations), "
-        f"{len(cols['index'])} frames at {fps} fps, task {task!r}; no camera frames were recorded, so no videos"
-        + ("; the recording was cut at its size bound, so later episodes are missing" if truncated else "")
-    )
 
 
 def _write_tasks(pa, pq, path: Path, tasks: list[str]) -> None:

@@ -23,7 +23,7 @@ import numpy as np
 import rerun as rr
 
 from mrguide.cell_layout import CUP_RADIUS
-from mrguide.replay.runs import Episode
+from mrguide.replay.runs import Episode, Frame
 from mrguide.robot import RobotSpec, urdf_with_tool
 from mrguide.task import PHASES
 
@@ -154,6 +154,7 @@ def _blueprint(episodes: Sequence[Episode]) -> Any:
 
 
 def _log_episode(rr: Any, rec: Any, ep: Episode, spec: RobotSpec, arm: tuple | None) -> None:
+    """Log one episode: its static entities (coordinate frames, arm, goal), then each frame on the shared timelines."""
     label = ep.label
     base = f"/{label}"
     rgb = color(ep.outcome)
@@ -165,20 +166,7 @@ def _log_episode(rr: Any, rec: Any, ep: Episode, spec: RobotSpec, arm: tuple | N
         rec.log(f"{base}/{part}", rr.CoordinateFrame(world), static=True)
     joints = []
     if arm is not None and frames and frames[0].q is not None:
-        urdf, meshes = arm
-        tree = rr.urdf.UrdfTree.from_file_path(
-            urdf, entity_path_prefix=label, frame_prefix=f"{label}/", static_transform_entity_path=f"{base}/tf_static"
-        )
-        tree.log_urdf_to_recording(rec)
-        joints = [tree.get_joint_by_name(n) for n in spec.joint_names]
-        for link, vertices, faces in meshes:
-            path = f"{base}/{tree.name}/meshes/{link}"
-            rec.log(path, rr.CoordinateFrame(f"{label}/{link}"), static=True)
-            rec.log(
-                path,
-                rr.Mesh3D(vertex_positions=vertices, triangle_indices=faces, albedo_factor=(0.72, 0.74, 0.78, 1.0)),
-                static=True,
-            )
+        joints = _log_arm(rr, rec, label, spec, arm)
     if ep.goal is not None:
         rec.log(
             f"{base}/goal",
@@ -196,63 +184,98 @@ def _log_episode(rr: Any, rec: Any, ep: Episode, spec: RobotSpec, arm: tuple | N
         rec.set_time("time", duration=f.t * ep.decision_period)
         if f.t == 0:
             rec.log(f"/events/{label}", rr.TextLog(summary, level="INFO"))
-        if joints and f.q is not None:
-            for joint, q in zip(joints, f.q):
-                rec.log(f"{base}/joints", joint.compute_transform(float(q), clamp=False))
-        if f.tcp is not None:
-            trail.append(f.tcp)
-            rec.log(f"{base}/tcp", rr.Points3D([f.tcp], radii=0.006, colors=[rgb]))
-            rec.log(f"{base}/trail", rr.LineStrips3D([np.array(trail)], radii=0.002, colors=[rgb]))
-        if f.target is not None:
-            rec.log(f"{base}/target", rr.Points3D([f.target], radii=0.008, colors=[(250, 200, 0)]))
-            if f.tcp is not None:
-                rec.log(
-                    f"{base}/command", rr.Arrows3D(origins=[f.tcp], vectors=[f.target - f.tcp], colors=[(250, 200, 0)])
-                )
-        if f.obj is not None:
-            age = (
-                f" ({f.pose_age_s * 1e3:.0f} ms old)" if f.pose_age_s is not None and f.object_from == "source" else ""
-            )
-            rec.log(
-                f"{base}/object/seen",
-                rr.Boxes3D(
-                    centers=[f.obj],
-                    half_sizes=[[OBJECT_HALF] * 3],
-                    colors=[(90, 140, 255)],
-                    fill_mode="MajorWireframe",
-                    labels=[f"seen: {f.object_from or 'source'}{age}"],
-                ),
-            )
-        if f.obj_true is not None:
-            rec.log(
-                f"{base}/object/true",
-                rr.Boxes3D(
-                    centers=[f.obj_true], half_sizes=[[OBJECT_HALF] * 3], colors=[(200, 30, 30)], fill_mode="Solid"
-                ),
-            )
+        _log_arm_pose(rr, rec, base, f, joints, trail, rgb)
+        _log_object(rr, rec, base, f)
         if f.phase != last_phase:
             rec.log(f"/phase/{label}", rr.StateChange(state=PHASES[f.phase]))
             rec.log(f"/events/{label}", rr.TextLog(f"{label}: phase {PHASES[f.phase]}", level="DEBUG"))
             last_phase = f.phase
-        if f.phi is not None:
-            rec.log(f"/plots/phi/{label}", rr.Scalars(f.phi))
-        if f.vacuum_kpa is not None:
-            rec.log(f"/plots/vacuum_kpa/{label}", rr.Scalars(float(f.vacuum_kpa)))
-        if f.part is not None:
-            rec.log(f"/plots/part/{label}", rr.Scalars(float(bool(f.part))))
-        if f.latency_ms is not None:
-            rec.log(f"/plots/latency_ms/{label}", rr.Scalars(float(f.latency_ms)))
-        if f.pose_age_s is not None and f.object_from == "source":
-            rec.log(f"/plots/pose_age_ms/{label}", rr.Scalars(float(f.pose_age_s) * 1e3))
-        for e in event_at.get(f.t, []):
-            text = f"{label}: {e['event']} → {e.get('reaction')}: {e.get('detail')}"
-            rec.log(f"/events/{label}", rr.TextLog(text, level="WARN"))
-            if f.tcp is not None:
-                rec.log(
-                    f"{base}/markers", rr.Points3D([f.tcp], radii=0.012, colors=[(255, 140, 0)], labels=[e["event"]])
-                )
-        if f.outcome is not None:
-            level = "INFO" if f.outcome == "success" else "ERROR"
-            rec.log(f"/events/{label}", rr.TextLog(f"{label}: {f.outcome} at t = {f.t}", level=level))
-            if f.tcp is not None:
-                rec.log(f"{base}/markers", rr.Points3D([f.tcp], radii=0.014, colors=[rgb], labels=[f.outcome]))
+        _log_scalars(rr, rec, label, f)
+        _log_events(rr, rec, label, f, event_at.get(f.t, []), rgb)
+
+
+def _log_arm(rr: Any, rec: Any, label: str, spec: RobotSpec, arm: tuple) -> list:
+    """Log the arm's URDF tree and link meshes (static) under `/<label>/`; returns its joints in `spec`'s order."""
+    base = f"/{label}"
+    urdf, meshes = arm
+    tree = rr.urdf.UrdfTree.from_file_path(
+        urdf, entity_path_prefix=label, frame_prefix=f"{label}/", static_transform_entity_path=f"{base}/tf_static"
+    )
+    tree.log_urdf_to_recording(rec)
+    joints = [tree.get_joint_by_name(n) for n in spec.joint_names]
+    for link, vertices, faces in meshes:
+        path = f"{base}/{tree.name}/meshes/{link}"
+        rec.log(path, rr.CoordinateFrame(f"{label}/{link}"), static=True)
+        rec.log(
+            path,
+            rr.Mesh3D(vertex_positions=vertices, triangle_indices=faces, albedo_factor=(0.72, 0.74, 0.78, 1.0)),
+            static=True,
+        )
+    return joints
+
+
+def _log_arm_pose(
+    rr: Any, rec: Any, base: str, f: Frame, joints: list, trail: list[np.ndarray], rgb: tuple[int, int, int]
+) -> None:
+    """Log one frame's joints, TCP (appended to `trail`), commanded target and the arrow to it."""
+    if joints and f.q is not None:
+        for joint, q in zip(joints, f.q):
+            rec.log(f"{base}/joints", joint.compute_transform(float(q), clamp=False))
+    if f.tcp is not None:
+        trail.append(f.tcp)
+        rec.log(f"{base}/tcp", rr.Points3D([f.tcp], radii=0.006, colors=[rgb]))
+        rec.log(f"{base}/trail", rr.LineStrips3D([np.array(trail)], radii=0.002, colors=[rgb]))
+    if f.target is not None:
+        rec.log(f"{base}/target", rr.Points3D([f.target], radii=0.008, colors=[(250, 200, 0)]))
+        if f.tcp is not None:
+            rec.log(f"{base}/command", rr.Arrows3D(origins=[f.tcp], vectors=[f.target - f.tcp], colors=[(250, 200, 0)]))
+
+
+def _log_object(rr: Any, rec: Any, base: str, f: Frame) -> None:
+    """Log one frame's object: as the policy saw it (with the estimate's age) and where it really was."""
+    if f.obj is not None:
+        age = f" ({f.pose_age_s * 1e3:.0f} ms old)" if f.pose_age_s is not None and f.object_from == "source" else ""
+        rec.log(
+            f"{base}/object/seen",
+            rr.Boxes3D(
+                centers=[f.obj],
+                half_sizes=[[OBJECT_HALF] * 3],
+                colors=[(90, 140, 255)],
+                fill_mode="MajorWireframe",
+                labels=[f"seen: {f.object_from or 'source'}{age}"],
+            ),
+        )
+    if f.obj_true is not None:
+        rec.log(
+            f"{base}/object/true",
+            rr.Boxes3D(centers=[f.obj_true], half_sizes=[[OBJECT_HALF] * 3], colors=[(200, 30, 30)], fill_mode="Solid"),
+        )
+
+
+def _log_scalars(rr: Any, rec: Any, label: str, f: Frame) -> None:
+    """Log one frame's plotted quantities under `/plots/<quantity>/<label>`."""
+    if f.phi is not None:
+        rec.log(f"/plots/phi/{label}", rr.Scalars(f.phi))
+    if f.vacuum_kpa is not None:
+        rec.log(f"/plots/vacuum_kpa/{label}", rr.Scalars(float(f.vacuum_kpa)))
+    if f.part is not None:
+        rec.log(f"/plots/part/{label}", rr.Scalars(float(bool(f.part))))
+    if f.latency_ms is not None:
+        rec.log(f"/plots/latency_ms/{label}", rr.Scalars(float(f.latency_ms)))
+    if f.pose_age_s is not None and f.object_from == "source":
+        rec.log(f"/plots/pose_age_ms/{label}", rr.Scalars(float(f.pose_age_s) * 1e3))
+
+
+def _log_events(rr: Any, rec: Any, label: str, f: Frame, events: list[dict], rgb: tuple[int, int, int]) -> None:
+    """Log one frame's supervisor `events` and the episode's end, as log lines and markers at the TCP."""
+    base = f"/{label}"
+    for e in events:
+        text = f"{label}: {e['event']} → {e.get('reaction')}: {e.get('detail')}"
+        rec.log(f"/events/{label}", rr.TextLog(text, level="WARN"))
+        if f.tcp is not None:
+            rec.log(f"{base}/markers", rr.Points3D([f.tcp], radii=0.012, colors=[(255, 140, 0)], labels=[e["event"]]))
+    if f.outcome is not None:
+        level = "INFO" if f.outcome == "success" else "ERROR"
+        rec.log(f"/events/{label}", rr.TextLog(f"{label}: {f.outcome} at t = {f.t}", level=level))
+        if f.tcp is not None:
+            rec.log(f"{base}/markers", rr.Points3D([f.tcp], radii=0.014, colors=[rgb], labels=[f.outcome]))

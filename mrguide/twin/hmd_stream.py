@@ -20,12 +20,17 @@ import threading
 import time
 from dataclasses import replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from mrguide.pose_source import ObjectPoseSource, PoseUnavailable
 from mrguide.twin.plant import CellView
 from mrguide.twin.visual_arm import ArmDrawing
+
+if TYPE_CHECKING:
+    from mrguide.calibration.calibration_file import CalibrationRecord
+    from mrguide.twin.visual_arm import VisualArm
 
 log = logging.getLogger(__name__)
 
@@ -80,13 +85,25 @@ def _hmd_worker(
             hmd, run.record.T_base_hmd, cfg.detector, OBJECT_MARKER_ID, -T_obj_marker[:3, 3], noise=cfg.hmd
         )
         drawn = VisualArm(client, arm)
-        err = float(np.linalg.norm(run.record.T_base_hmd[:3, 3] - twin_cfg.T_base_hmd[:3, 3]))
-        conn.send(
-            ("ready", {"rms_residual_m": float(run.record.rms_residual_m), "T_base_hmd_translation_error_m": err})
-        )
+        conn.send(("ready", _calibration_quality(run.record, twin_cfg.T_base_hmd)))
     except Exception as exc:  # report start-up failures to the parent instead of dying silently
         conn.send(("error", f"{type(exc).__name__}: {exc}"))
         return
+    _answer_poses(conn, client, cube, drawn, source)
+
+
+def _calibration_quality(record: CalibrationRecord, T_base_hmd_true: np.ndarray) -> dict:
+    """The start-up report: the calibration's RMS residual and how far its HMD position is from the true one."""
+    err = float(np.linalg.norm(record.T_base_hmd[:3, 3] - T_base_hmd_true[:3, 3]))
+    return {"rms_residual_m": float(record.rms_residual_m), "T_base_hmd_translation_error_m": err}
+
+
+def _answer_poses(
+    conn: multiprocessing.connection.Connection, client: int, cube: int, drawn: VisualArm, source: ObjectPoseSource
+) -> None:
+    """Until None arrives: pose the cube and the arm as received, and send back the HMD's object estimate."""
+    import pybullet as pb
+
     while True:
         msg = conn.recv()
         if msg is None:

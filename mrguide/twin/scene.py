@@ -24,7 +24,7 @@ import pybullet as pb
 from mrguide.cell_layout import CUP_RADIUS, TABLE_CENTER, TABLE_HALF_EXTENTS
 from mrguide.robot import RobotSpec, urdf_with_tool
 from mrguide.twin.camera import Camera
-from mrguide.twin.config import TwinConfig
+from mrguide.twin.config import RealityGap, TwinConfig
 from mrguide.twin.suction import SuctionCup, SuctionState
 
 log = logging.getLogger(__name__)
@@ -47,6 +47,53 @@ def urdf_with_cup(spec: RobotSpec, stroke: float = 0.0) -> Path:
     return out
 
 
+def _add_table(client: int) -> int:
+    """The table: a static box; its body id."""
+    table_col = pb.createCollisionShape(pb.GEOM_BOX, halfExtents=TABLE_HALF_EXTENTS, physicsClientId=client)
+    table_vis = pb.createVisualShape(
+        pb.GEOM_BOX, halfExtents=TABLE_HALF_EXTENTS, rgbaColor=(0.75, 0.72, 0.66, 1), physicsClientId=client
+    )
+    return pb.createMultiBody(0, table_col, table_vis, TABLE_CENTER, physicsClientId=client)
+
+
+def _link_and_joint_ids(robot: int, client: int) -> tuple[dict[str, int], dict[str, int]]:
+    """The robot's joint indices by child link name, and by joint name."""
+    links = {
+        pb.getJointInfo(robot, j, physicsClientId=client)[12].decode(): j
+        for j in range(pb.getNumJoints(robot, physicsClientId=client))
+    }
+    joints = {
+        pb.getJointInfo(robot, j, physicsClientId=client)[1].decode(): j
+        for j in range(pb.getNumJoints(robot, physicsClientId=client))
+    }
+    return links, joints
+
+
+def _add_object(client: int, half: float, gap: RealityGap) -> int:
+    """The cube (edge 2 × `half`), with the gap's mass and friction, at its default start; its body id."""
+    obj_col = pb.createCollisionShape(pb.GEOM_BOX, halfExtents=(half, half, half), physicsClientId=client)
+    obj_vis = pb.createVisualShape(
+        pb.GEOM_BOX, halfExtents=(half, half, half), rgbaColor=(0.85, 0.1, 0.1, 1), physicsClientId=client
+    )
+    body = pb.createMultiBody(gap.object_mass, obj_col, obj_vis, (0.5, -0.1, half), physicsClientId=client)
+    pb.changeDynamics(
+        body,
+        -1,
+        lateralFriction=gap.object_friction,
+        activationState=pb.ACTIVATION_STATE_DISABLE_SLEEPING,
+        physicsClientId=client,
+    )
+    return body
+
+
+def _add_goal_marker(client: int) -> int:
+    """The goal marker: a visual-only flat green disc at its default place; its body id."""
+    goal_vis = pb.createVisualShape(
+        pb.GEOM_CYLINDER, radius=0.03, length=0.002, rgbaColor=(0.1, 0.8, 0.2, 0.6), physicsClientId=client
+    )
+    return pb.createMultiBody(0, -1, goal_vis, (0.5, 0.2, 0.001), physicsClientId=client)
+
+
 @dataclass
 class SceneSnapshot:
     """A restorable state: PyBullet's in-memory state plus what lives outside it."""
@@ -63,6 +110,7 @@ class Scene:
     """One PyBullet world with the cell in it."""
 
     def __init__(self, spec: RobotSpec, cfg: TwinConfig, object_size: float = 0.05, seed: int | None = None):
+        """Connect to PyBullet (its GUI if `cfg.gui`) and build the cell: arm at home, object and goal placed."""
         self.spec, self.cfg = spec, cfg
         self.object_size = object_size
         self.client = pb.connect(pb.GUI if cfg.gui else pb.DIRECT)
@@ -70,20 +118,9 @@ class Scene:
         pb.setGravity(0, 0, -9.81, physicsClientId=c)
         pb.setTimeStep(cfg.control_period, physicsClientId=c)
         pb.setPhysicsEngineParameter(deterministicOverlappingPairs=1, physicsClientId=c)
-        table_col = pb.createCollisionShape(pb.GEOM_BOX, halfExtents=TABLE_HALF_EXTENTS, physicsClientId=c)
-        table_vis = pb.createVisualShape(
-            pb.GEOM_BOX, halfExtents=TABLE_HALF_EXTENTS, rgbaColor=(0.75, 0.72, 0.66, 1), physicsClientId=c
-        )
-        self.table = pb.createMultiBody(0, table_col, table_vis, TABLE_CENTER, physicsClientId=c)
+        self.table = _add_table(c)
         self.robot = pb.loadURDF(str(urdf_with_cup(spec, cfg.cup.stroke)), useFixedBase=True, physicsClientId=c)
-        links = {
-            pb.getJointInfo(self.robot, j, physicsClientId=c)[12].decode(): j
-            for j in range(pb.getNumJoints(self.robot, physicsClientId=c))
-        }
-        joints = {
-            pb.getJointInfo(self.robot, j, physicsClientId=c)[1].decode(): j
-            for j in range(pb.getNumJoints(self.robot, physicsClientId=c))
-        }
+        links, joints = _link_and_joint_ids(self.robot, c)
         self.joint_ids = [joints[name] for name in spec.joint_names]
         self.tcp_link = links["tcp"]
         self.cup_link = links["suction_cup"]
@@ -100,23 +137,9 @@ class Scene:
             "velocityGains": [1.0] * spec.dof,
         }
         h = object_size / 2
-        obj_col = pb.createCollisionShape(pb.GEOM_BOX, halfExtents=(h, h, h), physicsClientId=c)
-        obj_vis = pb.createVisualShape(
-            pb.GEOM_BOX, halfExtents=(h, h, h), rgbaColor=(0.85, 0.1, 0.1, 1), physicsClientId=c
-        )
         gap = cfg.reality_gap
-        self.object = pb.createMultiBody(gap.object_mass, obj_col, obj_vis, (0.5, -0.1, h), physicsClientId=c)
-        pb.changeDynamics(
-            self.object,
-            -1,
-            lateralFriction=gap.object_friction,
-            activationState=pb.ACTIVATION_STATE_DISABLE_SLEEPING,
-            physicsClientId=c,
-        )
-        goal_vis = pb.createVisualShape(
-            pb.GEOM_CYLINDER, radius=0.03, length=0.002, rgbaColor=(0.1, 0.8, 0.2, 0.6), physicsClientId=c
-        )
-        self.goal_marker = pb.createMultiBody(0, -1, goal_vis, (0.5, 0.2, 0.001), physicsClientId=c)
+        self.object = _add_object(c, h, gap)
+        self.goal_marker = _add_goal_marker(c)
         self.suction = SuctionCup(
             c, self.robot, self.tcp_link, self.object, object_size, cfg.vacuum, cfg.control_period
         )
