@@ -8,12 +8,17 @@ import argparse
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 from tqdm import tqdm
 
 from mrguide.cli_args import nonnegative_int, positive_int
 from mrguide.errors import InputError
+
+if TYPE_CHECKING:
+    from mrguide.deploy.policy import ExportedPolicy
+    from mrguide.deploy.session import DeployConfig
+    from mrguide.drivers.config import CobotBusConfig
 
 #: Test seam: lets tests drive the real-robot path of `deploy` (--enable-drives) over a python-can virtual
 #: channel with simulated devices on it. Users always get the refusal of the virtual interface; only a test
@@ -96,27 +101,9 @@ def cmd_deploy(args: argparse.Namespace) -> int:
         dry: DryRunBackend = args.dry_run_factory(args.config)
         check_decision_period(policy, args.policy, bus.timing.control_period, dry.decision_period)
     else:
-        check_decision_period(policy, args.policy, bus.timing.control_period)
-        if bus.bus.interface == "virtual" and not ALLOW_VIRTUAL_REAL_BUS:
-            raise ConfigError("the bus config names the virtual interface; use --dry-run, or configure the real bus")
-        if not args.enable_drives:
-            raise InputError(
-                f"this will enable the drives on {bus.bus.interface}:{bus.bus.channel} and move the arm. "
-                "Clear the cell, keep the E-stop at hand, and re-run with --enable-drives to confirm."
-            )
+        _check_real_bus(args, policy, bus)
     log_path, where = _log_path(args, dcfg)
-    header = {
-        "command": "deploy",
-        "dry_run": args.dry_run,
-        "policy": str(args.policy),
-        "config": args.config,
-        "bus": f"{bus.bus.interface}:{bus.bus.channel}",
-        "episodes": episodes,
-        "seed": seed if args.dry_run else None,
-        "decision_period": policy.decision_period,
-        "pose_source": dcfg.pose_source,
-        "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
-    }
+    header = _run_header(args, dcfg, bus, policy, episodes, seed)
     camera = _camera(args, dcfg, task, dry if args.dry_run else None)
     try:
         with (
@@ -141,6 +128,40 @@ def cmd_deploy(args: argparse.Namespace) -> int:
     print(summary.text() + (f"\n{camera_stats.text()}" if camera_stats else ""))
     print(f"run log: {log_path}")
     return 0 if summary.stopped is None else 1
+
+
+def _check_real_bus(args: argparse.Namespace, policy: ExportedPolicy, bus: CobotBusConfig) -> None:
+    """ConfigError or InputError unless the real bus may be driven: the policy's timing, a real interface, and
+    --enable-drives given."""
+    from mrguide.config import ConfigError
+    from mrguide.deploy.policy import check_decision_period
+
+    check_decision_period(policy, args.policy, bus.timing.control_period)
+    if bus.bus.interface == "virtual" and not ALLOW_VIRTUAL_REAL_BUS:
+        raise ConfigError("the bus config names the virtual interface; use --dry-run, or configure the real bus")
+    if not args.enable_drives:
+        raise InputError(
+            f"this will enable the drives on {bus.bus.interface}:{bus.bus.channel} and move the arm. "
+            "Clear the cell, keep the E-stop at hand, and re-run with --enable-drives to confirm."
+        )
+
+
+def _run_header(
+    args: argparse.Namespace, dcfg: DeployConfig, bus: CobotBusConfig, policy: ExportedPolicy, episodes: int, seed: int
+) -> dict[str, Any]:
+    """The run log's header: the command line's inputs, the bus, the policy's timing, the start time."""
+    return {
+        "command": "deploy",
+        "dry_run": args.dry_run,
+        "policy": str(args.policy),
+        "config": args.config,
+        "bus": f"{bus.bus.interface}:{bus.bus.channel}",
+        "episodes": episodes,
+        "seed": seed if args.dry_run else None,
+        "decision_period": policy.decision_period,
+        "pose_source": dcfg.pose_source,
+        "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+    }
 
 
 def _log_path(args: argparse.Namespace, dcfg) -> tuple[Path, str]:

@@ -343,6 +343,11 @@ class Runtime:
             self.supervisor.ik_result(True)
             record["q_target"] = cmd.q_target
         self.cobot.set_vacuum(cmd.vacuum)
+        self._stream_decision(t, t_read, inference_ms, record, report)
+        return None
+
+    def _stream_decision(self, t: int, t_read: float, inference_ms: float, record: dict, report: EpisodeReport) -> None:
+        """One decision period streamed; its timing and setpoints go to `report` and the run log's `record`."""
         latency_ms = (time.perf_counter() - t_read) * 1e3
         setpoints = [self._stream_cycle()[0] for _ in range(self.cycles)]
         record["latency_ms"], record["inference_ms"] = latency_ms, inference_ms
@@ -351,7 +356,6 @@ class Runtime:
         report.inference_ms.append(inference_ms)
         report.decisions = t + 1
         self.log.write("decision", **record)
-        return None
 
     def _object_position(self, tcp: np.ndarray, vac: VacuumState) -> np.ndarray | None:
         """Where the object is for this decision; None once the pose has been missing for too long.

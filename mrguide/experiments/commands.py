@@ -66,12 +66,15 @@ NAMES: tuple[ExperimentName, ...] = get_args(ExperimentName)
 
 
 def _experiments() -> dict[ExperimentName, Experiment]:
-    """Every experiment by name (imported here: the parser needs only NAMES)."""
+    """Every experiment by name, in the order of NAMES (imported here: the parser needs only NAMES)."""
+    return {**_figure_experiments(), **_further_experiments()}
+
+
+def _figure_experiments() -> dict[ExperimentName, Experiment]:
+    """Learning curves, long baseline, noise robustness and generalization (the paper's Fig. 3-7)."""
     from mrguide.experiments import generalization as gen
     from mrguide.experiments import learning_curves as lc
     from mrguide.experiments import noise_robustness as nr
-    from mrguide.experiments import peers, person
-    from mrguide.experiments import sim2real_runs as s2r
 
     return {
         "learning-curves": Experiment(
@@ -104,6 +107,15 @@ def _experiments() -> dict[ExperimentName, Experiment]:
             gen.evaluate,
             lambda run, root: run.directory(root) / "goals.csv",
         ),
+    }
+
+
+def _further_experiments() -> dict[ExperimentName, Experiment]:
+    """A person's marks, the SAC peer side by side, and sim-to-real (the paper's Fig. 8) as an experiment."""
+    from mrguide.experiments import peers, person
+    from mrguide.experiments import sim2real_runs as s2r
+
+    return {
         "person": Experiment(
             person.PersonConfig,
             "person.toml",

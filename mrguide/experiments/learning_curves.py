@@ -76,47 +76,8 @@ def per_run_rows(recs: dict[str, list[RunRecord]]) -> list[dict[str, Any]]:
 
 def learning_curves_report(cfg: CurvesConfig, recs: dict[str, list[RunRecord]]) -> dict[str, bytes]:
     """summary.csv, runs.csv, summary.md and Fig. 3, 5, 9."""
-    table = []
-    for v, rs in recs.items():
-        conv = [r.converged.step for r in rs if r.converged.step is not None]
-        ann = [a for r in rs if (a := r.annotations_until_convergence) is not None]  # the converged runs
-        table.append(
-            {
-                "variant": v,
-                "seeds": len(rs),
-                "converged_4k": sum(c <= 4000 for c in conv),
-                "converged_5k": sum(c <= 5000 for c in conv),
-                "converged_20k": sum(c <= 20_000 for c in conv),
-                "median_step": int(np.median(conv)) if conv else None,
-                "median_annotations": int(np.median(ann)) if ann and v == "guided" else None,
-                "median_person_minutes": person_minutes(float(np.median(ann))) if ann and v == "guided" else None,
-                "reached_at_end": sum(r.converged.at_end for r in rs),
-                "final_eval_success": round(float(np.mean([r.eval_rates[-1] for r in rs])), 3),
-            }
-        )
-    md = (
-        f"Learning curves: {cfg.seeds} seeds × {cfg.steps} steps per variant. Convergence: the evaluation success over "
-        f"the last {WINDOW_EPISODES} deterministic episodes reaches {CONVERGENCE_THRESHOLD:.0%} (ours) and stays there to "
-        "the end; a window first reached at the final evaluation is counted as 'reached at the end', not converged.\n\n"
-        + report.markdown(
-            table,
-            [
-                ("variant", "variant"),
-                ("seeds", "seeds"),
-                ("converged_4k", "converged ≤ 4k"),
-                ("converged_5k", "converged ≤ 5k"),
-                ("converged_20k", "converged ≤ 20k"),
-                ("median_step", "median convergence step"),
-                ("median_annotations", "annotations until convergence (median)"),
-                (
-                    "median_person_minutes",
-                    f"person-minutes until convergence (median, {PERSON_SECONDS_PER_MARK:.0f} s a mark)",
-                ),
-                ("reached_at_end", "reached only at the end"),
-                ("final_eval_success", "final eval success"),
-            ],
-        )
-    )
+    table = _curves_summary_rows(recs)
+    md = _curves_summary_md(cfg, table)
     grid = _grid(cfg.steps)
     files = {
         "summary.csv": report.csv_bytes(
@@ -144,6 +105,56 @@ def learning_curves_report(cfg: CurvesConfig, recs: dict[str, list[RunRecord]]) 
     if "guided" in recs:
         files["fig9_expert_effort.png"] = _fig_effort(recs["guided"], grid)
     return files
+
+
+def _curves_summary_rows(recs: dict[str, list[RunRecord]]) -> list[dict[str, Any]]:
+    """One summary row per variant: convergence counts and medians, annotation effort, final success."""
+    table = []
+    for v, rs in recs.items():
+        conv = [r.converged.step for r in rs if r.converged.step is not None]
+        ann = [a for r in rs if (a := r.annotations_until_convergence) is not None]  # the converged runs
+        table.append(
+            {
+                "variant": v,
+                "seeds": len(rs),
+                "converged_4k": sum(c <= 4000 for c in conv),
+                "converged_5k": sum(c <= 5000 for c in conv),
+                "converged_20k": sum(c <= 20_000 for c in conv),
+                "median_step": int(np.median(conv)) if conv else None,
+                "median_annotations": int(np.median(ann)) if ann and v == "guided" else None,
+                "median_person_minutes": person_minutes(float(np.median(ann))) if ann and v == "guided" else None,
+                "reached_at_end": sum(r.converged.at_end for r in rs),
+                "final_eval_success": round(float(np.mean([r.eval_rates[-1] for r in rs])), 3),
+            }
+        )
+    return table
+
+
+def _curves_summary_md(cfg: CurvesConfig, table: list[dict[str, Any]]) -> str:
+    """summary.md of the learning curves: how convergence is counted, then the summary table."""
+    return (
+        f"Learning curves: {cfg.seeds} seeds × {cfg.steps} steps per variant. Convergence: the evaluation success over "
+        f"the last {WINDOW_EPISODES} deterministic episodes reaches {CONVERGENCE_THRESHOLD:.0%} (ours) and stays there to "
+        "the end; a window first reached at the final evaluation is counted as 'reached at the end', not converged.\n\n"
+        + report.markdown(
+            table,
+            [
+                ("variant", "variant"),
+                ("seeds", "seeds"),
+                ("converged_4k", "converged ≤ 4k"),
+                ("converged_5k", "converged ≤ 5k"),
+                ("converged_20k", "converged ≤ 20k"),
+                ("median_step", "median convergence step"),
+                ("median_annotations", "annotations until convergence (median)"),
+                (
+                    "median_person_minutes",
+                    f"person-minutes until convergence (median, {PERSON_SECONDS_PER_MARK:.0f} s a mark)",
+                ),
+                ("reached_at_end", "reached only at the end"),
+                ("final_eval_success", "final eval success"),
+            ],
+        )
+    )
 
 
 def long_baseline_report(cfg: CurvesConfig, recs: dict[str, list[RunRecord]]) -> dict[str, bytes]:

@@ -15,7 +15,7 @@ import io
 import logging
 from collections import Counter
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -26,13 +26,14 @@ from mrguide.deploy.policy import ExportedPolicy, check_arm, check_decision_peri
 from mrguide.deploy.runlog import RunLog
 from mrguide.deploy.runtime import EpisodeReport
 from mrguide.deploy.safety import SafetyConfig
+from mrguide.deploy.session import DeploySummary
 from mrguide.drivers.config import CobotBusConfig
 from mrguide.drivers.errors import DriverError
 from mrguide.experiments import report
 from mrguide.experiments.stats import wilson
 from mrguide.output_files import write_files_atomically
 from mrguide.robot import load_robot
-from mrguide.task import Outcome, placed_at_goal
+from mrguide.task import Outcome, TaskConfig, placed_at_goal
 from mrguide.twin.dry_run import SimulatedCell, dry_run, episode_layouts
 from mrguide.twin.env import EnvConfig, PickPlaceEnv
 from mrguide.twin.hmd_stream import HmdPoseStream, HmdStartError
@@ -171,51 +172,14 @@ def run_real(
     (any obs → action callable) replaces the policy file, as in `dry_run`. A safety stop fails its
     episode; with `recover` the drives are fault-reset and the next episode runs (as an operator would
     after acknowledging), otherwise the remaining episodes of the seed count as safety stops too."""
-    cells: list[SimulatedCell] = []
-    outcomes: list[str] = []
-    goals = [g for _, g in episode_layouts(real_cfg, episodes, seed)]
-    task = real_cfg.task
-    header = {
-        "command": "sim2real",
-        "condition": condition or ("real_hmd" if use_hmd else "real_exact"),
-        "policy": str(policy_path),
-        "seed": seed,
-        "episodes": episodes,
-        "hmd_overrides": hmd_overrides or {},
-        "reality_gap": to_dict(real_cfg.twin.reality_gap),
-        "plant": to_dict(real_cfg.plant),
-    }
-    # the HMD process calibrates (seconds of rendering) before the simulated cell's control loop starts
-    arm = ArmDrawing.of(load_robot(real_cfg.robot))
+    condition = condition or ("real_hmd" if use_hmd else "real_exact")
+    header = _run_header(policy_path, real_cfg, seed, episodes, condition, hmd_overrides)
     try:
-        streams = (
-            [HmdPoseStream(None, hmd_config, task.object_height, arm, noise_seed=seed, hmd_overrides=hmd_overrides)]
-            if use_hmd
-            else []
-        )
+        streams = _hmd_streams(real_cfg, hmd_config, seed, use_hmd, hmd_overrides)
     except HmdStartError as exc:  # e.g. too much tracking noise to calibrate: no episode can run, none is lost
-        return _unplayed(log_path, header, episodes, f"the HMD could not start: {exc}", on_episode)
-
-    def pose_factory(cell: SimulatedCell):
-        cells.append(cell)
-        return streams[0].attach(cell.plant) if use_hmd else TwinObjectPose(cell.plant)
-
-    def refresh() -> None:  # a person moved the object: wait until the HMD has seen it again
-        for s in streams:
-            s.invalidate()
-            s.wait_fresh()
-
-    def judge(report: EpisodeReport) -> None:
-        outcome = _cause(report.outcome)
-        if outcome in (Outcome.SUCCESS, Outcome.MISPLACED):
-            # released at the goal pose: the task model's placement rule decides, on the ground truth of the
-            # twin that played the robot (the runtime judged on its pose source or the tracked TCP)
-            placed = placed_at_goal(task, cells[0].plant.object_position(), goals[report.index])
-            outcome = (Outcome.SUCCESS if placed else Outcome.MISPLACED).value
-        outcomes.append(outcome)
-        if on_episode:
-            on_episode(outcome)
-
+        with RunLog(log_path, header) as run_log:
+            return _unplayed(run_log, seed, episodes, f"the HMD could not start: {exc}", on_episode)
+    hooks = _SeedHooks(real_cfg.task, [g for _, g in episode_layouts(real_cfg, episodes, seed)], streams, on_episode)
     try:
         with RunLog(log_path, header) as run_log:
             try:
@@ -227,43 +191,103 @@ def run_real(
                     seed,
                     run_log,
                     safety,
-                    pose_factory=pose_factory,
-                    after_episode=judge,
-                    on_placed=refresh,
+                    pose_factory=hooks.pose_factory,
+                    after_episode=hooks.judge,
+                    on_placed=hooks.refresh,
                     policy=policy,
                     max_recoveries=episodes if recover else 0,
                 )
             except DriverError as exc:  # the cell did not start (drives not enabled in time on a starved PC)
-                if outcomes:
+                if hooks.outcomes:
                     raise
-                run_log.write("run_stopped", reason=f"the simulated cell did not start: {exc}")
-                log.warning("seed %d not run: the simulated cell did not start: %s", seed, exc)
-                return _count(["safety_stop"] * episodes, on_episode)
+                return _unplayed(run_log, seed, episodes, f"the simulated cell did not start: {exc}", on_episode)
     finally:
         for s in streams:
             s.close()
-    # a run stopped early leaves its remaining episodes unplayed: they count as safety stops
-    outcomes += ["safety_stop"] * (episodes - len(outcomes))
-    if summary.recoveries:
-        log.warning("seed %d: %d safety stop(s) recovered from", seed, summary.recoveries)
-    if summary.stopped:
-        log.warning("seed %d stopped: %s", seed, summary.stopped)
-    return outcomes
+    return hooks.finish(summary, seed, episodes)
+
+
+def _run_header(
+    policy_path: Path, real_cfg: EnvConfig, seed: int, episodes: int, condition: str, hmd_overrides: dict | None
+) -> dict[str, Any]:
+    """The run log's header for one seed of conditions 2 and 3 in the 'real' cell `real_cfg`."""
+    return {
+        "command": "sim2real",
+        "condition": condition,
+        "policy": str(policy_path),
+        "seed": seed,
+        "episodes": episodes,
+        "hmd_overrides": hmd_overrides or {},
+        "reality_gap": to_dict(real_cfg.twin.reality_gap),
+        "plant": to_dict(real_cfg.plant),
+    }
+
+
+def _hmd_streams(
+    real_cfg: EnvConfig, hmd_config: Path | None, seed: int, use_hmd: bool, hmd_overrides: dict | None
+) -> list[HmdPoseStream]:
+    """With `use_hmd`, the HMD's pose stream, calibrated; otherwise none. HmdStartError if the HMD cannot start."""
+    # the HMD process calibrates (seconds of rendering) before the simulated cell's control loop starts
+    arm = ArmDrawing.of(load_robot(real_cfg.robot))
+    if not use_hmd:
+        return []
+    return [
+        HmdPoseStream(None, hmd_config, real_cfg.task.object_height, arm, noise_seed=seed, hmd_overrides=hmd_overrides)
+    ]
+
+
+@dataclass
+class _SeedHooks:
+    """The dry run's hooks for one seed of conditions 2 and 3; `outcomes` gathers the episodes' outcomes as judged."""
+
+    task: TaskConfig
+    goals: list[np.ndarray]
+    streams: list[HmdPoseStream]  # condition 3: the HMD's pose stream; condition 2: none
+    on_episode: Callable[[str], None] | None
+    cells: list[SimulatedCell] = field(default_factory=list)
+    outcomes: list[str] = field(default_factory=list)
+
+    def pose_factory(self, cell: SimulatedCell) -> HmdPoseStream | TwinObjectPose:
+        """The object pose source in `cell`: the HMD's stream attached to it, or the twin's ground truth."""
+        self.cells.append(cell)
+        return self.streams[0].attach(cell.plant) if self.streams else TwinObjectPose(cell.plant)
+
+    def refresh(self) -> None:
+        """A person moved the object: wait until the HMD has seen it again."""
+        for s in self.streams:
+            s.invalidate()
+            s.wait_fresh()
+
+    def judge(self, report: EpisodeReport) -> None:
+        """Record the episode's outcome, judged on the ground truth of the twin that played the robot."""
+        outcome = _cause(report.outcome)
+        if outcome in (Outcome.SUCCESS, Outcome.MISPLACED):
+            # released at the goal pose: the task model's placement rule decides, on the ground truth of the
+            # twin that played the robot (the runtime judged on its pose source or the tracked TCP)
+            placed = placed_at_goal(self.task, self.cells[0].plant.object_position(), self.goals[report.index])
+            outcome = (Outcome.SUCCESS if placed else Outcome.MISPLACED).value
+        self.outcomes.append(outcome)
+        if self.on_episode:
+            self.on_episode(outcome)
+
+    def finish(self, summary: DeploySummary, seed: int, episodes: int) -> list[str]:
+        """The seed's outcomes: a run stopped early leaves its remaining episodes unplayed, counted as safety stops."""
+        self.outcomes += ["safety_stop"] * (episodes - len(self.outcomes))
+        if summary.recoveries:
+            log.warning("seed %d: %d safety stop(s) recovered from", seed, summary.recoveries)
+        if summary.stopped:
+            log.warning("seed %d stopped: %s", seed, summary.stopped)
+        return self.outcomes
 
 
 def _unplayed(
-    log_path: Path, header: dict, episodes: int, reason: str, on_episode: Callable[[str], None] | None
+    run_log: RunLog, seed: int, episodes: int, reason: str, on_episode: Callable[[str], None] | None
 ) -> list[str]:
-    """A seed whose run could not start: its episodes count as safety stops (as a run stopped early does), and
-    the run log says why."""
-    with RunLog(log_path, header) as run_log:
-        run_log.write("run_stopped", reason=reason)
-    log.warning("seed %d not run: %s", header["seed"], reason)
-    return _count([Outcome.SAFETY_STOP.value] * episodes, on_episode)
-
-
-def _count(outcomes: list[str], on_episode: Callable[[str], None] | None) -> list[str]:
-    """`outcomes`, each handed to `on_episode` (the progress bar) first."""
+    """A seed whose run could not start: its episodes count as safety stops (as a run stopped early does), each
+    handed to `on_episode` (the progress bar) first, and the run log says why."""
+    run_log.write("run_stopped", reason=reason)
+    log.warning("seed %d not run: %s", seed, reason)
+    outcomes = [Outcome.SAFETY_STOP.value] * episodes
     if on_episode:
         for outcome in outcomes:
             on_episode(outcome)

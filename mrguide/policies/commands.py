@@ -12,12 +12,17 @@ from collections.abc import Callable
 from contextlib import contextmanager
 from functools import partial
 from pathlib import Path
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 from tqdm import tqdm
 
 from mrguide.cli_args import nonnegative_int, override_arg, positive_int
 from mrguide.policies.choices import EXPERT_SOURCES, OVERRIDE_SECTIONS
+
+if TYPE_CHECKING:
+    from mrguide.policies.guidance import GuidanceConfig
+    from mrguide.policies.train import Trainer
+    from mrguide.policies.train_config import TrainConfig
 
 
 class LiveSessionLike(Protocol):
@@ -112,8 +117,8 @@ def _refuse(message: str) -> int:
 
 def cmd_train(args: argparse.Namespace, live: LivePlugin | None = None) -> int:
     """Train (or resume), show progress, export the policy; Ctrl-C checkpoints and exits 130."""
-    from mrguide.policies.tensorboard_log import TensorBoardLog, summary_writer_class
-    from mrguide.policies.train import CheckpointError, Trainer
+    from mrguide.policies.tensorboard_log import summary_writer_class
+    from mrguide.policies.train import Trainer
     from mrguide.policies.train_config import apply_overrides, load_sac_config, load_train_config
 
     if args.tensorboard:
@@ -147,6 +152,22 @@ def cmd_train(args: argparse.Namespace, live: LivePlugin | None = None) -> int:
         raise
     if session:
         bar.write(f"annotation page: {session.url}")
+    return _train_and_export(args, tr, tc, gc, out, bar, session)
+
+
+def _train_and_export(
+    args: argparse.Namespace,
+    tr: Trainer,
+    tc: TrainConfig,
+    gc: GuidanceConfig,
+    out: Path,
+    bar: tqdm,
+    session: LiveSessionLike | None,
+) -> int:
+    """Resume, attach the recorder and TensorBoard as asked, train and export; what was opened is closed after."""
+    from mrguide.policies.tensorboard_log import TensorBoardLog
+    from mrguide.policies.train import CheckpointError
+
     tb = None
     try:
         if args.resume:
