@@ -17,6 +17,7 @@ import pytest
 
 from mrguide.drivers import Cobot
 from mrguide.drivers.mock import SimulatedCobot
+from mrguide.drivers.mock.sim_cobot import shared_pc_config
 from mrguide.drivers.realtime import settled_heap
 from mrguide.motion.kinematics import Kinematics
 from mrguide.motion.trajectory import point_to_point
@@ -29,8 +30,9 @@ GOAL = np.array([0.45, 0.20, 0.025])
 
 @pytest.fixture(params=sorted(PLANT_BUILDERS))
 def cell(request, make_config, robot) -> Iterator[tuple]:
-    """(config, plant, simulated devices, enabled master) around each registered engine's plant, the part placed."""
-    config = make_config()
+    """(config, plant, simulated devices, enabled master) around each registered engine's plant, the part placed. The
+    bus timing is a dry run's (`shared_pc_config`): the plant steps in the devices' thread, in the master's process."""
+    config = shared_pc_config(make_config())
     env_cfg = EnvConfig()
     twin_cfg = replace(env_cfg.twin, control_period=config.timing.control_period, gui=False)
     plant, scene = PLANT_BUILDERS[request.param](env_cfg, twin_cfg, robot, 0)
