@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import fcntl
 import json
+import os
 import subprocess
 import sys
 import tempfile
@@ -38,6 +39,21 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     for item in items:
         if item.path.relative_to(config.rootpath).as_posix().startswith(REALTIME):
             item.add_marker(pytest.mark.realtime)
+
+
+#: The niceness a worker takes for the ordinary tests while the other one runs the realtime unit.
+ORDINARY_NICENESS = 10
+
+
+def pytest_runtest_setup(item: pytest.Item) -> None:
+    """Under `--dist loadgroup`, a worker lowers its CPU priority (and its children's: Chromium, MuJoCo) for good at its
+    first ordinary test. The realtime unit runs first on the other worker at normal priority, so the scheduler gives
+    its control threads the CPU whenever both workers want more than the machine has; the niced worker still takes
+    every cycle they leave. (The worker that ran the realtime unit lowers its own priority when it moves on.)"""
+    if not getattr(item.config.option, "loadgroup", False) or item.nodeid.startswith(REALTIME + RAY):
+        return
+    if os.getpriority(os.PRIO_PROCESS, 0) < ORDINARY_NICENESS:
+        os.setpriority(os.PRIO_PROCESS, 0, ORDINARY_NICENESS)
 
 
 @pytest.hookimpl(optionalhook=True)  # a pytest-xdist hook: absent with `-p no:xdist`
