@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import fcntl
 import json
-import os
 import subprocess
 import sys
 import tempfile
@@ -16,7 +15,8 @@ import numpy as np
 import pytest
 
 #: Tests that keep time with threads (simulated CANopen devices on the virtual bus, dry runs, the sim-to-real
-#: conditions), marked `realtime`.
+#: conditions): `./run.sh test` runs them on their own, after the rest has run on two workers, since a control
+#: cycle that another test process starves for a few hundred ms is a (correct) safety stop, not a failure of the code.
 REALTIME = (
     "tests/deploy/",
     "tests/drivers/",
@@ -26,53 +26,12 @@ REALTIME = (
     "tests/test_install_profiles.py",
     "tests/test_robot_pc_imports.py",
 )
-#: Tests that start a local Ray with two workers: several busy processes at once.
-RAY = (
-    "tests/experiments/test_ray_experiment.py",
-    "tests/experiments/test_generalization.py::test_tiny_generalization_on_local_ray",
-)
-#: The one work unit of `--dist loadgroup` that holds every realtime and Ray test.
-ONE_AT_A_TIME = "realtime"
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     for item in items:
         if item.path.relative_to(config.rootpath).as_posix().startswith(REALTIME):
             item.add_marker(pytest.mark.realtime)
-
-
-#: The niceness a worker takes for the ordinary tests while the other one runs the realtime unit.
-ORDINARY_NICENESS = 10
-
-
-def pytest_runtest_setup(item: pytest.Item) -> None:
-    """Under `--dist loadgroup`, a worker lowers its CPU priority (and its children's: Chromium, MuJoCo) for good at its
-    first ordinary test. The realtime unit runs first on the other worker at normal priority, so the scheduler gives
-    its control threads the CPU whenever both workers want more than the machine has; the niced worker still takes
-    every cycle they leave. (The worker that ran the realtime unit lowers its own priority when it moves on.)"""
-    if not getattr(item.config.option, "loadgroup", False) or item.nodeid.startswith(REALTIME + RAY):
-        return
-    if os.getpriority(os.PRIO_PROCESS, 0) < ORDINARY_NICENESS:
-        os.setpriority(os.PRIO_PROCESS, 0, ORDINARY_NICENESS)
-
-
-@pytest.hookimpl(optionalhook=True)  # a pytest-xdist hook: absent with `-p no:xdist`
-def pytest_xdist_make_scheduler(config: pytest.Config, log: Any) -> Any:
-    """`./run.sh test` runs the suite on two pytest-xdist workers with `--dist loadgroup`, grouped here: the realtime
-    and the Ray tests are one work unit, run one test after another on one worker (the largest unit, it starts first),
-    while the other worker takes the rest. A realtime test thus never runs beside another one or beside a Ray
-    experiment, only beside one ordinary test process, a load the realtime path must hold anyway. (pytest-xdist 3.8's own
-    `xdist_group` mark groups by renaming `item._nodeid`, which pytest 9's `Node.nodeid` no longer reads: it groups
-    nothing here.)"""
-    if config.getvalue("dist") != "loadgroup":
-        return None
-    from xdist.scheduler import LoadScopeScheduling
-
-    class OneAtATime(LoadScopeScheduling):
-        def _split_scope(self, nodeid: str) -> str:
-            return ONE_AT_A_TIME if nodeid.startswith(REALTIME + RAY) else nodeid
-
-    return OneAtATime(config, log)
 
 
 @dataclass

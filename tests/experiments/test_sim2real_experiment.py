@@ -17,11 +17,12 @@ MUJOCO_CELL = REAL_CELL.with_name("mujoco_cell.toml")
 
 
 def test_tiny_sim2real_experiment_on_local_ray_evaluates_each_run_once(tiny_experiment, capsys):
+    """Conditions 1 and 2 and the MuJoCo cell's, one Ray start: each plays once, the report has a row each."""
     write, out = tiny_experiment
     cfg = write(
         "s2r",
-        f'seeds = 1\nsteps = 150\neval_seeds = 1\nepisodes = 1\nconditions = ["sim", "real_exact"]\n'
-        f'real_config = "{REAL_CELL}"\n',
+        f'seeds = 1\nsteps = 150\neval_seeds = 1\nepisodes = 1\nconditions = ["sim", "real_exact", "mujoco_exact"]\n'
+        f'real_config = "{REAL_CELL}"\nmujoco_config = "{MUJOCO_CELL}"\n',
     )
     assert main(["experiment", "sim2real", "--config", str(cfg), "--out", str(out), "--workers", "1", "--quiet"]) == 0
     outcomes = out / "guided" / "seed0" / "sim2real" / "outcomes.csv"
@@ -30,11 +31,15 @@ def test_tiny_sim2real_experiment_on_local_ray_evaluates_each_run_once(tiny_expe
     assert [(r["condition"], r["eval_seed"], r["episode"]) for r in rows] == [
         ("sim", "0", "0"),
         ("real_exact", "0", "0"),
+        ("mujoco_exact", "0", "0"),
     ]
     assert all(r["outcome"] for r in rows)
     assert list((outcomes.parent).glob("log-real_exact-seed0.jsonl"))  # the deploy run log of condition 2
+    log = outcomes.parent / "log-mujoco_exact-seed0.jsonl"  # and the MuJoCo cell's, played by that engine
+    header = json.loads(log.read_text().splitlines()[0])
+    assert header["condition"] == "mujoco_exact" and header["plant"]["engine"] == "mujoco"
     summary = (out / "summary.csv").read_text().splitlines()
-    assert summary[0].startswith("condition,seeds,episodes,success_rate,ci95_low,ci95_high") and len(summary) == 3
+    assert summary[0].startswith("condition,seeds,episodes,success_rate,ci95_low,ci95_high") and len(summary) == 4
     assert (out / "fig8_sim2real.png").stat().st_size > 10_000
     stamp = outcomes.stat().st_mtime_ns
     capsys.readouterr()
@@ -53,20 +58,6 @@ def test_bad_sim2real_experiment_configs_are_refused(tiny_experiment, capsys):
     cfg = write("s2r", 'seeds = 1\nsteps = 150\nreal_config = "no_such_cell.toml"\n')
     assert main(["experiment", "sim2real", "--config", str(cfg), "--out", str(out)]) == 2
     assert "no_such_cell.toml" in capsys.readouterr().err and not out.exists()
-
-
-def test_the_mujoco_condition_plays_the_policy_in_the_mujoco_cell(tiny_experiment):
-    write, out = tiny_experiment
-    cfg = write(
-        "s2r",
-        f'seeds = 1\nsteps = 150\neval_seeds = 1\nepisodes = 1\nconditions = ["mujoco_exact"]\n'
-        f'real_config = "{REAL_CELL}"\nmujoco_config = "{MUJOCO_CELL}"\n',
-    )
-    assert main(["experiment", "sim2real", "--config", str(cfg), "--out", str(out), "--workers", "1", "--quiet"]) == 0
-    log = out / "guided" / "seed0" / "sim2real" / "log-mujoco_exact-seed0.jsonl"
-    header = json.loads(log.read_text().splitlines()[0])
-    assert '"condition": "mujoco_exact"' in json.dumps(header) and '"engine": "mujoco"' in json.dumps(header)
-    assert "mujoco_exact" in (out / "summary.csv").read_text()
 
 
 def test_a_missing_mujoco_cell_is_refused_only_where_a_condition_plays_it(tiny_experiment, capsys):
