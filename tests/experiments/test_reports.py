@@ -5,6 +5,7 @@ import dataclasses
 
 from mrguide.experiments import learning_curves as lc
 from mrguide.experiments import noise_robustness as nr
+from mrguide.experiments.runs import configs
 from tests.experiments.conftest import write_run
 
 
@@ -170,3 +171,28 @@ def test_peers_report_compares_at_equal_marks_and_equal_wall_time(tmp_path):
     assert rows["ddpg"]["mean_success_at_150_s"] == "1.0" and rows["sac"]["mean_success_at_150_s"] == "0.0"
     assert rows["ddpg"]["median_wall_s_per_run"] == "100.0" and rows["sac"]["median_wall_s_per_run"] == "500.0"
     assert files["peers.png"][:4] == b"\x89PNG"
+
+
+def test_the_bias_reading_reports_the_bias_each_person_drew(tmp_path):
+    """runs.csv of the registration-bias sweep names each run's drawn bias: the one its trainer's annotator holds."""
+    from mrguide.policies.guided_expert import make_expert_source
+    from mrguide.twin.env import PickPlaceEnv
+
+    shipped = "configs/runs/person.toml"
+    cfg = nr.NoiseConfig(seeds=2, steps=5000, sigmas=(0.0, 0.012), reading="bias")
+    runs = nr.runs(cfg, shipped)
+    for run in runs:
+        write_run(tmp_path / run.name, [0.5, 0.9, 1.0, 1.0, 1.0], list(range(10)))
+    files = nr.noise_report(cfg, nr.records(cfg, shipped, tmp_path, 10))
+    (tmp_path / "r.csv").write_bytes(files["runs.csv"])
+    rows = {(r["sigma_m"], r["seed"]): r["registration_bias_mm"] for r in read(tmp_path / "r.csv")}
+    run = runs[3]  # 12 mm, seed 1
+    _, _, gc, ec = configs(run)
+    env = PickPlaceEnv(ec)
+    try:
+        drawn = 1e3 * make_expert_source(gc, env, run.seed).run_bias
+    finally:
+        env.close()
+    assert rows[("0.012", "1")] == " ".join(f"{b:.1f}" for b in drawn) and abs(drawn).max() > 0.5
+    assert rows[("0.012", "0")] != rows[("0.012", "1")]  # each seed's person draws their own
+    assert rows[("0.0", "0")] == "0.0 0.0 0.0"
