@@ -7,6 +7,7 @@ from __future__ import annotations
 import argparse
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 
@@ -33,6 +34,8 @@ class DryRunBackend(Protocol):
 
     def camera(self, camera_cfg: Any, base: Path, object_height: float) -> Any: ...
 
+    def run_cycles(self, inputs: DeployInputs, run: Any) -> Any: ...
+
     def run(
         self,
         policy_path: str,
@@ -48,6 +51,21 @@ class DryRunBackend(Protocol):
     ) -> Any: ...
 
 
+@dataclass
+class DeployInputs:
+    """Everything a deploy run was given, checked: the policy and the cell's description, and the open run log."""
+
+    policy_path: str
+    policy: ExportedPolicy
+    bus: CobotBusConfig
+    spec: Any  # RobotSpec
+    task: Any  # TaskConfig
+    safety: Any  # SafetyConfig | None
+    dcfg: DeployConfig
+    camera: Any  # the camera pose source, or None
+    run_log: Any  # RunLog
+
+
 def add_deploy_command(sub: argparse._SubParsersAction, dry_run_factory: Callable[[str | None], DryRunBackend]) -> None:
     """Register `mrguide deploy`; `dry_run_factory(config_path)` builds the twin's DryRunBackend."""
     sp = sub.add_parser("deploy", help="run an exported policy on the cobot, or --dry-run it against the simulated bus")
@@ -58,6 +76,10 @@ def add_deploy_command(sub: argparse._SubParsersAction, dry_run_factory: Callabl
     )
     sp.add_argument("--enable-drives", action="store_true", help="confirm enabling the real drives (real bus only)")
     sp.add_argument("--episodes", type=positive_int, help="default: [deploy] episodes")
+    sp.add_argument(
+        "--cycles", type=positive_int, help="production: this many parts, one after another, lost ones picked again"
+    )
+    sp.add_argument("--resume", action="store_true", help="with --cycles and --log: go on from that run log's count")
     sp.add_argument("--seed", type=nonnegative_int, help="dry run: object/goal layouts; default: [deploy] seed")
     sp.add_argument("--log", help="run log path (JSONL); default under [deploy] log_dir")
     sp.add_argument("--quiet", action="store_true")
@@ -103,24 +125,13 @@ def cmd_deploy(args: argparse.Namespace) -> int:
     else:
         _check_real_bus(args, policy, bus)
     log_path, where = _log_path(args, dcfg)
-    header = _run_header(args, dcfg, bus, policy, episodes, seed)
+    start = _first_cycle(args, log_path)
+    header = _run_header(args, dcfg, bus, policy, episodes, seed) | {"cycles": args.cycles, "first_cycle": start}
     camera = _camera(args, dcfg, task, dry if args.dry_run else None)
     try:
-        with (
-            RunLog(log_path, header, where) as run_log,
-            tqdm(
-                total=episodes, desc="deploy" + (" (dry run)" if args.dry_run else ""), unit="ep", disable=args.quiet
-            ) as bar,
-        ):
-
-            def tick(report) -> None:
-                bar.update(1)
-                bar.set_postfix(last=report.outcome, decisions=report.decisions)
-
-            if args.dry_run:
-                summary = dry.run(args.policy, policy, bus, episodes, seed, run_log, safety, dcfg.runtime, tick, camera)
-            else:
-                summary = _deploy_real(policy, bus, spec, task, dcfg, safety, episodes, run_log, tick, camera)
+        with RunLog(log_path, header, where) as run_log:
+            inputs = DeployInputs(args.policy, policy, bus, spec, task, safety, dcfg, camera, run_log)
+            summary = _run(args, inputs, dry if args.dry_run else None, episodes, seed, start)
             camera_stats = _log_camera(camera, run_log)
     finally:
         if camera:
@@ -128,6 +139,43 @@ def cmd_deploy(args: argparse.Namespace) -> int:
     print(summary.text() + (f"\n{camera_stats.text()}" if camera_stats else ""))
     print(f"run log: {log_path}")
     return 0 if summary.stopped is None else 1
+
+
+def _first_cycle(args: argparse.Namespace, log_path: Path) -> int:
+    """The first cycle to run: 0, or with --resume the count of the run log being continued."""
+    from mrguide.deploy.cycle_commands import cycles_done
+
+    if args.cycles is not None and args.episodes is not None:
+        raise InputError("--cycles and --episodes: a run is either production cycles or episodes, not both")
+    if not args.resume:
+        return 0
+    if args.cycles is None or not args.log:
+        raise InputError("--resume needs --cycles and --log (the run log whose count it goes on from)")
+    return cycles_done(log_path)
+
+
+def _run(
+    args: argparse.Namespace, inputs: DeployInputs, dry: DryRunBackend | None, episodes: int, seed: int, start: int
+):
+    """The episodes, or with --cycles the production cycles, with a progress bar; their summary."""
+    from mrguide.deploy.cycle_commands import cycle_run, run_cycles
+
+    desc = "deploy" + (" (dry run)" if dry else "")
+    total, unit = (args.cycles, "part") if args.cycles else (episodes, "ep")
+    with tqdm(total=total, desc=desc, unit=unit, disable=args.quiet) as bar:
+        if args.cycles:
+            return run_cycles(cycle_run(args, inputs.dcfg, seed, start, bar), dry, inputs)
+
+        def tick(report) -> None:
+            bar.update(1)
+            bar.set_postfix(last=report.outcome, decisions=report.decisions)
+
+        i = inputs
+        if dry is not None:
+            return dry.run(
+                args.policy, i.policy, i.bus, episodes, seed, i.run_log, i.safety, i.dcfg.runtime, tick, i.camera
+            )
+        return _deploy_real(i.policy, i.bus, i.spec, i.task, i.dcfg, i.safety, episodes, i.run_log, tick, i.camera)
 
 
 def _check_real_bus(args: argparse.Namespace, policy: ExportedPolicy, bus: CobotBusConfig) -> None:

@@ -11,6 +11,7 @@ import numpy as np
 
 from mrguide.config import ConfigError, check_number
 from mrguide.deploy.camera import CameraSourceConfig
+from mrguide.deploy.cycles import CycleConfig
 from mrguide.deploy.runtime import EpisodeReport, RunStopped, Runtime, RuntimeConfig
 from mrguide.drivers.errors import DriverError
 from mrguide.pose_source import ObjectPoseSource, PoseUnavailable
@@ -43,6 +44,8 @@ class DeployConfig:
     camera: CameraSourceConfig = field(default_factory=CameraSourceConfig)
     #: Home tolerance, carried-object tracking, missing poses ([deploy.runtime]).
     runtime: RuntimeConfig = field(default_factory=RuntimeConfig)
+    #: Production cycles (`deploy --cycles`): retries, alarms, the pick region ([deploy.cycles]).
+    cycles: CycleConfig = field(default_factory=CycleConfig)
 
     def __post_init__(self) -> None:
         if self.pose_source not in POSE_SOURCES:

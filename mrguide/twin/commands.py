@@ -70,6 +70,24 @@ class TwinDryRun:
 
         return TwinCameraPoses(camera_cfg, base, object_height, ArmDrawing.of(load_robot(self.env_cfg.robot)))
 
+    def run_cycles(self, inputs: Any, run: Any) -> Any:
+        """`deploy --dry-run --cycles`: production cycles against the simulated cell, parts fed by the twin."""
+        from mrguide.twin.dry_run import dry_run_cycles
+
+        camera = inputs.camera
+        return dry_run_cycles(
+            inputs.policy_path,
+            self.env_cfg,
+            inputs.bus,
+            run,
+            inputs.run_log,
+            inputs.safety,
+            pose_factory=camera,
+            policy=inputs.policy,
+            on_placed=camera.refresh if camera else None,
+            runtime_cfg=inputs.dcfg.runtime,
+        )
+
     def run(
         self,
         policy_path: str,

@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from mrguide.config import ConfigError
+from mrguide.deploy.cycles import CycleRun, CycleRunner, CycleSummary
 from mrguide.deploy.policy import ExportedPolicy, check_decision_period
 from mrguide.deploy.runlog import RunLog
 from mrguide.deploy.runtime import EpisodeReport, Runtime, RuntimeConfig
@@ -87,8 +88,8 @@ def simulated_cell(env_cfg: EnvConfig, bus_cfg: CobotBusConfig, seed: int = 0) -
                 scene.close()
 
 
-def episode_layouts(env_cfg: EnvConfig, episodes: int, seed: int) -> list[tuple[np.ndarray, np.ndarray]]:
-    """(object, goal) per episode, drawn from the twin's object and goal regions."""
+def episode_layouts(env_cfg: EnvConfig, episodes: int, seed: int | list[int]) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(object, goal) per episode, drawn from the twin's object and goal regions (`seed`: numpy's seed entropy)."""
     rng = np.random.default_rng(seed)
     h = 0.5 * env_cfg.task.object_height
     out = []
@@ -140,36 +141,105 @@ def dry_run(
     spec = load_robot(env_cfg.robot)
     policy = _checked_policy(policy_path, policy, spec, env_cfg, bus_cfg)
     layouts = episode_layouts(env_cfg, episodes, seed)
-    with simulated_cell(env_cfg, bus_cfg, seed) as cell:
-        pose = pose_factory(cell) if pose_factory else TwinObjectPose(cell.plant)
-        # Without a [safety] config the simulated cell allows 0.1 rad of following error (robot: 0.05):
-        # on a loaded PC the simulated arm can fall behind for lack of CPU, not of torque.
-        runtime = Runtime(
-            cell.cobot,
-            policy,
-            pose,
-            spec,
-            env_cfg.task,
-            run_log,
-            env_cfg.twin.decision_period,
-            runtime_cfg,
-            safety or SafetyConfig(following_error=0.1),
-        )
+    with (
+        simulated_cell(env_cfg, bus_cfg, seed) as cell,
+        _cell_runtime(cell, env_cfg, spec, policy, run_log, pose_factory, safety, runtime_cfg) as runtime,
+    ):
 
         def place(i: int) -> None:
             cell.plant.place_objects(*layouts[i])
             if on_placed:
                 on_placed()
 
-        with contextlib.ExitStack() as stack:
-            # the pose source stops before the cell does (a camera whose world closed mid-frame would report itself lost)
-            if callable(close := getattr(pose, "close", None)):
-                stack.callback(close)
-            stack.enter_context(runtime)
-            return run_session(
-                runtime,
-                [g for _, g in layouts],
-                before_episode=place,
-                after_episode=after_episode,
-                max_recoveries=max_recoveries,
-            )
+        return run_session(
+            runtime,
+            [g for _, g in layouts],
+            before_episode=place,
+            after_episode=after_episode,
+            max_recoveries=max_recoveries,
+        )
+
+
+@contextlib.contextmanager
+def _cell_runtime(
+    cell: SimulatedCell,
+    env_cfg: EnvConfig,
+    spec: RobotSpec,
+    policy: Callable[[np.ndarray], np.ndarray],
+    run_log: RunLog,
+    pose_factory: Callable[[SimulatedCell], ObjectPoseSource] | None,
+    safety: SafetyConfig | None,
+    runtime_cfg: RuntimeConfig | None,
+) -> Iterator[Runtime]:
+    """The deploy runtime on a simulated cell, its pose source closed (if it can be) before the cell is torn down."""
+    pose = pose_factory(cell) if pose_factory else TwinObjectPose(cell.plant)
+    # Without a [safety] config the simulated cell allows 0.1 rad of following error (robot: 0.05):
+    # on a loaded PC the simulated arm can fall behind for lack of CPU, not of torque.
+    runtime = Runtime(
+        cell.cobot,
+        policy,
+        pose,
+        spec,
+        env_cfg.task,
+        run_log,
+        env_cfg.twin.decision_period,
+        runtime_cfg,
+        safety or SafetyConfig(following_error=0.1),
+    )
+    with contextlib.ExitStack() as stack:
+        # the pose source stops before the cell does (a camera whose world closed mid-frame would report itself lost)
+        if callable(close := getattr(pose, "close", None)):
+            stack.callback(close)
+        stack.enter_context(runtime)
+        yield runtime
+
+
+class TwinFeeder:
+    """A dry run's part feeder: each cycle a new part at a seeded random pose in the twin's object region, and the
+    cycle's goal from its goal region (as `episode_layouts` draws them; cycle `c` of seed `s` is always the same)."""
+
+    tracks_part = True  # the dry run's pose sources (exact, camera, HMD) see the part wherever it lies
+
+    def __init__(self, cell: SimulatedCell, env_cfg: EnvConfig, seed: int, on_placed: Callable[[], None] | None):
+        self.cell, self.env_cfg, self.seed, self.on_placed = cell, env_cfg, seed, on_placed
+
+    def layout(self, cycle: int) -> tuple[np.ndarray, np.ndarray]:
+        """(part, goal) of `cycle`."""
+        return episode_layouts(self.env_cfg, 1, [self.seed, cycle])[0]
+
+    def goal(self, cycle: int) -> np.ndarray:
+        return self.layout(cycle)[1]
+
+    def next_part(self, cycle: int) -> None:
+        """The placed (or skipped) part leaves the cell; the next one lies in the pick region."""
+        self.cell.plant.place_objects(*self.layout(cycle))
+        if self.on_placed:
+            self.on_placed()
+
+    def clear_part(self, cycle: int) -> None:
+        """Nothing to do: `next_part` takes the simulated part away as it feeds the next one."""
+
+
+def dry_run_cycles(
+    policy_path: str | Path | None,
+    env_cfg: EnvConfig,
+    bus_cfg: CobotBusConfig,
+    run: CycleRun,
+    run_log: RunLog,
+    safety: SafetyConfig | None = None,
+    pose_factory: Callable[[SimulatedCell], ObjectPoseSource] | None = None,
+    policy=None,
+    on_placed: Callable[[], None] | None = None,
+    runtime_cfg: RuntimeConfig | None = None,
+) -> CycleSummary:
+    """Production cycles `run.start` .. of a policy through the whole stack against the simulated cell, parts fed
+    by a `TwinFeeder` of seed `run.seed` (the arguments otherwise as `dry_run`'s)."""
+    spec = load_robot(env_cfg.robot)
+    policy = _checked_policy(policy_path, policy, spec, env_cfg, bus_cfg)
+    with (
+        simulated_cell(env_cfg, bus_cfg, run.seed) as cell,
+        _cell_runtime(cell, env_cfg, spec, policy, run_log, pose_factory, safety, runtime_cfg) as runtime,
+    ):
+        feeder = TwinFeeder(cell, env_cfg, run.seed, on_placed)
+        runner = CycleRunner(runtime, feeder, feeder.goal, run.config, run.after_cycle)
+        return runner.run(run.start, run.count, run.interrupt)

@@ -1,0 +1,300 @@
+"""Production cycles: one part after another, a lost part picked again where it lies, alarms when it cannot.
+
+A cycle places one part: the feeder brings it (a dry run's feeder puts a new part at a random pose in the
+pick region; on the robot the pose source finds it, or the operator places it), the arm goes to its ready
+pose (home, where every policy episode starts), the policy runs one attempt toward the cycle's goal. An
+attempt that fails with the part still on the table (dropped in the lift or transport, no seal, time out)
+is a retry: the part is perceived again where it lies and, if it lies in the pick region, picked again.
+A part outside the pick region, a pose source that cannot see where a lost part went, or more than
+`max_retries` retries raise an alarm: the run stops (`on_alarm = "stop"`) or the part is left for the
+operator and the next one fed (`"skip"`). Every retry and alarm, with its cause, goes to the run log.
+A safety stop (quick stop) ends the run, as it does in episodes.
+"""
+
+from __future__ import annotations
+
+import logging
+import resource
+import time
+from collections import Counter
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import numpy as np
+
+from mrguide.config import ConfigError, check_number
+from mrguide.deploy.interrupt import CycleInterrupt
+from mrguide.deploy.runtime import EpisodeReport, RunStopped, Runtime
+from mrguide.drivers.errors import DriverError
+from mrguide.pose_source import PoseUnavailable
+from mrguide.task import Outcome
+
+log = logging.getLogger(__name__)
+
+ALARM_ACTIONS = ("stop", "skip")
+#: Most cycles of one run.
+MAX_CYCLES = 1_000_000
+#: Outcomes after which the part lies somewhere on the table and may be picked again.
+RETRYABLE = frozenset(
+    {Outcome.DROPPED, Outcome.NO_GRASP, Outcome.TIMEOUT, Outcome.MISPLACED, Outcome.ABORTED, Outcome.POSE_LOST}
+)
+
+
+@dataclass(frozen=True)
+class CycleConfig:
+    """Production cycles ([deploy.cycles] in a TOML config)."""
+
+    #: Failed attempts at one part that are retried; one more raises an alarm. In [0, 100].
+    max_retries: int = 3
+    #: What an alarm does: "stop" ends the run (the operator clears the cell and resumes), "skip" leaves the
+    #: part for the operator and goes on with the next one.
+    on_alarm: str = "stop"
+    #: Where a part may be picked (xy in the base frame, m: low corner, high corner): the region the policy
+    #: was trained on (the twin's object region) plus 2 cm around it.
+    pick_region: tuple[tuple[float, float], tuple[float, float]] = ((0.38, -0.17), (0.62, 0.02))
+    #: How far (m) a part's centre may be from its resting height on the table and still be picked.
+    rest_height_tolerance: float = 0.01
+
+    def __post_init__(self) -> None:
+        check_number("deploy.cycles.max_retries", self.max_retries, 0, 100, integer=True)
+        if self.on_alarm not in ALARM_ACTIONS:
+            raise ConfigError(f"deploy.cycles.on_alarm = {self.on_alarm!r}: expected one of {', '.join(ALARM_ACTIONS)}")
+        low, high = self.pick_region
+        for k in range(2):
+            check_number(f"deploy.cycles.pick_region[0][{k}]", low[k], -5.0, 5.0, " m")
+            check_number(f"deploy.cycles.pick_region[1][{k}]", high[k], low[k], 5.0, " m")
+        check_number("deploy.cycles.rest_height_tolerance", self.rest_height_tolerance, 0.0, 0.1, " m")
+
+
+class PartFeeder(Protocol):
+    """Brings parts into the pick region: a dry run's simulated feeder, or the operator/camera on the robot."""
+
+    #: Whether the pose source sees a part where it fell (a camera, the twin's exact pose), or only where the
+    #: feeder put it (a fixed fixture pose): then a lost part raises an alarm instead of a retry.
+    tracks_part: bool
+
+    def next_part(self, cycle: int) -> None:
+        """Bring the part of `cycle` into the pick region (or wait until the pose source sees one there)."""
+        ...
+
+    def clear_part(self, cycle: int) -> None:
+        """Remove the part an alarm left behind (`on_alarm = "skip"`)."""
+        ...
+
+
+@dataclass(frozen=True)
+class CycleRun:
+    """Which cycles to run and how: `count` cycles from `start` (a resumed run goes on from its log's count)."""
+
+    start: int
+    count: int
+    seed: int  # a dry run's feeder: part poses and goals
+    config: CycleConfig
+    after_cycle: Callable[[CycleReport], None] | None = None
+    interrupt: CycleInterrupt | None = None
+
+
+@dataclass
+class CycleReport:
+    """One cycle: placed or not, its attempts' outcomes, its time from feeding to the end of the last attempt."""
+
+    cycle: int
+    placed: bool
+    outcomes: list[str] = field(default_factory=list)
+    #: Causes of the failed attempts that were followed by another attempt at this part.
+    retries: list[str] = field(default_factory=list)
+    alarm: str | None = None
+    cycle_s: float = 0.0
+
+
+@dataclass
+class CycleSummary:
+    """What a run of cycles did: parts placed, retries by cause, alarms, cycle times and the driver's health."""
+
+    start: int = 0
+    cycles: list[CycleReport] = field(default_factory=list)
+    stopped: str | None = None
+    wall_s: float = 0.0
+    missed_cycles: int = 0
+    underruns: int = 0
+    rss_growth_mb: float = 0.0
+
+    @property
+    def placed(self) -> int:
+        return sum(c.placed for c in self.cycles)
+
+    def retries(self) -> Counter:
+        """Failed attempts followed by another attempt at the same part, by the failed attempt's outcome."""
+        return Counter(cause for r in self.cycles for cause in r.retries)
+
+    def cycle_times(self) -> np.ndarray:
+        return np.array([c.cycle_s for c in self.cycles if c.placed])
+
+    def parts_per_hour(self) -> float:
+        return 3600.0 * self.placed / self.wall_s if self.wall_s > 0 else 0.0
+
+    def as_dict(self) -> dict:
+        t = self.cycle_times()
+        return {
+            "cycles": len(self.cycles),
+            "placed": self.placed,
+            "alarms": [{"cycle": c.cycle, "reason": c.alarm} for c in self.cycles if c.alarm],
+            "retries": dict(self.retries()),
+            "cycle_s_median": float(np.median(t)) if len(t) else None,
+            "cycle_s_p95": float(np.percentile(t, 95)) if len(t) else None,
+            "parts_per_hour": self.parts_per_hour(),
+            "wall_s": self.wall_s,
+            "missed_cycles": self.missed_cycles,
+            "underruns": self.underruns,
+            "rss_growth_mb": self.rss_growth_mb,
+            "stopped": self.stopped,
+        }
+
+    def text(self) -> str:
+        n, d = len(self.cycles), self.as_dict()
+        lines = [
+            f"cycles {self.start}..{self.start + n - 1}: {self.placed} of {n} parts placed ({self.placed / max(n, 1):.1%})",
+            f"retries: {d['retries'] or 'none'}; alarms: {len(d['alarms'])}",
+        ]
+        if d["cycle_s_median"] is not None:
+            lines.append(
+                f"cycle time median {d['cycle_s_median']:.2f} s, p95 {d['cycle_s_p95']:.2f} s; "
+                f"{d['parts_per_hour']:.0f} parts per hour"
+            )
+        lines.append(
+            f"missed control cycles: {self.missed_cycles}, setpoint queue ran dry while moving: {self.underruns}, "
+            f"peak RSS growth {self.rss_growth_mb:.1f} MB"
+        )
+        lines += [f"alarm in cycle {a['cycle']}: {a['reason']}" for a in d["alarms"]]
+        if self.stopped:
+            lines.append(f"run stopped: {self.stopped}")
+        return "\n".join(lines)
+
+
+def _peak_rss_mb() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # Linux: KiB
+
+
+class CycleRunner:
+    """Runs cycles `start`, `start + 1`, ... on a runtime whose cobot is connected and enabled."""
+
+    def __init__(
+        self,
+        runtime: Runtime,
+        feeder: PartFeeder,
+        goal_for: Callable[[int], np.ndarray],
+        config: CycleConfig,
+        after_cycle: Callable[[CycleReport], None] | None = None,
+    ):
+        self.rt, self.feeder, self.goal_for, self.cfg = runtime, feeder, goal_for, config
+        self.after_cycle = after_cycle
+        self.rest_z = 0.5 * runtime.task.object_height
+        self._attempt = 0  # episode index in the run log: attempts so far in this run
+
+    def run(self, start: int, count: int, interrupt: CycleInterrupt | None = None) -> CycleSummary:
+        """Cycles `start` .. `start + count - 1`, until an alarm with `on_alarm = "stop"`, a safety stop, or
+        `interrupt` (the current cycle is finished first)."""
+        summary = CycleSummary(start=start)
+        rss0, t0 = _peak_rss_mb(), time.perf_counter()
+        stats0 = self.rt.cobot.stats()
+        try:
+            for cycle in range(start, start + count):
+                if interrupt is not None and interrupt.requested:
+                    summary.stopped = "interrupted: the cycle in progress was finished"
+                    break
+                report = self._cycle(cycle)
+                summary.cycles.append(report)
+                if self.after_cycle:
+                    self.after_cycle(report)
+                if report.alarm and self.cfg.on_alarm == "stop":
+                    summary.stopped = f"alarm in cycle {cycle}: {report.alarm}"
+                    break
+        except (RunStopped, DriverError, KeyboardInterrupt) as exc:
+            summary.stopped = str(exc) or "interrupted (Ctrl-C twice): quick stop"
+            log.error("run stopped: %s", summary.stopped)
+        finally:
+            stats = self.rt.cobot.stats()
+            summary.wall_s = time.perf_counter() - t0
+            summary.missed_cycles = stats.missed_cycles - stats0.missed_cycles
+            summary.underruns = stats.underruns - stats0.underruns
+            summary.rss_growth_mb = _peak_rss_mb() - rss0
+            self.rt.log.write("cycles_end", **summary.as_dict())
+            self.rt.log.sync()
+        return summary
+
+    def _cycle(self, cycle: int) -> CycleReport:
+        """Feed a part, then attempts until it is placed, an alarm, or a safety stop (RunStopped propagates)."""
+        goal = np.asarray(self.goal_for(cycle), dtype=float)
+        self.feeder.next_part(cycle)
+        t0 = time.perf_counter()
+        report = CycleReport(cycle, placed=False)
+        self.rt.log.write("cycle_start", cycle=cycle, goal=goal)
+        try:
+            while True:
+                self.rt.home()  # the ready pose: every policy episode starts there, and the camera sees the part
+                problem = self._pickable()
+                if problem:
+                    self._alarm(cycle, report, problem)
+                    break
+                episode = self.rt.run_episode(goal, self._attempt)
+                self._attempt += 1
+                report.outcomes.append(episode.outcome.value)
+                if episode.outcome is Outcome.SUCCESS:
+                    report.placed = True
+                    break
+                if not self._retry(cycle, report, episode):
+                    break
+        finally:
+            report.cycle_s = time.perf_counter() - t0
+            self.rt.log.write(
+                "cycle_end",
+                cycle=cycle,
+                placed=report.placed,
+                outcomes=report.outcomes,
+                retries=report.retries,
+                alarm=report.alarm,
+                cycle_s=report.cycle_s,
+            )
+            self.rt.log.sync()
+        return report
+
+    def _retry(self, cycle: int, report: CycleReport, episode: EpisodeReport) -> bool:
+        """After a failed attempt: whether to try again (counted and logged), or the alarm that ends the cycle."""
+        cause = episode.outcome
+        if cause not in RETRYABLE:
+            self._alarm(cycle, report, f"attempt {len(report.outcomes)} ended {cause.value}: the part is gone")
+            return False
+        if not self.feeder.tracks_part and cause is not Outcome.NO_GRASP:
+            self._alarm(
+                cycle, report, f"attempt ended {cause.value} and the pose source cannot see where the part lies"
+            )
+            return False
+        if len(report.outcomes) > self.cfg.max_retries:
+            self._alarm(cycle, report, f"{len(report.outcomes)} failed attempts (last: {cause.value})")
+            return False
+        report.retries.append(cause.value)
+        self.rt.log.write("retry", cycle=cycle, attempt=len(report.outcomes), cause=cause.value)
+        log.info("cycle %d: attempt %d ended %s; picking the part again", cycle, len(report.outcomes), cause.value)
+        return True
+
+    def _pickable(self) -> str | None:
+        """Why the part cannot be picked where the pose source sees it, or None."""
+        try:
+            obj = self.rt.pose.object_position()
+        except PoseUnavailable as exc:
+            return f"no pose of the part: {exc}"
+        (x0, y0), (x1, y1) = self.cfg.pick_region
+        x, y, z = (float(v) for v in obj)
+        if not (x0 <= x <= x1 and y0 <= y <= y1):
+            return f"the part lies at ({x:.3f}, {y:.3f}) m, outside the pick region {self.cfg.pick_region}"
+        if abs(z - self.rest_z) > self.cfg.rest_height_tolerance:
+            return f"the part's centre is at z = {z:.3f} m, not resting on the table (expected {self.rest_z:.3f} m)"
+        return None
+
+    def _alarm(self, cycle: int, report: CycleReport, reason: str) -> None:
+        report.alarm = reason
+        self.rt.log.write("alarm", cycle=cycle, reason=reason, action=self.cfg.on_alarm)
+        log.warning("alarm in cycle %d: %s (%s)", cycle, reason, self.cfg.on_alarm)
+        if self.cfg.on_alarm == "skip":
+            self.feeder.clear_part(cycle)
