@@ -226,11 +226,15 @@ class CycleRunner:
     def _cycle(self, cycle: int) -> CycleReport:
         """Feed a part, then attempts until it is placed, an alarm, or a safety stop (RunStopped propagates)."""
         goal = np.asarray(self.goal_for(cycle), dtype=float)
-        self.feeder.next_part(cycle)
         t0 = time.perf_counter()
         report = CycleReport(cycle, placed=False)
         self.rt.log.write("cycle_start", cycle=cycle, goal=goal)
         try:
+            try:
+                self.feeder.next_part(cycle)
+            except PoseUnavailable as exc:
+                self._alarm(cycle, report, f"no part came: {exc}")
+                return report
             while True:
                 self.rt.home()  # the ready pose: every policy episode starts there, and the camera sees the part
                 problem = self._pickable()

@@ -22,15 +22,17 @@ import numpy as np
 from mrguide.config import ConfigError, check_number
 from mrguide.deploy.decision import NON_FINITE, ActionError, DecisionStep
 from mrguide.deploy.following import FollowingMonitor
+from mrguide.deploy.lift_rule import LiftRule
+from mrguide.deploy.object_tracking import ObjectStartUnknown, ObjectTracker
 from mrguide.deploy.runlog import RunLog
 from mrguide.deploy.safety import Event, Reaction, SafetyConfig, Supervisor, Watchdog
 from mrguide.drivers.cobot_state import JointState, VacuumState
 from mrguide.drivers.errors import DriverError
 from mrguide.drivers.interface import CobotInterface
 from mrguide.motion.trajectory import TrajectoryError
-from mrguide.pose_source import ObjectPoseSource, PoseUnavailable
+from mrguide.pose_source import ObjectPoseSource
 from mrguide.robot import RobotSpec
-from mrguide.task import Outcome, Phase, TaskConfig
+from mrguide.task import Outcome, TaskConfig
 
 log = logging.getLogger(__name__)
 
@@ -62,6 +64,10 @@ class RuntimeConfig:
     #: The same before the grasp (approach and grasp phases), when the arm over the part hides its marker from
     #: the camera or HMD while the part lies still where it was last seen. In [0, 1000].
     max_pose_misses_before_grasp: int = 30
+    #: The lift's first part at a bounded speed, so that a cup's level-compensator reaches its end stop gently
+    #: (lift_rule.py): how far (m, in [0, 0.1]; 0 = off) and how fast (m/s, in [0.005, 1]).
+    break_away_distance: float = 0.015
+    break_away_speed: float = 0.1
 
     def __post_init__(self) -> None:
         check_number("deploy.runtime.home_tolerance", self.home_tolerance, 1e-4, 0.5, " rad")
@@ -69,6 +75,8 @@ class RuntimeConfig:
         check_number(
             "deploy.runtime.max_pose_misses_before_grasp", self.max_pose_misses_before_grasp, 0, 1000, integer=True
         )
+        check_number("deploy.runtime.break_away_distance", self.break_away_distance, 0.0, 0.1, " m")
+        check_number("deploy.runtime.break_away_speed", self.break_away_speed, 0.005, 1.0, " m/s")
 
 
 @dataclass
@@ -120,10 +128,15 @@ class Runtime:
         self.watchdog = Watchdog(self.supervisor.cfg.stall_timeout, self._on_stall)
         self._episode_events: Counter[str] = Counter()
         self._t = 0
-        self._last_obj: np.ndarray | None = None  # last pose the source gave in this episode
-        self._pose_misses = 0  # decisions in a row without a pose from the source
-        self._carried: np.ndarray | None = None  # where the part hung under the cup, last seen
-        self._object_from = "source"  # where the last decision's object position came from (the run log says)
+        self.lift = LiftRule(spec.workspace, decision_period, self.cfg.break_away_distance, self.cfg.break_away_speed)
+        self.objects = ObjectTracker(
+            pose,
+            self.supervisor,
+            task.object_height,
+            self.cfg.track_carried_object,
+            self.cfg.max_pose_misses,
+            self.cfg.max_pose_misses_before_grasp,
+        )
 
     # -- lifecycle ----------------------------------------------------------------------------------
     def __enter__(self) -> Runtime:
@@ -223,7 +236,8 @@ class Runtime:
         t0 = time.perf_counter()
         self.log.write("episode_start", episode=index, goal=goal)
         self.decision.reset(self.cobot.setpoint)
-        self._last_obj, self._pose_misses, self._carried = None, 0, None
+        self.objects.reset()
+        self.lift.reset()
         self.watchdog.arm(True)
         try:
             outcome = self._decisions(goal, index, report)
@@ -267,7 +281,10 @@ class Runtime:
             js, vac = self.cobot.joint_state(), self.cobot.vacuum_state()
             tcp = self.decision.tcp(js.positions)
             g = 1 if vac.vacuum_on else -1
-            obj = self._object_position(tcp, vac)
+            try:
+                obj = self.objects.position(tcp, vac, self.decision.phase)
+            except ObjectStartUnknown as exc:
+                raise RunStopped(str(exc)) from exc
             if obj is None:
                 self.log.write(
                     "decision", t=t, tcp=tcp, g=g, phase=self.decision.phase, outcome=Outcome.POSE_LOST.value
@@ -306,6 +323,9 @@ class Runtime:
         t_inf = time.perf_counter()
         action = self.policy(obs)
         inference_ms = (time.perf_counter() - t_inf) * 1e3
+        executed, rule = self.lift.apply(action, self.decision.tcp(js.positions), self.decision.phase, vac)
+        if rule is not None:
+            self.supervisor.report(Event(rule), f"height target lowered in phase {self.decision.phase}")
         record = {
             "episode": index,
             "t": t,
@@ -316,13 +336,15 @@ class Runtime:
             "q": js.positions,
             "vacuum_kpa": vac.level_kpa,
             "part": vac.part_gripped,
-            "object_from": self._object_from,
+            "object_from": self.objects.source,
         }
+        if rule is not None:
+            record["lift_rule"] = rule
         details = getattr(self.pose, "pose_details", None)  # optional (PoseDetails): the estimate's age, the truth
         if details is not None:
             record["pose"] = details()
         try:
-            cmd = self.decision.act(action, js.positions)
+            cmd = self.decision.act(executed, js.positions)
         except ActionError as exc:
             event = Event.NON_FINITE_ACTION if exc.kind == NON_FINITE else Event.INVALID_ACTION
             self.supervisor.report(event, f"policy output: {exc}")
@@ -356,45 +378,3 @@ class Runtime:
         report.inference_ms.append(inference_ms)
         report.decisions = t + 1
         self.log.write("decision", **record)
-
-    def _object_position(self, tcp: np.ndarray, vac: VacuumState) -> np.ndarray | None:
-        """Where the object is for this decision; None once the pose has been missing for too long.
-
-        While the part hangs under the cup (after the grasp) it is where the TCP is; just released, where the
-        cup let it go. Otherwise the pose source says; when it has no pose, the last one is used for at most
-        `max_pose_misses` decisions in a row (`max_pose_misses_before_grasp` before the grasp, when the arm
-        hides the part as it reaches for it), each counted and logged; then the episode ends."""
-        if self.cfg.track_carried_object and self.decision.phase >= Phase.LIFT:
-            if vac.part_gripped:
-                self._carried = tcp - np.array([0.0, 0.0, 0.5 * self.task.object_height])
-                self._object_from = "carried"
-                return self._carried
-            if self._carried is not None and self.decision.phase == Phase.RELEASE:
-                self._object_from = "released"
-                return self._carried
-        self._object_from = "source"
-        try:
-            obj = self.pose.object_position()
-        except PoseUnavailable as exc:
-            if self._last_obj is None:
-                raise RunStopped(f"no object pose at the start of the episode: {exc}") from exc
-            self._pose_misses += 1
-            allowed = (
-                self.cfg.max_pose_misses_before_grasp
-                if self.decision.phase <= Phase.GRASP
-                else self.cfg.max_pose_misses
-            )
-            if self._pose_misses > allowed:
-                self.supervisor.report(
-                    Event.POSE_LOST,
-                    f"no object pose for {self._pose_misses} decisions in a row "
-                    f"(at most {allowed} may use the last one): {exc}",
-                )
-                return None
-            self.supervisor.report(
-                Event.POSE_UNAVAILABLE, f"{exc}; using the last pose ({self._pose_misses} of at most {allowed})"
-            )
-            self._object_from = "last"
-            return self._last_obj
-        self._last_obj, self._pose_misses = obj, 0
-        return obj

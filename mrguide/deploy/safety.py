@@ -52,6 +52,8 @@ class Event(str, enum.Enum):
     FOLLOWING_ERROR = "following_error"  # measured joints too far from the commanded ones
     DRIVE_FAULT = "drive_fault"  # EMCY, heartbeat loss, lost feedback, bus error (latched by the driver)
     VACUUM_LOST = "vacuum_lost"  # part lost during lift or transport (a drop)
+    VACUUM_NOT_OK = "vacuum_not_ok"  # a lift asked before the part was reported gripped: the arm does not rise
+    BREAK_AWAY = "break_away"  # the lift's first millimetres slowed (lift_rule.py)
     STALL = "stall"  # the decision loop stopped feeding setpoints (watchdog)
     INTERRUPT = "interrupt"  # Ctrl-C
 
@@ -69,6 +71,8 @@ REACTIONS: dict[Event, Reaction] = {
     Event.FOLLOWING_ERROR: Reaction.QUICK_STOP,
     Event.DRIVE_FAULT: Reaction.QUICK_STOP,
     Event.VACUUM_LOST: Reaction.ABORT,
+    Event.VACUUM_NOT_OK: Reaction.CLAMP,
+    Event.BREAK_AWAY: Reaction.CLAMP,
     Event.STALL: Reaction.QUICK_STOP,
     Event.INTERRUPT: Reaction.QUICK_STOP,
 }

@@ -174,3 +174,41 @@ def test_virtual_interface_without_dry_run_is_refused_for_users(tmp_path, policy
         "virtual interface", "--dry-run"
     )
     assert connected == []
+
+
+def test_cycles_on_the_robot_retry_alarm_skip_and_resume(robot_on_virtual_bus, tmp_path, capsys):
+    """`--cycles` on the real-bus path with the fixed pose (the operator feeds the fixture): this policy never grips,
+    so each part is tried twice (one retry), the alarm leaves it for the operator, and the next one is fed;
+    `--resume` goes on from the log's count."""
+    cfg, policy, _sim, prompts = robot_on_virtual_bus
+    cfg.write_text(cfg.read_text() + '[deploy.cycles]\nmax_retries = 1\non_alarm = "skip"\n')
+    log = tmp_path / "cycles.jsonl"
+    args = ["deploy", "--policy", str(policy), "--config", str(cfg), "--enable-drives", "--log", str(log), "--quiet"]
+    assert main([*args, "--cycles", "2"]) == 0, capsys.readouterr().err
+    out = capsys.readouterr().out
+    assert "cycles 0..1: 0 of 2 parts placed" in out and "retries: {'no_grasp': 2}" in out
+    assert [p.split(":")[0] for p in prompts] == ["cycle 0", "cycle 0", "cycle 1", "cycle 1"]
+    assert "place the part" in prompts[0] and "remove the part" in prompts[1]
+    records = read_log(log)
+    assert [r["episode"] for r in records if r["kind"] == "episode_end"] == [0, 1, 2, 3]
+    assert [(r["cycle"], r["cause"]) for r in records if r["kind"] == "retry"] == [(0, "no_grasp"), (1, "no_grasp")]
+    assert [r["action"] for r in records if r["kind"] == "alarm"] == ["skip", "skip"]
+
+    assert main([*args, "--cycles", "1", "--resume"]) == 0
+    assert "cycles 2..2" in capsys.readouterr().out
+    headers = [r for r in read_log(log) if r["kind"] == "run"]
+    assert [h["first_cycle"] for h in headers] == [0, 2]
+
+
+@pytest.mark.parametrize(
+    ("extra", "words"),
+    [
+        (["--resume", "--cycles", "1"], ("--resume needs", "--log")),
+        (["--cycles", "1", "--episodes", "2"], ("--cycles and --episodes",)),
+        (["--cycles", "1", "--resume", "--log", "missing.jsonl"], ("no such run log",)),
+    ],
+)
+def test_bad_cycle_arguments_are_refused(tmp_path, policy_file, run_cli, extra, words):
+    policy = policy_file(tmp_path / "p.npz")
+    extra = [str(tmp_path / e) if e.endswith(".jsonl") else e for e in extra]
+    run_cli(["deploy", "--policy", policy, "--dry-run", "--quiet", *extra]).assert_refused(*words)

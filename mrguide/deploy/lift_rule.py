@@ -1,0 +1,60 @@
+"""The runtime's rules for the lift, applied on the robot and in every dry run whatever the policy commands.
+
+- Vacuum OK: while the cup is on the part with the vacuum on but the generator does not yet report the part
+  gripped (its "vacuum OK" / part-present signal, threshold L1 of the bus config), the arm does not rise: a
+  partial seal is never lifted. The task model leaves the grasp phase only on that signal.
+- Break-away: the first `break_away_distance` of the lift rises at most `break_away_speed`. A cup on a spring
+  level-compensator is pressed in at the grasp; lifted fast, the compensator reaches its end stop with the part
+  hanging under it and jerks the part at the arm's full speed: in the 'real' cell's twin, the drops in the lift
+  were that jerk at full vacuum (docs/robot.md, production cycles).
+
+Both only lower the height the action asks for; the twin trains without them (its rigid cup needs neither).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from mrguide.drivers.cobot_state import VacuumState
+from mrguide.robot import Workspace
+from mrguide.task import ACT_DIM, Phase
+
+#: What `LiftRule.apply` says it did (also the safety event's name).
+VACUUM_NOT_OK, BREAK_AWAY = "vacuum_not_ok", "break_away"
+
+
+class LiftRule:
+    """Lowers an action's height target where a lift rule applies; one per runtime, `reset()` per episode."""
+
+    def __init__(self, workspace: Workspace, decision_period: float, distance: float, speed: float):
+        self.workspace, self.rise_per_decision, self.distance = workspace, speed * decision_period, distance
+        self.reset()
+
+    def reset(self) -> None:
+        self._seal_z: float | None = None  # the TCP's height at the first decision of the lift
+
+    def apply(self, action: np.ndarray, tcp: np.ndarray, phase: int, vac: VacuumState) -> tuple[np.ndarray, str | None]:
+        """(the action to run, the rule that lowered it or None). An action the decision step will refuse
+        (wrong shape, NaN) is passed on unchanged for it to refuse."""
+        a = np.asarray(action, dtype=float)
+        if a.shape != (ACT_DIM,) or not np.all(np.isfinite(a)):
+            return action, None
+        cap, rule = self._ceiling(a, float(tcp[2]), phase, vac)
+        target = self.workspace.to_cartesian(np.clip(a[:3], -1.0, 1.0))
+        if cap is None or target[2] <= cap:
+            return action, None
+        target[2] = cap
+        out = a.copy()
+        out[:3] = np.clip(self.workspace.to_normalized(target), -1.0, 1.0)  # a floor below the box: its floor
+        return out, rule
+
+    def _ceiling(self, a: np.ndarray, z: float, phase: int, vac: VacuumState) -> tuple[float | None, str | None]:
+        """The highest target height allowed this decision, and which rule sets it (None: no limit)."""
+        if phase == Phase.GRASP and a[3] > 0 and not vac.part_gripped:
+            return z, VACUUM_NOT_OK
+        if phase == Phase.LIFT:
+            if self._seal_z is None:
+                self._seal_z = z
+            if z < self._seal_z + self.distance:
+                return z + self.rise_per_decision, BREAK_AWAY
+        return None, None

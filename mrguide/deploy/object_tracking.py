@@ -1,0 +1,84 @@
+"""Where the object is for each decision of an episode: the pose source, the last pose, or under the cup."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from mrguide.deploy.safety import Event, Supervisor
+from mrguide.drivers.cobot_state import VacuumState
+from mrguide.pose_source import ObjectPoseSource, PoseUnavailable
+from mrguide.task import Phase
+
+
+class ObjectStartUnknown(RuntimeError):
+    """The pose source has no pose at the start of an episode."""
+
+
+class ObjectTracker:
+    """The object's position per decision, and where it came from (`source`: for the run log).
+
+    While the part hangs under the cup (after the grasp) it is where the TCP is; just released, where the cup let
+    it go. Otherwise the pose source says; when it has no pose, the last one is used for at most `max_misses`
+    decisions in a row (`max_misses_before_grasp` before the grasp, when the arm hides the part as it reaches for
+    it), each reported to the supervisor; then None (the episode ends)."""
+
+    def __init__(
+        self,
+        pose: ObjectPoseSource,
+        supervisor: Supervisor,
+        object_height: float,
+        track_carried: bool,
+        max_misses: int,
+        max_misses_before_grasp: int,
+    ):
+        self.pose, self.supervisor = pose, supervisor
+        self.hang = np.array([0.0, 0.0, 0.5 * object_height])  # from the TCP down to the carried part's centre
+        self.track_carried, self.max_misses, self.max_misses_before_grasp = (
+            track_carried,
+            max_misses,
+            max_misses_before_grasp,
+        )
+        self.reset()
+
+    def reset(self) -> None:
+        """A new episode: nothing seen yet."""
+        self._last: np.ndarray | None = None  # last pose the source gave in this episode
+        self._misses = 0  # decisions in a row without a pose from the source
+        self._carried: np.ndarray | None = None  # where the part hung under the cup, last seen
+        self.source = "source"  # where the last position came from
+
+    def position(self, tcp: np.ndarray, vac: VacuumState, phase: int) -> np.ndarray | None:
+        """The object's position for this decision; None once the pose has been missing for too long.
+        ObjectStartUnknown if the source has none before the first pose of the episode."""
+        if self.track_carried and phase >= Phase.LIFT:
+            if vac.part_gripped:
+                self._carried = tcp - self.hang
+                self.source = "carried"
+                return self._carried
+            if self._carried is not None and phase == Phase.RELEASE:
+                self.source = "released"
+                return self._carried
+        self.source = "source"
+        try:
+            obj = self.pose.object_position()
+        except PoseUnavailable as exc:
+            return self._missing(exc, phase)
+        self._last, self._misses = obj, 0
+        return obj
+
+    def _missing(self, exc: PoseUnavailable, phase: int) -> np.ndarray | None:
+        if self._last is None:
+            raise ObjectStartUnknown(f"no object pose at the start of the episode: {exc}") from exc
+        self._misses += 1
+        allowed = self.max_misses_before_grasp if phase <= Phase.GRASP else self.max_misses
+        if self._misses > allowed:
+            self.supervisor.report(
+                Event.POSE_LOST,
+                f"no object pose for {self._misses} decisions in a row (at most {allowed} may use the last one): {exc}",
+            )
+            return None
+        self.supervisor.report(
+            Event.POSE_UNAVAILABLE, f"{exc}; using the last pose ({self._misses} of at most {allowed})"
+        )
+        self.source = "last"
+        return self._last

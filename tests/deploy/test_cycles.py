@@ -1,0 +1,193 @@
+"""Production cycles (deploy/cycles.py) on a scripted runtime: retries, alarms, skip, interrupt, resume counts.
+
+The runtime here is a stand-in whose attempts end as a script says and whose part lies where the script puts it,
+so every rule of the cycle runner is checked without threads or a bus; tests/deploy/test_cycles_dry_run.py runs
+the same runner through the whole stack."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import pytest
+
+from mrguide.config import ConfigError
+from mrguide.deploy.cycle_commands import cycles_done
+from mrguide.deploy.cycles import CycleConfig, CycleRunner
+from mrguide.deploy.interrupt import CycleInterrupt
+from mrguide.deploy.runlog import RunLog, RunLogError, read_log
+from mrguide.deploy.runtime import EpisodeReport, RunStopped
+from mrguide.drivers.cobot_state import DriverStats
+from mrguide.pose_source import PoseUnavailable
+from mrguide.task import Outcome, TaskConfig
+
+ON_TABLE = np.array([0.5, -0.075, 0.025])
+
+
+@dataclass
+class ScriptedRuntime:
+    """Attempts end with `outcomes` in turn; after each, the part lies at `positions` in turn (default: on the table
+    in the pick region). A `RunStopped` in `outcomes` is raised instead."""
+
+    outcomes: list
+    log: RunLog
+    positions: list = field(default_factory=list)
+    task: TaskConfig = field(default_factory=TaskConfig)
+    homes: int = 0
+    episodes: list = field(default_factory=list)
+
+    def __post_init__(self):
+        self.pose, self.cobot = self, self
+        self._where = ON_TABLE
+
+    def object_position(self):
+        if self._where is None:
+            raise PoseUnavailable("marker not in view")
+        return np.array(self._where, dtype=float)
+
+    def stats(self):
+        return DriverStats(*([0] * 2), *([0.0] * 3), *([0] * 11))
+
+    def home(self):
+        self.homes += 1
+
+    def run_episode(self, goal, index):
+        self.episodes.append(index)
+        outcome = self.outcomes.pop(0)
+        if isinstance(outcome, Exception):
+            raise outcome
+        self._where = self.positions.pop(0) if self.positions else ON_TABLE
+        return EpisodeReport(index, outcome, 10, {})
+
+
+class Feeder:
+    def __init__(self, tracks_part=True):
+        self.tracks_part, self.fed, self.cleared = tracks_part, [], []
+
+    def next_part(self, cycle):
+        self.fed.append(cycle)
+
+    def clear_part(self, cycle):
+        self.cleared.append(cycle)
+
+
+def run(tmp_path, outcomes, count, config=None, positions=(), feeder=None, start=0, interrupt=None):
+    log_path = tmp_path / "cycles.jsonl"
+    with RunLog(log_path, {"test": "cycles"}) as log:
+        rt = ScriptedRuntime(list(outcomes), log, list(positions))
+        feeder = feeder or Feeder()
+        runner = CycleRunner(rt, feeder, lambda c: np.array([0.5, 0.21, 0.025]), config or CycleConfig())
+        summary = runner.run(start, count, interrupt)
+    return summary, rt, feeder, read_log(log_path)
+
+
+S, D, N = Outcome.SUCCESS, Outcome.DROPPED, Outcome.NO_GRASP
+
+
+def test_each_cycle_feeds_a_part_and_places_it(tmp_path):
+    summary, rt, feeder, records = run(tmp_path, [S, S, S], 3)
+    assert summary.placed == 3 and not summary.retries() and summary.stopped is None
+    assert feeder.fed == [0, 1, 2] and rt.homes == 3 and rt.episodes == [0, 1, 2]
+    ends = [r for r in records if r["kind"] == "cycle_end"]
+    assert [(r["cycle"], r["placed"], r["outcomes"]) for r in ends] == [(c, True, ["success"]) for c in range(3)]
+    (final,) = [r for r in records if r["kind"] == "cycles_end"]
+    assert final["placed"] == 3 and final["alarms"] == []
+
+
+def test_a_dropped_part_is_picked_again_and_the_retry_counted(tmp_path):
+    summary, _rt, feeder, records = run(tmp_path, [D, N, S, S], 2)
+    assert summary.placed == 2 and summary.retries() == {"dropped": 1, "no_grasp": 1}
+    assert feeder.fed == [0, 1]  # no new part for a retry: the same one is picked where it lies
+    retries = [(r["cycle"], r["attempt"], r["cause"]) for r in records if r["kind"] == "retry"]
+    assert retries == [(0, 1, "dropped"), (0, 2, "no_grasp")]
+    assert summary.cycles[0].outcomes == ["dropped", "no_grasp", "success"]
+
+
+def test_too_many_failed_attempts_raise_an_alarm_that_stops_the_run(tmp_path):
+    summary, _rt, feeder, records = run(tmp_path, [D, D, D], 5, CycleConfig(max_retries=2))
+    assert summary.placed == 0 and len(summary.cycles) == 1
+    assert summary.stopped == "alarm in cycle 0: 3 failed attempts (last: dropped)"
+    assert [r["kind"] for r in records].count("alarm") == 1 and feeder.fed == [0]
+
+
+def test_with_on_alarm_skip_the_part_is_left_for_the_operator_and_the_next_one_fed(tmp_path):
+    summary, _rt, feeder, records = run(tmp_path, [D, D, S], 2, CycleConfig(max_retries=1, on_alarm="skip"))
+    assert [c.placed for c in summary.cycles] == [False, True] and summary.stopped is None
+    assert feeder.cleared == [0] and feeder.fed == [0, 1]
+    (alarm,) = [r for r in records if r["kind"] == "alarm"]
+    assert alarm["action"] == "skip" and alarm["cycle"] == 0
+
+
+@pytest.mark.parametrize(
+    ("where", "reason"),
+    [
+        ((0.5, 0.08, 0.025), "outside the pick region"),  # dropped in transport, between pick and goal regions
+        ((0.5, -0.075, -0.2), "not resting on the table"),  # fell off the table
+        (None, "no pose of the part"),  # the pose source lost it
+    ],
+)
+def test_a_part_that_cannot_be_picked_where_it_lies_raises_an_alarm(tmp_path, where, reason):
+    summary, rt, _, _ = run(tmp_path, [D, S], 2, positions=[where])
+    assert reason in summary.cycles[0].alarm and summary.placed == 0 and len(rt.episodes) == 1
+
+
+def test_a_pose_source_that_cannot_see_a_lost_part_raises_an_alarm(tmp_path):
+    summary, *_ = run(tmp_path, [D, S], 1, feeder=Feeder(tracks_part=False))
+    assert "cannot see where the part lies" in summary.cycles[0].alarm
+
+
+def test_a_feeder_that_brings_no_part_raises_an_alarm(tmp_path):
+    class Empty(Feeder):
+        def next_part(self, cycle):
+            raise PoseUnavailable("no part seen in the pick region within 30 s")
+
+    summary, rt, _, records = run(tmp_path, [S], 2, feeder=Empty())
+    assert summary.cycles[0].alarm == "no part came: no part seen in the pick region within 30 s"
+    assert rt.episodes == [] and [r["kind"] for r in records][-2:] == ["cycle_end", "cycles_end"]
+
+
+def test_a_part_knocked_off_is_gone_and_raises_an_alarm(tmp_path):
+    summary, *_ = run(tmp_path, [Outcome.KNOCKED_OFF], 1)
+    assert "knocked_off: the part is gone" in summary.cycles[0].alarm
+
+
+def test_a_safety_stop_ends_the_run_with_its_reason_and_the_log_complete(tmp_path):
+    summary, _rt, _, records = run(tmp_path, [S, RunStopped("drive_fault: EMCY from node 4")], 3)
+    assert summary.stopped == "drive_fault: EMCY from node 4" and summary.placed == 1
+    assert [r["kind"] for r in records][-2:] == ["cycle_end", "cycles_end"]
+
+
+def test_an_interrupt_finishes_the_cycle_in_progress_then_stops(tmp_path):
+    interrupt = CycleInterrupt()
+
+    class Asking(Feeder):
+        def next_part(self, cycle):
+            super().next_part(cycle)
+            if cycle == 1:
+                interrupt.requested = True  # Ctrl-C while cycle 1 runs
+
+    summary, *_ = run(tmp_path, [S, S, S], 3, feeder=Asking(), interrupt=interrupt)
+    assert [c.cycle for c in summary.cycles] == [0, 1] and summary.placed == 2
+    assert summary.stopped.startswith("interrupted")
+
+
+def test_a_resumed_run_goes_on_from_the_log_count(tmp_path):
+    _summary, _rt, feeder, _ = run(tmp_path, [S, S], 2, start=7)
+    assert feeder.fed == [7, 8]
+    assert cycles_done(tmp_path / "cycles.jsonl") == 9
+    with pytest.raises(RunLogError, match="no such run log"):
+        cycles_done(tmp_path / "missing.jsonl")
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"max_retries": -1}, "deploy.cycles.max_retries"),
+        ({"on_alarm": "wait"}, "deploy.cycles.on_alarm"),
+        ({"pick_region": ((0.6, 0.0), (0.4, 0.1))}, "deploy.cycles.pick_region[1][0]"),
+        ({"rest_height_tolerance": float("nan")}, "deploy.cycles.rest_height_tolerance"),
+    ],
+)
+def test_a_bad_cycle_config_is_refused_with_its_key(kwargs, message):
+    with pytest.raises(ConfigError, match=message.replace("[", r"\[").replace("]", r"\]")):
+        CycleConfig(**kwargs)

@@ -1,0 +1,55 @@
+"""Production cycles through the whole stack against the simulated cell: a part lost in the lift is picked again
+where it fell, and the lift rules of the runtime act on every lift."""
+
+from __future__ import annotations
+
+from mrguide.deploy.cycles import CycleConfig, CycleRun
+from mrguide.deploy.runlog import RunLog, read_log
+from mrguide.twin.dry_run import dry_run_cycles
+from mrguide.twin.env import EnvConfig
+
+from .conftest import Expert, bus_config
+
+
+def test_a_part_dropped_in_the_lift_is_picked_again_and_placed(tmp_path):
+    cfg = EnvConfig()
+    leaks = []
+
+    def leak_once(obs, phase, a, cell):
+        """The first lift of the run loses its vacuum (a torn seal); the vacuum is whole again after it."""
+        if phase == 2 and not leaks:
+            cell.sim.set_vacuum_leak(1.0)
+            leaks.append(1)
+        elif phase == 0 and leaks:
+            cell.sim.set_vacuum_leak(0.0)
+        return a
+
+    cells = []
+
+    def pose_factory(cell):
+        from mrguide.twin.plant import TwinObjectPose
+
+        cells.append(cell)
+        return TwinObjectPose(cell.plant)
+
+    log = tmp_path / "cycles.jsonl"
+    with RunLog(log, {"test": "cycles"}) as run_log:
+        summary = dry_run_cycles(
+            None,
+            cfg,
+            bus_config(),
+            CycleRun(0, 2, seed=3, config=CycleConfig()),
+            run_log,
+            pose_factory=pose_factory,
+            policy=Expert(cfg, lambda o, p, a: leak_once(o, p, a, cells[0])),
+        )
+    assert summary.stopped is None, summary.text()
+    assert summary.placed == 2 and summary.retries() == {"dropped": 1}, summary.text()
+    assert summary.cycles[0].outcomes == ["dropped", "success"]
+    records = read_log(log)
+    assert [(r["cycle"], r["cause"]) for r in records if r["kind"] == "retry"] == [(0, "dropped")]
+    # the lift rules: every lift started slowly (break-away), and each is in the run log
+    lifts = [r for r in records if r["kind"] == "decision" and r.get("lift_rule") == "break_away"]
+    assert {r["episode"] for r in lifts} == {0, 1, 2}
+    (final,) = [r for r in records if r["kind"] == "cycles_end"]
+    assert final["placed"] == 2 and final["alarms"] == [] and final["retries"] == {"dropped": 1}
