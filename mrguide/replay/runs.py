@@ -132,6 +132,8 @@ def log_episodes(path: Path) -> list[Episode]:
             current = Episode(str(path), int(rec["episode"]), "deploy", _arr(rec.get("goal")), None, meta=header)
             current.decision_period = period
             episodes.append(current)
+        elif kind in ("retry", "alarm") and episodes and episodes[-1].frames:
+            _cycle_event(episodes[-1], rec)
         elif current is None:
             continue
         elif kind == "decision":
@@ -148,6 +150,15 @@ def log_episodes(path: Path) -> list[Episode]:
     if not episodes:
         raise RunError(f"{path}: a run log without episodes")
     return episodes
+
+
+def _cycle_event(episode: Episode, rec: dict) -> None:
+    """A production cycle's retry or alarm, shown at the last frame of the attempt it followed."""
+    if rec["kind"] == "retry":
+        detail = f"cycle {rec.get('cycle')}: attempt ended {rec.get('cause')}, the part is picked again where it lies"
+    else:
+        detail = f"cycle {rec.get('cycle')}: {rec.get('reason')} ({rec.get('action')})"
+    episode.events.append({"t": episode.frames[-1].t, "event": rec["kind"], "reaction": None, "detail": detail})
 
 
 def _decision_frame(rec: dict) -> Frame:

@@ -3,8 +3,10 @@ where it fell, and the lift rules of the runtime act on every lift."""
 
 from __future__ import annotations
 
+from mrguide.cli import main
 from mrguide.deploy.cycles import CycleConfig, CycleRun
 from mrguide.deploy.runlog import RunLog, read_log
+from mrguide.replay.runs import load_run
 from mrguide.twin.dry_run import dry_run_cycles
 from mrguide.twin.env import EnvConfig
 
@@ -53,3 +55,9 @@ def test_a_part_dropped_in_the_lift_is_picked_again_and_placed(tmp_path):
     assert {r["episode"] for r in lifts} == {0, 1, 2}
     (final,) = [r for r in records if r["kind"] == "cycles_end"]
     assert final["placed"] == 2 and final["alarms"] == [] and final["retries"] == {"dropped": 1}
+    # `mrguide replay` shows the recovered drop: the dropped attempt ends with the retry, the next one succeeds
+    dropped, again, _ = load_run(log)
+    assert dropped.outcome == "dropped" and again.outcome == "success"
+    assert dropped.events[-1]["event"] == "retry" and "picked again" in dropped.events[-1]["detail"]
+    assert main(["replay", f"{log}:0,1", "--save", str(tmp_path / "recovered.rrd")]) == 0
+    assert (tmp_path / "recovered.rrd").stat().st_size > 0
