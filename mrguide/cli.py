@@ -93,6 +93,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_expert_command(sub)
     add_deploy_command(sub, TwinDryRun)
+    from mrguide.deploy.cycle_report import add_cycles_command
+
+    add_cycles_command(sub)
 
     from mrguide.calibration.commands import add_calibrate_command
     from mrguide.experiments.commands import add_experiment_command

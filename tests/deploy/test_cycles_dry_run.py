@@ -9,8 +9,7 @@ from mrguide.deploy.runlog import RunLog, read_log
 from mrguide.replay.runs import load_run
 from mrguide.twin.dry_run import dry_run_cycles
 from mrguide.twin.env import EnvConfig
-
-from .conftest import Expert, bus_config
+from tests.deploy.conftest import Expert, bus_config
 
 
 def test_a_part_dropped_in_the_lift_is_picked_again_and_placed(tmp_path):

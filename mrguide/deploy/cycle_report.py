@@ -1,0 +1,101 @@
+"""`mrguide cycles report`: the figures of production runs, recomputed from their run logs, and slim copies of the
+logs for the results (every cycle, retry and alarm record; every decision of the attempts that failed)."""
+
+from __future__ import annotations
+
+import argparse
+import gzip
+import json
+from collections import Counter
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from mrguide.deploy.runlog import RunLogError, read_log
+from mrguide.errors import InputError
+
+
+def cycle_figures(records: list[dict]) -> dict[str, Any]:
+    """A production run's figures from its records (a resumed run's segments together)."""
+    ends = [r for r in records if r.get("kind") == "cycle_end"]
+    if not ends:
+        raise InputError("a run log without production cycles (no cycle_end record)")
+    segments = [r for r in records if r.get("kind") == "cycles_end"]
+    placed = [r for r in ends if r["placed"]]
+    times = np.array([r["cycle_s"] for r in placed])
+    wall = sum(float(s.get("wall_s") or 0.0) for s in segments)
+    return {
+        "cycles": len(ends),
+        "placed": len(placed),
+        "placed_first_attempt": sum(len(r["outcomes"]) == 1 for r in placed),
+        "alarms": sum(r["alarm"] is not None for r in ends),
+        "retries": dict(Counter(c for r in ends for c in r["retries"])),
+        "cycle_s_median": float(np.median(times)) if len(times) else None,
+        "cycle_s_p95": float(np.percentile(times, 95)) if len(times) else None,
+        "parts_per_hour": 3600.0 * len(placed) / wall if wall > 0 else None,
+        # the driver's counters are in the run's summary record(s): unknown for a run that ended without one
+        "missed_cycles": sum(int(s["missed_cycles"]) for s in segments) if segments else None,
+        "underruns": sum(int(s["underruns"]) for s in segments) if segments else None,
+        "rss_growth_mb": max(float(s["rss_growth_mb"]) for s in segments) if segments else None,
+    }
+
+
+def slim_records(records: list[dict]) -> list[dict]:
+    """The records without the decisions of attempts that succeeded (the bulk of a long run's log)."""
+    succeeded = {r["episode"] for r in records if r.get("kind") == "episode_end" and r.get("outcome") == "success"}
+    return [r for r in records if not (r.get("kind") == "decision" and r.get("episode") in succeeded)]
+
+
+def table(rows: dict[str, dict[str, Any]]) -> str:
+    """One markdown row per run."""
+    head = (
+        "| run | parts placed | without alarm | first attempt | retries (cause) | alarms | cycle time median / p95 "
+        "| parts per hour | missed control cycles | queue ran dry | peak RSS growth |"
+    )
+    lines = [head, "| " + " | ".join(["---"] * (head.count("|") - 1)) + " |"]
+    for name, f in rows.items():
+        n = f["cycles"]
+        retries = ", ".join(f"{k} {v}" for k, v in sorted(f["retries"].items())) or "none"
+        lines.append(
+            f"| {name} | {f['placed']} / {n} | {(n - f['alarms']) / n:.1%} | {f['placed_first_attempt']} | {retries} "
+            f"| {f['alarms']} | {_num(f['cycle_s_median'], '.2f')} / {_num(f['cycle_s_p95'], '.2f')} s "
+            f"| {_num(f['parts_per_hour'], '.0f')} | {_num(f['missed_cycles'], 'd')} | {_num(f['underruns'], 'd')} "
+            f"| {_num(f['rss_growth_mb'], '.1f')} MB |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+def _num(value: float | int | None, fmt: str) -> str:
+    """A figure, or "—" where the log does not have it (a run that ended without its summary record)."""
+    return "—" if value is None else format(value, fmt)
+
+
+def add_cycles_command(sub: argparse._SubParsersAction) -> None:
+    sp = sub.add_parser("cycles", help="production runs (deploy --cycles): their figures from the run logs")
+    kinds = sp.add_subparsers(dest="cycles_command", required=True)
+    rp = kinds.add_parser("report", help="a table of production runs, recomputed from their run logs")
+    rp.add_argument("logs", nargs="+", help="run logs of `deploy --cycles` (.jsonl or .jsonl.gz)")
+    rp.add_argument("--out", help="also write cycles.md and slim gzipped copies of the logs into this folder")
+    rp.set_defaults(func=cmd_cycles_report)
+
+
+def cmd_cycles_report(args: argparse.Namespace) -> int:
+    rows = {}
+    for path in map(Path, args.logs):
+        name = path.name.removesuffix(".gz").removesuffix(".jsonl")
+        records = read_log(path)
+        try:
+            rows[name] = cycle_figures(records)
+        except InputError as exc:
+            raise RunLogError(f"{path}: {exc}") from exc
+        if args.out:
+            out = Path(args.out)
+            out.mkdir(parents=True, exist_ok=True)
+            text = "".join(json.dumps(r) + "\n" for r in slim_records(records))
+            (out / f"{name}.jsonl.gz").write_bytes(gzip.compress(text.encode(), mtime=0))
+    md = table(rows)
+    if args.out:
+        (Path(args.out) / "cycles.md").write_text(md)
+    print(md, end="")
+    return 0

@@ -1,0 +1,79 @@
+"""`mrguide cycles report`: a production run's figures recomputed from its run log, and its slim copy."""
+
+from __future__ import annotations
+
+import gzip
+import json
+
+import pytest
+
+from mrguide.cli import main
+from mrguide.deploy.cycle_report import cycle_figures, slim_records
+from mrguide.deploy.runlog import RunLog, read_log
+
+
+def write_run(path, segments=True):
+    """Three cycles: placed at once; placed after a drop; an alarm after two no-grasps (one retried)."""
+    with RunLog(path, {"command": "deploy", "cycles": 3}) as log:
+        # the attempts of cycles 0, 1, 1, 2, 2
+        for episode, outcome in enumerate(["success", "dropped", "success", "no_grasp", "no_grasp"]):
+            log.write("episode_start", episode=episode)
+            log.write("decision", episode=episode, t=0, setpoints=[[0.0] * 6] * 25)
+            log.write("episode_end", episode=episode, outcome=outcome)
+        log.write("cycle_end", cycle=0, placed=True, outcomes=["success"], retries=[], alarm=None, cycle_s=4.0)
+        log.write("retry", cycle=1, attempt=1, cause="dropped")
+        log.write(
+            "cycle_end",
+            cycle=1,
+            placed=True,
+            outcomes=["dropped", "success"],
+            retries=["dropped"],
+            alarm=None,
+            cycle_s=8.0,
+        )
+        log.write(
+            "cycle_end",
+            cycle=2,
+            placed=False,
+            outcomes=["no_grasp"] * 2,
+            retries=["no_grasp"],
+            alarm="2 failed attempts",
+            cycle_s=9.0,
+        )
+        if segments:
+            log.write("cycles_end", wall_s=36.0, missed_cycles=2, underruns=1, rss_growth_mb=3.5)
+
+
+def test_the_figures_come_from_the_cycle_records(tmp_path):
+    write_run(tmp_path / "run.jsonl")
+    f = cycle_figures(read_log(tmp_path / "run.jsonl"))
+    assert (f["cycles"], f["placed"], f["placed_first_attempt"], f["alarms"]) == (3, 2, 1, 1)
+    assert f["retries"] == {"dropped": 1, "no_grasp": 1}
+    assert f["cycle_s_median"] == pytest.approx(6.0) and f["parts_per_hour"] == pytest.approx(200.0)
+    assert (f["missed_cycles"], f["underruns"], f["rss_growth_mb"]) == (2, 1, 3.5)
+
+
+def test_a_run_without_its_summary_record_reports_the_driver_counters_as_unknown(tmp_path, capsys):
+    write_run(tmp_path / "killed.jsonl", segments=False)
+    f = cycle_figures(read_log(tmp_path / "killed.jsonl"))
+    assert f["missed_cycles"] is None and f["parts_per_hour"] is None
+    assert main(["cycles", "report", str(tmp_path / "killed.jsonl")]) == 0
+    assert "| killed | 2 / 3 | 66.7% | 1 | dropped 1, no_grasp 1 | 1 | 6.00 / 7.80 s | — | — | — | — MB |" in (
+        capsys.readouterr().out
+    )
+
+
+def test_the_slim_copy_keeps_every_cycle_record_and_the_failed_attempts(tmp_path):
+    write_run(tmp_path / "run.jsonl")
+    assert main(["cycles", "report", str(tmp_path / "run.jsonl"), "--out", str(tmp_path / "out")]) == 0
+    slim = [json.loads(line) for line in gzip.decompress((tmp_path / "out" / "run.jsonl.gz").read_bytes()).splitlines()]
+    assert [r["episode"] for r in slim if r["kind"] == "decision"] == [1, 3, 4]
+    assert [r["kind"] for r in slim].count("cycle_end") == 3 and slim == slim_records(read_log(tmp_path / "run.jsonl"))
+    assert cycle_figures(slim) == cycle_figures(read_log(tmp_path / "run.jsonl"))
+    assert (tmp_path / "out" / "cycles.md").read_text().startswith("| run | parts placed |")
+
+
+def test_a_log_without_cycles_is_refused_with_its_name(tmp_path, run_cli):
+    with RunLog(tmp_path / "episodes.jsonl", {"command": "deploy"}) as log:
+        log.write("episode_end", episode=0, outcome="success")
+    run_cli(["cycles", "report", str(tmp_path / "episodes.jsonl")]).assert_refused("episodes.jsonl", "no cycle_end")
