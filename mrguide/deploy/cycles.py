@@ -33,6 +33,8 @@ from mrguide.task import Outcome
 log = logging.getLogger(__name__)
 
 ALARM_ACTIONS = ("stop", "skip")
+#: How often a cycle asks the pose source again while it waits for the part to be seen (s).
+POSE_POLL_S = 0.1
 #: Most cycles of one run.
 MAX_CYCLES = 1_000_000
 #: Outcomes after which the part lies somewhere on the table and may be picked again.
@@ -55,6 +57,9 @@ class CycleConfig:
     pick_region: tuple[tuple[float, float], tuple[float, float]] = ((0.38, -0.17), (0.62, 0.02))
     #: How far (m) a part's centre may be from its resting height on the table and still be picked.
     rest_height_tolerance: float = 0.01
+    #: How long (s) the arm waits at home for the pose source to see the part (a camera or HMD that lost its
+    #: view, a tracking restart) before the alarm. In [0, 600].
+    pose_wait_s: float = 10.0
 
     def __post_init__(self) -> None:
         check_number("deploy.cycles.max_retries", self.max_retries, 0, 100, integer=True)
@@ -65,6 +70,7 @@ class CycleConfig:
             check_number(f"deploy.cycles.pick_region[0][{k}]", low[k], -5.0, 5.0, " m")
             check_number(f"deploy.cycles.pick_region[1][{k}]", high[k], low[k], 5.0, " m")
         check_number("deploy.cycles.rest_height_tolerance", self.rest_height_tolerance, 0.0, 0.1, " m")
+        check_number("deploy.cycles.pose_wait_s", self.pose_wait_s, 0.0, 600.0, " s")
 
 
 class PartFeeder(Protocol):
@@ -284,10 +290,15 @@ class CycleRunner:
 
     def _pickable(self) -> str | None:
         """Why the part cannot be picked where the pose source sees it, or None."""
-        try:
-            obj = self.rt.pose.object_position()
-        except PoseUnavailable as exc:
-            return f"no pose of the part: {exc}"
+        deadline = time.monotonic() + self.cfg.pose_wait_s
+        while True:
+            try:
+                obj = self.rt.pose.object_position()
+                break
+            except PoseUnavailable as exc:
+                if time.monotonic() >= deadline:
+                    return f"no pose of the part for {self.cfg.pose_wait_s:g} s: {exc}"
+                time.sleep(POSE_POLL_S)
         (x0, y0), (x1, y1) = self.cfg.pick_region
         x, y, z = (float(v) for v in obj)
         if not (x0 <= x <= x1 and y0 <= y <= y1):

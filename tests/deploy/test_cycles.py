@@ -35,13 +35,15 @@ class ScriptedRuntime:
     task: TaskConfig = field(default_factory=TaskConfig)
     homes: int = 0
     episodes: list = field(default_factory=list)
+    blind_reads: int = 0  # the pose source's next reads that have no pose
 
     def __post_init__(self):
         self.pose, self.cobot = self, self
         self._where = ON_TABLE
 
     def object_position(self):
-        if self._where is None:
+        if self._where is None or self.blind_reads > 0:
+            self.blind_reads -= 1
             raise PoseUnavailable("marker not in view")
         return np.array(self._where, dtype=float)
 
@@ -123,12 +125,21 @@ def test_with_on_alarm_skip_the_part_is_left_for_the_operator_and_the_next_one_f
     [
         ((0.5, 0.08, 0.025), "outside the pick region"),  # dropped in transport, between pick and goal regions
         ((0.5, -0.075, -0.2), "not resting on the table"),  # fell off the table
-        (None, "no pose of the part"),  # the pose source lost it
+        (None, "no pose of the part for 0 s"),  # the pose source lost it
     ],
 )
 def test_a_part_that_cannot_be_picked_where_it_lies_raises_an_alarm(tmp_path, where, reason):
-    summary, rt, _, _ = run(tmp_path, [D, S], 2, positions=[where])
+    summary, rt, _, _ = run(tmp_path, [D, S], 2, CycleConfig(pose_wait_s=0.0), positions=[where])
     assert reason in summary.cycles[0].alarm and summary.placed == 0 and len(rt.episodes) == 1
+
+
+def test_the_arm_waits_at_home_for_a_pose_source_that_lost_its_view(tmp_path):
+    log_path = tmp_path / "cycles.jsonl"
+    with RunLog(log_path, {"test": "cycles"}) as log:
+        rt = ScriptedRuntime([S], log, blind_reads=3)  # back after 3 reads (0.3 s of polling)
+        runner = CycleRunner(rt, Feeder(), lambda c: np.zeros(3), CycleConfig(pose_wait_s=60.0))
+        summary = runner.run(0, 1)
+    assert summary.placed == 1 and rt.blind_reads == 0 and not summary.cycles[0].alarm
 
 
 def test_a_pose_source_that_cannot_see_a_lost_part_raises_an_alarm(tmp_path):
@@ -186,6 +197,7 @@ def test_a_resumed_run_goes_on_from_the_log_count(tmp_path):
         ({"on_alarm": "wait"}, "deploy.cycles.on_alarm"),
         ({"pick_region": ((0.6, 0.0), (0.4, 0.1))}, "deploy.cycles.pick_region[1][0]"),
         ({"rest_height_tolerance": float("nan")}, "deploy.cycles.rest_height_tolerance"),
+        ({"pose_wait_s": -1.0}, "deploy.cycles.pose_wait_s"),
     ],
 )
 def test_a_bad_cycle_config_is_refused_with_its_key(kwargs, message):
