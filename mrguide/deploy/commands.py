@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 from tqdm import tqdm
 
-from mrguide.cli_args import nonnegative_int, positive_int
+from mrguide.cli_args import nonnegative_int, override_arg, positive_int
 from mrguide.errors import InputError
 
 if TYPE_CHECKING:
@@ -82,6 +82,15 @@ def add_deploy_command(sub: argparse._SubParsersAction, dry_run_factory: Callabl
     sp.add_argument("--resume", action="store_true", help="with --cycles and --log: go on from that run log's count")
     sp.add_argument("--seed", type=nonnegative_int, help="dry run: object/goal layouts; default: [deploy] seed")
     sp.add_argument("--log", help="run log path (JSONL); default under [deploy] log_dir")
+    sp.add_argument(
+        "--set",
+        type=override_arg,
+        action="append",
+        default=[],
+        metavar="SECTION.KEY=VALUE",
+        help="set a [deploy] or [safety] key for this run, after --config (e.g. --set deploy.cycles.max_retries=1 "
+        "--set safety.stall_timeout=0.3); repeatable",
+    )
     sp.add_argument("--quiet", action="store_true")
     sp.set_defaults(func=cmd_deploy, dry_run_factory=dry_run_factory)
 
@@ -109,8 +118,11 @@ def cmd_deploy(args: argparse.Namespace) -> int:
     from mrguide.robot import load_robot, load_robot_config
     from mrguide.task import TaskConfig
 
-    dcfg = load_section(DeployConfig, args.config, "deploy")
-    safety = load_optional_section(SafetyConfig, args.config, "safety")
+    dcfg, safety = _overridden(
+        load_section(DeployConfig, args.config, "deploy"),
+        load_optional_section(SafetyConfig, args.config, "safety"),
+        args.set,
+    )
     episodes = args.episodes if args.episodes is not None else dcfg.episodes
     seed = args.seed if args.seed is not None else dcfg.seed
     spec = load_robot(load_robot_config(args.config))
@@ -139,6 +151,26 @@ def cmd_deploy(args: argparse.Namespace) -> int:
     print(summary.text() + (f"\n{camera_stats.text()}" if camera_stats else ""))
     print(f"run log: {log_path}")
     return 0 if summary.stopped is None else 1
+
+
+#: The sections `deploy --set` sets.
+SET_SECTIONS = ("deploy", "safety")
+
+
+def _overridden(dcfg: DeployConfig, safety: Any, overrides: list[tuple[str, Any]]) -> tuple[DeployConfig, Any]:
+    """[deploy] and [safety] with each `--set` override applied, checked as a value in the file would be."""
+    from mrguide.config import ConfigError, replace_path
+    from mrguide.deploy.safety import SafetyConfig
+
+    for key, value in overrides:
+        section, _, path = key.partition(".")
+        if section == "deploy":
+            dcfg = replace_path(dcfg, path, value, f"--set {key}")
+        elif section == "safety":
+            safety = replace_path(safety or SafetyConfig(), path, value, f"--set {key}")
+        else:
+            raise ConfigError(f"--set {key}: deploy sets keys of {' and '.join(SET_SECTIONS)}, not [{section}]")
+    return dcfg, safety
 
 
 def _first_cycle(args: argparse.Namespace, log_path: Path) -> int:
@@ -208,6 +240,7 @@ def _run_header(
         "seed": seed if args.dry_run else None,
         "decision_period": policy.decision_period,
         "pose_source": dcfg.pose_source,
+        "set": dict(args.set),
         "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
     }
 

@@ -181,9 +181,10 @@ def test_cycles_on_the_robot_retry_alarm_skip_and_resume(robot_on_virtual_bus, t
     so each part is tried twice (one retry), the alarm leaves it for the operator, and the next one is fed;
     `--resume` goes on from the log's count."""
     cfg, policy, _sim, prompts = robot_on_virtual_bus
-    cfg.write_text(cfg.read_text() + '[deploy.cycles]\nmax_retries = 1\non_alarm = "skip"\n')
+    cfg.write_text(cfg.read_text() + "[deploy.cycles]\nmax_retries = 3\n")
     log = tmp_path / "cycles.jsonl"
     args = ["deploy", "--policy", str(policy), "--config", str(cfg), "--enable-drives", "--log", str(log), "--quiet"]
+    args += ["--set", "deploy.cycles.max_retries=1", "--set", "deploy.cycles.on_alarm=skip"]  # after the file's
     assert main([*args, "--cycles", "2"]) == 0, capsys.readouterr().err
     out = capsys.readouterr().out
     assert "cycles 0..1: 0 of 2 parts placed" in out and "retries: {'no_grasp': 2}" in out
@@ -206,6 +207,10 @@ def test_cycles_on_the_robot_retry_alarm_skip_and_resume(robot_on_virtual_bus, t
         (["--resume", "--cycles", "1"], ("--resume needs", "--log")),
         (["--cycles", "1", "--episodes", "2"], ("--cycles and --episodes",)),
         (["--cycles", "1", "--resume", "--log", "missing.jsonl"], ("no such run log",)),
+        (["--set", "deploy.cycles.max_retries=-1"], ("--set", "deploy.cycles.max_retries")),
+        (["--set", "deploy.cycles.nope=1"], ("--set", "cycles.nope", "no such key")),
+        (["--set", "twin.gui=true"], ("--set twin.gui", "deploy and safety")),
+        (["--set", "safety.stall_timeout=nan"], ("safety.stall_timeout",)),
     ],
 )
 def test_bad_cycle_arguments_are_refused(tmp_path, policy_file, run_cli, extra, words):
