@@ -9,6 +9,7 @@ responds with a first-order lag, from which the part-present signal is derived a
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import pybullet as pb
@@ -39,6 +40,9 @@ class SuctionCup:
         self._level_gain = 1.0 - math.exp(-dt / cfg.time_constant)  # first-order lag over one period
         self.break_force = math.inf
         self.leak = 0.0  # fault injection: fraction of the sealed vacuum lost through a leak
+        #: Called at each break with the constraint's force (N, in the cup frame) and the cup's pose in the part's
+        #: frame (position, m): for probes (mrguide.twin.break_probe).
+        self.on_break: Callable[[tuple[float, ...], tuple[float, ...]], None] | None = None
         self.state = SuctionState()
         self._cid: int | None = None
 
@@ -61,6 +65,8 @@ class SuctionCup:
             fx, fy, fz = pb.getConstraintState(self._cid, physicsClientId=self.client)[:3]
             if math.hypot(fx, fy, fz) > self.break_force:
                 s.breaks += 1
+                if self.on_break is not None:
+                    self.on_break((fx, fy, fz), tuple(self._tcp_in_object()[0]))
                 self._detach()
         target = 0.0
         if s.vacuum_on:
