@@ -138,7 +138,7 @@ def cmd_deploy(args: argparse.Namespace) -> int:
         _check_real_bus(args, policy, bus)
     log_path, where = _log_path(args, dcfg)
     start = _first_cycle(args, log_path)
-    header = _run_header(args, dcfg, bus, policy, episodes, seed) | {"cycles": args.cycles, "first_cycle": start}
+    header = _run_header(args, dcfg, bus, policy, episodes, seed) | {"cycles": args.cycles, "first_cycle": start[0]}
     camera = _camera(args, dcfg, task, dry if args.dry_run else None)
     try:
         with RunLog(log_path, header, where) as run_log:
@@ -173,21 +173,27 @@ def _overridden(dcfg: DeployConfig, safety: Any, overrides: list[tuple[str, Any]
     return dcfg, safety
 
 
-def _first_cycle(args: argparse.Namespace, log_path: Path) -> int:
-    """The first cycle to run: 0, or with --resume the count of the run log being continued."""
+def _first_cycle(args: argparse.Namespace, log_path: Path) -> tuple[int, int]:
+    """The first cycle to run and its first attempt's episode index: (0, 0), or with --resume where the run log
+    being continued left off."""
     from mrguide.deploy.cycle_commands import cycles_done
 
     if args.cycles is not None and args.episodes is not None:
         raise InputError("--cycles and --episodes: a run is either production cycles or episodes, not both")
     if not args.resume:
-        return 0
+        return 0, 0
     if args.cycles is None or not args.log:
         raise InputError("--resume needs --cycles and --log (the run log whose count it goes on from)")
     return cycles_done(log_path)
 
 
 def _run(
-    args: argparse.Namespace, inputs: DeployInputs, dry: DryRunBackend | None, episodes: int, seed: int, start: int
+    args: argparse.Namespace,
+    inputs: DeployInputs,
+    dry: DryRunBackend | None,
+    episodes: int,
+    seed: int,
+    start: tuple[int, int],
 ):
     """The episodes, or with --cycles the production cycles, with a progress bar; their summary."""
     from mrguide.deploy.cycle_commands import cycle_run, run_cycles
@@ -236,7 +242,7 @@ def _run_header(
         "policy": str(args.policy),
         "config": args.config,
         "bus": f"{bus.bus.interface}:{bus.bus.channel}",
-        "episodes": episodes,
+        "episodes": None if args.cycles else episodes,
         "seed": seed if args.dry_run else None,
         "decision_period": policy.decision_period,
         "pose_source": dcfg.pose_source,

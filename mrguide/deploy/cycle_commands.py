@@ -4,6 +4,7 @@ or in the dry-run cell (a simulated feeder), `--resume` going on from a run log'
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -23,13 +24,15 @@ if TYPE_CHECKING:
 PART_WAIT_S = 30.0
 
 
-def cycles_done(log_path: Path) -> int:
-    """The next cycle of a run log: one past the last cycle it finished (0 for a log without cycles).
-    RunLogError if the log cannot be read or has no cycle records though it exists."""
+def cycles_done(log_path: Path) -> tuple[int, int]:
+    """Where a run log's production run goes on: its next cycle (one past the last it finished) and the episode
+    index of its next attempt ((0, 0) for a log without cycles). RunLogError if the log cannot be read."""
     if not log_path.exists():
         raise RunLogError(f"--resume {log_path}: no such run log")
-    ended = [r["cycle"] for r in read_log(log_path) if r.get("kind") == "cycle_end" and isinstance(r.get("cycle"), int)]
-    return max(ended) + 1 if ended else 0
+    records = read_log(log_path)
+    cycles = [r["cycle"] for r in records if r.get("kind") == "cycle_end" and isinstance(r.get("cycle"), int)]
+    episodes = [r["episode"] for r in records if r.get("kind") == "episode_end" and isinstance(r.get("episode"), int)]
+    return (max(cycles) + 1 if cycles else 0), (max(episodes) + 1 if episodes else 0)
 
 
 class RobotFeeder:
@@ -56,20 +59,20 @@ class RobotFeeder:
         input(f"cycle {cycle}: remove the part the alarm left behind and press Enter ")
 
 
-def cycle_run(args: argparse.Namespace, dcfg: DeployConfig, seed: int, start: int, bar: Any) -> CycleRun:
-    """What `--cycles` asks for, from cycle `start`; the progress bar ticks once per cycle."""
+def cycle_run(args: argparse.Namespace, dcfg: DeployConfig, seed: int, start: tuple[int, int], bar: Any) -> CycleRun:
+    """What `--cycles` asks for, from `start` (cycle, attempt); the progress bar ticks once per cycle."""
 
     def tick(report: CycleReport) -> None:
         bar.update(1)
         bar.set_postfix(placed=report.placed, attempts=len(report.outcomes), s=f"{report.cycle_s:.1f}")
 
-    return CycleRun(start, args.cycles, seed, dcfg.cycles, tick)
+    return CycleRun(start[0], args.cycles, seed, dcfg.cycles, tick, first_attempt=start[1])
 
 
 def run_cycles(run: CycleRun, dry: Any, inputs: DeployInputs) -> CycleSummary:
     """The cycles on the dry-run backend `dry` or (None) on the robot, Ctrl-C finishing the cycle in progress."""
     with finish_cycle_on_interrupt() as interrupt:
-        run = CycleRun(run.start, run.count, run.seed, run.config, run.after_cycle, interrupt)
+        run = dataclasses.replace(run, interrupt=interrupt)
         if dry is not None:
             return dry.run_cycles(inputs, run)
         return _robot_cycles(run, inputs)
@@ -92,4 +95,4 @@ def _robot_cycles(run: CycleRun, inputs: DeployInputs) -> CycleSummary:
         ) as rt:
             feeder = RobotFeeder(i.camera, i.dcfg)
             runner = CycleRunner(rt, feeder, lambda c: np.array(goals[c % len(goals)]), run.config, run.after_cycle)
-            return runner.run(run.start, run.count, run.interrupt)
+            return runner.run(run.start, run.count, run.interrupt, run.first_attempt)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import gzip
+import itertools
 import json
 from collections import Counter
 from pathlib import Path
@@ -42,9 +43,19 @@ def cycle_figures(records: list[dict]) -> dict[str, Any]:
 
 
 def slim_records(records: list[dict]) -> list[dict]:
-    """The records without the decisions of attempts that succeeded (the bulk of a long run's log)."""
-    succeeded = {r["episode"] for r in records if r.get("kind") == "episode_end" and r.get("outcome") == "success"}
-    return [r for r in records if not (r.get("kind") == "decision" and r.get("episode") in succeeded)]
+    """The records without the decisions of attempts that succeeded (the bulk of a long run's log). Episodes are
+    told apart per segment of the log (a `run` record starts one), as a resumed run may count them anew."""
+    segments = list(itertools.accumulate(r.get("kind") == "run" for r in records))
+    succeeded = {
+        (seg, r.get("episode"))
+        for seg, r in zip(segments, records, strict=True)
+        if r.get("kind") == "episode_end" and r.get("outcome") == "success"
+    }
+    return [
+        r
+        for seg, r in zip(segments, records, strict=True)
+        if not (r.get("kind") == "decision" and (seg, r.get("episode")) in succeeded)
+    ]
 
 
 def table(rows: dict[str, dict[str, Any]]) -> str:

@@ -99,6 +99,7 @@ class CycleRun:
     config: CycleConfig
     after_cycle: Callable[[CycleReport], None] | None = None
     interrupt: CycleInterrupt | None = None
+    first_attempt: int = 0  # the run log's episode index of the first attempt (a resumed run goes on counting)
 
 
 @dataclass
@@ -196,12 +197,15 @@ class CycleRunner:
         self.rt, self.feeder, self.goal_for, self.cfg = runtime, feeder, goal_for, config
         self.after_cycle = after_cycle
         self.rest_z = 0.5 * runtime.task.object_height
-        self._attempt = 0  # episode index in the run log: attempts so far in this run
+        self._attempt = 0  # episode index in the run log of the next attempt
 
-    def run(self, start: int, count: int, interrupt: CycleInterrupt | None = None) -> CycleSummary:
+    def run(
+        self, start: int, count: int, interrupt: CycleInterrupt | None = None, first_attempt: int = 0
+    ) -> CycleSummary:
         """Cycles `start` .. `start + count - 1`, until an alarm with `on_alarm = "stop"`, a safety stop, or
-        `interrupt` (the current cycle is finished first)."""
+        `interrupt` (the current cycle is finished first); the attempts numbered from `first_attempt` on."""
         summary = CycleSummary(start=start)
+        self._attempt = first_attempt
         rss0, t0 = _peak_rss_mb(), time.perf_counter()
         stats0 = self.rt.cobot.stats()
         try:

@@ -242,4 +242,4 @@ def dry_run_cycles(
     ):
         feeder = TwinFeeder(cell, env_cfg, run.seed, on_placed)
         runner = CycleRunner(runtime, feeder, feeder.goal, run.config, run.after_cycle)
-        return runner.run(run.start, run.count, run.interrupt)
+        return runner.run(run.start, run.count, run.interrupt, run.first_attempt)

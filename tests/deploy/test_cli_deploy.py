@@ -197,8 +197,9 @@ def test_cycles_on_the_robot_retry_alarm_skip_and_resume(robot_on_virtual_bus, t
 
     assert main([*args, "--cycles", "1", "--resume"]) == 0
     assert "cycles 2..2" in capsys.readouterr().out
-    headers = [r for r in read_log(log) if r["kind"] == "run"]
-    assert [h["first_cycle"] for h in headers] == [0, 2]
+    records = read_log(log)
+    assert [h["first_cycle"] for h in records if h["kind"] == "run"] == [0, 2]
+    assert [r["episode"] for r in records if r["kind"] == "episode_end"] == [0, 1, 2, 3, 4, 5]  # counted on
 
 
 @pytest.mark.parametrize(

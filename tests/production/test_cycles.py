@@ -59,6 +59,7 @@ class ScriptedRuntime:
         if isinstance(outcome, Exception):
             raise outcome
         self._where = self.positions.pop(0) if self.positions else ON_TABLE
+        self.log.write("episode_end", episode=index, outcome=outcome.value)  # as the runtime does
         return EpisodeReport(index, outcome, 10, {})
 
 
@@ -185,7 +186,7 @@ def test_an_interrupt_finishes_the_cycle_in_progress_then_stops(tmp_path):
 def test_a_resumed_run_goes_on_from_the_log_count(tmp_path):
     _summary, _rt, feeder, _ = run(tmp_path, [S, S], 2, start=7)
     assert feeder.fed == [7, 8]
-    assert cycles_done(tmp_path / "cycles.jsonl") == 9
+    assert cycles_done(tmp_path / "cycles.jsonl") == (9, 2)  # the next cycle, the next attempt's episode index
     with pytest.raises(RunLogError, match="no such run log"):
         cycles_done(tmp_path / "missing.jsonl")
 
