@@ -6,6 +6,8 @@ pass); tests/deploy/test_cycles_dry_run.py runs the same runner through the whol
 
 from __future__ import annotations
 
+import itertools
+
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -204,3 +206,34 @@ def test_a_resumed_run_goes_on_from_the_log_count(tmp_path):
 def test_a_bad_cycle_config_is_refused_with_its_key(kwargs, message):
     with pytest.raises(ConfigError, match=message.replace("[", r"\[").replace("]", r"\]")):
         CycleConfig(**kwargs)
+
+
+class FakeCamera:
+    """Poses in turn, each captured now."""
+
+    def __init__(self, positions):
+        self.positions = iter(positions)
+
+    def wait_for_pose(self, after, timeout):
+        from mrguide.deploy.camera import TimedPose
+
+        position = next(self.positions, None)
+        if position is None:
+            raise PoseUnavailable(f"no camera pose within {timeout} s")
+        return TimedPose(np.array(position), after + 0.01)
+
+
+def test_the_robot_feeder_waits_until_the_camera_sees_a_part_in_the_pick_region(monkeypatch):
+    from mrguide.deploy import cycle_commands
+    from mrguide.deploy.cycle_commands import RobotFeeder
+    from mrguide.deploy.session import DeployConfig
+
+    camera = FakeCamera([(0.5, 0.2, 0.025), (0.7, -0.05, 0.025), (0.5, -0.05, 0.025)])  # goal, outside, pick region
+    RobotFeeder(camera, DeployConfig()).next_part(0)
+    assert next(camera.positions, None) is None and RobotFeeder(camera, DeployConfig()).tracks_part
+    monkeypatch.setattr(cycle_commands, "PART_WAIT_S", 0.05)
+    with pytest.raises(PoseUnavailable, match="no part seen in the pick region within 0.05 s"):
+        RobotFeeder(FakeCamera(itertools.repeat((0.5, 0.2, 0.025))), DeployConfig()).next_part(1)
+    with pytest.raises(PoseUnavailable, match="no camera pose"):
+        RobotFeeder(FakeCamera([]), DeployConfig()).next_part(1)
+    assert not RobotFeeder(None, DeployConfig()).tracks_part  # the fixed fixture pose cannot see a lost part
