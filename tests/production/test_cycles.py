@@ -7,7 +7,6 @@ pass); tests/deploy/test_cycles_dry_run.py runs the same runner through the whol
 from __future__ import annotations
 
 import itertools
-
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -232,7 +231,7 @@ def test_the_robot_feeder_waits_until_the_camera_sees_a_part_in_the_pick_region(
     RobotFeeder(camera, DeployConfig()).next_part(0)
     assert next(camera.positions, None) is None and RobotFeeder(camera, DeployConfig()).tracks_part
     monkeypatch.setattr(cycle_commands, "PART_WAIT_S", 0.05)
-    with pytest.raises(PoseUnavailable, match="no part seen in the pick region within 0.05 s"):
+    with pytest.raises(PoseUnavailable, match=r"no part seen in the pick region within 0\.05 s"):
         RobotFeeder(FakeCamera(itertools.repeat((0.5, 0.2, 0.025))), DeployConfig()).next_part(1)
     with pytest.raises(PoseUnavailable, match="no camera pose"):
         RobotFeeder(FakeCamera([]), DeployConfig()).next_part(1)
