@@ -7,7 +7,7 @@ OUT/breaks.csv with the phase the episode was in, the constraint's force (N; z <
 it) and the cup's position in the part's frame (m; the top face is at z = half the part's height); the outcomes to
 OUT/break_outcomes.csv. Prints one line per variant.
 
-    python -m mrguide.twin.break_probe --policy P [--seeds 3] [--episodes 20] [--out docs/results/compliance]
+    python -m mrguide.experiments.break_probe --policy P [--seeds 3] [--episodes 20] [--out docs/results/compliance]
 """
 
 from __future__ import annotations
