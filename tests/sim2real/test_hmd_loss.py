@@ -102,8 +102,8 @@ def test_hmd_dying_in_the_grasp_finishes_the_episode_on_the_last_pose_then_stops
     assert killed == [1]
     assert out == ["success", "safety_stop"]  # the second episode could not start
     records = read_log(log)
-    safety = [(r["event"], r["reaction"]) for r in records if r["kind"] == "safety"]
-    assert 1 <= len(safety) <= RuntimeConfig().max_pose_misses_before_grasp
+    safety = [(r["event"], r["reaction"]) for r in records if r["kind"] == "safety" and r["event"] != "break_away"]
+    assert 1 <= len(safety) <= RuntimeConfig().max_pose_misses_before_grasp  # besides the lift rule's break-away
     assert set(safety) == {("pose_unavailable", "last_known")}, safety
     ends = [r for r in records if r["kind"] == "episode_end"]
     assert [e["outcome"] for e in ends] == ["success"]
