@@ -15,8 +15,9 @@ import numpy as np
 import pytest
 
 #: Tests that keep time with threads (simulated CANopen devices on the virtual bus, dry runs, the sim-to-real
-#: conditions): `./run.sh test` runs them on their own, after the rest has run on two workers, since a control
-#: cycle that another test process starves for a few hundred ms is a (correct) safety stop, not a failure of the code.
+#: conditions): `./run.sh test` runs them in a pass of their own (two workers), after the rest, so that a test that
+#: computes flat out on both cores never shares the machine with a control cycle: a cycle starved for a few hundred ms
+#: is a (correct) safety stop, not a failure of the code.
 REALTIME = (
     "tests/deploy/",
     "tests/drivers/",
