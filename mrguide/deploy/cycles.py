@@ -1,8 +1,12 @@
 """Production cycles: one part after another, a lost part picked again where it lies, alarms when it cannot.
 
 A cycle places one part: the feeder brings it (a dry run's feeder puts a new part at a random pose in the
-pick region; on the robot the pose source finds it, or the operator places it), the arm goes to its ready
-pose (home, where every policy episode starts), the policy runs one attempt toward the cycle's goal. An
+pick region; on the robot the pose source finds it, or the operator places it) and the policy runs one attempt
+toward the cycle's goal from home (where every episode of the training starts). After a place the arm first rises
+`depart_height` straight up, clear of the part it let go, as a cell program departs. With `home_between_cycles =
+false` the next cycle starts from there instead (a policy trained from such starts; the pose source must see the
+part from there, else the arm homes); the first attempt of a run and every attempt after a failed one start from
+home. An
 attempt that fails with the part still on the table (dropped in the lift or transport, no seal, time out)
 is a retry: the part is perceived again where it lies and, if it lies in the pick region, picked again.
 A part outside the pick region, a pose source that cannot see where a lost part went, or more than
@@ -60,6 +64,13 @@ class CycleConfig:
     #: How long (s) the arm waits at home for the pose source to see the part (a camera or HMD that lost its
     #: view, a tracking restart) before the alarm. In [0, 600].
     pose_wait_s: float = 10.0
+    #: How far (m) the arm rises straight up after a place, clear of the part it let go; 0: no depart move.
+    #: In [0, 0.3].
+    depart_height: float = 0.05
+    #: Whether each cycle's attempt starts from home (true), or from where the arm departed after the last place
+    #: (false: no homing between cycles, for a policy trained to start from there; the shipped policies,
+    #: trained from home only, miss grasps from there: docs/results).
+    home_between_cycles: bool = True
 
     def __post_init__(self) -> None:
         check_number("deploy.cycles.max_retries", self.max_retries, 0, 100, integer=True)
@@ -71,6 +82,11 @@ class CycleConfig:
             check_number(f"deploy.cycles.pick_region[1][{k}]", high[k], low[k], 5.0, " m")
         check_number("deploy.cycles.rest_height_tolerance", self.rest_height_tolerance, 0.0, 0.1, " m")
         check_number("deploy.cycles.pose_wait_s", self.pose_wait_s, 0.0, 600.0, " s")
+        check_number("deploy.cycles.depart_height", self.depart_height, 0.0, 0.3, " m")
+        if not isinstance(self.home_between_cycles, bool):
+            raise ConfigError(
+                f"deploy.cycles.home_between_cycles = {self.home_between_cycles!r}: expected true or false"
+            )
 
 
 class PartFeeder(Protocol):
@@ -198,6 +214,7 @@ class CycleRunner:
         self.after_cycle = after_cycle
         self.rest_z = 0.5 * runtime.task.object_height
         self._attempt = 0  # episode index in the run log of the next attempt
+        self._departed = False  # whether the arm rose from a place and the next attempt may start there
 
     def run(
         self, start: int, count: int, interrupt: CycleInterrupt | None = None, first_attempt: int = 0
@@ -246,8 +263,7 @@ class CycleRunner:
                 self._alarm(cycle, report, f"no part came: {exc}")
                 return report
             while True:
-                self.rt.home()  # the ready pose: every policy episode starts there, and the camera sees the part
-                problem = self._pickable()
+                problem = self._start_attempt()
                 if problem:
                     self._alarm(cycle, report, problem)
                     break
@@ -256,6 +272,8 @@ class CycleRunner:
                 report.outcomes.append(episode.outcome.value)
                 if episode.outcome is Outcome.SUCCESS:
                     report.placed = True
+                    departed = self.cfg.depart_height > 0 and self.rt.depart(self.cfg.depart_height)
+                    self._departed = departed and not self.cfg.home_between_cycles
                     break
                 if not self._retry(cycle, report, episode):
                     break
@@ -292,17 +310,34 @@ class CycleRunner:
         log.info("cycle %d: attempt %d ended %s; picking the part again", cycle, len(report.outcomes), cause.value)
         return True
 
-    def _pickable(self) -> str | None:
-        """Why the part cannot be picked where the pose source sees it, or None."""
-        deadline = time.monotonic() + self.cfg.pose_wait_s
+    def _start_attempt(self) -> str | None:
+        """Bring the arm where the attempt starts and find the part: where the arm departed after the last place
+        if the pose source sees the part from there, else home. Why the part cannot be picked, or None."""
+        if self._departed:
+            self._departed = False
+            try:
+                return self._unpickable(self._part_position(0.0))
+            except PoseUnavailable as exc:
+                log.info("the part is not seen from where the arm departed (%s): homing", exc)
+        self.rt.home()  # where every policy episode of the training starts, and the camera sees the part
+        try:
+            return self._unpickable(self._part_position(self.cfg.pose_wait_s))
+        except PoseUnavailable as exc:
+            return f"no pose of the part for {self.cfg.pose_wait_s:g} s: {exc}"
+
+    def _part_position(self, wait_s: float) -> np.ndarray:
+        """The part's position from the pose source, asked again for `wait_s` s (PoseUnavailable after that)."""
+        deadline = time.monotonic() + wait_s
         while True:
             try:
-                obj = self.rt.pose.object_position()
-                break
-            except PoseUnavailable as exc:
+                return self.rt.pose.object_position()
+            except PoseUnavailable:
                 if time.monotonic() >= deadline:
-                    return f"no pose of the part for {self.cfg.pose_wait_s:g} s: {exc}"
+                    raise
                 time.sleep(POSE_POLL_S)
+
+    def _unpickable(self, obj: np.ndarray) -> str | None:
+        """Why the part cannot be picked at `obj`, or None."""
         (x0, y0), (x1, y1) = self.cfg.pick_region
         x, y, z = (float(v) for v in obj)
         if not (x0 <= x <= x1 and y0 <= y <= y1):

@@ -29,6 +29,7 @@ from mrguide.deploy.safety import Event, Reaction, SafetyConfig, Supervisor, Wat
 from mrguide.drivers.cobot_state import JointState, VacuumState
 from mrguide.drivers.errors import DriverError
 from mrguide.drivers.interface import CobotInterface
+from mrguide.motion.kinematics import IKError
 from mrguide.motion.trajectory import TrajectoryError
 from mrguide.pose_source import ObjectPoseSource
 from mrguide.robot import RobotSpec
@@ -195,25 +196,41 @@ class Runtime:
 
     def home(self) -> None:
         """Move to the home configuration (jerk-limited) with the vacuum off."""
-        self.cobot.set_vacuum(False)
-        self.streamer.reset(self.cobot.setpoint)
-        self.streamer.set_target(self.spec.q_home)
-        self.watchdog.arm(True)
-        try:
-            self._settle(max_cycles=int(30 / self.cobot.period))
-            # the setpoints are home; the joints follow with the servos' lag: hold home until they arrive
-            for _ in range(int(HOME_SETTLE_S / self.cobot.period)):
-                if self._home_error() <= self.cfg.home_tolerance:
-                    break
-                self._stream_cycle()
-        finally:
-            self.watchdog.arm(False)
+        self._move(self.spec.q_home, arrive=True)
         if self._home_error() > self.cfg.home_tolerance:
             q = self.cobot.joint_state().positions
             raise RunStopped(
                 f"arm did not reach home within {HOME_SETTLE_S:g} s of its last setpoint: "
                 f"{np.round(q - self.spec.q_home, 4).tolist()} rad off"
             )
+
+    def depart(self, height: float) -> bool:
+        """Rise `height` m above where the TCP stands (jerk-limited, the vacuum off), clear of a part just placed;
+        False, the arm not moved, when no joint configuration reaches that point."""
+        q = self.cobot.joint_state().positions
+        try:
+            target = self.decision.kin.ik(self.decision.tcp(q) + np.array([0.0, 0.0, height]), q)
+        except IKError as exc:
+            log.info("no depart move: %s", exc)
+            return False
+        self._move(target, arrive=False)
+        return True
+
+    def _move(self, q: np.ndarray, arrive: bool) -> None:
+        """Stream a jerk-limited move to the joint configuration `q` with the vacuum off until it is at rest; with
+        `arrive`, then hold `q` until the joints are within `home_tolerance` of it (servo lag), HOME_SETTLE_S at most."""
+        self.cobot.set_vacuum(False)
+        self.streamer.reset(self.cobot.setpoint)
+        self.streamer.set_target(q)
+        self.watchdog.arm(True)
+        try:
+            self._settle(max_cycles=int(30 / self.cobot.period))
+            for _ in range(int(HOME_SETTLE_S / self.cobot.period) if arrive else 0):
+                if np.max(np.abs(self.cobot.joint_state().positions - q)) <= self.cfg.home_tolerance:
+                    break
+                self._stream_cycle()
+        finally:
+            self.watchdog.arm(False)
 
     def _home_error(self) -> float:
         return float(np.max(np.abs(self.cobot.joint_state().positions - self.spec.q_home)))

@@ -6,7 +6,9 @@ from __future__ import annotations
 from mrguide.cli import main
 from mrguide.deploy.cycles import CycleConfig, CycleRun
 from mrguide.deploy.runlog import RunLog, read_log
+from mrguide.motion.kinematics import Kinematics
 from mrguide.replay.runs import load_run
+from mrguide.robot import load_robot
 from mrguide.twin.dry_run import dry_run_cycles
 from mrguide.twin.env import EnvConfig
 from tests.deploy.conftest import Expert, bus_config
@@ -33,13 +35,21 @@ def test_a_part_dropped_in_the_lift_is_picked_again_and_placed(tmp_path):
         cells.append(cell)
         return TwinObjectPose(cell.plant)
 
+    kin = Kinematics(load_robot(cfg.robot))
+    clearance = []  # after each placed cycle: how far the TCP stands above the top of the part it let go
+
+    def after_cycle(report):
+        _pos, _orn, q = cells[0].plant.view()
+        part_top = cells[0].plant.object_position()[2] + 0.5 * cfg.task.object_height
+        clearance.append(kin.tcp_position(q)[2] - part_top)
+
     log = tmp_path / "cycles.jsonl"
     with RunLog(log, {"test": "cycles"}) as run_log:
         summary = dry_run_cycles(
             None,
             cfg,
             bus_config(),
-            CycleRun(0, 2, seed=3, config=CycleConfig()),
+            CycleRun(0, 2, seed=3, config=CycleConfig(), after_cycle=after_cycle),
             run_log,
             pose_factory=pose_factory,
             policy=Expert(cfg, lambda o, p, a: leak_once(o, p, a, cells[0])),
@@ -47,6 +57,7 @@ def test_a_part_dropped_in_the_lift_is_picked_again_and_placed(tmp_path):
     assert summary.stopped is None, summary.text()
     assert summary.placed == 2 and summary.retries() == {"dropped": 1}, summary.text()
     assert summary.cycles[0].outcomes == ["dropped", "success"]
+    assert len(clearance) == 2 and min(clearance) > 0.04, clearance  # each place departed (5 cm) straight up
     records = read_log(log)
     assert [(r["cycle"], r["cause"]) for r in records if r["kind"] == "retry"] == [(0, "dropped")]
     # the lift rules: every lift started slowly (break-away), and each is in the run log

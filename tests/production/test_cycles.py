@@ -35,6 +35,8 @@ class ScriptedRuntime:
     positions: list = field(default_factory=list)
     task: TaskConfig = field(default_factory=TaskConfig)
     homes: int = 0
+    departs: list = field(default_factory=list)  # the heights of the depart moves made
+    can_depart: bool = True  # False: no joint configuration reaches the point above (an IK failure)
     episodes: list = field(default_factory=list)
     blind_reads: int = 0  # the pose source's next reads that have no pose
 
@@ -53,6 +55,11 @@ class ScriptedRuntime:
 
     def home(self):
         self.homes += 1
+
+    def depart(self, height):
+        if self.can_depart:
+            self.departs.append(height)
+        return self.can_depart
 
     def run_episode(self, goal, index):
         self.episodes.append(index)
@@ -91,7 +98,8 @@ S, D, N = Outcome.SUCCESS, Outcome.DROPPED, Outcome.NO_GRASP
 def test_each_cycle_feeds_a_part_and_places_it(tmp_path):
     summary, rt, feeder, records = run(tmp_path, [S, S, S], 3)
     assert summary.placed == 3 and not summary.retries() and summary.stopped is None
-    assert feeder.fed == [0, 1, 2] and rt.homes == 3 and rt.episodes == [0, 1, 2]
+    assert feeder.fed == [0, 1, 2] and rt.episodes == [0, 1, 2]
+    assert rt.homes == 3 and rt.departs == [0.05] * 3  # each place departs straight up; each attempt starts home
     ends = [r for r in records if r["kind"] == "cycle_end"]
     assert [(r["cycle"], r["placed"], r["outcomes"]) for r in ends] == [(c, True, ["success"]) for c in range(3)]
     (final,) = [r for r in records if r["kind"] == "cycles_end"]
@@ -105,6 +113,34 @@ def test_a_dropped_part_is_picked_again_and_the_retry_counted(tmp_path):
     retries = [(r["cycle"], r["attempt"], r["cause"]) for r in records if r["kind"] == "retry"]
     assert retries == [(0, 1, "dropped"), (0, 2, "no_grasp")]
     assert summary.cycles[0].outcomes == ["dropped", "no_grasp", "success"]
+
+
+NO_HOMING = CycleConfig(home_between_cycles=False)
+
+
+def test_without_homing_a_cycle_starts_where_the_arm_departed_a_retry_from_home(tmp_path):
+    _summary, rt, _, _ = run(tmp_path, [S, S, S], 3, NO_HOMING)
+    assert rt.homes == 1 and rt.departs == [0.05] * 3  # only the run's first attempt starts from home
+    _summary, rt, _, _ = run(tmp_path, [S, D, S], 2, NO_HOMING)
+    assert rt.homes == 2  # the run's first attempt, then the retry after the drop
+    _summary, rt, _, _ = run(tmp_path, [S, S], 2, CycleConfig(depart_height=0.0, home_between_cycles=False))
+    assert rt.homes == 2 and rt.departs == []  # no depart move: the arm stands in the place, so it homes
+
+
+def test_a_depart_move_out_of_reach_or_a_part_unseen_from_there_sends_the_arm_home(tmp_path):
+    class BlindAfterPlace(Feeder):
+        def next_part(self, cycle):
+            super().next_part(cycle)
+            rt.blind_reads = 1 if cycle == 1 else 0  # the arm over the goal hides the part from the camera
+
+    with RunLog(tmp_path / "blind.jsonl", {"test": "cycles"}) as log:
+        rt = ScriptedRuntime([S, S, S], log)
+        summary = CycleRunner(rt, BlindAfterPlace(), lambda c: np.zeros(3), NO_HOMING).run(0, 3)
+    assert summary.placed == 3 and rt.homes == 2 and not any(c.alarm for c in summary.cycles)
+    with RunLog(tmp_path / "reach.jsonl", {"test": "cycles"}) as log:
+        rt = ScriptedRuntime([S, S], log, can_depart=False)
+        CycleRunner(rt, Feeder(), lambda c: np.zeros(3), NO_HOMING).run(0, 2)
+    assert rt.homes == 2
 
 
 def test_too_many_failed_attempts_raise_an_alarm_that_stops_the_run(tmp_path):
@@ -200,6 +236,8 @@ def test_a_resumed_run_goes_on_from_the_log_count(tmp_path):
         ({"pick_region": ((0.6, 0.0), (0.4, 0.1))}, "deploy.cycles.pick_region[1][0]"),
         ({"rest_height_tolerance": float("nan")}, "deploy.cycles.rest_height_tolerance"),
         ({"pose_wait_s": -1.0}, "deploy.cycles.pose_wait_s"),
+        ({"depart_height": 0.5}, "deploy.cycles.depart_height"),
+        ({"home_between_cycles": "no"}, "deploy.cycles.home_between_cycles"),
     ],
 )
 def test_a_bad_cycle_config_is_refused_with_its_key(kwargs, message):
