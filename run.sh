@@ -15,10 +15,11 @@ if [ ! -f "$STAMP" ]; then
   echo "[run.sh] setting up $VENV (first run takes a few minutes)..." >&2
   "$PY" -m venv "$VENV"
   "$VENV/bin/python" -m pip install --quiet --upgrade pip
-  # torch is pinned to the CPU build; install it first so nothing pulls a CUDA build.
-  "$VENV/bin/python" -m pip install --quiet "torch==2.13.0"
+  # torch is pinned to the CPU build; install it first so nothing pulls a CUDA build. --no-compile: Python
+  # compiles what it imports when it first imports it, not every file of every package up front (~40 s less).
+  "$VENV/bin/python" -m pip install --quiet --no-compile "torch==2.13.0"
   # The workstation profile and the test tools (docs/install.md; a robot PC installs '.[robot]' instead).
-  "$VENV/bin/python" -m pip install --quiet -e ".[train,dev]"
+  "$VENV/bin/python" -m pip install --quiet --no-compile -e ".[train,dev]"
   rm -f "$VENV"/.installed-*
   touch "$STAMP"
 fi
