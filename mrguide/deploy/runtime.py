@@ -225,10 +225,11 @@ class Runtime:
         self.watchdog.arm(True)
         try:
             self._settle(max_cycles=int(30 / self.cobot.period))
-            for _ in range(int(HOME_SETTLE_S / self.cobot.period) if arrive else 0):
-                if np.max(np.abs(self.cobot.joint_state().positions - q)) <= self.cfg.home_tolerance:
-                    break
-                self._stream_cycle()
+            if arrive:  # the setpoints are at q; the joints follow with the servos' lag: hold q until they arrive
+                for _ in range(int(HOME_SETTLE_S / self.cobot.period)):
+                    if np.max(np.abs(self.cobot.joint_state().positions - q)) <= self.cfg.home_tolerance:
+                        break
+                    self._stream_cycle()
         finally:
             self.watchdog.arm(False)
 
