@@ -108,7 +108,7 @@ def build_parser() -> argparse.ArgumentParser:
     from mrguide.drivers.commands import add_bus_commands
 
     add_bus_commands(sub)
-    from mrguide.experiments.commands import add_sim2real_command
+    from mrguide.experiments.sim2real_command import add_sim2real_command
 
     add_sim2real_command(sub)
 
