@@ -141,9 +141,13 @@ class GuidedExpert:
         self.demo = PickPlaceDemo(self.task)
 
     def end_demonstration(self, success: bool) -> None:
-        """A successful demonstration's set-down point is a measurement of the place (pick_place marks)."""
+        """A successful demonstration measures the place (pick_place marks): the height at which its descent set the
+        part down, over the goal. The cell knows where the goal is, and the success rule asks the TCP to open within
+        ε of the goal's top; a success anywhere within ε would otherwise keep the place where it happened to
+        succeed — up to ε beside the goal, where every wobble of the policy that clones it fails."""
         if success and self.demo.released is not None and PLACE_PHASE in self._plan:
-            self._measured(PLACE_PHASE, self.demo.released)
+            goal = self._plan[PLACE_PHASE][2]
+            self._measured(PLACE_PHASE, np.r_[goal[:2], self.demo.released[2]])
 
     def annotation_in_use(self, obs: np.ndarray) -> int | None:
         """The annotation cache record the last `action(obs)` followed (its index in annotations.jsonl), or None."""

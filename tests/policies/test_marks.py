@@ -315,6 +315,23 @@ def test_the_release_opens_where_the_part_came_to_rest_and_a_success_measures_th
     assert expert.fusion.settled(PLACE_PHASE, 0.0)
 
 
+def test_a_success_beside_the_goal_measures_the_place_over_it(tmp_path):
+    """A place mark 1.8 cm beside the goal succeeds (within ε): the success measures the height where the part met
+    the table, over the goal, so the next demonstrations do not keep the place at the edge of ε."""
+    goal_top = GOAL + [0.0, 0.0, 0.025]
+    beside = np.array([0.018, -0.004, 0.0])
+    src = _Recorder(answers=[OBJ + [0.0, 0.0, 0.022], goal_top + beside])
+    expert, _ = _pick_place(src, tmp_path)
+    expert.begin_demonstration()
+    expert.action(_obs(1))
+    for dz in (0.1, 0.0):
+        expert.action(_obs(4, tcp=goal_top + beside + [0.0, 0.0, dz], g=1))
+    expert.end_demonstration(success=False)
+    assert expert.fusion.measured[PLACE_PHASE] == []  # a failure measures nothing
+    expert.end_demonstration(success=True)
+    assert np.allclose(expert.fusion.measured[PLACE_PHASE][0], [0.0, 0.0, 0.025], atol=1e-6)
+
+
 def test_settled_marks_are_not_asked_again(tmp_path):
     """Exact place marks: after MIN_MARKS their median cannot move, and a new scene's place uses it unasked; a
     scattered person is asked until the median's standard error is within the precision."""
