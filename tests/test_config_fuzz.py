@@ -44,7 +44,7 @@ from mrguide.drivers.config import (
     LimitOverrides,
     MasterConfig,
     TimingConfig,
-    VacuumConfig,
+    VacuumNodeConfig,
     resolve_limits,
 )
 from mrguide.robot import ArmConfig, RobotConfig, UrdfSource, Workspace, load_robot
@@ -178,7 +178,7 @@ CONFIGS = [
     TimingConfig,
     JointDriveConfig,
     DriveConfig,
-    VacuumConfig,
+    VacuumNodeConfig,
     MasterConfig,
     LimitOverrides,
     CobotBusConfig,

@@ -199,7 +199,7 @@ class DriveConfig:
 
 
 @dataclass(frozen=True)
-class VacuumConfig:
+class VacuumNodeConfig:
     """Vacuum generator node ([vacuum]); levels in kPa below atmosphere."""
 
     node_id: int = 16
@@ -249,7 +249,7 @@ class CobotBusConfig:
     timing: TimingConfig = field(default_factory=TimingConfig)
     joints: tuple[JointDriveConfig, ...] = field(default_factory=_default_joints)
     drives: DriveConfig = field(default_factory=DriveConfig)
-    vacuum: VacuumConfig = field(default_factory=VacuumConfig)
+    vacuum: VacuumNodeConfig = field(default_factory=VacuumNodeConfig)
     limits: LimitOverrides = field(default_factory=LimitOverrides)
     master: MasterConfig = field(default_factory=MasterConfig)
 

@@ -17,7 +17,7 @@ from canopen.objectdictionary import ODVariable
 from canopen.pdo import PdoMap
 from canopen.sdo.exceptions import SdoError
 
-from mrguide.drivers.config import TimingConfig, VacuumConfig
+from mrguide.drivers.config import TimingConfig, VacuumNodeConfig
 from mrguide.drivers.errors import BootError
 from mrguide.drivers.objects import (
     DEVICE_TYPE,
@@ -66,7 +66,7 @@ class VacuumFeedback:
 class VacuumGenerator:
     """The vacuum generator on the bus, seen from the master."""
 
-    def __init__(self, node: RemoteNode, config: VacuumConfig, sync_index: Callable[[], int]) -> None:
+    def __init__(self, node: RemoteNode, config: VacuumNodeConfig, sync_index: Callable[[], int]) -> None:
         self.node = node
         self.node_id = node_id_of(node)
         self.config = config
