@@ -85,7 +85,7 @@ class _PdoField:
         if key == (VACUUM_LEVEL, 1):
             return f"level={value * vac.LEVEL_UNIT_KPA:.1f} kPa"
         if key in ((PART_GRIPPED, 0), (PART_LOST, 0)):
-            return f"{'gripped' if key[0] == 0x2001 else 'lost'}={'yes' if value & vac.MODULE0_BIT else 'no'}"
+            return f"{'gripped' if key[0] == PART_GRIPPED else 'lost'}={'yes' if value & vac.MODULE0_BIT else 'no'}"
         return f"{self.var.name}={value}"
 
 
