@@ -10,116 +10,14 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import sys
-from collections.abc import Callable
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal, get_args
+from typing import Any
 
 from mrguide.cli_args import positive_int
 from mrguide.config import ConfigError, load_section
+from mrguide.experiments.registry import Experiment, experiments
 from mrguide.experiments.runs import configs, sac_config
 from mrguide.shipped_configs import shipped_config
-
-
-@dataclass(frozen=True)
-class Experiment:
-    """How to run and report one experiment: its config class and file, its runs, an optional evaluation of
-    the trained runs (Ray tasks), and its report built from the run directories."""
-
-    config_cls: type[Any]
-    default_config: str
-    default_out: str
-    runs: Callable[[Any, str | None], list]
-    report: Callable[[Any, str | None, Path, int], dict[str, bytes]]
-    #: Ray tasks evaluating each trained run (run, root, cfg) → the file that marks it evaluated
-    evaluate: Callable[..., str] | None = None
-    evaluated: Callable[[Any, Path], Path] | None = None  # (run, root) → that file
-
-
-#: The experiments, by the name `mrguide experiment NAME` takes (their `Experiment`s: `_experiments`).
-ExperimentName = Literal[
-    "learning-curves", "long-baseline", "noise-robustness", "generalization", "person", "peers", "sim2real"
-]
-NAMES: tuple[ExperimentName, ...] = get_args(ExperimentName)
-
-
-def _experiments() -> dict[ExperimentName, Experiment]:
-    """Every experiment by name, in the order of NAMES (imported here: the parser needs only NAMES)."""
-    return {**_figure_experiments(), **_further_experiments()}
-
-
-def _figure_experiments() -> dict[ExperimentName, Experiment]:
-    """Learning curves, long baseline, noise robustness and generalization (the paper's Fig. 3-7)."""
-    from mrguide.experiments import generalization as gen
-    from mrguide.experiments import learning_curves as lc
-    from mrguide.experiments import noise_robustness as nr
-
-    return {
-        "learning-curves": Experiment(
-            lc.CurvesConfig,
-            "learning_curves.toml",
-            "runs/learning-curves",
-            lc.runs,
-            lambda c, b, r, e: lc.learning_curves_report(c, lc.records(c, b, r, e)),
-        ),
-        "long-baseline": Experiment(
-            lc.CurvesConfig,
-            "long_baseline.toml",
-            "runs/long-baseline",
-            lc.runs,
-            lambda c, b, r, e: lc.long_baseline_report(c, lc.records(c, b, r, e)),
-        ),
-        "noise-robustness": Experiment(
-            nr.NoiseConfig,
-            "noise_robustness.toml",
-            "runs/noise-robustness",
-            nr.runs,
-            lambda c, b, r, e: nr.noise_report(c, nr.records(c, b, r, e)),
-        ),
-        "generalization": Experiment(
-            gen.GeneralizationConfig,
-            "generalization.toml",
-            "runs/generalization",
-            gen.runs,
-            lambda c, b, r, e: gen.generalization_report(c, r, gen.runs(c, b)),
-            gen.evaluate,
-            lambda run, root: run.directory(root) / "goals.csv",
-        ),
-    }
-
-
-def _further_experiments() -> dict[ExperimentName, Experiment]:
-    """A person's marks, the SAC peer side by side, and sim-to-real (the paper's Fig. 8) as an experiment."""
-    from mrguide.experiments import peers, person
-    from mrguide.experiments import sim2real_runs as s2r
-
-    return {
-        "person": Experiment(
-            person.PersonConfig,
-            "person.toml",
-            "runs/person",
-            person.runs,
-            lambda c, b, r, e: person.person_report(c, r, person.runs(c, b), e),
-            person.evaluate,
-            person.fresh_path,
-        ),
-        "peers": Experiment(
-            peers.PeersConfig,
-            "peers.toml",
-            "runs/peers",
-            peers.runs,
-            lambda c, b, r, e: peers.peers_report(c, peers.records(c, b, r, e)),
-        ),
-        "sim2real": Experiment(
-            s2r.Sim2RealConfig,
-            "sim2real.toml",
-            "runs/sim2real-experiment",
-            s2r.runs,
-            lambda c, b, r, e: s2r.sim2real_report(c, r, s2r.runs(c, b)),
-            s2r.evaluate,
-            s2r.outcomes_path,
-        ),
-    }
 
 
 def _evaluate(
@@ -136,8 +34,9 @@ def _evaluate(
 def add_experiment_command(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("experiment", help="the paper's experiments (Fig. 3-7, 9), run on Ray, resumable")
     esub = p.add_subparsers(dest="experiment", required=True)
-    for name in NAMES:
-        e = esub.add_parser(name, help=f"{name}: train what is not done yet, then report")
+    registered = experiments()
+    for name, exp in registered.items():
+        e = esub.add_parser(name, help=f"{exp.help}: train what is not done yet, then report")
         e.add_argument(
             "--config", help=f"experiment TOML ([experiment]); default the shipped configs/experiments/<{name}>.toml"
         )
@@ -149,7 +48,7 @@ def add_experiment_command(sub: argparse._SubParsersAction) -> None:
         e.add_argument("--quiet", action="store_true")
         e.set_defaults(func=cmd_experiment, name=name)
     r = esub.add_parser("report", help="rebuild an experiment's report from its run directories (no training)")
-    r.add_argument("name", choices=NAMES)
+    r.add_argument("name", choices=list(registered))
     r.add_argument("--config", help="the experiment TOML the runs were made with")
     r.add_argument("--out", help="experiment directory")
     r.add_argument("--seeds", type=positive_int)
@@ -158,7 +57,7 @@ def add_experiment_command(sub: argparse._SubParsersAction) -> None:
 
 
 def _setup(args: argparse.Namespace) -> tuple[Experiment, Any, str | None, Path]:
-    exp = _experiments()[args.name]
+    exp = experiments()[args.name]
     path = Path(args.config) if args.config else shipped_config("experiments", exp.default_config)
     cfg = load_section(exp.config_cls, path, "experiment", known=("experiment",))
     cfg = dataclasses.replace(cfg, **{k: getattr(args, k) for k in ("seeds", "steps") if getattr(args, k) is not None})

@@ -18,6 +18,7 @@ import numpy as np
 
 from mrguide.config import ConfigError, check_number
 from mrguide.experiments import report
+from mrguide.experiments.registry import Experiment, register
 from mrguide.experiments.runs import TrainRun, configs
 from mrguide.experiments.stats import wilson
 
@@ -205,3 +206,18 @@ def _figure(table: list[dict[str, Any]]) -> bytes:
     ax.set_ylim(-0.02, 1.02)
     ax.legend(loc="upper right")
     return report.png_bytes(fig)
+
+
+register(
+    "generalization",
+    Experiment(
+        GeneralizationConfig,
+        "generalization.toml",
+        "runs/generalization",
+        runs,
+        lambda c, b, r, e: generalization_report(c, r, runs(c, b)),
+        "Fig. 6: success on goals beyond the training region",
+        evaluate,
+        lambda run, root: run.directory(root) / "goals.csv",
+    ),
+)

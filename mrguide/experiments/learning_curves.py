@@ -15,6 +15,7 @@ from scipy import stats as scipy_stats
 
 from mrguide.config import ConfigError, check_number
 from mrguide.experiments import report
+from mrguide.experiments.registry import Experiment, register
 from mrguide.experiments.run_records import RunRecord, read_run
 from mrguide.experiments.runs import TrainRun
 from mrguide.experiments.stats import CONVERGENCE_THRESHOLD, PERSON_SECONDS_PER_MARK, WINDOW_EPISODES, person_minutes
@@ -261,3 +262,27 @@ def _fig_effort(rs: list[RunRecord], grid: np.ndarray) -> bytes:
     ax.legend(handles, [h.get_label() for h in handles], loc="center right")
     report.paper_note(ax, "interventions plateau after intake closes at 10k; ratio 0.9 → 0.1")
     return report.png_bytes(fig)
+
+
+register(
+    "learning-curves",
+    Experiment(
+        CurvesConfig,
+        "learning_curves.toml",
+        "runs/learning-curves",
+        runs,
+        lambda c, b, r, e: learning_curves_report(c, records(c, b, r, e)),
+        "Fig. 3, 5, 9: guided and baseline learning curves",
+    ),
+)
+register(
+    "long-baseline",
+    Experiment(
+        CurvesConfig,
+        "long_baseline.toml",
+        "runs/long-baseline",
+        runs,
+        lambda c, b, r, e: long_baseline_report(c, records(c, b, r, e)),
+        "Fig. 4: the baseline over a long run",
+    ),
+)

@@ -20,6 +20,7 @@ import numpy as np
 
 from mrguide.config import ConfigError, check_number
 from mrguide.experiments import report
+from mrguide.experiments.registry import Experiment, register
 from mrguide.experiments.run_records import RunRecord, read_run
 from mrguide.experiments.runs import TrainRun
 from mrguide.experiments.stats import person_minutes, wilson
@@ -220,3 +221,16 @@ def _figure(table: list[dict[str, Any]], reading: str) -> bytes:
     ax.set_ylim(-0.02, 1.02)
     ax.legend(loc="lower left")
     return report.png_bytes(fig)
+
+
+register(
+    "noise-robustness",
+    Experiment(
+        NoiseConfig,
+        "noise_robustness.toml",
+        "runs/noise-robustness",
+        runs,
+        lambda c, b, r, e: noise_report(c, records(c, b, r, e)),
+        "Fig. 7: convergence against the noise on the marks (or a registration bias)",
+    ),
+)

@@ -17,6 +17,7 @@ import numpy as np
 
 from mrguide.config import ConfigError, check_number
 from mrguide.experiments import report
+from mrguide.experiments.registry import Experiment, register
 from mrguide.experiments.run_records import RunRecord, read_run
 from mrguide.experiments.runs import TrainRun
 from mrguide.experiments.stats import person_minutes
@@ -167,3 +168,16 @@ def _figure(recs: dict[str, list[RunRecord]], cfg: PeersConfig) -> bytes:
         ax.set_ylim(-0.02, 1.02)
         ax.legend(loc="lower right")
     return report.png_bytes(fig)
+
+
+register(
+    "peers",
+    Experiment(
+        PeersConfig,
+        "peers.toml",
+        "runs/peers",
+        runs,
+        lambda c, b, r, e: peers_report(c, records(c, b, r, e)),
+        "guided DDPG and the RLPD-style SAC peer side by side",
+    ),
+)

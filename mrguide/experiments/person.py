@@ -16,6 +16,7 @@ import numpy as np
 
 from mrguide.config import check_number
 from mrguide.experiments import report
+from mrguide.experiments.registry import Experiment, register
 from mrguide.experiments.run_records import RunRecord, read_run
 from mrguide.experiments.runs import TrainRun, configs
 from mrguide.experiments.stats import PERSON_SECONDS_PER_MARK, person_minutes, wilson
@@ -166,3 +167,18 @@ def _figure(recs: list[RunRecord]) -> bytes:
     success.legend(loc="lower right", ncol=2, fontsize=7)
     marks.set_ylabel("marks asked (cumulative); dot: converged")
     return report.png_bytes(fig)
+
+
+register(
+    "person",
+    Experiment(
+        PersonConfig,
+        "person.toml",
+        "runs/person",
+        runs,
+        lambda c, b, r, e: person_report(c, r, runs(c, b), e),
+        "a person's error model, every mark over the live protocol",
+        evaluate,
+        fresh_path,
+    ),
+)

@@ -8,11 +8,7 @@ import io
 from pathlib import Path
 from typing import Any
 
-import matplotlib
 import numpy as np
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 
 from mrguide.output_files import write_files_atomically
 
@@ -46,9 +42,20 @@ def write_report(out: Path, files: dict[str, bytes]) -> None:
     write_files_atomically({out / name: data for name, data in files.items()})
 
 
+def _pyplot():
+    """matplotlib's pyplot on the file-only Agg backend, imported when the first figure is drawn (the CLI lists the
+    experiments without it)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
 def figure(title: str, xlabel: str, ylabel: str, size: tuple[float, float] = (7.0, 4.0), columns: int = 1):
     """A figure with one axes (or `columns` side by side, sharing the title and the y label)."""
-    fig, ax = plt.subplots(1, columns, figsize=size)
+    fig, ax = _pyplot().subplots(1, columns, figsize=size)
     for a in np.atleast_1d(ax):
         a.set(xlabel=xlabel, ylabel=ylabel)
     if columns == 1:
@@ -62,7 +69,7 @@ def png_bytes(fig) -> bytes:
     buf = io.BytesIO()
     fig.tight_layout()
     fig.savefig(buf, format="png", dpi=120)
-    plt.close(fig)
+    _pyplot().close(fig)
     return buf.getvalue()
 
 

@@ -14,6 +14,7 @@ from typing import Any
 
 from mrguide.config import ConfigError, check_number
 from mrguide.experiments import report
+from mrguide.experiments.registry import Experiment, register
 from mrguide.experiments.runs import TrainRun, configs
 
 CONDITIONS = ("sim", "real_exact", "real_hmd", "mujoco_exact", "mujoco_hmd")
@@ -122,3 +123,18 @@ def sim2real_report(cfg: Sim2RealConfig, root: Path, run_list: list[TrainRun]) -
         "fig8_sim2real.png": files["fig8_sim2real.png"],
         "outcomes.csv": report.csv_bytes(all_rows, ["train_seed", *OUTCOME_FIELDS]),
     }
+
+
+register(
+    "sim2real",
+    Experiment(
+        Sim2RealConfig,
+        "sim2real.toml",
+        "runs/sim2real-experiment",
+        runs,
+        lambda c, b, r, e: sim2real_report(c, r, runs(c, b)),
+        "Fig. 8: train, then every policy in the sim-to-real conditions",
+        evaluate,
+        outcomes_path,
+    ),
+)

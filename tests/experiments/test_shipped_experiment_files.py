@@ -7,7 +7,8 @@ from pathlib import Path
 import pytest
 
 from mrguide.config import ConfigError
-from mrguide.experiments.commands import NAMES, _setup
+from mrguide.experiments.commands import _setup
+from mrguide.experiments.registry import experiments
 from tests import shipped_files
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -16,7 +17,7 @@ FILES = shipped_files.EXPERIMENT_FILES
 
 def experiment_of(path: Path) -> str:
     """The experiment a shipped file belongs to: the longest experiment name its file name starts with."""
-    return max((n for n in NAMES if path.stem.startswith(n.replace("-", "_"))), key=len)
+    return max((n for n in experiments() if path.stem.startswith(n.replace("-", "_"))), key=len)
 
 
 @pytest.mark.parametrize("path", FILES, ids=lambda p: p.name)
@@ -34,3 +35,8 @@ def test_a_file_with_a_bad_override_is_refused_before_anything_runs(tmp_path):
     )
     with pytest.raises(ConfigError, match="pick_plase"):
         _setup(argparse.Namespace(name="generalization", config=str(bad), seeds=None, steps=None, out=None))
+
+
+def test_every_registered_experiment_has_its_shipped_file():
+    for name, exp in experiments().items():
+        assert (ROOT / "configs/experiments" / exp.default_config).is_file(), name
