@@ -13,10 +13,10 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from mrguide.cli_args import positive_int
+from mrguide.cli_args import override_arg, positive_int
 from mrguide.config import ConfigError, load_section
 from mrguide.experiments.registry import Experiment, experiments
-from mrguide.experiments.runs import configs, sac_config
+from mrguide.experiments.runs import check_same_config, configs, sac_config
 from mrguide.shipped_configs import shipped_config
 
 
@@ -43,6 +43,15 @@ def add_experiment_command(sub: argparse._SubParsersAction) -> None:
         e.add_argument("--out", help="experiment directory (one subdirectory per run); default runs/<name>")
         e.add_argument("--seeds", type=positive_int, help="override experiment.seeds")
         e.add_argument("--steps", type=positive_int, help="override experiment.steps")
+        e.add_argument(
+            "--set",
+            type=override_arg,
+            action="append",
+            default=[],
+            metavar="SECTION.KEY=VALUE",
+            help="set a training config key for every run, over the file's [experiment.overrides] (e.g. --set "
+            "ddpg.lr_actor=0.001); repeatable; what the experiment itself varies it sets last",
+        )
         e.add_argument("--workers", type=positive_int, default=2, help="local Ray: CPUs (= runs at a time)")
         e.add_argument("--address", help="an existing Ray cluster: 'auto' on a cluster node, or ray://HEAD:10001")
         e.add_argument("--quiet", action="store_true")
@@ -53,6 +62,7 @@ def add_experiment_command(sub: argparse._SubParsersAction) -> None:
     r.add_argument("--out", help="experiment directory")
     r.add_argument("--seeds", type=positive_int)
     r.add_argument("--steps", type=positive_int)
+    r.add_argument("--set", type=override_arg, action="append", default=[], metavar="SECTION.KEY=VALUE")
     r.set_defaults(func=cmd_report)
 
 
@@ -61,6 +71,8 @@ def _setup(args: argparse.Namespace) -> tuple[Experiment, Any, str | None, Path]
     path = Path(args.config) if args.config else shipped_config("experiments", exp.default_config)
     cfg = load_section(exp.config_cls, path, "experiment", known=("experiment",))
     cfg = dataclasses.replace(cfg, **{k: getattr(args, k) for k in ("seeds", "steps") if getattr(args, k) is not None})
+    if getattr(args, "set", None):
+        cfg = dataclasses.replace(cfg, overrides={**cfg.overrides, **dict(args.set)})
     base = None
     if cfg.config:
         base_path = (path.parent / cfg.config).resolve()
@@ -87,6 +99,8 @@ def cmd_experiment(args: argparse.Namespace) -> int:
 
     exp, cfg, base, out = _setup(args)
     specs = exp.runs(cfg, base)
+    for run in specs:  # a run started or done with another configuration is not resumed into this one
+        check_same_config(run, out)
     try:
         run_all(specs, out, args.workers, args.address, show_progress=not args.quiet)
         if exp.evaluate is not None:

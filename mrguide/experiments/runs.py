@@ -76,6 +76,38 @@ def run_record(run: TrainRun) -> dict[str, Any]:
     return {"effective_config": effective, **dataclasses.asdict(run)}
 
 
+def check_same_config(run: TrainRun, root: Path) -> None:
+    """ConfigError if `run` has started or finished in `root` with another configuration than it would train with
+    now (an edited experiment file, another --set): its results would be mixed with the new ones."""
+    from mrguide.config import ConfigError
+
+    out = run.directory(root)
+    if not ((out / "done").exists() or (out / "checkpoint.pt").exists()):
+        return
+    try:
+        stored = json.loads((out / "run.json").read_text())["effective_config"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return  # no record to compare (runs made before run.json held the configuration)
+    now = json.loads(json.dumps(run_record(run)["effective_config"]))
+    diff = _first_difference(stored, now)
+    if diff:
+        raise ConfigError(
+            f"{out} was trained with another configuration ({diff}); give another --out, or remove that run"
+        )
+
+
+def _first_difference(was: Any, now: Any, key: str = "") -> str:
+    """The first key whose value differs between two JSON trees, as 'key: was → now' ('' if none). A key only one
+    of them has is no difference: a field added to the code since keeps its old behaviour by default."""
+    if isinstance(was, dict) and isinstance(now, dict):
+        for k in sorted(set(was) & set(now)):
+            diff = _first_difference(was[k], now[k], f"{key}.{k}" if key else k)
+            if diff:
+                return diff
+        return ""
+    return "" if was == now else f"{key}: {was!r} → {now!r}"
+
+
 def is_done(run: TrainRun, root: Path) -> bool:
     return (run.directory(root) / "done").exists()
 
