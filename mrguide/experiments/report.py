@@ -4,6 +4,7 @@ paper's numbers drawn beside ours."""
 from __future__ import annotations
 
 import csv
+import gzip
 import io
 from pathlib import Path
 from typing import Any
@@ -16,7 +17,10 @@ PAPER_COLOR = "0.35"
 
 
 def read_csv(path: Path) -> list[dict[str, str]]:
-    with path.open() as fh:
+    """The rows of a CSV file, or of its gzip-compressed copy `path.gz` where only that one is there (the run files
+    committed under docs/results are stored compressed)."""
+    packed = path.with_name(path.name + ".gz")
+    with gzip.open(packed, "rt") if packed.exists() and not path.exists() else path.open() as fh:
         return list(csv.DictReader(fh))
 
 

@@ -196,3 +196,20 @@ def test_the_bias_reading_reports_the_bias_each_person_drew(tmp_path):
     assert rows[("0.012", "1")] == " ".join(f"{b:.1f}" for b in drawn) and abs(drawn).max() > 0.5
     assert rows[("0.012", "0")] != rows[("0.012", "1")]  # each seed's person draws their own
     assert rows[("0.0", "0")] == "0.0 0.0 0.0"
+
+
+def test_a_report_reads_run_files_stored_compressed_as_it_reads_them_plain(tmp_path):
+    """docs/results keeps metrics.csv and eval.csv of its runs gzip-compressed: the same report either way."""
+    import gzip
+    import shutil
+
+    cfg = nr.NoiseConfig(seeds=2, steps=5000, sigmas=(0.0,))
+    for name, rates in zip(["sigma_0.000/seed0", "sigma_0.000/seed1"], ([0.5, 0.9, 1.0, 1.0, 1.0], [0.0] * 5)):
+        write_run(tmp_path / name, rates, list(range(10)), rows=[{"kind": "agent", "outcome": "dropped"}] * 10)
+    plain = nr.noise_report(cfg, nr.records(cfg, None, tmp_path, 10))
+    for path in tmp_path.glob("sigma_0.000/seed0/*.csv"):
+        with path.open("rb") as src, gzip.open(path.with_name(path.name + ".gz"), "wb") as dst:
+            shutil.copyfileobj(src, dst)
+        path.unlink()
+    packed = nr.noise_report(cfg, nr.records(cfg, None, tmp_path, 10))
+    assert packed["summary.csv"] == plain["summary.csv"] and packed["runs.csv"] == plain["runs.csv"]
