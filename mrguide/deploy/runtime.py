@@ -321,8 +321,8 @@ class Runtime:
                         "decision", t=t, tcp=tcp, g=g, phase=res.phase, reward=reward, outcome=res.outcome.value
                     )
                     return res.outcome
-            ended = self._decide(t, t_read, js, vac, self.decision.observe(tcp, g, obj, goal), index, reward, report)
-            if ended is not None:
+            obs = self.decision.observe(tcp, g, obj, goal)
+            if (ended := self._decide(t, t_read, js, vac, tcp, obs, index, reward, report)) is not None:
                 return ended
         raise AssertionError("the task model ends every episode at its horizon")  # pragma: no cover
 
@@ -332,16 +332,18 @@ class Runtime:
         t_read: float,
         js: JointState,
         vac: VacuumState,
+        tcp: np.ndarray,
         obs: np.ndarray,
         index: int,
         reward: float | None,
         report: EpisodeReport,
     ) -> Outcome | None:
-        """Policy → decision step → one decision period streamed; an outcome if the supervisor ends the episode."""
+        """Policy → decision step → one decision period streamed (`tcp`: FK of `js`, in `obs`); an outcome if the
+        supervisor ends the episode."""
         t_inf = time.perf_counter()
         action = self.policy(obs)
         inference_ms = (time.perf_counter() - t_inf) * 1e3
-        executed, rule = self.lift.apply(action, self.decision.tcp(js.positions), self.decision.phase, vac)
+        executed, rule = self.lift.apply(action, tcp, self.decision.phase, vac)
         if rule is not None:
             self.supervisor.report(Event(rule), f"height target lowered in phase {self.decision.phase}")
         record = {
