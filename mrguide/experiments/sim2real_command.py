@@ -7,10 +7,11 @@ import argparse
 import math
 import time
 from pathlib import Path
+from typing import Any
 
 from tqdm import tqdm
 
-from mrguide.cli_args import positive_int
+from mrguide.cli_args import override_arg, positive_int
 from mrguide.config import ConfigError
 from mrguide.experiments.sim2real_runs import CONDITIONS
 from mrguide.shipped_configs import shipped_config
@@ -63,6 +64,16 @@ def add_sim2real_command(sub: argparse._SubParsersAction) -> None:
         f"runs condition 2, HMD ({', '.join(HMD_PARAMS)}) condition 3; repeatable",
     )
     p.add_argument(
+        "--set",
+        type=override_arg,
+        action="append",
+        default=[],
+        metavar="SECTION.KEY=VALUE",
+        help="set a key of the played cells (the 'real' one and the MuJoCo one) for this run, after their files "
+        "(e.g. --set twin.reality_gap.object_mass=0.4 --set calibration.hmd.tracking_noise_m=0.005); repeatable; "
+        "sections: twin, task, robot, plant, safety, calibration.hmd",
+    )
+    p.add_argument(
         "--no-recovery",
         action="store_true",
         help="a safety stop ends the seed's run (its remaining episodes fail); default: fault reset, "
@@ -103,6 +114,31 @@ def sweep_arg(text: str) -> tuple[str, list[float]]:
     return name, numbers
 
 
+#: The sections of the played cell that `mrguide sim2real --set` sets (keys of its env config, its safety, its HMD).
+CELL_SET_SECTIONS = ("twin", "task", "robot", "plant", "safety", "calibration.hmd")
+
+
+def set_cell_keys(cell: Any, sets: list[tuple[str, Any]]) -> Any:
+    """The played cell (`sim2real.RealCell`) with each (dotted key, value) of `--set` applied, checked as a value in
+    its file would be."""
+    from dataclasses import replace
+
+    from mrguide.config import replace_path
+    from mrguide.deploy.safety import SafetyConfig
+
+    for key, value in sets:
+        where = f"--set {key}"
+        if key.split(".", 1)[0] in ("twin", "task", "robot", "plant"):
+            cell = replace(cell, env=replace_path(cell.env, key, value, where))
+        elif key.startswith("safety."):
+            cell = replace(cell, safety=replace_path(cell.safety or SafetyConfig(), key[7:], value, where))
+        elif key.startswith("calibration.hmd."):
+            cell = replace(cell, hmd=replace_path(cell.hmd, key[16:], value, where))
+        else:
+            raise ConfigError(f"{where}: sim2real sets keys of the played cell's {', '.join(CELL_SET_SECTIONS)}")
+    return cell
+
+
 def cmd_sim2real(args: argparse.Namespace) -> int:
     """Every input is checked before the first episode: configs, bus, policy (against both twins), swept values,
     the output directory."""
@@ -112,11 +148,13 @@ def cmd_sim2real(args: argparse.Namespace) -> int:
 
     out = check_output_dir(args.out, "--out")
     train_cfg = EnvConfig.load(args.config)
-    cell = s2r.load_real_cell(args.real_config or shipped_config("cells", "real_cell.toml"))
+    cell = set_cell_keys(s2r.load_real_cell(args.real_config or shipped_config("cells", "real_cell.toml")), args.set)
     cells = {"real": cell}
     if {"mujoco_exact", "mujoco_hmd"} & set(args.conditions):
-        cells["mujoco"] = s2r.load_real_cell(args.mujoco_config or shipped_config("cells", "mujoco_cell.toml"))
+        mujoco = s2r.load_real_cell(args.mujoco_config or shipped_config("cells", "mujoco_cell.toml"))
+        cells["mujoco"] = set_cell_keys(mujoco, args.set)
     real_cfg, real_path, hmd = cell.env, cell.path, cell.hmd
+    hmd_sets = {key.removeprefix("calibration.hmd."): v for key, v in args.set if key.startswith("calibration.hmd.")}
     policy = s2r.load_policy(args.policy, train_cfg, cell)
     _check_sweeps(args.sweep, real_cfg, hmd)
     runs = (
@@ -127,6 +165,17 @@ def cmd_sim2real(args: argparse.Namespace) -> int:
         ]
     )
     out.mkdir(parents=True, exist_ok=True)
+    results = _play(args, runs, cells, train_cfg, policy, hmd_sets, out)
+    md = s2r.write_report(results, out, s2r.gap_description(real_cfg, real_path))
+    print(md.read_text())
+    print(f"figure and CSV in {out}")
+    return 0
+
+
+def _play(args: argparse.Namespace, runs: list, cells: dict, train_cfg: Any, policy: Any, hmd_sets: dict, out: Path):
+    """Every (condition, swept parameter, value) of `runs` for each seed: the conditions' results, in order."""
+    from mrguide.experiments import sim2real as s2r
+
     total = len(runs) * args.seeds * args.episodes
     with tqdm(total=total, desc="sim2real", unit="ep", disable=args.quiet) as bar:
         results = []
@@ -152,15 +201,12 @@ def cmd_sim2real(args: argparse.Namespace) -> int:
                     played.safety,
                     on_episode=lambda o: bar.update(1),
                     use_hmd=use_hmd,
-                    hmd_overrides={name: value} if name in HMD_PARAMS else None,
+                    hmd_overrides={**hmd_sets, **({name: value} if name in HMD_PARAMS else {})} or None,
                     recover=not args.no_recovery,
                     condition=cond,
                 )
             results.append(res)
-    md = s2r.write_report(results, out, s2r.gap_description(real_cfg, real_path))
-    print(md.read_text())
-    print(f"figure and CSV in {out}")
-    return 0
+    return results
 
 
 def _check_sweeps(sweeps: list[tuple[str, list[float]]], real_cfg, hmd) -> None:

@@ -73,6 +73,24 @@ CASES = [
         lambda d: _real_config(d, "[calibration.hmd]", "[calibration.hmd]\nseed = -1"),
         ["real.toml [calibration]", "hmd.seed = -1"],
     ),
+    ("--set not a key", lambda d: ["--set", "object_mass"], ["--set", "SECTION.KEY=VALUE"]),
+    (
+        "--set a section sim2real does not set",
+        lambda d: ["--set", "deploy.bus_config=x"],
+        ["--set deploy.bus_config", "sim2real sets keys of the played cell's twin, task"],
+    ),
+    ("--set unknown key", lambda d: ["--set", "twin.gravity=9.8"], ["--set twin.gravity", "no such key"]),
+    (
+        "--set mass -1",
+        lambda d: ["--set", "twin.reality_gap.object_mass=-1"],
+        ["--set twin.reality_gap.object_mass", "object_mass"],
+    ),
+    (
+        "--set HMD noise 5 m",
+        lambda d: ["--set", "calibration.hmd.tracking_noise_m=5"],
+        ["--set calibration.hmd.tracking_noise_m", "tracking_noise_m"],
+    ),
+    ("--set safety", lambda d: ["--set", "safety.following_error=7"], ["--set safety.following_error"]),
     ("policy decision period 0.2", lambda d: ["--policy", d / "p2.npz"], ["p2.npz", "0.2 s decision period"]),
     ("bad policy", lambda d: ["--policy", d / "afile"], ["afile", "not a readable policy file"]),
 ]
