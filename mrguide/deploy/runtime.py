@@ -332,14 +332,13 @@ class Runtime:
         t_read: float,
         js: JointState,
         vac: VacuumState,
-        tcp: np.ndarray,
+        tcp: np.ndarray,  # the forward kinematics of `js` that `obs` was made from
         obs: np.ndarray,
         index: int,
         reward: float | None,
         report: EpisodeReport,
     ) -> Outcome | None:
-        """Policy → decision step → one decision period streamed (`tcp`: FK of `js`, in `obs`); an outcome if the
-        supervisor ends the episode."""
+        """Policy → decision step → one decision period streamed; an outcome if the supervisor ends the episode."""
         t_inf = time.perf_counter()
         action = self.policy(obs)
         inference_ms = (time.perf_counter() - t_inf) * 1e3
