@@ -11,7 +11,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy import stats as scipy_stats
 
 from mrguide.config import ConfigError, check_number
 from mrguide.experiments import report
@@ -209,6 +208,8 @@ def _grid(steps: int, step: int = 1000) -> np.ndarray:
 
 def _ci95(x: np.ndarray) -> np.ndarray:
     """Half-width of the 95 % confidence interval of the mean over axis 0 (Student t)."""
+    from scipy import stats as scipy_stats  # here: the CLI imports this module on installs without scipy
+
     n = x.shape[0]
     return (
         scipy_stats.t.ppf(0.975, n - 1) * np.nanstd(x, axis=0, ddof=1) / np.sqrt(n) if n > 1 else np.zeros(x.shape[1])
