@@ -1,7 +1,8 @@
 """Where a policy opens the vacuum over the goal: for each policy file, episodes in the training twin (exact poses)
 and, over those that released the part (success or misplaced), how far the TCP opened from the goal's top and where
-the part came to rest. The success rule asks the TCP to open within ε (2 cm) of the goal's top and the part to lie
-within `place_tolerance` (3 cm) of the goal; a policy whose openings sit near ε fails at the slightest drift.
+the part came to rest; where it grasped, and how often it never completed the approach. The success rule asks the
+TCP to open within ε (2 cm) of the goal's top and the part to lie within `place_tolerance` (3 cm) of the goal; a
+policy whose openings sit near ε fails at the slightest drift.
 
 Prints one line per policy and writes OUT/release_probe.csv:
 
@@ -23,12 +24,22 @@ from mrguide.twin.env import PickPlaceEnv
 
 #: Start states of the probe: seeds from here on (none an evaluation of a training run uses first).
 FIRST_SEED = 1000
-FIELDS = ["policy", "episodes", "success", "released", "tcp_goal_median_m", "part_goal_median_m", "grasp_offset_m"]
+FIELDS = [
+    "policy",
+    "episodes",
+    "success",
+    "released",
+    "tcp_goal_median_m",
+    "part_goal_median_m",
+    "grasp_offset_m",
+    "never_approached",
+]
 
 
 def probe(env: PickPlaceEnv, policy: ExportedPolicy, episodes: int) -> dict[str, float | int]:
-    """Roll `policy` out for `episodes` episodes; the release and grasp figures of those that got that far."""
-    outcomes, tcp_goal, part_goal, grasp = [], [], [], []
+    """Roll `policy` out for `episodes` episodes; the release and grasp figures of those that got that far, and how
+    many never completed the approach (the TCP never within ε of the pre-grasp point)."""
+    outcomes, tcp_goal, part_goal, grasp, stuck = [], [], [], [], 0
     for i in range(episodes):
         obs, _ = env.reset(seed=FIRST_SEED + i)
         goal, phase = obs[OBS_GOAL].astype(float), Phase.APPROACH
@@ -42,6 +53,7 @@ def probe(env: PickPlaceEnv, policy: ExportedPolicy, episodes: int) -> dict[str,
             if term or trunc:
                 break
         outcomes.append(info["outcome"])
+        stuck += int(phase == Phase.APPROACH)
         if info["outcome"] in ("success", "misplaced"):
             tcp_goal.append(float(np.linalg.norm(tcp[:2] - goal[:2])))
             part_goal.append(float(np.linalg.norm(part[:2] - goal[:2])))
@@ -52,6 +64,7 @@ def probe(env: PickPlaceEnv, policy: ExportedPolicy, episodes: int) -> dict[str,
         "tcp_goal_median_m": _median(tcp_goal),
         "part_goal_median_m": _median(part_goal),
         "grasp_offset_m": _median(grasp),
+        "never_approached": stuck,
     }
 
 

@@ -20,7 +20,7 @@ def test_a_policy_that_places_opens_near_the_goal_and_the_csv_says_so(tmp_path, 
 
 
 def test_a_policy_that_never_grasps_releases_nothing(policy_file, tmp_path):
-    """Zero weights: the target on the anchor and the gripper output at 0, which never turns the vacuum on."""
+    """Zero weights: the target on the anchor (the part's centre) and the gripper output at 0 (vacuum never on)."""
     from mrguide.deploy.policy import ExportedPolicy
     from mrguide.twin.env import PickPlaceEnv
 
@@ -30,4 +30,5 @@ def test_a_policy_that_never_grasps_releases_nothing(policy_file, tmp_path):
     finally:
         env.close()
     assert row["success"] == 0 and row["released"] == 0
+    assert row["never_approached"] == 1  # its target, the part's centre, lies 10.5 cm below the pre-grasp point
     assert math.isnan(float(row["tcp_goal_median_m"])) and math.isnan(float(row["grasp_offset_m"]))
