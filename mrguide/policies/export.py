@@ -54,7 +54,7 @@ def export_actor(
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.name + ".tmp.npz")
-    np.savez(tmp, **arrays)  # type: ignore[arg-type]  # numpy's stub: **kwds cannot be told from allow_pickle: bool
+    np.savez_compressed(tmp, **arrays)  # type: ignore[arg-type]  # numpy's stub: **kwds vs allow_pickle: bool
     tmp.replace(path)
     return path
 
