@@ -163,15 +163,13 @@ def run_real(
     use_hmd: bool = False,
     hmd_overrides: dict | None = None,
     policy=None,
-    recover: bool = True,
     condition: str | None = None,
 ) -> list[str]:
     """Conditions 2 and 3 (`use_hmd`): a dry run whose outcomes are re-judged on the twin's ground truth.
 
     `hmd_config` is the TOML with `[calibration]` (and its `[calibration.hmd]` noise) for the HMD; `policy`
     (any obs → action callable) replaces the policy file, as in `dry_run`. A safety stop fails its
-    episode; with `recover` the drives are fault-reset and the next episode runs (as an operator would
-    after acknowledging), otherwise the remaining episodes of the seed count as safety stops too."""
+    episode; the drives are fault-reset and the next episode runs (as an operator would after acknowledging)."""
     condition = condition or ("real_hmd" if use_hmd else "real_exact")
     header = _run_header(policy_path, real_cfg, seed, episodes, condition, hmd_overrides)
     try:
@@ -195,7 +193,7 @@ def run_real(
                     after_episode=hooks.judge,
                     on_placed=hooks.refresh,
                     policy=policy,
-                    max_recoveries=episodes if recover else 0,
+                    max_recoveries=episodes,
                 )
             except DriverError as exc:  # the cell did not start (drives not enabled in time on a starved PC)
                 if hooks.outcomes:

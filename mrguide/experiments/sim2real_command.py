@@ -73,12 +73,6 @@ def add_sim2real_command(sub: argparse._SubParsersAction) -> None:
         "(e.g. --set twin.reality_gap.object_mass=0.4 --set calibration.hmd.tracking_noise_m=0.005); repeatable; "
         "sections: twin, task, robot, plant, safety, calibration.hmd",
     )
-    p.add_argument(
-        "--no-recovery",
-        action="store_true",
-        help="a safety stop ends the seed's run (its remaining episodes fail); default: fault reset, "
-        "the stopped episode fails, the next one runs",
-    )
     p.add_argument("--out", default="runs/sim2real")
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(func=cmd_sim2real)
@@ -202,7 +196,6 @@ def _play(args: argparse.Namespace, runs: list, cells: dict, train_cfg: Any, pol
                     on_episode=lambda o: bar.update(1),
                     use_hmd=use_hmd,
                     hmd_overrides={**hmd_sets, **({name: value} if name in HMD_PARAMS else {})} or None,
-                    recover=not args.no_recovery,
                     condition=cond,
                 )
             results.append(res)
