@@ -16,7 +16,7 @@ from typing import Any
 from mrguide.cli_args import override_arg, positive_int
 from mrguide.config import ConfigError, load_section
 from mrguide.experiments.registry import Experiment, experiments
-from mrguide.experiments.runs import check_same_config, configs, sac_config
+from mrguide.experiments.train_runs import check_same_config, configs, sac_config
 from mrguide.shipped_configs import shipped_config
 
 

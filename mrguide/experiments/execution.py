@@ -18,7 +18,7 @@ from typing import Any
 
 from tqdm import tqdm
 
-from mrguide.experiments.runs import RunResult, TrainRun, finished, is_done, progress_steps, train
+from mrguide.experiments.train_runs import RunResult, TrainRun, finished, is_done, progress_steps, train
 
 log = logging.getLogger(__name__)
 

@@ -19,8 +19,8 @@ import numpy as np
 from mrguide.config import ConfigError, check_number
 from mrguide.experiments import report
 from mrguide.experiments.registry import Experiment, register
-from mrguide.experiments.runs import TrainRun, configs
 from mrguide.experiments.stats import wilson
+from mrguide.experiments.train_runs import TrainRun, configs
 
 #: The paper's Fig. 6 in words: above 90 % near the training region, below 20 % at the largest offset (0.18 m).
 PAPER_NEAR, PAPER_FAR, PAPER_FAR_AT = 0.90, 0.20, 0.18

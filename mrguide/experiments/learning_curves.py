@@ -16,8 +16,8 @@ from mrguide.config import ConfigError, check_number
 from mrguide.experiments import report
 from mrguide.experiments.registry import Experiment, register
 from mrguide.experiments.run_records import RunRecord, read_run
-from mrguide.experiments.runs import TrainRun
 from mrguide.experiments.stats import CONVERGENCE_THRESHOLD, PERSON_SECONDS_PER_MARK, WINDOW_EPISODES, person_minutes
+from mrguide.experiments.train_runs import TrainRun
 
 VARIANTS = ("baseline", "guided")
 COLORS = {"baseline": "tab:blue", "guided": "tab:red"}

@@ -22,8 +22,8 @@ from mrguide.config import ConfigError, check_number
 from mrguide.experiments import report
 from mrguide.experiments.registry import Experiment, register
 from mrguide.experiments.run_records import RunRecord, read_run
-from mrguide.experiments.runs import TrainRun
 from mrguide.experiments.stats import person_minutes, wilson
+from mrguide.experiments.train_runs import TrainRun
 
 READINGS = ("marks", "stored", "bias")
 #: The config key each reading's σ sets.
@@ -155,7 +155,7 @@ def _run_row(sigma: float, r: RunRecord, reading: str) -> dict[str, Any]:
 def registration_bias_mm(run: TrainRun) -> np.ndarray:
     """The registration bias (mm, x y z) that the simulated person of `run` drew for its whole run: its annotator
     built from the run's configuration and seed as the trainer builds it (`IN_PROCESS_SOURCES["annotator"]`)."""
-    from mrguide.experiments.runs import configs
+    from mrguide.experiments.train_runs import configs
     from mrguide.policies.experts import ANNOTATOR_SEED_OFFSET, SimulatedAnnotator
     from mrguide.robot import load_robot
 

@@ -19,8 +19,8 @@ from mrguide.config import ConfigError, check_number
 from mrguide.experiments import report
 from mrguide.experiments.registry import Experiment, register
 from mrguide.experiments.run_records import RunRecord, read_run
-from mrguide.experiments.runs import TrainRun
 from mrguide.experiments.stats import person_minutes
+from mrguide.experiments.train_runs import TrainRun
 from mrguide.policies.choices import LEARNERS, Learner
 
 COLORS = {"ddpg": "tab:red", "sac": "tab:purple"}

@@ -18,8 +18,8 @@ from mrguide.config import check_number
 from mrguide.experiments import report
 from mrguide.experiments.registry import Experiment, register
 from mrguide.experiments.run_records import RunRecord, read_run
-from mrguide.experiments.runs import TrainRun, configs
 from mrguide.experiments.stats import PERSON_SECONDS_PER_MARK, person_minutes, wilson
+from mrguide.experiments.train_runs import TrainRun, configs
 
 #: Fresh start states of the final-policy evaluation: env seeds from here, disjoint from training's evaluations (1e6 + …).
 FRESH_SEED_BASE = 3_000_000

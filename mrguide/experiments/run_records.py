@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 
 from mrguide.experiments.report import read_csv
-from mrguide.experiments.runs import TrainRun, finished
 from mrguide.experiments.stats import Convergence, convergence
+from mrguide.experiments.train_runs import TrainRun, finished
 
 
 @dataclass(frozen=True)

@@ -15,7 +15,7 @@ from typing import Any
 from mrguide.config import ConfigError, check_number
 from mrguide.experiments import report
 from mrguide.experiments.registry import Experiment, register
-from mrguide.experiments.runs import TrainRun, configs
+from mrguide.experiments.train_runs import TrainRun, configs
 
 CONDITIONS = ("sim", "real_exact", "real_hmd", "mujoco_exact", "mujoco_hmd")
 OUTCOME_FIELDS = ["condition", "eval_seed", "episode", "outcome"]

@@ -21,7 +21,7 @@ from torch import nn
 
 from mrguide.config import ConfigError, check_number
 from mrguide.policies.networks import Actor, CriticEnsemble, ObsScaler
-from mrguide.policies.replay import Batch, TaggedReplay
+from mrguide.policies.replay_buffer import Batch, TaggedReplay
 
 #: The behaviour-cloning term asks the gripper output for the expert's side of 0 by at least this much, no more:
 #: pulling a tanh output towards a label of exactly ±1 saturates it, and a saturated gripper output never

@@ -18,7 +18,7 @@ import numpy as np
 
 from mrguide.policies.ddpg import DDPG, DDPGConfig
 from mrguide.policies.networks import Actor
-from mrguide.policies.replay import TaggedReplay
+from mrguide.policies.replay_buffer import TaggedReplay
 from mrguide.policies.sac import SAC, SACConfig
 
 

@@ -21,7 +21,7 @@ from torch import nn
 
 from mrguide.config import ConfigError, check_number
 from mrguide.policies.networks import Actor, CriticEnsemble, ObsScaler
-from mrguide.policies.replay import TaggedReplay
+from mrguide.policies.replay_buffer import TaggedReplay
 
 LOG_STD_MIN, LOG_STD_MAX = -20.0, 2.0  # RLPD's clip of the log standard deviation
 INITIAL_TEMPERATURE = 0.01  # HIL-SERL's temperature_init

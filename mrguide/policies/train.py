@@ -36,7 +36,7 @@ from mrguide.policies.guidance import REFERENCE_POSES, GuidanceConfig, Threshold
 from mrguide.policies.guided_expert import GuidedExpert, make_expert_source
 from mrguide.policies.learners import Learner, make_learner
 from mrguide.policies.networks import obs_scaling
-from mrguide.policies.replay import TaggedReplay
+from mrguide.policies.replay_buffer import TaggedReplay
 from mrguide.policies.sac import SACConfig
 from mrguide.policies.train_config import TrainConfig, arm_record, run_fingerprint
 from mrguide.policies.train_counters import TrainerCounters

@@ -232,7 +232,7 @@ def test_a_persons_marks_over_the_wire_in_pick_place_equal_the_in_process_person
 def test_an_experiment_run_over_the_wire_stops_with_the_reason_when_the_bot_fails(tmp_path, monkeypatch):
     """A bot that cannot go on stops the run (no `done`, no policy) instead of leaving it waiting forever."""
     from mrguide.annotation import bot_session
-    from mrguide.experiments.runs import TrainRun, train
+    from mrguide.experiments.train_runs import TrainRun, train
 
     def broken(self):
         raise bot_session.BotError("the server refused the connection (403: Forbidden)")

@@ -9,7 +9,7 @@ import pytest
 from mrguide.config import ConfigError
 from mrguide.experiments import noise_robustness
 from mrguide.experiments.commands import _setup
-from mrguide.experiments.runs import TrainRun, check_same_config, configs, run_record
+from mrguide.experiments.train_runs import TrainRun, check_same_config, configs, run_record
 
 
 def _args(**kw):

@@ -6,7 +6,7 @@ from pathlib import Path
 import pytest
 
 from mrguide.experiments import registry
-from mrguide.experiments.runs import TrainRun
+from mrguide.experiments.train_runs import TrainRun
 
 
 @dataclass(frozen=True)

@@ -5,7 +5,7 @@ import dataclasses
 
 from mrguide.experiments import learning_curves as lc
 from mrguide.experiments import noise_robustness as nr
-from mrguide.experiments.runs import configs
+from mrguide.experiments.train_runs import configs
 from tests.experiments.conftest import write_run
 
 

@@ -9,7 +9,7 @@ import torch
 
 from mrguide.config import ConfigError
 from mrguide.policies.ddpg import DDPG, GRIP_MARGIN, DDPGConfig, bc_error
-from mrguide.policies.replay import TaggedReplay
+from mrguide.policies.replay_buffer import TaggedReplay
 
 
 def batches(n, size=32):

@@ -6,7 +6,7 @@ import pytest
 
 from mrguide.policies.choices import LEARNERS as LEARNER_NAMES
 from mrguide.policies.learners import LEARNERS, make_learner
-from mrguide.policies.replay import TaggedReplay
+from mrguide.policies.replay_buffer import TaggedReplay
 from mrguide.task import ACT_DIM, OBS_DIM
 
 

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from mrguide.policies.replay import RingBuffer, TaggedReplay
+from mrguide.policies.replay_buffer import RingBuffer, TaggedReplay
 
 
 def filled(n_agent, n_expert, cap=10_000):

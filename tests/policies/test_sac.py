@@ -9,7 +9,7 @@ import torch
 
 from mrguide.config import ConfigError
 from mrguide.policies.networks import obs_scaling
-from mrguide.policies.replay import TaggedReplay
+from mrguide.policies.replay_buffer import TaggedReplay
 from mrguide.policies.sac import SAC, SACConfig
 from mrguide.robot import load_robot
 
