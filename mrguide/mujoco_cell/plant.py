@@ -22,7 +22,7 @@ import numpy as np
 
 from mrguide.cell_layout import CUP_RADIUS, CupConfig
 from mrguide.drivers.mock.first_order_plant import FirstOrderParams
-from mrguide.drivers.mock.plant import Plant
+from mrguide.drivers.mock.plant import CellPlant
 from mrguide.mujoco_cell.config import MujocoCellConfig
 from mrguide.mujoco_cell.model import build_cell
 from mrguide.robot import RobotSpec
@@ -31,7 +31,7 @@ from mrguide.robot import RobotSpec
 SEAL_MIN_COS = math.cos(math.radians(10.0))
 
 
-class MujocoPlant(Plant):
+class MujocoPlant(CellPlant):
     """The MuJoCo cell: arm, table, one cube part and a suction cup, advanced one SYNC period at a time."""
 
     def __init__(

@@ -97,8 +97,9 @@ class TwinConfig:
         return round(self.decision_period / self.control_period)
 
 
-#: The physics engines a simulated cell can run on ([plant] engine; twin/dry_run.py builds each).
-PLANT_ENGINES = ("pybullet", "mujoco")
+#: The physics engines a simulated cell can run on ([plant] engine): the two shipped ones, and any a module registered
+#: with `twin.dry_run.register_plant` (which builds each).
+PLANT_ENGINES: list[str] = ["pybullet", "mujoco"]
 
 
 @dataclass(frozen=True)

@@ -23,11 +23,12 @@ from mrguide.deploy.safety import SafetyConfig
 from mrguide.deploy.session import DeploySummary, run_session
 from mrguide.drivers.cobot import Cobot
 from mrguide.drivers.config import CobotBusConfig
+from mrguide.drivers.mock.plant import CellPlant
 from mrguide.drivers.mock.sim_cobot import SimulatedCobot, shared_pc_config
 from mrguide.drivers.realtime import settled_heap
 from mrguide.pose_source import ObjectPoseSource
 from mrguide.robot import RobotSpec, load_robot
-from mrguide.twin.config import TwinConfig
+from mrguide.twin.config import PLANT_ENGINES, TwinConfig
 from mrguide.twin.env import EnvConfig
 from mrguide.twin.plant import TwinObjectPose, TwinPlant
 from mrguide.twin.scene import Scene
@@ -42,7 +43,7 @@ class SimulatedCell:
     twin's scene when the engine is PyBullet, else None."""
 
     scene: Scene | None
-    plant: TwinPlant | MujocoPlant
+    plant: CellPlant
     sim: SimulatedCobot
     cobot: Cobot
 
@@ -58,11 +59,24 @@ def _mujoco_plant(env_cfg: EnvConfig, twin_cfg: TwinConfig, spec: RobotSpec, see
     return MujocoPlant(spec, env_cfg.plant.mujoco, env_cfg.task.object_height, cup=twin_cfg.cup), None
 
 
-#: How each engine of [plant] engine builds the plant behind the simulated drives (and the twin's scene, if any).
-PLANT_BUILDERS: dict[str, Callable[..., tuple[TwinPlant | MujocoPlant, Scene | None]]] = {
-    "pybullet": _pybullet_plant,
-    "mujoco": _mujoco_plant,
-}
+#: (env config, twin config, arm, seed) → the plant behind the simulated drives, and the twin's scene if it has one.
+PlantBuilder = Callable[[EnvConfig, TwinConfig, RobotSpec, int], tuple[CellPlant, Scene | None]]
+#: How each engine of [plant] engine builds its plant (`register_plant`).
+PLANT_BUILDERS: dict[str, PlantBuilder] = {}
+
+
+def register_plant(engine: str, builder: PlantBuilder) -> None:
+    """Make `[plant] engine = ENGINE` a cell's engine, built by `builder`; ValueError if the name is taken. The plant
+    contract tests (`tests/drivers/test_plant_contract.py`) run on every registered engine."""
+    if engine in PLANT_BUILDERS:
+        raise ValueError(f"plant engine {engine!r} is registered already")
+    PLANT_BUILDERS[engine] = builder
+    if engine not in PLANT_ENGINES:
+        PLANT_ENGINES.append(engine)
+
+
+register_plant("pybullet", _pybullet_plant)
+register_plant("mujoco", _mujoco_plant)
 
 
 @contextlib.contextmanager

@@ -12,12 +12,12 @@ from typing import Protocol
 
 import numpy as np
 
-from mrguide.drivers.mock.plant import Plant
+from mrguide.drivers.mock.plant import CellPlant
 from mrguide.pose_source import ObjectPoseSource
 from mrguide.twin.scene import Scene
 
 
-class TwinPlant(Plant):
+class TwinPlant(CellPlant):
     """A `Scene` driven through the `Plant` interface."""
 
     def __init__(self, scene: Scene):

@@ -54,3 +54,21 @@ class Plant(ABC):
     @abstractmethod
     def set_vacuum_leak(self, fraction: float) -> None:
         """Fault injection: a leak in the vacuum line; 0 = tight, 1 = no vacuum can build at the cup."""
+
+
+class CellPlant(Plant):
+    """A plant that is a whole simulated cell: a part to pick and a goal to place it at (dry runs, the sim-to-real
+    conditions and their judges), and a view for the cameras. The PyBullet twin's and the MuJoCo cell's plants are
+    ones; an engine registers its builder with `twin.dry_run.register_plant`."""
+
+    @abstractmethod
+    def place_objects(self, obj: np.ndarray, goal: np.ndarray) -> None:
+        """A new layout: the part at rest at `obj` (m), the goal at `goal`; the arm left where the drives hold it."""
+
+    @abstractmethod
+    def object_position(self) -> np.ndarray:
+        """The part's centre (m, robot base frame), the cell's ground truth."""
+
+    @abstractmethod
+    def view(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """What a camera sees, read at one instant: part position, quaternion (x, y, z, w), true joints."""
