@@ -14,9 +14,10 @@ Learner = Literal["ddpg", "sac"]
 LEARNERS: tuple[Learner, ...] = get_args(Learner)
 
 #: guidance.source: the scripted oracle, the simulated MR annotator (oracle + noise), a recorded annotation file,
-#: or a person through the live annotation page (`mrguide train --expert live`).
+#: or a person through the live annotation page (`mrguide train --expert live`) — and any source a module registered
+#: (`policies.guided_expert.register_expert_source`).
 ExpertSourceName = Literal["oracle", "annotator", "file", "live"]
-EXPERT_SOURCES: tuple[ExpertSourceName, ...] = get_args(ExpertSourceName)
+EXPERT_SOURCES: list[str] = list(get_args(ExpertSourceName))
 
 #: guidance.reference: a^e of Eq. 13, the task model's target or a running median of the marks (no ground truth).
 ReferenceName = Literal["nominal", "running_median"]

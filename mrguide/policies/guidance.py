@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import logging
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Protocol
 
@@ -152,7 +152,8 @@ class GuidanceConfig:
     #: five waypoints following from the fused marks (task.waypoint_from_mark). "phases" (the paper's): every
     #: phase's waypoint, used as marked. Both bounded by Eq. 13 around `reference`.
     marks: MarksMode = "pick_place"
-    source: ExpertSourceName = "annotator"  # "oracle", "annotator" (oracle + noise), "file", "live" (`--expert live`)
+    #: "oracle", "annotator" (oracle + noise), "file", "live" (`--expert live`), or a registered source
+    source: ExpertSourceName | str = "annotator"
     noise: AnnotatorNoise = field(default_factory=AnnotatorNoise)
     pose: PoseError = field(default_factory=PoseError)
     #: m: a kind of mark (pick or place) is not asked again once the median of its marks is known to within this per
@@ -186,7 +187,7 @@ class GuidanceConfig:
         check_number("guidance.mark_precision", self.mark_precision, 0.0, 1.0, " m")
 
 
-def _either(choices: tuple[str, ...]) -> str:
+def _either(choices: Sequence[str]) -> str:
     """'a' or 'b'; 'a', 'b' or 'c'."""
     quoted = [repr(c) for c in choices]
     return f"{', '.join(quoted[:-1])} or {quoted[-1]}"

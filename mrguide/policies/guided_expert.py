@@ -16,7 +16,7 @@ import numpy as np
 
 from mrguide.config import ConfigError
 from mrguide.policies.annotations import AnnotationCache
-from mrguide.policies.choices import ExpertSourceName, MarksMode
+from mrguide.policies.choices import EXPERT_SOURCES, MarksMode
 from mrguide.policies.experts import ANNOTATOR_SEED_OFFSET, ExpertSource, FileExpert, OracleExpert, SimulatedAnnotator
 from mrguide.policies.guidance import GuidanceConfig, PoseError, ReferencePose, bounded_projection
 from mrguide.policies.mark_fusion import KINDS, MarkFusion, anchor
@@ -283,15 +283,28 @@ class GuidedExpert:
             self.reference.observe(seen, ann)
 
 
-#: The in-process expert source of each guidance.source, built from (guidance, env, training seed). "live" is not
-#: among them: a person is attached by `mrguide train --expert live` (the trainer's `source_factory`).
-IN_PROCESS_SOURCES: dict[ExpertSourceName, Callable[[GuidanceConfig, PickPlaceEnv, int], ExpertSource]] = {
-    "oracle": lambda g, env, seed: OracleExpert(env.task_cfg),
-    "annotator": lambda g, env, seed: SimulatedAnnotator(
-        env.task_cfg, g.noise, env.workspace, seed=seed + ANNOTATOR_SEED_OFFSET
-    ),
-    "file": lambda g, env, seed: FileExpert(g.annotation_file, g.cache_tolerance),
-}
+#: (guidance, env, training seed) → an expert source.
+SourceFactory = Callable[[GuidanceConfig, PickPlaceEnv, int], ExpertSource]
+#: The in-process expert source of each guidance.source (`register_expert_source`). "live" is not among them: a
+#: person is attached by `mrguide train --expert live` (the trainer's `source_factory`).
+IN_PROCESS_SOURCES: dict[str, SourceFactory] = {}
+
+
+def register_expert_source(name: str, factory: SourceFactory) -> None:
+    """Make `guidance.source = NAME` build its marks' source with `factory`; ValueError if the name is taken."""
+    if name in IN_PROCESS_SOURCES or name == "live":
+        raise ValueError(f"expert source {name!r} is registered already")
+    IN_PROCESS_SOURCES[name] = factory
+    if name not in EXPERT_SOURCES:
+        EXPERT_SOURCES.append(name)
+
+
+register_expert_source("oracle", lambda g, env, seed: OracleExpert(env.task_cfg))
+register_expert_source(
+    "annotator",
+    lambda g, env, seed: SimulatedAnnotator(env.task_cfg, g.noise, env.workspace, seed=seed + ANNOTATOR_SEED_OFFSET),
+)
+register_expert_source("file", lambda g, env, seed: FileExpert(g.annotation_file, g.cache_tolerance))
 
 
 def make_expert_source(g: GuidanceConfig, env: PickPlaceEnv, seed: int) -> ExpertSource:
