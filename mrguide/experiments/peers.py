@@ -21,7 +21,7 @@ from mrguide.experiments.registry import Experiment, register
 from mrguide.experiments.run_records import RunRecord, read_run
 from mrguide.experiments.stats import person_minutes
 from mrguide.experiments.train_runs import TrainRun
-from mrguide.policies.choices import LEARNERS, Learner
+from mrguide.policies.choices import LEARNER_NAMES, LEARNERS, Learner
 
 COLORS = {"ddpg": "tab:red", "sac": "tab:purple"}
 
@@ -32,7 +32,7 @@ class PeersConfig:
 
     seeds: int = 10
     steps: int = 20_000
-    learners: tuple[Learner, ...] = LEARNERS
+    learners: tuple[Learner | str, ...] = LEARNERS  # the shipped two; any registered learner may be named
     config: str = "../runs/person.toml"  # base training config, relative to the experiment file (the marks in process)
     marks_budget: int = 100  # compare the learners' evaluation success after this many marks ...
     time_budget_s: float = 180.0  # ... and after this much training wall time
@@ -43,8 +43,10 @@ class PeersConfig:
         check_number("experiment.steps", self.steps, 1, 10**8, integer=True)
         check_number("experiment.marks_budget", self.marks_budget, 1, 10**6, integer=True)
         check_number("experiment.time_budget_s", self.time_budget_s, 1.0, 1e7, " s")
-        if not self.learners or any(v not in LEARNERS for v in self.learners):
-            raise ConfigError(f"experiment.learners = {list(self.learners)!r}: expected some of {', '.join(LEARNERS)}")
+        if not self.learners or any(v not in LEARNER_NAMES for v in self.learners):
+            raise ConfigError(
+                f"experiment.learners = {list(self.learners)!r}: expected some of {', '.join(LEARNER_NAMES)}"
+            )
 
 
 def runs(cfg: PeersConfig, base_config: str | None) -> list[TrainRun]:

@@ -9,9 +9,12 @@ from __future__ import annotations
 
 from typing import Literal, get_args
 
-#: train.learner: the paper's guided DDPG ([ddpg]) or the RLPD-style SAC peer ([sac]).
+#: train.learner: the paper's guided DDPG ([ddpg]) or the RLPD-style SAC peer ([sac]) — the shipped two (what the
+#: peers experiment compares) — and `LEARNER_NAMES`, what a config may choose: those and any a module registered
+#: (`policies.learners.register_learner`).
 Learner = Literal["ddpg", "sac"]
 LEARNERS: tuple[Learner, ...] = get_args(Learner)
+LEARNER_NAMES: list[str] = list(LEARNERS)
 
 #: guidance.source: the scripted oracle, the simulated MR annotator (oracle + noise), a recorded annotation file,
 #: or a person through the live annotation page (`mrguide train --expert live`) — and any source a module registered

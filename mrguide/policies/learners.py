@@ -3,9 +3,9 @@
 A learner is an agent the trainer drives without knowing which it is (`Learner`): it acts, learns from the
 tagged replay buffer after every environment step, says which actor is evaluated and exported, and gives and
 takes the state a checkpoint saves. `LEARNERS` maps `train.learner` to its class, the TOML section of its
-settings and their dataclass; `choices.Learner` names the same keys for the configs, without importing torch
-(tests/policies/test_learners.py checks that the two agree). To add a learner: write the class, add its name to
-`choices.Learner` and its entry here.
+settings and their dataclass (`register_learner`); `choices.LEARNER_NAMES` holds the same names for the configs,
+without importing torch (tests/policies/test_learners.py checks that the two agree). To add a learner: write the
+class and register it.
 """
 
 from __future__ import annotations
@@ -16,6 +16,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from mrguide.policies.choices import LEARNER_NAMES
 from mrguide.policies.ddpg import DDPG, DDPGConfig
 from mrguide.policies.networks import Actor
 from mrguide.policies.replay_buffer import TaggedReplay
@@ -61,10 +62,21 @@ class LearnerEntry:
     config: type
 
 
-LEARNERS: dict[str, LearnerEntry] = {
-    "ddpg": LearnerEntry(DDPG, "ddpg", DDPGConfig),
-    "sac": LearnerEntry(SAC, "sac", SACConfig),
-}
+LEARNERS: dict[str, LearnerEntry] = {}
+
+
+def register_learner(name: str, entry: LearnerEntry) -> None:
+    """Make `train.learner = NAME` train `entry`'s class; ValueError if the name is taken. Its settings come from an
+    existing section ([ddpg] or [sac]): a learner with a section of its own also needs it in the configs."""
+    if name in LEARNERS:
+        raise ValueError(f"learner {name!r} is registered already")
+    LEARNERS[name] = entry
+    if name not in LEARNER_NAMES:
+        LEARNER_NAMES.append(name)
+
+
+register_learner("ddpg", LearnerEntry(DDPG, "ddpg", DDPGConfig))
+register_learner("sac", LearnerEntry(SAC, "sac", SACConfig))
 
 
 def make_learner(

@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from mrguide.config import ConfigError, check_number, load_section, replace_path, to_dict
-from mrguide.policies.choices import LEARNERS, OVERRIDE_SECTIONS, Learner
+from mrguide.policies.choices import LEARNER_NAMES, OVERRIDE_SECTIONS, Learner
 from mrguide.policies.ddpg import DDPGConfig
 from mrguide.policies.guidance import GuidanceConfig
 from mrguide.policies.sac import SACConfig
@@ -24,7 +24,7 @@ class TrainConfig:
 
     total_steps: int = 20_000  # paper: 20k timesteps (Fig. 3)
     #: "ddpg" (the paper's learner, [ddpg]) or "sac" (the RLPD-style peer, [sac]; `mrguide experiment peers`).
-    learner: Learner = "ddpg"
+    learner: Learner | str = "ddpg"  # a shipped learner or a registered one
     seed: int = 0
     batch_size: int = 256  # Table I
     buffer_size: int = 1_000_000  # Table I
@@ -36,8 +36,8 @@ class TrainConfig:
 
     def __post_init__(self) -> None:
         check_number("train.total_steps", self.total_steps, 1, 10**9, integer=True)
-        if self.learner not in LEARNERS:
-            raise ConfigError(f"train.learner = {self.learner!r}: expected one of {', '.join(LEARNERS)}")
+        if self.learner not in LEARNER_NAMES:
+            raise ConfigError(f"train.learner = {self.learner!r}: expected one of {', '.join(LEARNER_NAMES)}")
         check_number("train.seed", self.seed, 0, 2**32 - 1, integer=True)
         check_number("train.batch_size", self.batch_size, 1, 1 << 20, integer=True)
         check_number("train.buffer_size", self.buffer_size, 1, 10**8, integer=True)

@@ -1,17 +1,22 @@
 """The learner registry: the names a config may choose are the learners the trainer can build, and each of them
 acts, learns, and survives its own checkpoint round trip through the `Learner` interface alone."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
-from mrguide.policies.choices import LEARNERS as LEARNER_NAMES
-from mrguide.policies.learners import LEARNERS, make_learner
+from mrguide.policies.choices import LEARNER_NAMES
+from mrguide.policies.ddpg import DDPG, DDPGConfig
+from mrguide.policies.learners import LEARNERS, LearnerEntry, make_learner, register_learner
 from mrguide.policies.replay_buffer import TaggedReplay
+from mrguide.policies.train import Trainer
+from mrguide.policies.train_config import load_train_config
 from mrguide.task import ACT_DIM, OBS_DIM
 
 
 def test_the_configs_choices_are_the_registered_learners():
-    assert set(LEARNER_NAMES) == set(LEARNERS)
+    assert list(LEARNERS) == LEARNER_NAMES
 
 
 @pytest.mark.parametrize("name", sorted(LEARNERS))
@@ -35,3 +40,35 @@ def test_a_registered_learner_acts_learns_and_restores(name):
     assert not np.array_equal(again.act(obs), action)  # another seed, other weights: the restore below matters
     again.load_state_dict(agent.state_dict())
     np.testing.assert_array_equal(again.act(obs), action)
+
+
+class CountingDDPG(DDPG):
+    """Guided DDPG, counting the environment steps it learned from."""
+
+    learned = 0
+
+    def learn(self, replay, lam, batch_size, rng):
+        CountingDDPG.learned += 1
+        return super().learn(replay, lam, batch_size, rng)
+
+
+@pytest.fixture
+def toy_learner():
+    register_learner("toy-ddpg", LearnerEntry(CountingDDPG, "ddpg", DDPGConfig))
+    CountingDDPG.learned = 0
+    yield "toy-ddpg"
+    del LEARNERS["toy-ddpg"]
+    LEARNER_NAMES.remove("toy-ddpg")
+
+
+def test_a_registered_learner_trains_by_its_name_and_a_name_is_registered_once(toy_learner, tmp_path):
+    tc, dc, gc, ec = load_train_config(None)
+    tc = dataclasses.replace(tc, learner=toy_learner, total_steps=200, learning_starts=64, batch_size=32)
+    tr = Trainer(dataclasses.replace(tc, eval_every=10_000), dataclasses.replace(dc, hidden=(16, 16)), gc, ec, tmp_path)
+    try:
+        tr.run(stop_at=150)
+    finally:
+        tr.close()
+    assert isinstance(tr.agent, CountingDDPG) and CountingDDPG.learned == tr.agent.updates > 0
+    with pytest.raises(ValueError, match="registered already"):
+        register_learner("sac", LearnerEntry(CountingDDPG, "ddpg", DDPGConfig))
