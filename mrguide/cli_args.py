@@ -82,3 +82,11 @@ def override_arg(text: str) -> tuple[str, Any]:
     except tomllib.TOMLDecodeError:
         value = raw
     return key.strip(), value
+
+
+def add_set_argument(parser: argparse.ArgumentParser, help_text: str) -> None:
+    """The repeatable `--set SECTION.KEY=VALUE` of every command that takes a config (`override_arg` values in
+    `args.set`, a list of (key, value))."""
+    parser.add_argument(
+        "--set", type=override_arg, action="append", default=[], metavar="SECTION.KEY=VALUE", help=help_text
+    )

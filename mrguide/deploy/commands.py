@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 from tqdm import tqdm
 
-from mrguide.cli_args import nonnegative_int, override_arg, positive_int
+from mrguide.cli_args import add_set_argument, nonnegative_int, positive_int
 from mrguide.errors import InputError
 
 if TYPE_CHECKING:
@@ -82,13 +82,9 @@ def add_deploy_command(sub: argparse._SubParsersAction, dry_run_factory: Callabl
     sp.add_argument("--resume", action="store_true", help="with --cycles and --log: go on from that run log's count")
     sp.add_argument("--seed", type=nonnegative_int, help="dry run: object/goal layouts; default: [deploy] seed")
     sp.add_argument("--log", help="run log path (JSONL); default under [deploy] log_dir")
-    sp.add_argument(
-        "--set",
-        type=override_arg,
-        action="append",
-        default=[],
-        metavar="SECTION.KEY=VALUE",
-        help="set a [deploy] or [safety] key for this run, after --config (e.g. --set deploy.cycles.max_retries=1 "
+    add_set_argument(
+        sp,
+        "set a [deploy] or [safety] key for this run, after --config (e.g. --set deploy.cycles.max_retries=1 "
         "--set safety.stall_timeout=0.3); repeatable",
     )
     sp.add_argument("--quiet", action="store_true")

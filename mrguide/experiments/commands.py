@@ -13,7 +13,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from mrguide.cli_args import override_arg, positive_int
+from mrguide.cli_args import add_set_argument, positive_int
 from mrguide.config import ConfigError, load_section
 from mrguide.experiments.registry import Experiment, experiments
 from mrguide.experiments.train_runs import check_same_config, configs, sac_config
@@ -43,13 +43,9 @@ def add_experiment_command(sub: argparse._SubParsersAction) -> None:
         e.add_argument("--out", help="experiment directory (one subdirectory per run); default runs/<name>")
         e.add_argument("--seeds", type=positive_int, help="override experiment.seeds")
         e.add_argument("--steps", type=positive_int, help="override experiment.steps")
-        e.add_argument(
-            "--set",
-            type=override_arg,
-            action="append",
-            default=[],
-            metavar="SECTION.KEY=VALUE",
-            help="set a training config key for every run, over the file's [experiment.overrides] (e.g. --set "
+        add_set_argument(
+            e,
+            "set a training config key for every run, over the file's [experiment.overrides] (e.g. --set "
             "ddpg.lr_actor=0.001); repeatable; what the experiment itself varies it sets last",
         )
         e.add_argument("--workers", type=positive_int, default=2, help="local Ray: CPUs (= runs at a time)")
@@ -62,7 +58,7 @@ def add_experiment_command(sub: argparse._SubParsersAction) -> None:
     r.add_argument("--out", help="experiment directory")
     r.add_argument("--seeds", type=positive_int)
     r.add_argument("--steps", type=positive_int)
-    r.add_argument("--set", type=override_arg, action="append", default=[], metavar="SECTION.KEY=VALUE")
+    add_set_argument(r, "the --set the runs were made with (their configuration is read from their files)")
     r.set_defaults(func=cmd_report)
 
 

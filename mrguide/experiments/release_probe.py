@@ -12,13 +12,13 @@ Prints one line per policy and writes OUT/release_probe.csv:
 from __future__ import annotations
 
 import argparse
-import csv
 from pathlib import Path
 
 import numpy as np
 
 from mrguide.cli_args import positive_int
 from mrguide.deploy.policy import ExportedPolicy
+from mrguide.experiments import report
 from mrguide.task import OBS_GOAL, Phase
 from mrguide.twin.env import PickPlaceEnv
 
@@ -86,11 +86,7 @@ def main(argv: list[str] | None = None) -> int:
         print(", ".join(f"{k} {v}" for k, v in row.items()), flush=True)
     env.close()
     if args.out:
-        Path(args.out).mkdir(parents=True, exist_ok=True)
-        with open(Path(args.out) / "release_probe.csv", "w", newline="") as f:
-            w = csv.DictWriter(f, fieldnames=FIELDS)
-            w.writeheader()
-            w.writerows(rows)
+        report.write_report(Path(args.out), {"release_probe.csv": report.csv_bytes(rows, FIELDS)})
     return 0
 
 

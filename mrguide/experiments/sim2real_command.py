@@ -11,7 +11,7 @@ from typing import Any
 
 from tqdm import tqdm
 
-from mrguide.cli_args import override_arg, positive_int
+from mrguide.cli_args import add_set_argument, positive_int
 from mrguide.config import ConfigError
 from mrguide.experiments.sim2real_runs import CONDITIONS
 from mrguide.shipped_configs import shipped_config
@@ -63,13 +63,9 @@ def add_sim2real_command(sub: argparse._SubParsersAction) -> None:
         help=f"instead of the three conditions, success vs one parameter; reality gap ({', '.join(GAP_PARAMS)}) "
         f"runs condition 2, HMD ({', '.join(HMD_PARAMS)}) condition 3; repeatable",
     )
-    p.add_argument(
-        "--set",
-        type=override_arg,
-        action="append",
-        default=[],
-        metavar="SECTION.KEY=VALUE",
-        help="set a key of the played cells (the 'real' one and the MuJoCo one) for this run, after their files "
+    add_set_argument(
+        p,
+        "set a key of the played cells (the 'real' one and the MuJoCo one) for this run, after their files "
         "(e.g. --set twin.reality_gap.object_mass=0.4 --set calibration.hmd.tracking_noise_m=0.005); repeatable; "
         "sections: twin, task, robot, plant, safety, calibration.hmd",
     )

@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 from tqdm import tqdm
 
-from mrguide.cli_args import nonnegative_int, override_arg, positive_int
+from mrguide.cli_args import add_set_argument, nonnegative_int, positive_int
 from mrguide.policies.choices import EXPERT_SOURCES, OVERRIDE_SECTIONS
 
 if TYPE_CHECKING:
@@ -62,13 +62,9 @@ def add_train_command(sub: argparse._SubParsersAction, live: LivePlugin | None =
         metavar="N",
         help="stop (checkpoint, export) after N steps, keeping the schedule of total_steps; --resume continues",
     )
-    p.add_argument(
-        "--set",
-        type=override_arg,
-        action="append",
-        default=[],
-        metavar="SECTION.KEY=VALUE",
-        help="set any config key for this run, after --config (e.g. --set ddpg.lr_actor=0.001 --set "
+    add_set_argument(
+        p,
+        "set any config key for this run, after --config (e.g. --set ddpg.lr_actor=0.001 --set "
         "guidance.noise.sigma=0.02); repeatable; sections: " + ", ".join(OVERRIDE_SECTIONS),
     )
     p.add_argument("--no-guidance", action="store_true", help="baseline DDPG (guidance.enabled = false)")
@@ -332,13 +328,9 @@ def add_config_command(sub: argparse._SubParsersAction) -> None:
         "values, then --set's",
     )
     show.add_argument("--config", help="TOML config, as `mrguide train --config` takes it")
-    show.add_argument(
-        "--set",
-        type=override_arg,
-        action="append",
-        default=[],
-        metavar="SECTION.KEY=VALUE",
-        help="as `mrguide train --set`; repeatable",
+    add_set_argument(
+        show,
+        "as `mrguide train --set`; repeatable",
     )
     show.set_defaults(func=cmd_config_show)
 
