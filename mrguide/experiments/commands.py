@@ -58,7 +58,6 @@ def add_experiment_command(sub: argparse._SubParsersAction) -> None:
     r.add_argument("--out", help="experiment directory")
     r.add_argument("--seeds", type=positive_int)
     r.add_argument("--steps", type=positive_int)
-    add_set_argument(r, "the --set the runs were made with (their configuration is read from their files)")
     r.set_defaults(func=cmd_report)
 
 

@@ -104,8 +104,9 @@ def sweep_arg(text: str) -> tuple[str, list[float]]:
     return name, numbers
 
 
-#: The sections of the played cell that `mrguide sim2real --set` sets (keys of its env config, its safety, its HMD).
-CELL_SET_SECTIONS = ("twin", "task", "robot", "plant", "safety", "calibration.hmd")
+#: The sections of the played cell that `mrguide sim2real --set` sets: its env config's, its safety, its HMD.
+ENV_SECTIONS = ("twin", "task", "robot", "plant")
+CELL_SET_SECTIONS = (*ENV_SECTIONS, "safety", "calibration.hmd")
 
 
 def set_cell_keys(cell: Any, sets: list[tuple[str, Any]]) -> Any:
@@ -118,12 +119,13 @@ def set_cell_keys(cell: Any, sets: list[tuple[str, Any]]) -> Any:
 
     for key, value in sets:
         where = f"--set {key}"
-        if key.split(".", 1)[0] in ("twin", "task", "robot", "plant"):
+        if key.split(".", 1)[0] in ENV_SECTIONS:
             cell = replace(cell, env=replace_path(cell.env, key, value, where))
         elif key.startswith("safety."):
-            cell = replace(cell, safety=replace_path(cell.safety or SafetyConfig(), key[7:], value, where))
+            safety = cell.safety or SafetyConfig()
+            cell = replace(cell, safety=replace_path(safety, key.removeprefix("safety."), value, where))
         elif key.startswith("calibration.hmd."):
-            cell = replace(cell, hmd=replace_path(cell.hmd, key[16:], value, where))
+            cell = replace(cell, hmd=replace_path(cell.hmd, key.removeprefix("calibration.hmd."), value, where))
         else:
             raise ConfigError(f"{where}: sim2real sets keys of the played cell's {', '.join(CELL_SET_SECTIONS)}")
     return cell
