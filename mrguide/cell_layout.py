@@ -4,8 +4,9 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Annotated
 
-from mrguide.config import check_number
+from mrguide.config import Range, check_ranges
 
 #: Radius of the suction cup's lip.
 CUP_RADIUS = 0.02
@@ -18,11 +19,10 @@ TABLE_HALF_EXTENTS = (0.55, 0.60, 0.02)
 class CupConfig:
     """The suction cup's mounting: rigid, or on a spring level-compensator that absorbs height error."""
 
-    stroke: float = 0.0  # m the cup may retract towards the flange; 0 = rigid (trained so far)
-    spring_rate: float = 1000.0  # N/m
-    preload: float = 5.0  # N pushing the cup out at full extension
+    #: m the cup may retract towards the flange; 0 = rigid (trained so far)
+    stroke: Annotated[float, Range(0.0, 0.05, " m")] = 0.0
+    spring_rate: Annotated[float, Range(1.0, 1e6, " N/m")] = 1000.0
+    preload: Annotated[float, Range(0.0, 1000.0, " N")] = 5.0  # N pushing the cup out at full extension
 
     def __post_init__(self) -> None:
-        check_number("twin.cup.stroke", self.stroke, 0.0, 0.05, " m")
-        check_number("twin.cup.spring_rate", self.spring_rate, 1.0, 1e6, " N/m")
-        check_number("twin.cup.preload", self.preload, 0.0, 1000.0, " N")
+        check_ranges(self, "twin.cup")

@@ -8,7 +8,7 @@ import tomllib
 import types
 import typing
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Annotated, Any, TypeVar
 
 import dacite
 
@@ -33,6 +33,44 @@ def check_number(key: str, value: Any, low: float, high: float, unit: str = "", 
         raise ConfigError(f"{key} = {value!r}: expected {kind} in [{low:g}, {high:g}]{unit}")
 
 
+_RANGED: dict[type, tuple[tuple[str, Range, bool], ...]] = {}
+
+
+@dataclasses.dataclass(frozen=True)
+class Range:
+    """A number field's range, declared with the field: `tau: Annotated[float, Range(1e-6, 1.0)] = 0.005`.
+
+    `check_ranges` enforces it (an `int` field must also be a whole number); `unit` ends the error message."""
+
+    low: float
+    high: float
+    unit: str = ""
+
+
+def _ranged_fields(cls: type) -> tuple[tuple[str, Range, bool], ...]:
+    """(name, range, integer) of every field of dataclass `cls` declared `Annotated[int | float, Range(...)]`
+    (read once per class)."""
+    if cls in _RANGED:
+        return _RANGED[cls]
+    hints = typing.get_type_hints(cls, include_extras=True)
+    ranged = []
+    for f in dataclasses.fields(cls):
+        hint = hints[f.name]
+        if typing.get_origin(hint) is Annotated:
+            base, *extras = typing.get_args(hint)
+            ranged += [(f.name, r, base is int) for r in extras if isinstance(r, Range)]
+    _RANGED[cls] = tuple(ranged)
+    return _RANGED[cls]
+
+
+def check_ranges(obj: object, section: str) -> None:
+    """Refuse the first field of dataclass instance `obj` outside its declared `Range`, naming it `section.field`.
+
+    For `__post_init__`, so that a config built in code is checked as one read from a file."""
+    for name, r, integer in _ranged_fields(type(obj)):
+        check_number(f"{section}.{name}", getattr(obj, name), r.low, r.high, r.unit, integer)
+
+
 def from_dict(cls: type[T], data: dict[str, Any], where: str = "config") -> T:
     """Build dataclass `cls` from `data`; unknown keys, wrong types, NaN/inf and values out of range raise
     ConfigError naming `where` and the key."""
@@ -55,7 +93,7 @@ def _number_problem(cls: Any, data: Any, prefix: str) -> str | None:
 
     Walks dataclasses, tuples (of numbers, of points, of tables) and plain numbers. Every float of every
     config must be finite (no setting means "off" by NaN or inf); range checks are in each dataclass's
-    `__post_init__` (`check_number`). Other mismatches are left to dacite, which names them too.
+    `__post_init__` (`check_ranges` of the fields' declared `Range`, `check_number` for the rest). Other mismatches are left to dacite, which names them too.
     """
     key = prefix.rstrip(".")
     if cls in (float, int):

@@ -4,8 +4,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Annotated
 
-from mrguide.config import ConfigError, check_number, load_section
+from mrguide.config import ConfigError, Range, check_number, check_ranges, load_section
 
 #: Corner refinement methods of the ArUco detector, by config name.
 CORNER_REFINEMENTS = ("none", "subpix", "contour", "apriltag", "edges")
@@ -32,17 +33,17 @@ class DetectorConfig:
     """ArUco detection and single-marker pose."""
 
     dictionary: str = "DICT_4X4_50"  # an OpenCV predefined dictionary name
-    marker_size_m: float = 0.04  # black-square edge of single markers (fits a 5 cm cube face with a 5 mm quiet zone)
+    #: black-square edge of single markers (fits a 5 cm cube face with a 5 mm quiet zone)
+    marker_size_m: Annotated[float, Range(MIN_SIZE_M, MAX_SIZE_M, " m")] = 0.04
     corner_refinement: str = "edges"  # one of CORNER_REFINEMENTS; "edges" = OpenCV subpix, then straight-edge fits
-    corner_window_px: int = 5  # half-size of the sub-pixel corner search window
-    min_marker_perimeter_rate: float = 0.02  # smallest marker perimeter as a fraction of the image's larger side
-    ambiguity_ratio: float = 0.6  # IPPE solutions whose error ratio (best/second) exceeds this are ambiguous
+    corner_window_px: Annotated[int, Range(1, 50, " px")] = 5  # half-size of the sub-pixel corner search window
+    #: smallest marker perimeter as a fraction of the image's larger side
+    min_marker_perimeter_rate: Annotated[float, Range(1e-4, 4.0)] = 0.02
+    #: IPPE solutions whose error ratio (best/second) exceeds this are ambiguous
+    ambiguity_ratio: Annotated[float, Range(1e-3, 1.0)] = 0.6
 
     def __post_init__(self) -> None:
-        check_number("calibration.detector.marker_size_m", self.marker_size_m, MIN_SIZE_M, MAX_SIZE_M, " m")
-        check_number("calibration.detector.corner_window_px", self.corner_window_px, 1, 50, " px", integer=True)
-        check_number("calibration.detector.min_marker_perimeter_rate", self.min_marker_perimeter_rate, 1e-4, 4.0)
-        check_number("calibration.detector.ambiguity_ratio", self.ambiguity_ratio, 1e-3, 1.0)
+        check_ranges(self, "calibration.detector")
         if self.corner_refinement not in CORNER_REFINEMENTS:
             raise ConfigError(
                 f"calibration.detector.corner_refinement must be one of {CORNER_REFINEMENTS}, got {self.corner_refinement!r}"
@@ -54,28 +55,26 @@ class BoardConfig:
     """A printed calibration board: an ArUco grid board or a ChArUco board (same dictionary as the detector)."""
 
     kind: str = "grid"  # "grid" or "charuco"
-    columns: int = 5
-    rows: int = 4
-    marker_size_m: float = 0.05  # black-square edge of each board marker
+    columns: Annotated[int, Range(1, 100)] = 5
+    rows: Annotated[int, Range(1, 100)] = 4
+    #: black-square edge of each board marker
+    marker_size_m: Annotated[float, Range(MIN_SIZE_M, MAX_SIZE_M, " m")] = 0.05
     separation_m: float = 0.0125  # grid: gap between neighbouring markers
-    square_size_m: float = 0.07  # charuco: chessboard square edge (> marker_size_m)
-    first_id: int = 10  # board marker ids are first_id, first_id + 1, ... (keeps them apart from object markers)
-    margin_m: float = 0.02  # white quiet zone printed around the board
-    thickness_m: float = 0.003  # board thickness: its printed face lies this far above the table
+    #: charuco: chessboard square edge (> marker_size_m)
+    square_size_m: Annotated[float, Range(MIN_SIZE_M, MAX_SIZE_M, " m")] = 0.07
+    #: board marker ids are first_id, first_id + 1, ... (keeps them apart from object markers)
+    first_id: Annotated[int, Range(0, MAX_MARKER_ID)] = 10
+    margin_m: Annotated[float, Range(1e-4, 1.0, " m")] = 0.02  # white quiet zone printed around the board
+    #: board thickness: its printed face lies this far above the table
+    thickness_m: Annotated[float, Range(0.0, 0.1, " m")] = 0.003
 
     def __post_init__(self) -> None:
         if self.kind not in BOARD_KINDS:
             raise ConfigError(f"calibration.board.kind must be one of {BOARD_KINDS}, got {self.kind!r}")
-        check_number("calibration.board.columns", self.columns, 1, 100, integer=True)
-        check_number("calibration.board.rows", self.rows, 1, 100, integer=True)
-        check_number("calibration.board.marker_size_m", self.marker_size_m, MIN_SIZE_M, MAX_SIZE_M, " m")
-        check_number("calibration.board.first_id", self.first_id, 0, MAX_MARKER_ID, integer=True)
-        check_number("calibration.board.margin_m", self.margin_m, 1e-4, 1.0, " m")
-        check_number("calibration.board.thickness_m", self.thickness_m, 0.0, 0.1, " m")
+        check_ranges(self, "calibration.board")
         if self.kind == "grid":
             check_number("calibration.board.separation_m", self.separation_m, 1e-4, MAX_SIZE_M, " m")
             return
-        check_number("calibration.board.square_size_m", self.square_size_m, MIN_SIZE_M, MAX_SIZE_M, " m")
         if not self.square_size_m > self.marker_size_m:
             raise ConfigError(
                 f"calibration.board.square_size_m ({self.square_size_m}) must exceed marker_size_m ({self.marker_size_m})"
@@ -88,12 +87,12 @@ class BoardConfig:
 class MarkerPlacement:
     """A single marker at a known pose on the table: id, centre (m) and yaw (deg) in the robot base frame."""
 
-    id: int
+    id: Annotated[int, Range(0, MAX_MARKER_ID)]
     xyz: tuple[float, float, float]
     yaw_deg: float = 0.0
 
     def __post_init__(self) -> None:
-        check_number("calibration.targets.markers.id", self.id, 0, MAX_MARKER_ID, integer=True)
+        check_ranges(self, "calibration.targets.markers")
         check_points(f"calibration.targets.markers (id {self.id}).xyz", (self.xyz,))
         check_number(f"calibration.targets.markers (id {self.id}).yaw_deg", self.yaw_deg, -360.0, 360.0, " deg")
 
@@ -111,7 +110,8 @@ class TargetsConfig:
     board_xyz: tuple[float, float, float] = (0.33, 0.25, 0.003)
     board_yaw_deg: float = 0.0
     board_touched_corners: tuple[tuple[float, float, float], ...] = ()
-    touch_tolerance_m: float = 0.003  # largest allowed residual of the touched corners against the board outline
+    #: largest allowed residual of the touched corners against the board outline
+    touch_tolerance_m: Annotated[float, Range(1e-5, 0.1, " m")] = 0.003
     markers: tuple[MarkerPlacement, ...] = ()  # single markers (size from the detector config)
 
     def __post_init__(self) -> None:
@@ -122,25 +122,24 @@ class TargetsConfig:
             )
         if not self.use_board and not self.markers:
             raise ConfigError("calibration.targets: no targets (use_board = false and no markers)")
-        check_number("calibration.targets.touch_tolerance_m", self.touch_tolerance_m, 1e-5, 0.1, " m")
+        check_ranges(self, "calibration.targets")
 
 
 @dataclass(frozen=True)
 class RegistrationConfig:
     """Registration of the HMD (or camera) frame to the robot base frame."""
 
-    min_markers: int = 4  # target markers a frame must show to be used
-    min_frames: int = 1  # usable frames required after outlier rejection
-    outlier_translation_m: float = 0.01  # frames whose estimate is farther than this from the median are rejected
-    outlier_rotation_deg: float = 2.0  # ... or whose rotation differs from the mean by more than this
-    max_rms_residual_m: float = 0.005  # a larger RMS residual is reported as a warning
+    min_markers: Annotated[int, Range(1, 1000)] = 4  # target markers a frame must show to be used
+    min_frames: Annotated[int, Range(1, 1000)] = 1  # usable frames required after outlier rejection
+    #: frames whose estimate is farther than this from the median are rejected
+    outlier_translation_m: Annotated[float, Range(1e-5, 1.0, " m")] = 0.01
+    #: ... or whose rotation differs from the mean by more than this
+    outlier_rotation_deg: Annotated[float, Range(1e-3, 180.0, " deg")] = 2.0
+    #: a larger RMS residual is reported as a warning
+    max_rms_residual_m: Annotated[float, Range(1e-6, 1.0, " m")] = 0.005
 
     def __post_init__(self) -> None:
-        check_number("calibration.registration.min_markers", self.min_markers, 1, 1000, integer=True)
-        check_number("calibration.registration.min_frames", self.min_frames, 1, 1000, integer=True)
-        check_number("calibration.registration.outlier_translation_m", self.outlier_translation_m, 1e-5, 1.0, " m")
-        check_number("calibration.registration.outlier_rotation_deg", self.outlier_rotation_deg, 1e-3, 180.0, " deg")
-        check_number("calibration.registration.max_rms_residual_m", self.max_rms_residual_m, 1e-6, 1.0, " m")
+        check_ranges(self, "calibration.registration")
 
 
 @dataclass(frozen=True)
@@ -156,7 +155,7 @@ class HmdNoiseConfig:
         0.1,
         0.0,
     )  # base point the rotation error turns about (workspace centre)
-    seed: int = 0
+    seed: Annotated[int, Range(0, 2**32 - 1)] = 0
 
     def __post_init__(self) -> None:
         for name, high, unit in (
@@ -166,7 +165,7 @@ class HmdNoiseConfig:
             ("calibration_error_deg", 45.0, " deg"),
         ):
             check_number(f"calibration.hmd.{name}", getattr(self, name), 0.0, high, unit)
-        check_number("calibration.hmd.seed", self.seed, 0, 2**32 - 1, integer=True)
+        check_ranges(self, "calibration.hmd")
 
 
 @dataclass(frozen=True)

@@ -17,6 +17,7 @@ from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Annotated
 
 import numpy as np
 
@@ -27,7 +28,7 @@ from mrguide.calibration.detection import MarkerDetector
 from mrguide.calibration.errors import CalibrationFileError
 from mrguide.calibration.hmd import HmdFrame
 from mrguide.calibration.pose_sources import MarkerObservation, MarkerPoseSource
-from mrguide.config import ConfigError, check_number
+from mrguide.config import ConfigError, Range, check_number, check_ranges
 from mrguide.deploy.frames import Frame, FrameGrabError, FrameSource, open_frames
 from mrguide.errors import InputError
 from mrguide.pose_source import ObjectPoseSource, PoseUnavailable
@@ -48,13 +49,14 @@ class CameraSourceConfig:
     source: int | str = 0  # device index, stream URL ("rtsp://..."), or a folder of images / a video file
     calibration: str = ""  # `mrguide calibrate` file of this camera (robot <- camera registration, intrinsics)
     intrinsics: str = ""  # intrinsics file; "" = the calibration file's "camera"
-    marker_id: int = 0  # the object's marker (dictionary: the calibration file's)
-    marker_size_m: float = 0.04  # its black-square edge
+    marker_id: Annotated[int, Range(0, 999)] = 0  # the object's marker (dictionary: the calibration file's)
+    marker_size_m: Annotated[float, Range(1e-3, 1.0, " m")] = 0.04  # its black-square edge
     #: From the marker centre to the object centre, in the marker frame (z out of the print): a 4 cm marker on
     #: top of the 5 cm cube sits 25.5 mm above its centre.
     marker_to_object_m: tuple[float, float, float] = (0.0, 0.0, -0.0255)
-    max_pose_age_s: float = 1.0  # an older pose counts as missing
-    frame_rate: float = 15.0  # folders: images per second (0 = as fast as they are processed)
+    max_pose_age_s: Annotated[float, Range(0.01, 60.0, " s")] = 1.0  # an older pose counts as missing
+    #: folders: images per second (0 = as fast as they are processed)
+    frame_rate: Annotated[float, Range(0.0, 1000.0, " Hz")] = 15.0
     loop: bool = False  # folders: start again after the last image
 
     def __post_init__(self) -> None:
@@ -65,12 +67,9 @@ class CameraSourceConfig:
             )
         if isinstance(self.source, str) and not self.source.strip():
             raise ConfigError("deploy.camera.source must not be empty")
-        check_number("deploy.camera.marker_id", self.marker_id, 0, 999, integer=True)
-        check_number("deploy.camera.marker_size_m", self.marker_size_m, 1e-3, 1.0, " m")
+        check_ranges(self, "deploy.camera")
         for k, v in enumerate(self.marker_to_object_m):
             check_number(f"deploy.camera.marker_to_object_m[{k}]", v, -1.0, 1.0, " m")
-        check_number("deploy.camera.max_pose_age_s", self.max_pose_age_s, 0.01, 60.0, " s")
-        check_number("deploy.camera.frame_rate", self.frame_rate, 0.0, 1000.0, " Hz")
 
 
 def load_marker_pipeline(cfg: CameraSourceConfig, base_dir: Path) -> MarkerPoseSource:

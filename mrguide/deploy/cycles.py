@@ -23,11 +23,11 @@ import time
 from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import Annotated, Protocol
 
 import numpy as np
 
-from mrguide.config import ConfigError, check_number
+from mrguide.config import ConfigError, Range, check_number, check_ranges
 from mrguide.deploy.interrupt import CycleInterrupt
 from mrguide.deploy.runtime import EpisodeReport, RunStopped, Runtime
 from mrguide.drivers.errors import DriverError
@@ -52,7 +52,7 @@ class CycleConfig:
     """Production cycles ([deploy.cycles] in a TOML config)."""
 
     #: Failed attempts at one part that are retried; one more raises an alarm. In [0, 100].
-    max_retries: int = 3
+    max_retries: Annotated[int, Range(0, 100)] = 3
     #: What an alarm does: "stop" ends the run (the operator clears the cell and resumes), "skip" leaves the
     #: part for the operator and goes on with the next one.
     on_alarm: str = "stop"
@@ -60,29 +60,26 @@ class CycleConfig:
     #: was trained on (the twin's object region) plus 2 cm around it.
     pick_region: tuple[tuple[float, float], tuple[float, float]] = ((0.38, -0.17), (0.62, 0.02))
     #: How far (m) a part's centre may be from its resting height on the table and still be picked.
-    rest_height_tolerance: float = 0.01
+    rest_height_tolerance: Annotated[float, Range(0.0, 0.1, " m")] = 0.01
     #: How long (s) the arm waits at home for the pose source to see the part (a camera or HMD that lost its
     #: view, a tracking restart) before the alarm. In [0, 600].
-    pose_wait_s: float = 10.0
+    pose_wait_s: Annotated[float, Range(0.0, 600.0, " s")] = 10.0
     #: How far (m) the arm rises straight up after a place, clear of the part it let go; 0: no depart move.
     #: In [0, 0.3].
-    depart_height: float = 0.05
+    depart_height: Annotated[float, Range(0.0, 0.3, " m")] = 0.05
     #: Whether each cycle's attempt starts from home (true), or from where the arm departed after the last place
     #: (false: no homing between cycles, for a policy trained to start from there; the shipped policies,
     #: trained from home only, miss grasps from there: docs/results).
     home_between_cycles: bool = True
 
     def __post_init__(self) -> None:
-        check_number("deploy.cycles.max_retries", self.max_retries, 0, 100, integer=True)
+        check_ranges(self, "deploy.cycles")
         if self.on_alarm not in ALARM_ACTIONS:
             raise ConfigError(f"deploy.cycles.on_alarm = {self.on_alarm!r}: expected one of {', '.join(ALARM_ACTIONS)}")
         low, high = self.pick_region
         for k in range(2):
             check_number(f"deploy.cycles.pick_region[0][{k}]", low[k], -5.0, 5.0, " m")
             check_number(f"deploy.cycles.pick_region[1][{k}]", high[k], low[k], 5.0, " m")
-        check_number("deploy.cycles.rest_height_tolerance", self.rest_height_tolerance, 0.0, 0.1, " m")
-        check_number("deploy.cycles.pose_wait_s", self.pose_wait_s, 0.0, 600.0, " s")
-        check_number("deploy.cycles.depart_height", self.depart_height, 0.0, 0.3, " m")
         if not isinstance(self.home_between_cycles, bool):
             raise ConfigError(
                 f"deploy.cycles.home_between_cycles = {self.home_between_cycles!r}: expected true or false"

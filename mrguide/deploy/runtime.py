@@ -15,11 +15,11 @@ import time
 from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import NoReturn
+from typing import Annotated, NoReturn
 
 import numpy as np
 
-from mrguide.config import ConfigError, check_number
+from mrguide.config import ConfigError, Range, check_ranges
 from mrguide.deploy.decision import NON_FINITE, ActionError, DecisionStep
 from mrguide.deploy.following import FollowingMonitor
 from mrguide.deploy.lift_rule import LiftRule
@@ -55,29 +55,23 @@ class RuntimeConfig:
     """How the runtime treats the arm and the object pose ([deploy.runtime] in a TOML config). The decision
     period is not set here: it is the one the policy was trained with (its metadata)."""
 
-    home_tolerance: float = 0.01  # rad; the arm counts as home within this
+    home_tolerance: Annotated[float, Range(1e-4, 0.5, " rad")] = 0.01  # the arm counts as home within this
     #: While the vacuum generator reports a part after the grasp, the object hangs under the cup: take its
     #: position from the TCP (forward kinematics) instead of the pose source, which may lag (an HMD does).
     track_carried_object: bool = True
     #: Decisions in a row that may use the last object pose when the pose source has none (a marker out of
     #: view, a dead HMD process); one more ends the episode as `pose_lost` with the arm held. In [0, 1000].
-    max_pose_misses: int = 3
+    max_pose_misses: Annotated[int, Range(0, 1000)] = 3
     #: The same before the grasp (approach and grasp phases), when the arm over the part hides its marker from
     #: the camera or HMD while the part lies still where it was last seen. In [0, 1000].
-    max_pose_misses_before_grasp: int = 30
+    max_pose_misses_before_grasp: Annotated[int, Range(0, 1000)] = 30
     #: The lift's first part at a bounded speed, so that a cup's level-compensator reaches its end stop gently
     #: (lift_rule.py): how far (m, in [0, 0.1]; 0 = off) and how fast (m/s, in [0.005, 1]).
-    break_away_distance: float = 0.015
-    break_away_speed: float = 0.1
+    break_away_distance: Annotated[float, Range(0.0, 0.1, " m")] = 0.015
+    break_away_speed: Annotated[float, Range(0.005, 1.0, " m/s")] = 0.1
 
     def __post_init__(self) -> None:
-        check_number("deploy.runtime.home_tolerance", self.home_tolerance, 1e-4, 0.5, " rad")
-        check_number("deploy.runtime.max_pose_misses", self.max_pose_misses, 0, 1000, integer=True)
-        check_number(
-            "deploy.runtime.max_pose_misses_before_grasp", self.max_pose_misses_before_grasp, 0, 1000, integer=True
-        )
-        check_number("deploy.runtime.break_away_distance", self.break_away_distance, 0.0, 0.1, " m")
-        check_number("deploy.runtime.break_away_speed", self.break_away_speed, 0.005, 1.0, " m/s")
+        check_ranges(self, "deploy.runtime")
 
 
 @dataclass

@@ -20,10 +20,11 @@ import time
 from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Annotated
 
 import numpy as np
 
-from mrguide.config import check_number
+from mrguide.config import Range, check_ranges
 from mrguide.robot import RobotSpec
 
 log = logging.getLogger(__name__)
@@ -82,16 +83,16 @@ REACTIONS: dict[Event, Reaction] = {
 class SafetyConfig:
     """Limits of the supervisor ([safety] in a TOML config); each must be finite and in its range."""
 
-    following_error: float = 0.05  # rad, in [1e-4, 1]; the drives' own window (0x6065) is the same by default
-    max_consecutive_ik_failures: int = 3  # in [1, 1000]
-    stall_timeout: float = 0.25  # s without a new setpoint while moving → quick stop; in [0.01, 10]
-    limit_tolerance: float = 1e-6  # relative slack on velocity/acceleration checks; in [0, 0.1]
+    #: in [1e-4, 1]; the drives' own window (0x6065) is the same by default
+    following_error: Annotated[float, Range(1e-4, 1.0, " rad")] = 0.05
+    max_consecutive_ik_failures: Annotated[int, Range(1, 1000)] = 3  # in [1, 1000]
+    #: s without a new setpoint while moving → quick stop; in [0.01, 10]
+    stall_timeout: Annotated[float, Range(0.01, 10.0, " s")] = 0.25
+    #: relative slack on velocity/acceleration checks; in [0, 0.1]
+    limit_tolerance: Annotated[float, Range(0.0, 0.1)] = 1e-6
 
     def __post_init__(self) -> None:
-        check_number("safety.following_error", self.following_error, 1e-4, 1.0, " rad")
-        check_number("safety.max_consecutive_ik_failures", self.max_consecutive_ik_failures, 1, 1000, integer=True)
-        check_number("safety.stall_timeout", self.stall_timeout, 0.01, 10.0, " s")
-        check_number("safety.limit_tolerance", self.limit_tolerance, 0.0, 0.1)
+        check_ranges(self, "safety")
 
 
 class Supervisor:

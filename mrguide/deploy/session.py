@@ -6,10 +6,11 @@ import logging
 from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import Annotated
 
 import numpy as np
 
-from mrguide.config import ConfigError, check_number
+from mrguide.config import ConfigError, Range, check_number, check_ranges
 from mrguide.deploy.camera import CameraSourceConfig
 from mrguide.deploy.cycles import CycleConfig
 from mrguide.deploy.runtime import EpisodeReport, RunStopped, Runtime, RuntimeConfig
@@ -31,8 +32,8 @@ class DeployConfig:
     """A deploy session ([deploy] in a TOML config)."""
 
     bus_config: str = ""  # CAN bus description (TOML), relative to the config file; "" = defaults (virtual bus)
-    episodes: int = 5
-    seed: int = 0  # dry run: object and goal layouts
+    episodes: Annotated[int, Range(1, MAX_EPISODES)] = 5
+    seed: Annotated[int, Range(0, 2**32 - 1)] = 0  # dry run: object and goal layouts
     log_dir: str = "runs/deploy"
     #: Real robot with the exact-pose model: where the object is placed for each episode (base frame, m).
     object_position: tuple[float, float, float] = (0.50, -0.075, 0.025)
@@ -52,8 +53,7 @@ class DeployConfig:
             raise ConfigError(f"deploy.pose_source = {self.pose_source!r}: expected one of {', '.join(POSE_SOURCES)}")
         if self.pose_source == "camera" and not self.camera.calibration:
             raise ConfigError('deploy.camera.calibration: pose_source = "camera" needs the camera\'s calibration file')
-        check_number("deploy.episodes", self.episodes, 1, MAX_EPISODES, integer=True)
-        check_number("deploy.seed", self.seed, 0, 2**32 - 1, integer=True)
+        check_ranges(self, "deploy")
         if not self.log_dir:
             raise ConfigError("deploy.log_dir must not be empty")
         if not self.goals:

@@ -12,11 +12,12 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Annotated
 
 import can.interfaces
 import numpy as np
 
-from mrguide.config import ConfigError, check_number, from_dict, load_toml
+from mrguide.config import ConfigError, Range, check_number, check_ranges, from_dict, load_toml
 from mrguide.drivers.bus_options import check_bus_options
 from mrguide.drivers.eds_check import DRIVE_OBJECTS, VACUUM_OBJECTS, VELOCITY_TPDO_OBJECTS, check_eds
 from mrguide.robot import RobotSpec, load_robot
@@ -77,54 +78,47 @@ class TimingConfig:
     """Control cycle and supervision times ([timing]); all in seconds."""
 
     #: SYNC / control period. 4 ms (250 Hz) is the project's requirement for CSP streaming.
-    control_period: float = 0.004
+    control_period: Annotated[float, Range(0.0005, 0.1, " s")] = 0.004
     #: Producer heartbeat time written to every node's 0x1017, and the master's own heartbeat period
     #: (whole ms, a whole number of control periods for the master's to be exact; assumed).
-    heartbeat_period: float = 0.04
+    heartbeat_period: Annotated[float, Range(0.001, 65.535, " s")] = 0.04
     #: Heartbeat consumer time = factor x producer time, in both directions (the master consumes the
     #: devices', every device the master's via 0x1016). 4.5 = three lost heartbeats in a row plus half a
     #: period of jitter: 180 ms at 40 ms (see configs/devices/cobot_bus.toml); at least MIN_HEARTBEAT_FACTOR.
-    heartbeat_timeout_factor: float = 4.5
+    heartbeat_timeout_factor: Annotated[
+        float,
+        Range(
+            MIN_HEARTBEAT_FACTOR,
+            MAX_HEARTBEAT_FACTOR,
+            " (consumer time / producer time: one lost heartbeat plus jitter at least)",
+        ),
+    ] = 4.5
     #: Time allowed for all nodes to send their boot-up message after NMT reset communication; [0.01, 60].
-    boot_timeout: float = 3.0
+    boot_timeout: Annotated[float, Range(0.01, 60.0, " s")] = 3.0
     #: Time allowed for all drives to reach OPERATION ENABLED (or to leave FAULT on reset); [0.01, 60].
-    enable_timeout: float = 1.0
+    enable_timeout: Annotated[float, Range(0.01, 60.0, " s")] = 1.0
     #: SDO response timeout per request during configuration; [0.001, 10].
-    sdo_timeout: float = 0.3
+    sdo_timeout: Annotated[float, Range(0.001, 10.0, " s")] = 0.3
     #: Joint setpoints buffered ahead of the bus (cycles, 1..1000); `Cobot.stream` blocks when full.
-    setpoint_queue_depth: int = 4
+    setpoint_queue_depth: Annotated[int, Range(1, 1000, " cycles")] = 4
     #: Consecutive SYNC cycles without a node's TPDO before it counts as lost (1..1000).
-    max_missed_feedback: int = 5
+    max_missed_feedback: Annotated[int, Range(1, 1000, " cycles")] = 5
     #: SCHED_FIFO priority (1..99) of the control and receive threads; 0 = normal scheduling (Linux only).
-    realtime_priority: int = 0
+    realtime_priority: Annotated[int, Range(0, 99)] = 0
 
     def __post_init__(self) -> None:
         # Every value arms a supervision: NaN or inf would switch it off (a time-out that never expires).
-        check_number("timing.control_period", self.control_period, 0.0005, 0.1, " s")
-        check_number("timing.heartbeat_period", self.heartbeat_period, 0.001, 65.535, " s")
+        check_ranges(self, "timing")
         hb_ms = self.heartbeat_period * 1000.0
         if abs(hb_ms - round(hb_ms)) > 1e-9:
             raise ConfigError(f"timing.heartbeat_period = {self.heartbeat_period}: must be whole ms")
         if self.heartbeat_period < 2 * self.control_period:
             raise ConfigError("timing.heartbeat_period must be at least two control periods")
-        check_number(
-            "timing.heartbeat_timeout_factor",
-            self.heartbeat_timeout_factor,
-            MIN_HEARTBEAT_FACTOR,
-            MAX_HEARTBEAT_FACTOR,
-            " (consumer time / producer time: one lost heartbeat plus jitter at least)",
-        )
         if self.heartbeat_timeout_ms > 0xFFFF:
             raise ConfigError(
                 "timing: heartbeat_period x heartbeat_timeout_factor must fit 65.535 s (the devices "
                 "consume the master's heartbeat with this time)"
             )
-        check_number("timing.boot_timeout", self.boot_timeout, 0.01, 60.0, " s")
-        check_number("timing.enable_timeout", self.enable_timeout, 0.01, 60.0, " s")
-        check_number("timing.sdo_timeout", self.sdo_timeout, 0.001, 10.0, " s")
-        check_number("timing.setpoint_queue_depth", self.setpoint_queue_depth, 1, 1000, " cycles", integer=True)
-        check_number("timing.max_missed_feedback", self.max_missed_feedback, 1, 1000, " cycles", integer=True)
-        check_number("timing.realtime_priority", self.realtime_priority, 0, 99, integer=True)
 
     @property
     def heartbeat_ms(self) -> int:
@@ -175,13 +169,13 @@ class DriveConfig:
 
     eds: str = "cia402_drive.eds"
     #: Following-error window (rad, [1e-4, 1]), written to 0x6065 in counts (assumed).
-    following_error_window: float = 0.05
+    following_error_window: Annotated[float, Range(1e-4, 1.0, " rad")] = 0.05
     #: Following-error time-out (ms), 0x6066 (assumed).
-    following_error_timeout_ms: int = 20
+    following_error_timeout_ms: Annotated[int, Range(0, 65535, " ms")] = 20
     #: Quick-stop option code 0x605A: 2 = stop on the quick-stop ramp, then SWITCH ON DISABLED.
     quick_stop_option: int = 2
     #: Quick-stop deceleration (rad/s^2, [0.1, 1000]), written to 0x6085 in counts/s^2 (assumed).
-    quick_stop_deceleration: float = 10.0
+    quick_stop_deceleration: Annotated[float, Range(0.1, 1000.0, " rad/s^2")] = 10.0
     #: Also map velocity actual value (0x606C) into a second TPDO every cycle.
     velocity_tpdo: bool = True
 
@@ -189,13 +183,9 @@ class DriveConfig:
         check_eds(
             eds_path(self.eds), DRIVE_OBJECTS + (VELOCITY_TPDO_OBJECTS if self.velocity_tpdo else ()), "drives.eds"
         )
-        check_number("drives.following_error_window", self.following_error_window, 1e-4, 1.0, " rad")
-        check_number(
-            "drives.following_error_timeout_ms", self.following_error_timeout_ms, 0, 65535, " ms", integer=True
-        )
+        check_ranges(self, "drives")
         if self.quick_stop_option not in (1, 2, 5, 6):
             raise ConfigError(f"drives.quick_stop_option: {self.quick_stop_option} not supported (1, 2, 5 or 6)")
-        check_number("drives.quick_stop_deceleration", self.quick_stop_deceleration, 0.1, 1000.0, " rad/s^2")
 
 
 @dataclass(frozen=True)

@@ -12,11 +12,11 @@ from __future__ import annotations
 import csv
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 import numpy as np
 
-from mrguide.config import ConfigError, check_number
+from mrguide.config import ConfigError, Range, check_ranges
 from mrguide.experiments import report
 from mrguide.experiments.registry import Experiment, register
 from mrguide.experiments.stats import wilson
@@ -31,24 +31,21 @@ EVAL_SEED_BASE = 2_000_000  # evaluation episode seeds (disjoint from training a
 class GeneralizationConfig:
     """[experiment] of configs/experiments/generalization.toml."""
 
-    seeds: int = 10
-    steps: int = 20_000
+    seeds: Annotated[int, Range(1, 1000)] = 10
+    steps: Annotated[int, Range(1, 10**8)] = 20_000
     workspace_low: tuple[float, float, float] = (0.16, -0.20, 0.045)  # wide enough for goals 0.21 m from the region
     workspace_high: tuple[float, float, float] = (0.72, 0.54, 0.35)
-    grid_step: float = 0.05  # m between goal targets (119 targets: 20 episodes each per seed ≈ 1 h of one core)
-    max_distance: float = 0.21  # m from the training goal region (the target: at least 0.21)
-    bin_width: float = 0.03  # m
-    episodes: int = 20  # per target and seed
+    #: m between goal targets (119 targets: 20 episodes each per seed ≈ 1 h of one core)
+    grid_step: Annotated[float, Range(0.005, 0.5, " m")] = 0.05
+    #: m from the training goal region (the target: at least 0.21)
+    max_distance: Annotated[float, Range(0.0, 1.0, " m")] = 0.21
+    bin_width: Annotated[float, Range(0.005, 1.0, " m")] = 0.03
+    episodes: Annotated[int, Range(1, 10_000)] = 20  # per target and seed
     config: str = ""
     overrides: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        check_number("experiment.seeds", self.seeds, 1, 1000, integer=True)
-        check_number("experiment.steps", self.steps, 1, 10**8, integer=True)
-        check_number("experiment.grid_step", self.grid_step, 0.005, 0.5, " m")
-        check_number("experiment.max_distance", self.max_distance, 0.0, 1.0, " m")
-        check_number("experiment.bin_width", self.bin_width, 0.005, 1.0, " m")
-        check_number("experiment.episodes", self.episodes, 1, 10_000, integer=True)
+        check_ranges(self, "experiment")
         if not all(h > lo for lo, h in zip(self.workspace_low, self.workspace_high)):
             raise ConfigError(
                 f"experiment.workspace_high {self.workspace_high} must exceed workspace_low {self.workspace_low}"

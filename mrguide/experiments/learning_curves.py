@@ -8,11 +8,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 import numpy as np
 
-from mrguide.config import ConfigError, check_number
+from mrguide.config import ConfigError, Range, check_ranges
 from mrguide.experiments import report
 from mrguide.experiments.registry import Experiment, register
 from mrguide.experiments.run_records import RunRecord, read_run
@@ -27,15 +27,14 @@ COLORS = {"baseline": "tab:blue", "guided": "tab:red"}
 class CurvesConfig:
     """[experiment] of configs/experiments/learning_curves.toml and long_baseline.toml."""
 
-    seeds: int = 10  # paper: 10
-    steps: int = 20_000  # paper: 20k (Fig. 3); 100k for the long baseline (Fig. 4)
+    seeds: Annotated[int, Range(1, 1000)] = 10  # paper: 10
+    steps: Annotated[int, Range(1, 10**8)] = 20_000  # paper: 20k (Fig. 3); 100k for the long baseline (Fig. 4)
     variants: tuple[str, ...] = VARIANTS
     config: str = ""  # base training config (TOML), relative to the experiment file; "" = defaults
     overrides: dict[str, Any] = field(default_factory=dict)  # "guidance.noise.sigma" = 0.05, ...
 
     def __post_init__(self) -> None:
-        check_number("experiment.seeds", self.seeds, 1, 1000, integer=True)
-        check_number("experiment.steps", self.steps, 1, 10**8, integer=True)
+        check_ranges(self, "experiment")
         if not self.variants or any(v not in VARIANTS for v in self.variants):
             raise ConfigError(f"experiment.variants = {list(self.variants)!r}: expected some of {', '.join(VARIANTS)}")
 

@@ -14,11 +14,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 import numpy as np
 
-from mrguide.config import ConfigError, check_number
+from mrguide.config import ConfigError, Range, check_number, check_ranges
 from mrguide.experiments import report
 from mrguide.experiments.registry import Experiment, register
 from mrguide.experiments.run_records import RunRecord, read_run
@@ -37,16 +37,15 @@ PAPER_AT_007 = 2 / 3
 class NoiseConfig:
     """[experiment] of configs/experiments/noise_robustness.toml."""
 
-    seeds: int = 10  # paper: 10
-    steps: int = 20_000  # "within the training horizon": 20k
+    seeds: Annotated[int, Range(1, 1000)] = 10  # paper: 10
+    steps: Annotated[int, Range(1, 10**8)] = 20_000  # "within the training horizon": 20k
     sigmas: tuple[float, ...] = (0.0, 0.01, 0.02, 0.03, 0.05, 0.07, 0.1)  # m (the paper's Fig. 7 range)
     reading: str = "marks"  # ours: a person's marks, each off by σ per axis
     config: str = ""  # base training config (TOML), relative to the experiment file; "" = defaults
     overrides: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        check_number("experiment.seeds", self.seeds, 1, 1000, integer=True)
-        check_number("experiment.steps", self.steps, 1, 10**8, integer=True)
+        check_ranges(self, "experiment")
         if not self.sigmas:
             raise ConfigError("experiment.sigmas: give at least one noise level (m)")
         for i, s in enumerate(self.sigmas):

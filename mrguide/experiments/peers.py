@@ -11,11 +11,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 import numpy as np
 
-from mrguide.config import ConfigError, check_number
+from mrguide.config import ConfigError, Range, check_ranges
 from mrguide.experiments import report
 from mrguide.experiments.registry import Experiment, register
 from mrguide.experiments.run_records import RunRecord, read_run
@@ -30,19 +30,17 @@ COLORS = {"ddpg": "tab:red", "sac": "tab:purple"}
 class PeersConfig:
     """[experiment] of configs/experiments/peers.toml."""
 
-    seeds: int = 10
-    steps: int = 20_000
+    seeds: Annotated[int, Range(1, 1000)] = 10
+    steps: Annotated[int, Range(1, 10**8)] = 20_000
     learners: tuple[Learner | str, ...] = LEARNERS  # the shipped two; any registered learner may be named
     config: str = "../runs/person.toml"  # base training config, relative to the experiment file (the marks in process)
-    marks_budget: int = 100  # compare the learners' evaluation success after this many marks ...
-    time_budget_s: float = 180.0  # ... and after this much training wall time
+    #: compare the learners' evaluation success after this many marks ...
+    marks_budget: Annotated[int, Range(1, 10**6)] = 100
+    time_budget_s: Annotated[float, Range(1.0, 1e7, " s")] = 180.0  # ... and after this much training wall time
     overrides: dict[str, Any] = field(default_factory=dict)  # for every learner ("sac.utd" = 4, ...)
 
     def __post_init__(self) -> None:
-        check_number("experiment.seeds", self.seeds, 1, 1000, integer=True)
-        check_number("experiment.steps", self.steps, 1, 10**8, integer=True)
-        check_number("experiment.marks_budget", self.marks_budget, 1, 10**6, integer=True)
-        check_number("experiment.time_budget_s", self.time_budget_s, 1.0, 1e7, " s")
+        check_ranges(self, "experiment")
         if not self.learners or any(v not in LEARNER_NAMES for v in self.learners):
             raise ConfigError(
                 f"experiment.learners = {list(self.learners)!r}: expected some of {', '.join(LEARNER_NAMES)}"

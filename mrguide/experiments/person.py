@@ -10,11 +10,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 import numpy as np
 
-from mrguide.config import check_number
+from mrguide.config import Range, check_ranges
 from mrguide.experiments import report
 from mrguide.experiments.registry import Experiment, register
 from mrguide.experiments.run_records import RunRecord, read_run
@@ -29,17 +29,15 @@ FRESH_SEED_BASE = 3_000_000
 class PersonConfig:
     """[experiment] of configs/experiments/person.toml."""
 
-    seeds: int = 10
-    steps: int = 20_000
+    seeds: Annotated[int, Range(1, 1000)] = 10
+    steps: Annotated[int, Range(1, 10**8)] = 20_000
     #: Base training config (its [guidance.noise] is the person), relative to the experiment file.
     config: str = "../runs/person.toml"
-    episodes: int = 50  # fresh episodes per final policy
+    episodes: Annotated[int, Range(1, 10**5)] = 50  # fresh episodes per final policy
     overrides: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        check_number("experiment.seeds", self.seeds, 1, 1000, integer=True)
-        check_number("experiment.steps", self.steps, 1, 10**8, integer=True)
-        check_number("experiment.episodes", self.episodes, 1, 10**5, integer=True)
+        check_ranges(self, "experiment")
 
 
 def runs(cfg: PersonConfig, base_config: str | None) -> list[TrainRun]:

@@ -10,9 +10,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
-from mrguide.config import ConfigError, check_number
+from mrguide.config import ConfigError, Range, check_ranges
 from mrguide.experiments import report
 from mrguide.experiments.registry import Experiment, register
 from mrguide.experiments.train_runs import TrainRun, configs
@@ -25,10 +25,11 @@ OUTCOME_FIELDS = ["condition", "eval_seed", "episode", "outcome"]
 class Sim2RealConfig:
     """[experiment] of configs/experiments/sim2real.toml."""
 
-    seeds: int = 3  # training seeds (guided)
-    steps: int = 20_000
-    eval_seeds: int = 3  # evaluation seeds per policy and condition (object and goal layouts)
-    episodes: int = 10  # per evaluation seed and condition
+    seeds: Annotated[int, Range(1, 1000)] = 3  # training seeds (guided)
+    steps: Annotated[int, Range(1, 10**8)] = 20_000
+    #: evaluation seeds per policy and condition (object and goal layouts)
+    eval_seeds: Annotated[int, Range(1, 1000)] = 3
+    episodes: Annotated[int, Range(1, 10_000)] = 10  # per evaluation seed and condition
     conditions: tuple[str, ...] = CONDITIONS
     #: The 'real' cell and the MuJoCo cell, relative to the experiment file (made absolute on load).
     real_config: str = "../cells/real_cell.toml"
@@ -37,10 +38,7 @@ class Sim2RealConfig:
     overrides: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        check_number("experiment.seeds", self.seeds, 1, 1000, integer=True)
-        check_number("experiment.steps", self.steps, 1, 10**8, integer=True)
-        check_number("experiment.eval_seeds", self.eval_seeds, 1, 1000, integer=True)
-        check_number("experiment.episodes", self.episodes, 1, 10_000, integer=True)
+        check_ranges(self, "experiment")
         unknown = [c for c in self.conditions if c not in CONDITIONS]
         if not self.conditions or unknown or len(set(self.conditions)) != len(self.conditions):
             raise ConfigError(

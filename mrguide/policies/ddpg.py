@@ -14,12 +14,13 @@ actor, the critic pair) are in `networks`.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Annotated
 
 import numpy as np
 import torch
 from torch import nn
 
-from mrguide.config import ConfigError, check_number
+from mrguide.config import ConfigError, Range, check_ranges
 from mrguide.policies.networks import Actor, CriticEnsemble, ObsScaler
 from mrguide.policies.replay_buffer import Batch, TaggedReplay
 
@@ -34,27 +35,23 @@ class DDPGConfig:
     """[ddpg] of a training config."""
 
     hidden: tuple[int, ...] = (96, 96)  # ours: the width that met the convergence and the speed targets
-    lr_actor: float = 5e-4  # Table I
-    lr_critic: float = 5e-4  # Table I
-    gamma: float = 0.99  # Table I
-    tau: float = 0.005  # soft target update rate (ours)
-    exploration_noise: float = 0.1  # std of the Gaussian action noise, normalized units (ours)
+    lr_actor: Annotated[float, Range(1e-8, 1.0)] = 5e-4  # Table I
+    lr_critic: Annotated[float, Range(1e-8, 1.0)] = 5e-4  # Table I
+    gamma: Annotated[float, Range(0.0, 1.0)] = 0.99  # Table I
+    tau: Annotated[float, Range(1e-6, 1.0)] = 0.005  # soft target update rate (ours)
+    #: std of the Gaussian action noise, normalized units (ours)
+    exploration_noise: Annotated[float, Range(0.0, 2.0)] = 0.1
     #: Weight of the behaviour-cloning term on the expert (ζ = 1) samples of each batch, with the Q term
     #: normalized by its mean magnitude as in TD3+BC (Fujimoto & Gu 2021). Not in the paper; 0 gives plain
     #: DDPG's actor step. It acts only on expert samples, so a run without guidance is unaffected.
-    bc_weight: float = 20.0
+    bc_weight: Annotated[float, Range(0.0, 1e4)] = 20.0
 
     def __post_init__(self) -> None:
         if not self.hidden or any(
             isinstance(h, bool) or not isinstance(h, int) or not 1 <= h <= 4096 for h in self.hidden
         ):
             raise ConfigError(f"ddpg.hidden = {list(self.hidden)!r}: expected one or more layer widths in [1, 4096]")
-        check_number("ddpg.lr_actor", self.lr_actor, 1e-8, 1.0)
-        check_number("ddpg.lr_critic", self.lr_critic, 1e-8, 1.0)
-        check_number("ddpg.gamma", self.gamma, 0.0, 1.0)
-        check_number("ddpg.tau", self.tau, 1e-6, 1.0)
-        check_number("ddpg.exploration_noise", self.exploration_noise, 0.0, 2.0)
-        check_number("ddpg.bc_weight", self.bc_weight, 0.0, 1e4)
+        check_ranges(self, "ddpg")
 
 
 def bc_error(pi: torch.Tensor, act: torch.Tensor) -> torch.Tensor:

@@ -4,11 +4,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Protocol
+from typing import Annotated, Protocol
 
 import numpy as np
 
-from mrguide.config import ConfigError, check_number
+from mrguide.config import ConfigError, Range, check_number, check_ranges
 from mrguide.policies.annotations import Annotation, AnnotationCache, AnnotationError
 from mrguide.robot import Workspace
 from mrguide.task import TaskConfig, oracle_target
@@ -63,17 +63,16 @@ class AnnotatorNoise:
     sigma_across: float = 0.0  # m, std per axis across the line of sight
     sigma_along: float = 0.0  # m, std along the line of sight (depth)
     viewpoint: tuple[float, float, float] = DEFAULT_VIEWPOINT  # m, the person's eyes, robot base frame
-    outlier_rate: float = 0.0  # fraction of annotations that are gross mistakes (slips)
+    outlier_rate: Annotated[float, Range(0.0, 1.0)] = 0.0  # fraction of annotations that are gross mistakes (slips)
     outlier_scale: float = 0.15  # m, std per axis of an outlier's error
     #: Which person of this model marks: 0 the first draw of the bias and of the marks' errors for a training seed,
     #: another number an independent one (a second panel of people)
-    draw: int = 0
+    draw: Annotated[int, Range(0, 2**32 - 1)] = 0
 
     def __post_init__(self) -> None:
         for name in ("sigma", "bias_sigma", "sigma_across", "sigma_along", "outlier_scale"):
             check_number(f"guidance.noise.{name}", getattr(self, name), 0.0, 1.0, " m")
-        check_number("guidance.noise.outlier_rate", self.outlier_rate, 0.0, 1.0)
-        check_number("guidance.noise.draw", self.draw, 0, 2**32 - 1, integer=True)
+        check_ranges(self, "guidance.noise")
         for field_name, vec, limit in (("bias", self.bias, 1.0), ("viewpoint", self.viewpoint, 100.0)):
             if len(vec) != 3:
                 raise ConfigError(f"guidance.noise.{field_name} = {list(vec)!r}: expected 3 numbers (m)")

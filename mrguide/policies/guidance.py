@@ -7,11 +7,11 @@ import logging
 from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import Annotated, Protocol
 
 import numpy as np
 
-from mrguide.config import ConfigError, check_number
+from mrguide.config import ConfigError, Range, check_ranges
 from mrguide.policies.annotations import Annotation, AnnotationError
 from mrguide.policies.choices import (
     EXPERT_SOURCES,
@@ -124,12 +124,13 @@ class PoseError:
     person or a noisy annotator marks, the figures set the HMD pipeline's assumed errors (configs/runs/person.toml):
     a registration bias drawn once per run and a fresh error per look, as the sim-to-real HMD condition has them."""
 
-    sigma: float = 0.0  # m, std per axis of each look's error (HMD tracking noise: 3 mm in the real cell)
-    bias_sigma: float = 0.0  # m, std per axis of the run's registration bias (HMD calibration error: ~5 mm norm)
+    #: std per axis of each look's error (HMD tracking noise: 3 mm in the real cell)
+    sigma: Annotated[float, Range(0.0, 0.1, " m")] = 0.0
+    #: std per axis of the run's registration bias (HMD calibration error: ~5 mm norm)
+    bias_sigma: Annotated[float, Range(0.0, 0.1, " m")] = 0.0
 
     def __post_init__(self) -> None:
-        check_number("guidance.pose.sigma", self.sigma, 0.0, 0.1, " m")
-        check_number("guidance.pose.bias_sigma", self.bias_sigma, 0.0, 0.1, " m")
+        check_ranges(self, "guidance.pose")
 
 
 @dataclass(frozen=True)
@@ -137,16 +138,19 @@ class GuidanceConfig:
     """Expert guidance ([guidance] in a TOML config)."""
 
     enabled: bool = True
-    r_threshold: float = -5.0  # R_th of Eq. 12 (ours; the paper gives no value)
-    intake_steps: int = 10_000  # expert intake window: the first 10k of 20k steps (paper, Sec. IV-B)
+    r_threshold: Annotated[float, Range(-1e4, 0.0)] = -5.0  # R_th of Eq. 12 (ours; the paper gives no value)
+    #: expert intake window: the first 10k of 20k steps (paper, Sec. IV-B)
+    intake_steps: Annotated[int, Range(0, 10**9)] = 10_000
     lam_max: float = 0.9  # λ_max (Table I)
     lam_min: float = 0.1  # λ_min (Table I)
-    delta: float = 0.05  # Δ of Eq. 13, m (ours)
+    delta: Annotated[float, Range(1e-4, 1.0, " m")] = 0.05  # Δ of Eq. 13, m (ours)
     #: a^e of Eq. 13: "running_median" (ours), the task model's target shifted by the median offset of the recent
     #: marks, so no ground truth corrects a mark; or "nominal", the task model's target itself (simulation only).
     reference: ReferenceName = "running_median"
-    cache_tolerance: float = 0.005  # m; observations this close reuse a cached annotation
-    reask_after: int = 15  # expert steps on one waypoint without reaching it before it is asked again (0: never; ours)
+    #: observations this close reuse a cached annotation
+    cache_tolerance: Annotated[float, Range(0.0, 0.1, " m")] = 0.005
+    #: expert steps on one waypoint without reaching it before it is asked again (0: never; ours)
+    reask_after: Annotated[int, Range(0, 10**6)] = 15
     #: What a person marks per demonstration. "pick_place" (ours): the grasp point and the set-down point, each
     #: fused with every earlier one as a measurement of one offset from the part (pick) or the goal (place), the
     #: five waypoints following from the fused marks (task.waypoint_from_mark). "phases" (the paper's): every
@@ -159,12 +163,12 @@ class GuidanceConfig:
     #: m: a kind of mark (pick or place) is not asked again once the median of its marks is known to within this per
     #: axis (its standard error, from the marks' own spread; at least 3 marks), nor the pick once a grasp sealed
     #: (ours: a person's time goes where an answer carries information; mark_fusion.py).
-    mark_precision: float = 0.005
+    mark_precision: Annotated[float, Range(0.0, 1.0, " m")] = 0.005
     #: m, std per axis of fresh Gaussian noise on every stored expert action, after Eq. 13 (so the bound cannot
     #: filter it), while the arm follows the clean one: Fig. 7's "stored" reading (label noise). Not clipped to
     #: the action box: near its floor — the grasp target lies 2 mm above it — clipping would bias the grasp
     #: height's labels upwards. `noise` above is the "marks" reading: each mark off by an error of its own.
-    action_noise: float = 0.0
+    action_noise: Annotated[float, Range(0.0, 1.0, " m")] = 0.0
     annotation_file: str = ""  # for source = "file"
 
     def __post_init__(self) -> None:
@@ -178,13 +182,7 @@ class GuidanceConfig:
             raise ConfigError("guidance.source = 'file' needs guidance.annotation_file")
         if not 0.0 <= self.lam_min <= self.lam_max <= 1.0:
             raise ConfigError(f"guidance: need 0 <= lam_min <= lam_max <= 1, got {self.lam_min}, {self.lam_max}")
-        check_number("guidance.r_threshold", self.r_threshold, -1e4, 0.0)
-        check_number("guidance.intake_steps", self.intake_steps, 0, 10**9, integer=True)
-        check_number("guidance.delta", self.delta, 1e-4, 1.0, " m")
-        check_number("guidance.cache_tolerance", self.cache_tolerance, 0.0, 0.1, " m")
-        check_number("guidance.reask_after", self.reask_after, 0, 10**6, integer=True)
-        check_number("guidance.action_noise", self.action_noise, 0.0, 1.0, " m")
-        check_number("guidance.mark_precision", self.mark_precision, 0.0, 1.0, " m")
+        check_ranges(self, "guidance")
 
 
 def _either(choices: Sequence[str]) -> str:

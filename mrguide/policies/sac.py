@@ -14,12 +14,13 @@ The policy is a tanh-Gaussian over the actor's MLP output y, through the same an
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Annotated
 
 import numpy as np
 import torch
 from torch import nn
 
-from mrguide.config import ConfigError, check_number
+from mrguide.config import ConfigError, Range, check_number, check_ranges
 from mrguide.policies.networks import Actor, CriticEnsemble, ObsScaler
 from mrguide.policies.replay_buffer import TaggedReplay
 
@@ -35,30 +36,25 @@ class SACConfig:
         128,
         128,
     )  # RLPD: 256; ours for the CPU (a 20k-step run at 256 takes ~20 min on one core)
-    lr: float = 3e-4  # actor, critics and temperature (RLPD)
-    gamma: float = 0.99
-    tau: float = 0.005
-    n_critics: int = 10  # RLPD: an ensemble of 10 ...
+    lr: Annotated[float, Range(1e-8, 1.0)] = 3e-4  # actor, critics and temperature (RLPD)
+    gamma: Annotated[float, Range(0.0, 1.0)] = 0.99
+    tau: Annotated[float, Range(1e-6, 1.0)] = 0.005
+    n_critics: Annotated[int, Range(1, 100)] = 10  # RLPD: an ensemble of 10 ...
     n_min: int = 2  # ... whose TD target is the minimum over a random 2
-    utd: int = 2  # critic updates per environment step (RLPD's runs: 20; ours, for the CPU)
-    expert_fraction: float = 0.5  # share of every batch drawn from the expert pool (RLPD's offline_ratio)
+    utd: Annotated[int, Range(1, 100)] = 2  # critic updates per environment step (RLPD's runs: 20; ours, for the CPU)
+    #: share of every batch drawn from the expert pool (RLPD's offline_ratio)
+    expert_fraction: Annotated[float, Range(0.0, 1.0)] = 0.5
     # of the policy over the actor's y ∈ [-1, 1]^4; ours (RLPD: -|A|/2 = -2, which holds the policy at about 0.15 in y,
     # 7 cm of target, on a task with a 13 mm seal margin: 0/10 converged; -10 is about 1 cm per axis; docs: results)
-    target_entropy: float = -10.0
+    target_entropy: Annotated[float, Range(-100.0, 100.0)] = -10.0
 
     def __post_init__(self) -> None:
         if not self.hidden or any(
             isinstance(h, bool) or not isinstance(h, int) or not 1 <= h <= 4096 for h in self.hidden
         ):
             raise ConfigError(f"sac.hidden = {list(self.hidden)!r}: expected one or more layer widths in [1, 4096]")
-        check_number("sac.lr", self.lr, 1e-8, 1.0)
-        check_number("sac.gamma", self.gamma, 0.0, 1.0)
-        check_number("sac.tau", self.tau, 1e-6, 1.0)
-        check_number("sac.n_critics", self.n_critics, 1, 100, integer=True)
+        check_ranges(self, "sac")
         check_number("sac.n_min", self.n_min, 1, self.n_critics, integer=True)
-        check_number("sac.utd", self.utd, 1, 100, integer=True)
-        check_number("sac.expert_fraction", self.expert_fraction, 0.0, 1.0)
-        check_number("sac.target_entropy", self.target_entropy, -100.0, 100.0)
 
 
 class GaussianActor(nn.Module):

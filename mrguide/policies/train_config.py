@@ -7,9 +7,9 @@ import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
-from mrguide.config import ConfigError, check_number, load_section, replace_path, to_dict
+from mrguide.config import ConfigError, Range, check_ranges, load_section, replace_path, to_dict
 from mrguide.policies.choices import LEARNER_NAMES, OVERRIDE_SECTIONS, Learner
 from mrguide.policies.ddpg import DDPGConfig
 from mrguide.policies.guidance import GuidanceConfig
@@ -22,30 +22,24 @@ from mrguide.twin.env import EnvConfig
 class TrainConfig:
     """A training run ([train] in a TOML config, with [ddpg] and [guidance] beside it)."""
 
-    total_steps: int = 20_000  # paper: 20k timesteps (Fig. 3)
+    total_steps: Annotated[int, Range(1, 10**9)] = 20_000  # paper: 20k timesteps (Fig. 3)
     #: "ddpg" (the paper's learner, [ddpg]) or "sac" (the RLPD-style peer, [sac]; `mrguide experiment peers`).
     learner: Learner | str = "ddpg"  # a shipped learner or a registered one
-    seed: int = 0
-    batch_size: int = 256  # Table I
-    buffer_size: int = 1_000_000  # Table I
-    learning_starts: int = 256  # updates begin once this many transitions are stored (ours)
-    eval_every: int = 1_000  # steps between deterministic evaluations (convergence is judged on them)
-    eval_episodes: int = 10  # per evaluation; each evaluation draws new start states (see Trainer.evaluate)
-    checkpoint_every: int = 2_000  # steps; checkpoints are written at the next episode end
-    torch_threads: int = 1
+    seed: Annotated[int, Range(0, 2**32 - 1)] = 0
+    batch_size: Annotated[int, Range(1, 1 << 20)] = 256  # Table I
+    buffer_size: Annotated[int, Range(1, 10**8)] = 1_000_000  # Table I
+    learning_starts: Annotated[int, Range(1, 10**9)] = 256  # updates begin once this many transitions are stored (ours)
+    #: steps between deterministic evaluations (convergence is judged on them)
+    eval_every: Annotated[int, Range(1, 10**9)] = 1_000
+    #: per evaluation; each evaluation draws new start states (see Trainer.evaluate)
+    eval_episodes: Annotated[int, Range(1, 10**5)] = 10
+    checkpoint_every: Annotated[int, Range(1, 10**9)] = 2_000  # steps; checkpoints are written at the next episode end
+    torch_threads: Annotated[int, Range(1, 1024)] = 1
 
     def __post_init__(self) -> None:
-        check_number("train.total_steps", self.total_steps, 1, 10**9, integer=True)
+        check_ranges(self, "train")
         if self.learner not in LEARNER_NAMES:
             raise ConfigError(f"train.learner = {self.learner!r}: expected one of {', '.join(LEARNER_NAMES)}")
-        check_number("train.seed", self.seed, 0, 2**32 - 1, integer=True)
-        check_number("train.batch_size", self.batch_size, 1, 1 << 20, integer=True)
-        check_number("train.buffer_size", self.buffer_size, 1, 10**8, integer=True)
-        check_number("train.learning_starts", self.learning_starts, 1, 10**9, integer=True)
-        check_number("train.eval_every", self.eval_every, 1, 10**9, integer=True)
-        check_number("train.eval_episodes", self.eval_episodes, 1, 10**5, integer=True)
-        check_number("train.checkpoint_every", self.checkpoint_every, 1, 10**9, integer=True)
-        check_number("train.torch_threads", self.torch_threads, 1, 1024, integer=True)
 
 
 def load_sac_config(path: str | Path | None) -> SACConfig:

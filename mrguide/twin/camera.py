@@ -7,12 +7,12 @@ the robot base frame. Images come from PyBullet's TinyRenderer, so no display is
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Literal, overload
+from typing import Annotated, Literal, overload
 
 import numpy as np
 import pybullet as pb
 
-from mrguide.config import ConfigError, check_number
+from mrguide.config import ConfigError, Range, check_number, check_ranges
 
 #: Largest rendered image side (px).
 MAX_IMAGE_SIDE = 16384
@@ -22,18 +22,15 @@ MAX_IMAGE_SIDE = 16384
 class Intrinsics:
     """Pinhole intrinsics in pixels, no distortion (the renderer has none)."""
 
-    width: int = 640
-    height: int = 480
-    fx: float = 600.0
-    fy: float = 600.0
+    width: Annotated[int, Range(1, MAX_IMAGE_SIDE, " px")] = 640
+    height: Annotated[int, Range(1, MAX_IMAGE_SIDE, " px")] = 480
+    fx: Annotated[float, Range(1.0, 1e6, " px")] = 600.0
+    fy: Annotated[float, Range(1.0, 1e6, " px")] = 600.0
     cx: float = 320.0
     cy: float = 240.0
 
     def __post_init__(self) -> None:
-        check_number("intrinsics.width", self.width, 1, MAX_IMAGE_SIDE, " px", integer=True)
-        check_number("intrinsics.height", self.height, 1, MAX_IMAGE_SIDE, " px", integer=True)
-        check_number("intrinsics.fx", self.fx, 1.0, 1e6, " px")
-        check_number("intrinsics.fy", self.fy, 1.0, 1e6, " px")
+        check_ranges(self, "intrinsics")
 
     @property
     def K(self) -> np.ndarray:
@@ -49,11 +46,11 @@ class CameraConfig:
     target: tuple[float, float, float] = (0.48, 0.10, 0.0)
     up: tuple[float, float, float] = (0.0, 0.0, 1.0)
     intrinsics: Intrinsics = field(default_factory=Intrinsics)
-    near: float = 0.05  # m; in [0.001, 10]
+    near: Annotated[float, Range(1e-3, 10.0, " m")] = 0.05  # in [0.001, 10]
     far: float = 5.0  # m; beyond `near`, at most 1000
 
     def __post_init__(self) -> None:
-        check_number("camera.near", self.near, 1e-3, 10.0, " m")
+        check_ranges(self, "camera")
         check_number("camera.far", self.far, self.near * (1 + 1e-6), 1000.0, " m (beyond camera.near)")
 
 

@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Annotated
 
 from mrguide.cell_layout import CupConfig
-from mrguide.config import ConfigError, check_number
+from mrguide.config import ConfigError, Range, check_ranges
 from mrguide.mujoco_cell.config import MujocoCellConfig
 from mrguide.twin.camera import CameraConfig
 
@@ -18,22 +19,19 @@ class RealityGap:
     the real robot loads other values, e.g. from `configs/cells/real_cell.toml`.
     """
 
-    object_mass: float = 0.20  # kg
-    object_friction: float = 0.8  # lateral friction coefficient
-    suction_break_force: float = 40.0  # N; the cup lets go above this constraint force
-    actuator_latency: int = 0  # control periods between a setpoint and its application
-    actuator_lag: float = 0.0  # s; first-order time constant of the joint servo on its setpoint
-    joint_noise: float = 0.0  # rad; std of the measured joint positions
-    vacuum_noise: float = 0.0  # kPa; std of the vacuum-level reading
+    object_mass: Annotated[float, Range(1e-3, 10.0, " kg")] = 0.20
+    object_friction: Annotated[float, Range(0.01, 2.0)] = 0.8  # lateral friction coefficient
+    #: the cup lets go above this constraint force
+    suction_break_force: Annotated[float, Range(0.1, 1000.0, " N")] = 40.0
+    #: control periods between a setpoint and its application
+    actuator_latency: Annotated[int, Range(0, 100, " control periods")] = 0
+    #: first-order time constant of the joint servo on its setpoint
+    actuator_lag: Annotated[float, Range(0.0, 1.0, " s")] = 0.0
+    joint_noise: Annotated[float, Range(0.0, 0.1, " rad")] = 0.0  # std of the measured joint positions
+    vacuum_noise: Annotated[float, Range(0.0, 50.0, " kPa")] = 0.0  # std of the vacuum-level reading
 
     def __post_init__(self) -> None:
-        check_number("reality_gap.object_mass", self.object_mass, 1e-3, 10.0, " kg")
-        check_number("reality_gap.object_friction", self.object_friction, 0.01, 2.0)
-        check_number("reality_gap.suction_break_force", self.suction_break_force, 0.1, 1000.0, " N")
-        check_number("reality_gap.actuator_latency", self.actuator_latency, 0, 100, " control periods", integer=True)
-        check_number("reality_gap.actuator_lag", self.actuator_lag, 0.0, 1.0, " s")
-        check_number("reality_gap.joint_noise", self.joint_noise, 0.0, 0.1, " rad")
-        check_number("reality_gap.vacuum_noise", self.vacuum_noise, 0.0, 50.0, " kPa")
+        check_ranges(self, "reality_gap")
 
 
 @dataclass(frozen=True)
@@ -55,8 +53,9 @@ class VacuumConfig:
     level_sealed: float = -65.0  # kPa with a part on the cup
     level_open: float = -8.0  # kPa with the vacuum on and no part (flow through the open cup)
     part_threshold: float = -35.0  # kPa; part-present when the level is below this
-    time_constant: float = 0.03  # s; first-order response of the level
-    seal_distance: float = 0.006  # m; the cup seals when its lip is within this of the object top
+    time_constant: Annotated[float, Range(1e-4, 10.0, " s")] = 0.03  # first-order response of the level
+    #: the cup seals when its lip is within this of the object top
+    seal_distance: Annotated[float, Range(1e-5, 0.1, " m")] = 0.006
 
     def __post_init__(self) -> None:
         if not self.level_sealed < self.part_threshold < self.level_open <= 0:
@@ -64,16 +63,16 @@ class VacuumConfig:
                 f"twin.vacuum: need level_sealed < part_threshold < level_open <= 0 kPa, got "
                 f"{self.level_sealed}, {self.part_threshold}, {self.level_open}"
             )
-        check_number("twin.vacuum.time_constant", self.time_constant, 1e-4, 10.0, " s")
-        check_number("twin.vacuum.seal_distance", self.seal_distance, 1e-5, 0.1, " m")
+        check_ranges(self, "twin.vacuum")
 
 
 @dataclass(frozen=True)
 class TwinConfig:
     """The twin of the cell ([twin] in a TOML config)."""
 
-    control_period: float = 0.004  # s; Ruckig/physics step (default 4 ms, as the bus SYNC period)
-    decision_period: float = 0.1  # s; one policy decision is executed for this long
+    #: Ruckig/physics step (default 4 ms, as the bus SYNC period)
+    control_period: Annotated[float, Range(5e-4, 0.1, " s")] = 0.004
+    decision_period: Annotated[float, Range(1e-4, 10.0, " s")] = 0.1  # one policy decision is executed for this long
     object_region: Region = field(default_factory=Region)
     goal_region: Region = field(default_factory=lambda: Region((0.40, 0.12), (0.60, 0.30)))
     reality_gap: RealityGap = field(default_factory=RealityGap)
@@ -83,8 +82,7 @@ class TwinConfig:
     gui: bool = False
 
     def __post_init__(self) -> None:
-        check_number("twin.control_period", self.control_period, 5e-4, 0.1, " s")
-        check_number("twin.decision_period", self.decision_period, 1e-4, 10.0, " s")
+        check_ranges(self, "twin")
         ratio = self.decision_period / self.control_period
         if self.decision_period <= 0 or abs(ratio - round(ratio)) > 1e-6:
             raise ConfigError(

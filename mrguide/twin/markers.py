@@ -16,6 +16,7 @@ import tempfile
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Annotated
 
 import cv2
 import numpy as np
@@ -30,7 +31,7 @@ from mrguide.calibration.pose_sources import MarkerPoseSource
 from mrguide.calibration.procedure import CalibrationRun, calibrate_frames
 from mrguide.calibration.se3 import apply, invert, make_T, rotation_from_rpy_deg
 from mrguide.calibration.targets import layout_from_config
-from mrguide.config import ConfigError, check_number
+from mrguide.config import ConfigError, Range, check_ranges
 from mrguide.twin.camera import Camera, Intrinsics, look_at
 
 log = logging.getLogger(__name__)
@@ -299,13 +300,13 @@ class TwinCalibrationConfig:
     )
     look_at: tuple[float, float, float] = (0.48, 0.13, 0.0)  # where the wearer looks (the board centre)
     intrinsics: Intrinsics = HOLOLENS2_PV
-    supersample: int = 2
+    supersample: Annotated[int, Range(1, 8)] = 2
 
     def __post_init__(self) -> None:
         if not self.views:
             raise ConfigError("calibration_twin.views: at least one camera position is needed")
         check_points("calibration_twin.views", self.views)
-        check_number("calibration_twin.supersample", self.supersample, 1, 8, integer=True)
+        check_ranges(self, "calibration_twin")
 
     @property
     def T_base_hmd(self) -> np.ndarray:
