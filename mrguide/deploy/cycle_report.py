@@ -4,16 +4,13 @@ logs for the results (every cycle, retry and alarm record; every decision of the
 from __future__ import annotations
 
 import argparse
-import gzip
-import itertools
-import json
 from collections import Counter
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from mrguide.deploy.runlog import RunLogError, read_log
+from mrguide.deploy.runlog import RunLogError, read_log, slim_records, write_gzipped
 from mrguide.errors import InputError
 
 
@@ -40,22 +37,6 @@ def cycle_figures(records: list[dict]) -> dict[str, Any]:
         "underruns": sum(int(s["underruns"]) for s in segments) if segments else None,
         "rss_growth_mb": max(float(s["rss_growth_mb"]) for s in segments) if segments else None,
     }
-
-
-def slim_records(records: list[dict]) -> list[dict]:
-    """The records without the decisions of attempts that succeeded (the bulk of a long run's log). Episodes are
-    told apart per segment of the log (a `run` record starts one), as a resumed run may count them anew."""
-    segments = list(itertools.accumulate(r.get("kind") == "run" for r in records))
-    succeeded = {
-        (seg, r.get("episode"))
-        for seg, r in zip(segments, records, strict=True)
-        if r.get("kind") == "episode_end" and r.get("outcome") == "success"
-    }
-    return [
-        r
-        for seg, r in zip(segments, records, strict=True)
-        if not (r.get("kind") == "decision" and (seg, r.get("episode")) in succeeded)
-    ]
 
 
 def table(rows: dict[str, dict[str, Any]]) -> str:
@@ -103,8 +84,7 @@ def cmd_cycles_report(args: argparse.Namespace) -> int:
         if args.out:
             out = Path(args.out)
             out.mkdir(parents=True, exist_ok=True)
-            text = "".join(json.dumps(r) + "\n" for r in slim_records(records))
-            (out / f"{name}.jsonl.gz").write_bytes(gzip.compress(text.encode(), mtime=0))
+            write_gzipped(out / f"{name}.jsonl.gz", slim_records(records))
     md = table(rows)
     if args.out:
         (Path(args.out) / "cycles.md").write_text(md)

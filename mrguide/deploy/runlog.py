@@ -10,6 +10,8 @@ import contextlib
 import gzip
 import json
 import os
+from collections import Counter
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -103,3 +105,39 @@ def read_log(path: str | Path) -> list[dict]:
             raise RunLogError(f"{path}:{number}: a run log record must be a JSON object, got {type(record).__name__}")
         records.append(record)
     return records
+
+
+def slim_records(records: list[dict], keep_successes: int = 0) -> list[dict]:
+    """The records without the decisions of episodes that succeeded (the bulk of a long run's log), except those of
+    the first `keep_successes` successful episodes of each segment (a clean one to replay beside the failures).
+    Episodes are told apart per segment of the log (a `run` record starts one), as a resumed run may count them
+    anew; a decision that names no episode (the last one, which only judges) belongs to the episode it is in."""
+    owners = list(_episode_owners(records))
+    kept: Counter[int] = Counter()
+    left_out = set()
+    for owner, r in zip(owners, records, strict=True):
+        if r.get("kind") == "episode_end" and r.get("outcome") == "success":
+            if kept[owner[0]] < keep_successes:
+                kept[owner[0]] += 1
+            else:
+                left_out.add(owner)
+    return [
+        r for owner, r in zip(owners, records, strict=True) if not (r.get("kind") == "decision" and owner in left_out)
+    ]
+
+
+def _episode_owners(records: list[dict]) -> Iterator[tuple[int, Any]]:
+    """(segment, episode) of each record: its own episode number, else that of the episode it is in."""
+    segment, episode = 0, None
+    for r in records:
+        if r.get("kind") == "run":
+            segment, episode = segment + 1, None
+        elif r.get("kind") == "episode_start":
+            episode = r.get("episode")
+        yield segment, r.get("episode", episode)
+
+
+def write_gzipped(path: Path, records: list[dict]) -> None:
+    """`records` as a gzipped run log at `path` (no time stamp in the gzip header: the same records, the same bytes)."""
+    text = "".join(json.dumps(r) + "\n" for r in records)
+    path.write_bytes(gzip.compress(text.encode(), mtime=0))

@@ -51,7 +51,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
     episodes = []
     for text in args.runs:
         path, indices = _run_spec(text)
-        chosen = select(load_run(path), indices, args.outcome)
+        chosen = _with_decisions(path, select(load_run(path), indices, args.outcome), indices is not None)
         episodes += chosen[: args.limit] if args.limit else chosen
     if not episodes:
         raise RunError("no episode of the given runs matches the selection")
@@ -62,6 +62,22 @@ def cmd_replay(args: argparse.Namespace) -> int:
     frames = sum(len(e.frames) for e in episodes)
     print(f"{len(episodes)} episodes, {frames} decisions" + (f" -> {args.save}" if args.save else ""))
     return 0
+
+
+def _with_decisions(path: str, chosen: list, named: bool) -> list:
+    """The `chosen` episodes that hold decisions. A slim copy of a run log (the results keep those) has none for
+    most successful episodes: asking for one by number is an error; otherwise they are left out, and said so."""
+    from mrguide.replay.runs import RunError
+
+    empty = [e.index for e in chosen if not e.frames]
+    if empty and named:
+        raise RunError(
+            f"{path}: episode {', '.join(map(str, empty))} holds no decisions in this log (a slim copy keeps those of "
+            "the failed episodes and of the first successful one)"
+        )
+    if empty:
+        print(f"{path}: {len(empty)} episodes without decisions left out (a slim copy of the log)")
+    return [e for e in chosen if e.frames]
 
 
 def add_export_command(sub: argparse._SubParsersAction) -> None:

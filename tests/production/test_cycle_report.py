@@ -8,8 +8,8 @@ import json
 import pytest
 
 from mrguide.cli import main
-from mrguide.deploy.cycle_report import cycle_figures, slim_records
-from mrguide.deploy.runlog import RunLog, read_log
+from mrguide.deploy.cycle_report import cycle_figures
+from mrguide.deploy.runlog import RunLog, read_log, slim_records
 
 
 def write_run(path, segments=True):

@@ -96,3 +96,29 @@ def test_replay_refuses_a_selection_that_matches_nothing(dry_log, tmp_path, run_
     run_cli(["replay", dry_log, "--outcome", "dropped", "--save", tmp_path / "x.rrd"]).assert_refused("no episode")
     run_cli(["replay", dry_log]).assert_refused("--save")
     run_cli(["replay", tmp_path / "missing.jsonl", "--save", tmp_path / "x.rrd"]).assert_refused("missing.jsonl")
+
+
+def test_a_slim_copy_keeps_the_first_success_and_replays_what_it_holds(dry_log, tmp_path, run_cli, capsys):
+    """The results keep slim copies of run logs (`python -m mrguide.deploy.runlog_slim`): of two successful
+    episodes the second loses its decisions, every other record stays, and slimming again changes no byte."""
+    from mrguide.deploy.runlog_slim import main as slim_main
+
+    log = tmp_path / "copy.jsonl"
+    log.write_bytes(dry_log.read_bytes())
+    assert slim_main([str(log)]) == 0
+    slim = tmp_path / "copy.jsonl.gz"
+    assert not log.exists() and slim.exists()
+    full, kept = read_log(dry_log), read_log(slim)
+    assert [r for r in full if r["kind"] != "decision"] == [r for r in kept if r["kind"] != "decision"]
+    second = next(i for i, r in enumerate(full) if r["kind"] == "episode_start" and r["episode"] == 1)
+    assert [r for r in kept if r["kind"] == "decision"] == [r for r in full[:second] if r["kind"] == "decision"]
+    assert 0 < len(kept) < len(full)
+    packed = slim.read_bytes()
+    assert slim_main([str(slim)]) == 0 and slim.read_bytes() == packed
+    assert [len(e.frames) > 0 for e in load_run(slim)] == [True, False]
+    rrd = tmp_path / "slim.rrd"
+    assert main(["replay", str(slim), "--save", str(rrd), "--no-arm"]) == 0
+    assert "1 episodes without decisions left out" in capsys.readouterr().out
+    labels = {p.split("/")[1] for p in _rows(rrd)[1] if p.endswith("/tcp")}
+    assert labels == {load_run(slim)[0].label}
+    run_cli(["replay", f"{slim}:1", "--save", tmp_path / "x.rrd"]).assert_refused("holds no decisions")
