@@ -198,6 +198,8 @@ class GuidedExpert:
             sealed = self.demo.enter(phase, obs)
             if sealed is not None:
                 self._measured(PICK_PHASE, sealed)
+        if phase == Phase.LIFT:
+            self.demo.carried(self.perceived(obs))
         steps = self._streak[1] + 1 if self._streak[0] == phase else 1
         planned = self._plan.get(kind)
         due = planned is not None and self.demo.search is None and self.reask_after and steps > self.reask_after

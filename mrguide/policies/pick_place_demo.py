@@ -8,8 +8,10 @@ towards `RELEASE_DEPTH` below the place point and opens the vacuum where the des
 table), as a cell program sets a part down: a place mark above or below where the part comes to rest releases it
 where it stands.
 
-What a demonstration measured goes back to the fusion (`MarkFusion.add_seal`, `add_placement`): where the grasp
-sealed and where the part was set down, each relative to its perceived anchor.
+What a demonstration measured goes back to the fusion (`MarkFusion.add_measurement`): where the grasp sealed and
+where the part was set down, each relative to its perceived anchor. A grasp that sealed more than `CENTRED` beside
+the part's centre — as the cell sees the part hanging from the cup through the lift — is measured over that centre:
+a seal near the edge of the cup's reach holds in one demonstration and drops the part at the policy's next wobble.
 """
 
 from __future__ import annotations
@@ -17,12 +19,15 @@ from __future__ import annotations
 import numpy as np
 
 from mrguide.policies.waypoint_search import PATTERNS, WaypointSearch
-from mrguide.task import OBS_TCP, PICK_PHASE, PLACE_PHASE, Phase, TaskConfig, mark_phase, waypoint_from_mark
+from mrguide.task import OBS_OBJECT, OBS_TCP, PICK_PHASE, PLACE_PHASE, Phase, TaskConfig, mark_phase, waypoint_from_mark
 
 #: m: a release descent that moved less than this in one decision has stopped: the part stands on the table.
 CONTACT_STALL = 0.002
 #: m: the release sets down this far below the place point and opens where the descent stops (ours).
 RELEASE_DEPTH = 0.005
+#: m: a grasp whose carried part the cell sees within this of the cup's axis is kept where it sealed (ours: about
+#: half the twin's seal reach; a perceived offset below it is as likely the perception's error as the grasp's).
+CENTRED = 0.006
 
 
 class PickPlaceDemo:
@@ -40,17 +45,18 @@ class PickPlaceDemo:
         self._last_z: float | None = None  # the TCP height at the last release decision
         self._descending = False  # the release descent has begun (the TCP went down by CONTACT_STALL at least once)
         self._waypoint = np.zeros(3)  # this phase's waypoint before the search moved it
+        self._carried: list[np.ndarray] = []  # the part's perceived xy from the TCP, per lift decision (m)
 
     def enter(self, phase: int, obs: np.ndarray) -> np.ndarray | None:
         """The observation `obs` is in `phase` now: close the phase it left. Where the grasp sealed: the pick point
         itself when it sealed as it was (no reason to move it); else laterally the probe that sealed (the commanded
         point: a measured one fed back as the next target would let the arm's lag accumulate), in height where the
         cup rests on the part now, its lip on the part's top. It is returned once the part was held through the lift
-        (a grasp at the seal's edge drops it)."""
+        (a grasp at the seal's edge drops it), over the part's centre if the lift saw it hang off (`carried`)."""
         sealed = None
         tcp = np.asarray(obs[OBS_TCP], dtype=float)
         if phase == Phase.TRANSPORT and self.phase == Phase.LIFT and self.sealed is not None:
-            sealed = self.sealed
+            sealed = self._centred(self.sealed)
         if self.started and phase > self.phase and self.search is not None:
             if self.phase == Phase.GRASP:
                 offset = self.search.pressed_offset()
@@ -62,6 +68,17 @@ class PickPlaceDemo:
         self.phase, self.started = phase, True
         self.restart_phase()
         return sealed
+
+    def carried(self, seen: np.ndarray) -> None:
+        """A lift decision's observation with the part where the cell sees it: how far off the cup's axis it hangs."""
+        if self.phase == Phase.LIFT:
+            self._carried.append(np.asarray(seen[OBS_OBJECT][:2], dtype=float) - np.asarray(seen[OBS_TCP][:2]))
+
+    def _centred(self, sealed: np.ndarray) -> np.ndarray:
+        """`sealed` moved laterally onto the part's centre as seen through the lift, if the part hung more than
+        CENTRED off the cup's axis; else as it sealed."""
+        off = np.mean(self._carried, axis=0) if self._carried else np.zeros(2)
+        return sealed + np.r_[off, 0.0] if np.linalg.norm(off) > CENTRED else sealed
 
     def restart_phase(self) -> None:
         """Search this phase afresh (entering it, or after a new mark)."""

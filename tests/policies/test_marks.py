@@ -315,6 +315,27 @@ def test_the_release_opens_where_the_part_came_to_rest_and_a_success_measures_th
     assert expert.fusion.settled(PLACE_PHASE, 0.0)
 
 
+@pytest.mark.parametrize(("beside", "centred"), [(0.010, True), (0.004, False)])
+def test_a_grasp_seen_hanging_off_the_cup_is_measured_over_the_parts_centre(tmp_path, beside, centred):
+    """A pick mark 1 cm beside the part's centre seals (within the cup's reach): through the lift the cell sees the
+    part hang 1 cm off the cup's axis, so the seal is measured over the part's centre, and the next demonstrations
+    do not grasp at the edge where the policy's next wobble drops the part. Within CENTRED it is kept as it sealed."""
+    from mrguide.policies.pick_place_demo import CENTRED
+
+    assert beside > CENTRED if centred else beside < CENTRED
+    grasp = ws.PATTERNS[Phase.GRASP]
+    expert, _ = _pick_place(_Recorder(offset=(beside, 0.0, 0.011)), tmp_path)
+    expert.begin_demonstration()
+    for _ in range(grasp.first_dwell + grasp.hover + grasp.press):
+        sealed_at = _target_m(expert.action(_obs(1)).executed)
+    assert np.isclose(sealed_at[0] - OBJ[0], beside)
+    for dz in (0.0, 0.03, 0.06):  # the lift: the part rises with the cup, `beside` off its axis
+        expert.action(_obs(2, obj=OBJ + [0.0, 0.0, dz], tcp=OBJ + [beside, 0.0, 0.026 + dz], g=1))
+    expert.action(_obs(3, obj=OBJ + [0.0, 0.0, 0.1], tcp=OBJ + [beside, 0.0, 0.126], g=1))
+    measured = expert.fusion.measured[PICK_PHASE][0]
+    assert np.allclose(measured, [0.0 if centred else beside, 0.0, 0.026], atol=1e-6)
+
+
 def test_a_success_beside_the_goal_measures_the_place_over_it(tmp_path):
     """A place mark 1.8 cm beside the goal succeeds (within ε): the success measures the height where the part met
     the table, over the goal, so the next demonstrations do not keep the place at the edge of ε."""
