@@ -1,0 +1,24 @@
+"""`python -m mrguide.replay.failures`: the failed episodes of run logs, recomputed from the committed slim logs of
+the 200-episode lift-drop runs exactly as the results page quotes them (`lift-drops-200/failures.txt`)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from mrguide.replay.failures import main
+
+RUNS = Path(__file__).parents[2] / "docs" / "results" / "lift-drops-200"
+
+
+def test_the_committed_failures_are_what_the_logs_say(capsys, monkeypatch):
+    monkeypatch.chdir(RUNS.parents[2])
+    logs = ["docs/results/lift-drops-200/mujoco_cell.jsonl.gz", "docs/results/lift-drops-200/real_cell.jsonl.gz"]
+    assert main(logs) == 0
+    printed = capsys.readouterr().out
+    assert printed == (RUNS / "failures.txt").read_text()
+    assert "mujoco_cell-d126: dropped in lift" in printed and "real_cell.jsonl.gz: 200 episodes, success 200" in printed
+
+
+def test_a_missing_log_is_an_error_not_a_traceback(tmp_path, capsys):
+    assert main([str(tmp_path / "none.jsonl")]) == 1
+    assert "none.jsonl" in capsys.readouterr().err
