@@ -1,16 +1,24 @@
-"""The failed episodes of run logs, one line each: the outcome, the phase it ended in, and the vacuum level and TCP
-height over its last decisions — where a part was lost, and whether the seal broke at once or leaked away.
+"""The failed episodes of run logs, one line each: the outcome, the phase it ended in, the vacuum level and TCP
+height over its last decisions — where a part was lost, and whether the seal broke at once or leaked away — and
+how far off the cup's axis the part hung when the lift began (a simulated cell's ground truth).
 
-    python -m mrguide.replay.failures LOG...
+    python -m mrguide.replay.failures LOG... [--grasps FILE.csv]
 
 Prints a line per failed episode and, per log, the outcomes of all its episodes. A slim log (`runlog_slim`) keeps
-every failed episode's decisions. Replay them with `mrguide replay LOG --outcome dropped --save drops.rrd`.
+every failed episode's decisions. `--grasps` also writes, for every episode that holds its decisions (all of them
+in a full log), the part's offset from the TCP at the lift's first decision. Replay the failures with `mrguide
+replay LOG --outcome dropped --save drops.rrd`.
 """
 
 from __future__ import annotations
 
+import argparse
+import csv
 import sys
 from collections import Counter
+from pathlib import Path
+
+import numpy as np
 
 from mrguide.replay.runs import Episode, RunError, load_run
 from mrguide.task import Phase
@@ -25,15 +33,26 @@ def failure_line(ep: Episode) -> str:
     phase = Phase(frames[-1].phase).name.lower() if frames else "?"
     vacuum = " ".join("?" if f.vacuum_kpa is None else f"{f.vacuum_kpa:.0f}" for f in frames)
     height = " ".join("?" if f.tcp is None else f"{1e3 * f.tcp[2]:.0f}" for f in frames)
-    return f"{ep.label}: {ep.outcome} in {phase}; vacuum {vacuum} kPa; TCP z {height} mm"
+    offset = grasp_offset_mm(ep)
+    off = "" if offset is None else f"; the part {offset:.1f} mm off the cup's axis as the lift began"
+    return f"{ep.label}: {ep.outcome} in {phase}; vacuum {vacuum} kPa; TCP z {height} mm{off}"
+
+
+def grasp_offset_mm(ep: Episode) -> float | None:
+    """The part's lateral distance from the TCP (mm, ground truth) at the episode's first lift decision, if known."""
+    lift = next((f for f in ep.frames if f.phase == Phase.LIFT), None)
+    if lift is None or lift.obj_true is None or lift.tcp is None:
+        return None
+    return float(1e3 * np.linalg.norm((lift.obj_true - lift.tcp)[:2]))
 
 
 def main(argv: list[str] | None = None) -> int:
-    logs = sys.argv[1:] if argv is None else argv
-    if not logs or logs[0] in ("-h", "--help"):
-        print(__doc__)
-        return 0 if logs else 2
-    for path in logs:
+    ap = argparse.ArgumentParser(prog="python -m mrguide.replay.failures", description=__doc__.split("\n")[0])
+    ap.add_argument("logs", nargs="+", help="run logs (.jsonl or .jsonl.gz) of deploy, a dry run or sim2real")
+    ap.add_argument("--grasps", type=Path, help="write every episode's grasp offset to this CSV")
+    args = ap.parse_args(argv)
+    rows = []
+    for path in args.logs:
         try:
             episodes = load_run(path)
         except RunError as exc:
@@ -42,8 +61,23 @@ def main(argv: list[str] | None = None) -> int:
         for ep in episodes:
             if ep.outcome != "success":
                 print(failure_line(ep))
+            offset = grasp_offset_mm(ep)
+            if offset is not None:
+                rows.append(
+                    {
+                        "log": Path(path).name,
+                        "episode": ep.index,
+                        "outcome": ep.outcome,
+                        "grasp_offset_mm": round(offset, 2),
+                    }
+                )
         outcomes = Counter(str(ep.outcome) for ep in episodes)
         print(f"{path}: {len(episodes)} episodes, " + ", ".join(f"{k} {v}" for k, v in sorted(outcomes.items())))
+    if args.grasps:
+        with args.grasps.open("w", newline="") as fh:
+            writer = csv.DictWriter(fh, ["log", "episode", "outcome", "grasp_offset_mm"])
+            writer.writeheader()
+            writer.writerows(rows)
     return 0
 
 

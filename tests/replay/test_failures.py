@@ -22,3 +22,19 @@ def test_the_committed_failures_are_what_the_logs_say(capsys, monkeypatch):
 def test_a_missing_log_is_an_error_not_a_traceback(tmp_path, capsys):
     assert main([str(tmp_path / "none.jsonl")]) == 1
     assert "none.jsonl" in capsys.readouterr().err
+
+
+def test_the_grasp_offsets_of_the_slim_logs_agree_with_the_committed_table(tmp_path, monkeypatch, capsys):
+    """`--grasps` on the slim logs: a row per episode that kept its decisions (the failures and each log's first
+    success), each the same as that episode's row of `grasps.csv` (computed from the full logs)."""
+    import csv
+
+    monkeypatch.chdir(RUNS)
+    out = tmp_path / "grasps.csv"
+    assert main(["mujoco_cell.jsonl.gz", "real_cell.jsonl.gz", "--grasps", str(out)]) == 0
+    slim = list(csv.DictReader(out.open()))
+    full = {(r["log"], r["episode"]): r for r in csv.DictReader((RUNS / "grasps.csv").open())}
+    assert len(full) == 400 and len(slim) == 4 + 1 + 1
+    for row in slim:
+        committed = full[(row["log"].removesuffix(".gz"), row["episode"])]
+        assert (row["outcome"], row["grasp_offset_mm"]) == (committed["outcome"], committed["grasp_offset_mm"])
