@@ -38,3 +38,11 @@ def test_the_grasp_offsets_of_the_slim_logs_agree_with_the_committed_table(tmp_p
     for row in slim:
         committed = full[(row["log"].removesuffix(".gz"), row["episode"])]
         assert (row["outcome"], row["grasp_offset_mm"]) == (committed["outcome"], committed["grasp_offset_mm"])
+
+
+def test_the_main_jobs_mujoco_failures_are_what_its_logs_say(capsys, monkeypatch):
+    runs = RUNS.parent / "sim2real-main5k-mujoco"
+    monkeypatch.chdir(RUNS.parents[2])
+    logs = sorted(str(p.relative_to(RUNS.parents[2])) for p in runs.glob("log-*.jsonl.gz"))
+    assert len(logs) == 6 and main(logs) == 0
+    assert capsys.readouterr().out == (runs / "failures.txt").read_text()
