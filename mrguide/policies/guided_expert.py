@@ -21,6 +21,7 @@ from mrguide.policies.experts import ANNOTATOR_SEED_OFFSET, ExpertSource, FileEx
 from mrguide.policies.guidance import GuidanceConfig, PoseError, ReferencePose, bounded_projection
 from mrguide.policies.mark_fusion import KINDS, MarkFusion, anchor
 from mrguide.policies.pick_place_demo import PickPlaceDemo
+from mrguide.registries import register
 from mrguide.task import (
     G_REQUIRED,
     OBS_OBJECT,
@@ -294,11 +295,9 @@ IN_PROCESS_SOURCES: dict[str, SourceFactory] = {}
 
 def register_expert_source(name: str, factory: SourceFactory) -> None:
     """Make `guidance.source = NAME` build its marks' source with `factory`; ValueError if the name is taken."""
-    if name in IN_PROCESS_SOURCES or name == "live":
+    if name == "live":  # the person's source, attached by the trainer: in the names, never in the table
         raise ValueError(f"expert source {name!r} is registered already")
-    IN_PROCESS_SOURCES[name] = factory
-    if name not in EXPERT_SOURCES:
-        EXPERT_SOURCES.append(name)
+    register(IN_PROCESS_SOURCES, EXPERT_SOURCES, name, factory, "expert source")
 
 
 register_expert_source("oracle", lambda g, env, seed: OracleExpert(env.task_cfg))

@@ -21,6 +21,7 @@ from mrguide.policies.ddpg import DDPG, DDPGConfig
 from mrguide.policies.networks import Actor
 from mrguide.policies.replay_buffer import TaggedReplay
 from mrguide.policies.sac import SAC, SACConfig
+from mrguide.registries import register
 
 
 class Learner(Protocol):
@@ -68,11 +69,7 @@ LEARNERS: dict[str, LearnerEntry] = {}
 def register_learner(name: str, entry: LearnerEntry) -> None:
     """Make `train.learner = NAME` train `entry`'s class; ValueError if the name is taken. Its settings come from an
     existing section ([ddpg] or [sac]): a learner with a section of its own also needs it in the configs."""
-    if name in LEARNERS:
-        raise ValueError(f"learner {name!r} is registered already")
-    LEARNERS[name] = entry
-    if name not in LEARNER_NAMES:
-        LEARNER_NAMES.append(name)
+    register(LEARNERS, LEARNER_NAMES, name, entry, "learner")
 
 
 register_learner("ddpg", LearnerEntry(DDPG, "ddpg", DDPGConfig))

@@ -27,6 +27,7 @@ from mrguide.drivers.mock.plant import CellPlant
 from mrguide.drivers.mock.sim_cobot import SimulatedCobot, shared_pc_config
 from mrguide.drivers.realtime import settled_heap
 from mrguide.pose_source import ObjectPoseSource
+from mrguide.registries import register
 from mrguide.robot import RobotSpec, load_robot
 from mrguide.twin.config import PLANT_ENGINES, TwinConfig
 from mrguide.twin.env import EnvConfig
@@ -68,11 +69,7 @@ PLANT_BUILDERS: dict[str, PlantBuilder] = {}
 def register_plant(engine: str, builder: PlantBuilder) -> None:
     """Make `[plant] engine = ENGINE` a cell's engine, built by `builder`; ValueError if the name is taken. The plant
     contract tests (`tests/drivers/test_plant_contract.py`) run on every registered engine."""
-    if engine in PLANT_BUILDERS:
-        raise ValueError(f"plant engine {engine!r} is registered already")
-    PLANT_BUILDERS[engine] = builder
-    if engine not in PLANT_ENGINES:
-        PLANT_ENGINES.append(engine)
+    register(PLANT_BUILDERS, PLANT_ENGINES, engine, builder, "plant engine")
 
 
 register_plant("pybullet", _pybullet_plant)
