@@ -46,3 +46,16 @@ def test_the_main_jobs_mujoco_failures_are_what_its_logs_say(capsys, monkeypatch
     logs = sorted(str(p.relative_to(RUNS.parents[2])) for p in runs.glob("log-*.jsonl.gz"))
     assert len(logs) == 6 and main(logs) == 0
     assert capsys.readouterr().out == (runs / "failures.txt").read_text()
+
+
+def test_the_grasp_offsets_by_outcome_are_what_the_committed_tables_say(capsys):
+    from mrguide.replay.grasp_offsets import main as offsets
+
+    for run, groups in (
+        ("lift-drops-200", ("mujoco_cell", "real_cell")),
+        ("sim2real-main5k-mujoco", ("mujoco_exact", "mujoco_hmd")),
+    ):
+        args = [str(RUNS.parent / run / "grasps.csv")] + [a for g in groups for a in ("--group", g)]
+        assert offsets(args) == 0
+        assert capsys.readouterr().out == (RUNS.parent / run / "grasp_offsets.txt").read_text()
+    assert offsets([str(RUNS / "failures.txt"), "--group", "x"]) == 1  # not a grasps CSV: an error, no traceback
