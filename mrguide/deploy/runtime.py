@@ -15,17 +15,19 @@ import time
 from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Annotated, NoReturn
+from typing import NoReturn
 
 import numpy as np
 
-from mrguide.config import ConfigError, Range, check_ranges
+from mrguide.config import ConfigError
 from mrguide.deploy.decision import NON_FINITE, ActionError, DecisionStep
 from mrguide.deploy.following import FollowingMonitor
 from mrguide.deploy.lift_rule import LiftRule
 from mrguide.deploy.object_tracking import ObjectStartUnknown, ObjectTracker
 from mrguide.deploy.runlog import RunLog
+from mrguide.deploy.runtime_config import RuntimeConfig
 from mrguide.deploy.safety import Event, Reaction, SafetyConfig, Supervisor, Watchdog
+from mrguide.deploy.seal_search import SealSearch
 from mrguide.drivers.cobot_state import JointState, VacuumState
 from mrguide.drivers.errors import DriverError
 from mrguide.drivers.interface import CobotInterface
@@ -33,7 +35,7 @@ from mrguide.motion.kinematics import IKError
 from mrguide.motion.trajectory import TrajectoryError
 from mrguide.pose_source import ObjectPoseSource
 from mrguide.robot import RobotSpec
-from mrguide.task import Outcome, TaskConfig
+from mrguide.task import OBS_OBJECT, Outcome, TaskConfig
 
 log = logging.getLogger(__name__)
 
@@ -48,30 +50,6 @@ class RunStopped(RuntimeError):
 
 #: How long the arm may take to arrive home after its last setpoint was home (s): servo lag, settling.
 HOME_SETTLE_S = 1.0
-
-
-@dataclass(frozen=True)
-class RuntimeConfig:
-    """How the runtime treats the arm and the object pose ([deploy.runtime] in a TOML config). The decision
-    period is not set here: it is the one the policy was trained with (its metadata)."""
-
-    home_tolerance: Annotated[float, Range(1e-4, 0.5, " rad")] = 0.01  # the arm counts as home within this
-    #: While the vacuum generator reports a part after the grasp, the object hangs under the cup: take its
-    #: position from the TCP (forward kinematics) instead of the pose source, which may lag (an HMD does).
-    track_carried_object: bool = True
-    #: Decisions in a row that may use the last object pose when the pose source has none (a marker out of
-    #: view, a dead HMD process); one more ends the episode as `pose_lost` with the arm held. In [0, 1000].
-    max_pose_misses: Annotated[int, Range(0, 1000)] = 3
-    #: The same before the grasp (approach and grasp phases), when the arm over the part hides its marker from
-    #: the camera or HMD while the part lies still where it was last seen. In [0, 1000].
-    max_pose_misses_before_grasp: Annotated[int, Range(0, 1000)] = 30
-    #: The lift's first part at a bounded speed, so that a cup's level-compensator reaches its end stop gently
-    #: (lift_rule.py): how far (m, in [0, 0.1]; 0 = off) and how fast (m/s, in [0.005, 1]).
-    break_away_distance: Annotated[float, Range(0.0, 0.1, " m")] = 0.015
-    break_away_speed: Annotated[float, Range(0.005, 1.0, " m/s")] = 0.1
-
-    def __post_init__(self) -> None:
-        check_ranges(self, "deploy.runtime")
 
 
 @dataclass
@@ -124,6 +102,7 @@ class Runtime:
         self._episode_events: Counter[str] = Counter()
         self._t = 0
         self.lift = LiftRule(spec.workspace, decision_period, self.cfg.break_away_distance, self.cfg.break_away_speed)
+        self.seal = SealSearch(spec.workspace, self.cfg.reseat_step, self.cfg.reseat_wait)
         self.objects = ObjectTracker(
             pose,
             self.supervisor,
@@ -250,6 +229,7 @@ class Runtime:
         self.decision.reset(self.cobot.setpoint)
         self.objects.reset()
         self.lift.reset()
+        self.seal.reset()
         self.watchdog.arm(True)
         try:
             outcome = self._decisions(goal, index, report)
@@ -336,9 +316,7 @@ class Runtime:
         t_inf = time.perf_counter()
         action = self.policy(obs)
         inference_ms = (time.perf_counter() - t_inf) * 1e3
-        executed, rule = self.lift.apply(action, tcp, self.decision.phase, vac)
-        if rule is not None:
-            self.supervisor.report(Event(rule), f"height target lowered in phase {self.decision.phase}")
+        executed, notes = self._cell_rules(action, tcp, obs, vac)
         record = {
             "episode": index,
             "t": t,
@@ -350,9 +328,8 @@ class Runtime:
             "vacuum_kpa": vac.level_kpa,
             "part": vac.part_gripped,
             "object_from": self.objects.source,
+            **notes,
         }
-        if rule is not None:
-            record["lift_rule"] = rule
         details = getattr(self.pose, "pose_details", None)  # optional (PoseDetails): the estimate's age, the truth
         if details is not None:
             record["pose"] = details()
@@ -377,9 +354,24 @@ class Runtime:
         else:
             self.supervisor.ik_result(True)
             record["q_target"] = cmd.q_target
-        self.cobot.set_vacuum(cmd.vacuum)
+        self.cobot.set_vacuum(cmd.vacuum, blow_off=self.seal.blow_off and not cmd.vacuum)
         self._stream_decision(t, t_read, inference_ms, record, report)
         return None
+
+    def _cell_rules(
+        self, action: np.ndarray, tcp: np.ndarray, obs: np.ndarray, vac: VacuumState
+    ) -> tuple[np.ndarray, dict]:
+        """The action after the cell's rules (the lift rules, the seal search), and what they did for the run log."""
+        notes: dict = {}
+        executed, rule = self.lift.apply(action, tcp, self.decision.phase, vac)
+        if rule is not None:
+            self.supervisor.report(Event(rule), f"height target lowered in phase {self.decision.phase}")
+            notes["lift_rule"] = rule
+        executed, reseat = self.seal.apply(executed, tcp, obs[OBS_OBJECT], self.decision.phase, vac)
+        if reseat is not None:
+            self.supervisor.report(Event.RESEAT, f"no seal at {vac.level_kpa:.0f} kPa: re-seat {self.seal.reseats}")
+            notes["reseat"] = self.seal.reseats
+        return executed, notes
 
     def _stream_decision(self, t: int, t_read: float, inference_ms: float, record: dict, report: EpisodeReport) -> None:
         """One decision period streamed; its timing and setpoints go to `report` and the run log's `record`."""

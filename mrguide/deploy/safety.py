@@ -1,7 +1,8 @@
 """Safety supervisor of the deploy runtime: what is watched, how each event is answered, and counts.
 
 Reactions, mildest first:
-- CLAMP: the target is moved into the workspace box; the episode goes on.
+- CLAMP: the target is moved (into the workspace box, or by a rule of the cell: the lift rules, the seal search);
+  the episode goes on.
 - LAST_KNOWN: the decision uses the last valid value (the object pose) and the episode goes on.
 - HOLD: the arm brakes to rest on a jerk-limited ramp (Ruckig) and keeps its position; the episode goes on.
 - ABORT: the arm brakes to rest and the episode ends (the run continues with the next one).
@@ -55,6 +56,7 @@ class Event(str, enum.Enum):
     VACUUM_LOST = "vacuum_lost"  # part lost during lift or transport (a drop)
     VACUUM_NOT_OK = "vacuum_not_ok"  # a lift asked before the part was reported gripped: the arm does not rise
     BREAK_AWAY = "break_away"  # the lift's first millimetres slowed (lift_rule.py)
+    RESEAT = "reseat"  # a cup pressed without a seal re-seated at the next point of the search (seal_search.py)
     STALL = "stall"  # the decision loop stopped feeding setpoints (watchdog)
     INTERRUPT = "interrupt"  # Ctrl-C
 
@@ -74,6 +76,7 @@ REACTIONS: dict[Event, Reaction] = {
     Event.VACUUM_LOST: Reaction.ABORT,
     Event.VACUUM_NOT_OK: Reaction.CLAMP,
     Event.BREAK_AWAY: Reaction.CLAMP,
+    Event.RESEAT: Reaction.CLAMP,
     Event.STALL: Reaction.QUICK_STOP,
     Event.INTERRUPT: Reaction.QUICK_STOP,
 }

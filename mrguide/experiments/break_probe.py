@@ -22,7 +22,7 @@ import numpy as np
 
 from mrguide.deploy.policy import ExportedPolicy
 from mrguide.deploy.runlog import RunLog
-from mrguide.deploy.runtime import RuntimeConfig
+from mrguide.deploy.runtime_config import RuntimeConfig
 from mrguide.experiments.sim2real import load_real_cell
 from mrguide.robot import load_robot
 from mrguide.task import OBS_PROGRESS, phase_from_progress

@@ -18,7 +18,8 @@ from mrguide.config import ConfigError
 from mrguide.deploy.cycles import CycleRun, CycleRunner, CycleSummary
 from mrguide.deploy.policy import ExportedPolicy, check_decision_period
 from mrguide.deploy.runlog import RunLog
-from mrguide.deploy.runtime import EpisodeReport, Runtime, RuntimeConfig
+from mrguide.deploy.runtime import EpisodeReport, Runtime
+from mrguide.deploy.runtime_config import RuntimeConfig
 from mrguide.deploy.safety import SafetyConfig
 from mrguide.deploy.session import DeploySummary, run_session
 from mrguide.drivers.cobot import Cobot

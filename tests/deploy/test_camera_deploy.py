@@ -8,7 +8,7 @@ import pytest
 
 from mrguide.deploy.camera import CameraSourceConfig
 from mrguide.deploy.runlog import read_log
-from mrguide.deploy.runtime import RuntimeConfig
+from mrguide.deploy.runtime_config import RuntimeConfig
 from mrguide.robot import load_robot
 from mrguide.task import Outcome
 from mrguide.twin.camera_feed import TwinCameraFeed, TwinCameraPoses

@@ -11,7 +11,8 @@ import pytest
 
 from mrguide.config import ConfigError
 from mrguide.deploy.runlog import RunLog, read_log
-from mrguide.deploy.runtime import RunStopped, Runtime, RuntimeConfig
+from mrguide.deploy.runtime import RunStopped, Runtime
+from mrguide.deploy.runtime_config import RuntimeConfig
 from mrguide.deploy.session import FixedObjectPose
 from mrguide.drivers.cobot_state import DriverStats, JointState, VacuumState
 from mrguide.drivers.errors import DriverError

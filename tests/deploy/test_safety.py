@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from mrguide.deploy.runlog import read_log
-from mrguide.deploy.runtime import RuntimeConfig
+from mrguide.deploy.runtime_config import RuntimeConfig
 from mrguide.motion.trajectory import JointSetpoint, JointStreamer, TrajectoryError
 from mrguide.pose_source import PoseUnavailable
 from mrguide.robot import RobotConfig, Workspace, load_robot

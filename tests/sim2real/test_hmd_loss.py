@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from mrguide.deploy.runlog import read_log
-from mrguide.deploy.runtime import RuntimeConfig
+from mrguide.deploy.runtime_config import RuntimeConfig
 from mrguide.deploy.safety import SafetyConfig
 from mrguide.drivers.config import BusConfig, CobotBusConfig
 from mrguide.experiments import sim2real as s2r

@@ -1,0 +1,37 @@
+"""[deploy.runtime]: how the runtime treats the arm, the object pose and the cup (its lift rules and seal search)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Annotated
+
+from mrguide.config import Range, check_ranges
+
+
+@dataclass(frozen=True)
+class RuntimeConfig:
+    """How the runtime treats the arm and the object pose ([deploy.runtime] in a TOML config). The decision
+    period is not set here: it is the one the policy was trained with (its metadata)."""
+
+    home_tolerance: Annotated[float, Range(1e-4, 0.5, " rad")] = 0.01  # the arm counts as home within this
+    #: While the vacuum generator reports a part after the grasp, the object hangs under the cup: take its
+    #: position from the TCP (forward kinematics) instead of the pose source, which may lag (an HMD does).
+    track_carried_object: bool = True
+    #: Decisions in a row that may use the last object pose when the pose source has none (a marker out of
+    #: view, a dead HMD process); one more ends the episode as `pose_lost` with the arm held. In [0, 1000].
+    max_pose_misses: Annotated[int, Range(0, 1000)] = 3
+    #: The same before the grasp (approach and grasp phases), when the arm over the part hides its marker from
+    #: the camera or HMD while the part lies still where it was last seen. In [0, 1000].
+    max_pose_misses_before_grasp: Annotated[int, Range(0, 1000)] = 30
+    #: The lift's first part at a bounded speed, so that a cup's level-compensator reaches its end stop gently
+    #: (lift_rule.py): how far (m, in [0, 0.1]; 0 = off) and how fast (m/s, in [0.005, 1]).
+    break_away_distance: Annotated[float, Range(0.0, 0.1, " m")] = 0.015
+    break_away_speed: Annotated[float, Range(0.005, 1.0, " m/s")] = 0.1
+    #: The seal search (seal_search.py): a cup pressed without "vacuum OK" for `reseat_wait` decisions is re-seated
+    #: at the next point of a hexagonal pattern `reseat_step` apart (m, in [0, 0.02]; 0 = off). 5 mm: within a
+    #: lattice point by 2.9 mm, inside the 5 mm a 2 cm cup's lip tolerates on the 5 cm part (docs/sim2real.md).
+    reseat_step: Annotated[float, Range(0.0, 0.02, " m")] = 0.005
+    reseat_wait: Annotated[int, Range(1, 50)] = 1
+
+    def __post_init__(self) -> None:
+        check_ranges(self, "deploy.runtime")
