@@ -3,7 +3,7 @@ records, which every copy keeps, count each episode's events):
 
     python -m mrguide.replay.event_counts LOG... [--event reseat]
 
-One line per log: its episodes, those with the event and their outcomes, and the event's count.
+One line per log (named as given): its episodes, those with the event and their outcomes, and the event's count.
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ def count(path: Path, event: str) -> str:
     outcomes = Counter(r["outcome"] for r in marked)
     total = sum(r["events"][event] for r in marked)
     by_outcome = ", ".join(f"{k} {v}" for k, v in sorted(outcomes.items())) or "none"
-    return f"{path.name}: {len(ends)} episodes; {len(marked)} with {event} ({by_outcome}); {event} {total} times"
+    return f"{path}: {len(ends)} episodes; {len(marked)} with {event} ({by_outcome}); {event} {total} times"
 
 
 def main(argv: list[str] | None = None) -> int:

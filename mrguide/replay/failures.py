@@ -6,7 +6,8 @@ how far off the cup's axis the part hung when the lift began (a simulated cell's
 
 Prints a line per failed episode and, per log, the outcomes of all its episodes. A slim log (`runlog_slim`) keeps
 every failed episode's decisions. `--grasps` also writes, for every episode that holds its decisions (all of them
-in a full log), the part's offset from the TCP at the lift's first decision. Replay the failures with `mrguide
+in a full log), the part's offset from the TCP at the lift's first decision, each row naming its log as given (give
+paths that tell runs apart: Fig. 8's logs share their names across policies). Replay the failures with `mrguide
 replay LOG --outcome dropped --save drops.rrd`.
 """
 
@@ -65,7 +66,7 @@ def main(argv: list[str] | None = None) -> int:
             if offset is not None:
                 rows.append(
                     {
-                        "log": Path(path).name,
+                        "log": str(path),
                         "episode": ep.index,
                         "outcome": ep.outcome,
                         "grasp_offset_mm": round(offset, 2),

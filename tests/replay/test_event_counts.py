@@ -10,8 +10,9 @@ from mrguide.replay.event_counts import main
 RUNS = Path(__file__).parents[2] / "docs" / "results" / "sim2real-main5k-seal-search"
 
 
-def test_the_committed_reseat_counts_are_what_the_logs_say(capsys):
-    logs = sorted(str(p) for p in RUNS.glob("log-*.jsonl.gz"))
+def test_the_committed_reseat_counts_are_what_the_logs_say(capsys, monkeypatch):
+    monkeypatch.chdir(RUNS)
+    logs = sorted(p.name for p in RUNS.glob("log-*.jsonl.gz"))
     assert len(logs) == 12 and main(logs) == 0
     printed = capsys.readouterr().out
     assert printed == (RUNS / "reseats.txt").read_text()

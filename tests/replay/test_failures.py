@@ -56,8 +56,19 @@ def test_the_grasp_offsets_by_outcome_are_what_the_committed_tables_say(capsys):
     for run, groups in (
         ("lift-drops-200", ("mujoco_cell", "real_cell")),
         ("sim2real-main5k-seal-search", ("mujoco_exact", "mujoco_hmd", "real_exact", "real_hmd")),
+        ("sim2real", ("mujoco_exact", "mujoco_hmd", "real_exact", "real_hmd")),
     ):
         args = [str(RUNS.parent / run / "grasps.csv")] + [a for g in groups for a in ("--group", g)]
         assert offsets(args) == 0
         assert capsys.readouterr().out == (RUNS.parent / run / "grasp_offsets.txt").read_text()
     assert offsets([str(RUNS / "failures.txt"), "--group", "x"]) == 1  # not a grasps CSV: an error, no traceback
+
+
+def test_fig8s_failures_are_what_its_slim_logs_say(capsys, monkeypatch):
+    """Fig. 8's failures.txt, written from the full logs with paths relative to its directory: the slim logs give the
+    same lines (every failed episode's decisions are kept), the same per-log outcomes."""
+    fig8 = RUNS.parent / "sim2real"
+    monkeypatch.chdir(fig8)
+    logs = sorted(str(p.relative_to(fig8)) for p in fig8.glob("guided/seed*/sim2real/log-*.jsonl.gz"))
+    assert len(logs) == 36 and main(logs) == 0
+    assert capsys.readouterr().out.replace(".jsonl.gz", ".jsonl") == (fig8 / "failures.txt").read_text()
