@@ -11,6 +11,28 @@ WEB=mrguide/annotation/web
 # The annotation page's JavaScript (three.js, urdf-loader, iwer) from npm, exactly as the lockfile says.
 WEB_STAMP="$WEB/node_modules/.installed-$(sha1sum "$WEB/package-lock.json" | cut -c1-12)"
 
+# apt_install WHAT PACKAGE...: Debian's packages, when root; otherwise say which to install (and fail).
+apt_install() {
+  local what=$1
+  shift
+  if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
+    echo "[run.sh] installing Debian's $* for $what..." >&2
+    DEBIAN_FRONTEND=noninteractive apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends "$@" >/dev/null
+  else
+    echo "[run.sh] $what: 'sudo apt-get install $*'" >&2
+    return 1
+  fi
+}
+
+# missing_debs PACKAGE...: those of the Debian packages that are not installed, one per line.
+missing_debs() {
+  local p
+  for p in "$@"; do
+    dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "ok installed" || echo "$p"
+  done
+}
+
 if [ ! -f "$STAMP" ]; then
   echo "[run.sh] setting up $VENV (first run takes a few minutes)..." >&2
   "$PY" -m venv "$VENV"
@@ -26,14 +48,7 @@ fi
 
 if [ ! -f "$WEB_STAMP" ]; then
   if ! command -v npm >/dev/null; then
-    if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
-      echo "[run.sh] installing Debian's nodejs and npm for the annotation page's packages..." >&2
-      DEBIAN_FRONTEND=noninteractive apt-get update -qq
-      DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends nodejs npm >/dev/null
-    else
-      echo "[run.sh] the annotation page needs Node.js and npm: 'sudo apt-get install nodejs npm'" >&2
-      exit 1
-    fi
+    apt_install "the annotation page's packages" nodejs npm || exit 1
   fi
   echo "[run.sh] installing the annotation page's npm packages (npm ci)..." >&2
   (cd "$WEB" && npm ci --no-audit --no-fund --loglevel=error)
@@ -47,13 +62,12 @@ case "$cmd" in
   test)
     # The annotation page's browser tests drive Debian's chromium (never a browser a test tool downloads).
     if [ ! -x /usr/bin/chromium ] && [ -z "${MRGUIDE_CHROMIUM:-}" ]; then
-      if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
-        echo "[run.sh] installing Debian's chromium for the browser tests..." >&2
-        DEBIAN_FRONTEND=noninteractive apt-get update -qq
-        DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends chromium >/dev/null
-      else
-        echo "[run.sh] the browser tests need Chromium: 'sudo apt-get install chromium' (or set MRGUIDE_CHROMIUM)" >&2
-      fi
+      apt_install "the browser tests (or set MRGUIDE_CHROMIUM)" chromium || true
+    fi
+    # MuJoCo's offscreen renderer (the MuJoCo cell's HMD) draws through EGL with Mesa's software rasterizer.
+    if command -v dpkg-query >/dev/null; then
+      mapfile -t EGL < <(missing_debs libegl1 libegl-mesa0 libgl1-mesa-dri)
+      if [ ${#EGL[@]} -gt 0 ]; then apt_install "MuJoCo's offscreen renderer" "${EGL[@]}" || true; fi
     fi
     if [ $# -gt 0 ]; then exec "$VENV/bin/python" -m pytest -q "$@"; fi
     # The suite in two passes on two workers each (pytest-xdist): first the tests that compute, then those that

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import fcntl
 import json
+import os
 import subprocess
 import sys
 import tempfile
@@ -13,6 +14,10 @@ from typing import Any
 
 import numpy as np
 import pytest
+
+#: MuJoCo's offscreen renderer (the MuJoCo cell's HMD, drawn in-process by its tests) needs an OpenGL context without a
+#: display; mujoco reads the variable once, at its import (run.sh installs Debian's EGL).
+os.environ.setdefault("MUJOCO_GL", "egl")
 
 #: Tests that keep time with threads (simulated CANopen devices on the virtual bus, dry runs, the sim-to-real
 #: conditions): `./run.sh test` runs them in a pass of their own (two workers), after the rest, so that a test that

@@ -36,7 +36,7 @@ from mrguide.robot import load_robot
 from mrguide.task import Outcome, TaskConfig, placed_at_goal
 from mrguide.twin.dry_run import SimulatedCell, dry_run, episode_layouts
 from mrguide.twin.env import EnvConfig, PickPlaceEnv
-from mrguide.twin.hmd_stream import HmdPoseStream, HmdStartError
+from mrguide.twin.hmd_stream import HmdPoseStream, HmdStartError, MujocoDrawing
 from mrguide.twin.plant import TwinObjectPose
 from mrguide.twin.visual_arm import ArmDrawing
 
@@ -224,14 +224,15 @@ def _run_header(
 def _hmd_streams(
     real_cfg: EnvConfig, hmd_config: Path | None, seed: int, use_hmd: bool, hmd_overrides: dict | None
 ) -> list[HmdPoseStream]:
-    """With `use_hmd`, the HMD's pose stream, calibrated; otherwise none. HmdStartError if the HMD cannot start."""
+    """With `use_hmd`, the HMD's pose stream, calibrated; otherwise none. HmdStartError if the HMD cannot start.
+    The HMD draws the cell with the cell's engine: PyBullet, or MuJoCo's offscreen renderer for the MuJoCo cell."""
     # the HMD process calibrates (seconds of rendering) before the simulated cell's control loop starts
-    arm = ArmDrawing.of(load_robot(real_cfg.robot))
     if not use_hmd:
         return []
-    return [
-        HmdPoseStream(None, hmd_config, real_cfg.task.object_height, arm, noise_seed=seed, hmd_overrides=hmd_overrides)
-    ]
+    spec = load_robot(real_cfg.robot)
+    drawing = MujocoDrawing(spec, real_cfg.twin.cup) if real_cfg.plant.engine == "mujoco" else ArmDrawing.of(spec)
+    height = real_cfg.task.object_height
+    return [HmdPoseStream(None, hmd_config, height, drawing, noise_seed=seed, hmd_overrides=hmd_overrides)]
 
 
 @dataclass

@@ -75,7 +75,8 @@ def _collision_mesh_dir(urdf: str) -> Path:
     return dirs.pop()
 
 
-def _arm_spec(spec: RobotSpec, cfg: MujocoCellConfig, cup: CupConfig) -> mujoco.MjSpec:
+def arm_spec(spec: RobotSpec, cfg: MujocoCellConfig, cup: CupConfig) -> mujoco.MjSpec:
+    """The arm with its cup from the URDF's collision meshes, gravity-compensated, its level-compensator sprung."""
     urdf = urdf_with_tool(spec, f"{spec.package_dir.as_posix()}/", CUP_RADIUS, cup.stroke)
     root = ET.fromstring(urdf)
     ext = ET.SubElement(root, "mujoco")
@@ -155,7 +156,7 @@ def _servo_gains(s: mujoco.MjSpec, spec: RobotSpec, cfg: MujocoCellConfig) -> tu
 def build_cell(spec: RobotSpec, cfg: MujocoCellConfig, part_size: float, cup: CupConfig) -> CellModel:
     """Compile the cell for the arm `spec` with a cube part of edge `part_size` (m) and the cup mounted as `cup`
     says (rigid, or on a spring level-compensator)."""
-    s = _arm_spec(spec, cfg, cup)
+    s = arm_spec(spec, cfg, cup)
     _add_cell(s, part_size, cfg.part_mass)
     kp, kv = _servo_gains(s, spec, cfg)
     for name, p, v in zip(spec.joint_names, kp, kv, strict=True):

@@ -3,10 +3,11 @@ and reports the object position through its marker calibration, streamed to the 
 
 Like a real HoloLens, it runs beside the robot controller, not inside its control loop: rendering a
 1280x720 frame takes ~0.1 s and would stall the 4 ms CAN cycle if done in-process (PyBullet holds the
-GIL). The HMD process has its own PyBullet world with the table, the marked cube and the arm, which mirror
-the true object pose and joints of the cell, so the arm hides the marker when it is in the line of sight.
-At start-up the HMD is calibrated against the board exactly as `mrguide calibrate --twin` does (before the
-arm is drawn: the wearer calibrates with the arm parked out of view).
+GIL). The HMD process has its own world with the table, the marked cube and the arm, which mirror the true
+object pose and joints of the cell, so the arm hides the marker when it is in the line of sight: a PyBullet
+world for the PyBullet cell (`ArmDrawing`), a MuJoCo model drawn by MuJoCo's offscreen renderer for the MuJoCo
+cell (`MujocoDrawing`). At start-up the HMD is calibrated against the board exactly as `mrguide calibrate
+--twin` does (PyBullet: before the arm is drawn; MuJoCo: with the arm at home, clear of the board).
 """
 
 from __future__ import annotations
@@ -18,19 +19,24 @@ import multiprocessing.connection
 import os
 import threading
 import time
-from dataclasses import replace
+from collections.abc import Callable
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
+from numpy.typing import ArrayLike
 
+from mrguide.cell_layout import CupConfig
 from mrguide.pose_source import ObjectPoseSource, PoseUnavailable
+from mrguide.robot import RobotSpec
 from mrguide.twin.plant import CellView
 from mrguide.twin.visual_arm import ArmDrawing
 
 if TYPE_CHECKING:
     from mrguide.calibration.calibration_file import CalibrationRecord
-    from mrguide.twin.visual_arm import VisualArm
+    from mrguide.calibration.config import CalibrationConfig
+    from mrguide.twin.markers import TwinCalibrationConfig
 
 log = logging.getLogger(__name__)
 
@@ -40,22 +46,34 @@ WATCH_TARGET = (0.50, -0.05, 0.0)
 OBJECT_MARKER_ID = 0
 
 
+@dataclass(frozen=True)
+class MujocoDrawing:
+    """The MuJoCo cell as its HMD process draws it, with MuJoCo's own offscreen renderer (picklable)."""
+
+    spec: RobotSpec
+    cup: CupConfig
+
+
+#: Poses the HMD process's scene as the cell is: part position, quaternion (x, y, z, w), arm joints.
+ScenePoser = Callable[[ArrayLike, ArrayLike, ArrayLike], None]
+
+
 def _hmd_worker(
-    conn, calibration_path: str | None, object_size: float, noise_seed: int, hmd_overrides: dict, arm: ArmDrawing
+    conn,
+    calibration_path: str | None,
+    object_size: float,
+    noise_seed: int,
+    hmd_overrides: dict,
+    arm: ArmDrawing | MujocoDrawing,
 ) -> None:
     """Runs in the HMD process: calibrate, then answer each true (object pose, joints) with the HMD's estimate."""
-    import pybullet as pb
-
     from mrguide.twin.camera_feed import RENDER_NICENESS
 
     os.nice(RENDER_NICENESS)  # the simulated drives and the deploy loop share this machine: they go first
 
     from mrguide.calibration.config import load_calibration_config
     from mrguide.config import load_section
-    from mrguide.twin.camera import look_at
-    from mrguide.twin.camera_feed import marked_object_scene
-    from mrguide.twin.markers import TwinCalibrationConfig, TwinHmd, calibrate_twin_hmd, hmd_marker_pose_source
-    from mrguide.twin.visual_arm import VisualArm
+    from mrguide.twin.markers import TwinCalibrationConfig
 
     try:
         cfg = load_calibration_config(calibration_path)
@@ -65,31 +83,80 @@ def _hmd_worker(
             if calibration_path
             else TwinCalibrationConfig()
         )
-        client = pb.connect(pb.DIRECT)
-        cube, marker = marked_object_scene(
-            client, object_size, cfg.detector.dictionary, OBJECT_MARKER_ID, cfg.detector.marker_size_m
-        )
-        T_obj_marker = marker.T_body_marker
-        hmd = TwinHmd(
-            client,
-            twin_cfg.T_base_hmd,
-            look_at(np.array(WATCH_EYE), np.array(WATCH_TARGET), np.array([0.0, 0.0, 1.0])),
-            twin_cfg.intrinsics,
-            twin_cfg.supersample,
-            attached=[marker],
-        )
-        run = calibrate_twin_hmd(hmd, cfg, twin_cfg.views, twin_cfg.look_at, cfg.hmd)
-        hmd.look_from(WATCH_EYE, WATCH_TARGET)
-        hmd.supersample = 1  # streaming: ~4x faster frames than the calibration shots
-        source = hmd_marker_pose_source(
-            hmd, run.record.T_base_hmd, cfg.detector, OBJECT_MARKER_ID, -T_obj_marker[:3, 3], noise=cfg.hmd
-        )
-        drawn = VisualArm(client, arm)
-        conn.send(("ready", _calibration_quality(run.record, twin_cfg.T_base_hmd)))
+        if isinstance(arm, MujocoDrawing):
+            source, pose, quality = _mujoco_hmd(cfg, twin_cfg, object_size, arm)
+        else:
+            source, pose, quality = _pybullet_hmd(cfg, twin_cfg, object_size, arm)
+        conn.send(("ready", quality))
     except Exception as exc:  # report start-up failures to the parent instead of dying silently
         conn.send(("error", f"{type(exc).__name__}: {exc}"))
         return
-    _answer_poses(conn, client, cube, drawn, source)
+    _answer_poses(conn, pose, source)
+
+
+def _pybullet_hmd(
+    cfg: CalibrationConfig, twin_cfg: TwinCalibrationConfig, object_size: float, arm: ArmDrawing
+) -> tuple[ObjectPoseSource, ScenePoser, dict]:
+    """The HMD rendered by PyBullet: calibrated, looking at the cell; its pose source, poser and start-up report."""
+    import pybullet as pb
+
+    from mrguide.twin.camera import look_at
+    from mrguide.twin.camera_feed import marked_object_scene
+    from mrguide.twin.markers import TwinHmd, calibrate_twin_hmd, hmd_marker_pose_source
+    from mrguide.twin.visual_arm import VisualArm
+
+    client = pb.connect(pb.DIRECT)
+    cube, marker = marked_object_scene(
+        client, object_size, cfg.detector.dictionary, OBJECT_MARKER_ID, cfg.detector.marker_size_m
+    )
+    hmd = TwinHmd(
+        client,
+        twin_cfg.T_base_hmd,
+        look_at(np.array(WATCH_EYE), np.array(WATCH_TARGET), np.array([0.0, 0.0, 1.0])),
+        twin_cfg.intrinsics,
+        twin_cfg.supersample,
+        attached=[marker],
+    )
+    run = calibrate_twin_hmd(hmd, cfg, twin_cfg.views, twin_cfg.look_at, cfg.hmd)
+    hmd.look_from(WATCH_EYE, WATCH_TARGET)
+    hmd.supersample = 1  # streaming: ~4x faster frames than the calibration shots
+    source = hmd_marker_pose_source(
+        hmd, run.record.T_base_hmd, cfg.detector, OBJECT_MARKER_ID, -marker.T_body_marker[:3, 3], noise=cfg.hmd
+    )
+    drawn = VisualArm(client, arm)
+
+    def pose(pos, orn, q) -> None:
+        pb.resetBasePositionAndOrientation(cube, pos, orn, physicsClientId=client)
+        drawn.set(np.asarray(q))
+
+    return source, pose, _calibration_quality(run.record, twin_cfg.T_base_hmd)
+
+
+def _mujoco_hmd(
+    cfg: CalibrationConfig, twin_cfg: TwinCalibrationConfig, object_size: float, arm: MujocoDrawing
+) -> tuple[ObjectPoseSource, ScenePoser, dict]:
+    """The HMD of the MuJoCo cell rendered by MuJoCo offscreen (EGL unless MUJOCO_GL says otherwise)."""
+    from mrguide.twin.markers import hmd_marker_pose_source
+    from mrguide.twin.mujoco_hmd import MujocoHmd, calibrate_mujoco_hmd
+
+    hmd = MujocoHmd(
+        arm.spec,
+        arm.cup,
+        object_size,
+        cfg,
+        OBJECT_MARKER_ID,
+        twin_cfg.T_base_hmd,
+        twin_cfg.intrinsics,
+        twin_cfg.supersample,
+    )
+    hmd.pose((*WATCH_TARGET[:2], 0.5 * object_size), (0.0, 0.0, 0.0, 1.0), arm.spec.q_home)
+    run = calibrate_mujoco_hmd(hmd, cfg, twin_cfg.views, twin_cfg.look_at, cfg.hmd)
+    hmd.look_from(WATCH_EYE, WATCH_TARGET)
+    hmd.supersample = 1
+    source = hmd_marker_pose_source(
+        hmd, run.record.T_base_hmd, cfg.detector, OBJECT_MARKER_ID, -hmd.T_part_marker[:3, 3], noise=cfg.hmd
+    )
+    return source, hmd.pose, _calibration_quality(run.record, twin_cfg.T_base_hmd)
 
 
 def _calibration_quality(record: CalibrationRecord, T_base_hmd_true: np.ndarray) -> dict:
@@ -98,23 +165,30 @@ def _calibration_quality(record: CalibrationRecord, T_base_hmd_true: np.ndarray)
     return {"rms_residual_m": float(record.rms_residual_m), "T_base_hmd_translation_error_m": err}
 
 
-def _answer_poses(
-    conn: multiprocessing.connection.Connection, client: int, cube: int, drawn: VisualArm, source: ObjectPoseSource
-) -> None:
-    """Until None arrives: pose the cube and the arm as received, and send back the HMD's object estimate."""
-    import pybullet as pb
-
+def _answer_poses(conn: multiprocessing.connection.Connection, pose: ScenePoser, source: ObjectPoseSource) -> None:
+    """Until None arrives: pose the scene as received, and send back the HMD's object estimate."""
     while True:
         msg = conn.recv()
         if msg is None:
             break
-        pos, orn, q = msg
-        pb.resetBasePositionAndOrientation(cube, pos, orn, physicsClientId=client)
-        drawn.set(q)
+        pose(*msg)
         try:
             conn.send(("pose", source.object_position()))
         except PoseUnavailable as exc:
             conn.send(("none", str(exc)))
+
+
+def _start(proc: mp.process.BaseProcess, offscreen_gl: bool) -> None:
+    """Start `proc`; with `offscreen_gl` its environment has MUJOCO_GL=egl (unless set) from its first import of
+    mujoco on (the variable is read once, when mujoco is imported), while this process's is left as it was."""
+    if not offscreen_gl or "MUJOCO_GL" in os.environ:
+        proc.start()
+        return
+    os.environ["MUJOCO_GL"] = "egl"
+    try:
+        proc.start()
+    finally:
+        del os.environ["MUJOCO_GL"]
 
 
 def stop_render_process(conn, proc) -> None:
@@ -138,7 +212,7 @@ class HmdPoseStream(ObjectPoseSource):
         plant: CellView | None,
         calibration_path: str | Path | None,
         object_size: float,
-        arm: ArmDrawing,
+        arm: ArmDrawing | MujocoDrawing,
         noise_seed: int = 0,
         hmd_overrides: dict | None = None,
         max_age: float = 3.0,
@@ -166,7 +240,7 @@ class HmdPoseStream(ObjectPoseSource):
             name="hmd",
             daemon=True,
         )
-        self._proc.start()
+        _start(self._proc, offscreen_gl=isinstance(arm, MujocoDrawing))
         self.calibration = self._wait_ready(start_timeout)
         self._latest: tuple[np.ndarray, float] | None = None
         self._generation = 0

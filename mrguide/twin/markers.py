@@ -16,7 +16,7 @@ import tempfile
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Protocol
 
 import cv2
 import numpy as np
@@ -43,7 +43,7 @@ MARKER_THICKNESS = 0.0005  # m; a printed sticker, thick enough to avoid z-fight
 _TEXTURE_DIR: Path | None = None
 
 
-def _texture_path(image: np.ndarray, name: str) -> str:
+def texture_path(image: np.ndarray, name: str) -> str:
     global _TEXTURE_DIR
     if _TEXTURE_DIR is None:
         _TEXTURE_DIR = Path(tempfile.mkdtemp(prefix="mrguide-markers-"))
@@ -69,7 +69,7 @@ def _quat_xyzw(R: np.ndarray) -> list[float]:
     return q.tolist()
 
 
-def _slab_mesh(corners: np.ndarray, thickness: float, tex_shape: tuple[int, int]):
+def slab_mesh(corners: np.ndarray, thickness: float, tex_shape: tuple[int, int]):
     """Vertices, indices, normals and uvs of a slab whose printed face is the quad `corners` (TL, TR, BR, BL of
     the image); the slab extends `thickness` behind the face. Only the printed face is textured; the other
     faces sample the image's top-left (white quiet-zone) texel."""
@@ -106,7 +106,7 @@ def add_textured_slab(
 ) -> int:
     """A static, visual-only body showing `image` on the quad `corners_face` (TL, TR, BR, BL of the image,
     in the face frame placed at `T_base_face`); returns its body id."""
-    vertices, indices, normals, uvs = _slab_mesh(np.asarray(corners_face, dtype=float), thickness, image.shape[:2])
+    vertices, indices, normals, uvs = slab_mesh(np.asarray(corners_face, dtype=float), thickness, image.shape[:2])
     vis = pb.createVisualShape(
         pb.GEOM_MESH, vertices=vertices, indices=indices, normals=normals, uvs=uvs, physicsClientId=client
     )
@@ -114,7 +114,7 @@ def add_textured_slab(
         0, -1, vis, T_base_face[:3, 3].tolist(), _quat_xyzw(T_base_face[:3, :3]), physicsClientId=client
     )
     rgb = cv2.cvtColor(image, cv2.COLOR_GRAY2BGR) if image.ndim == 2 else image
-    tex = pb.loadTexture(_texture_path(rgb, name), physicsClientId=client)
+    tex = pb.loadTexture(texture_path(rgb, name), physicsClientId=client)
     pb.changeVisualShape(body, -1, textureUniqueId=tex, rgbaColor=[1, 1, 1, 1], physicsClientId=client)
     return body
 
@@ -252,8 +252,16 @@ class TwinHmd:
         return HmdFrame(render(self.camera, self.supersample), self.T_hmd_cam())
 
 
+class HmdCamera(Protocol):
+    """An HMD as the marker pose source uses it: frames with head-tracked poses, and its camera's model."""
+
+    camera_model: CameraModel
+
+    def frame(self) -> HmdFrame: ...
+
+
 def hmd_marker_pose_source(
-    hmd: TwinHmd,
+    hmd: HmdCamera,
     T_base_hmd_estimate: np.ndarray,
     detector_cfg: DetectorConfig,
     marker_id: int,
