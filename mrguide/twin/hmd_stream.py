@@ -44,6 +44,9 @@ log = logging.getLogger(__name__)
 WATCH_EYE = (1.0, -0.05, 0.55)
 WATCH_TARGET = (0.50, -0.05, 0.0)
 OBJECT_MARKER_ID = 0
+#: Frames per second the HMD process is asked for at most. The runtime reads one pose per decision (10 Hz); a render
+#: process drawing flat out (MuJoCo's draws ~25 frames/s here) takes CPU the simulated cell's real-time threads need.
+MAX_FRAME_RATE = 15.0
 
 
 @dataclass(frozen=True)
@@ -54,6 +57,12 @@ class MujocoDrawing:
     cup: CupConfig
 
 
+#: What MuJoCo's offscreen renderer needs, for the errors that say it is missing.
+OFFSCREEN_GL_HELP = (
+    "MuJoCo's offscreen renderer needs EGL (Debian: apt-get install libegl1 libegl-mesa0 libgl1-mesa-dri; "
+    "MUJOCO_GL=egl, the default here) or OSMesa (apt-get install libosmesa6; MUJOCO_GL=osmesa), set before mujoco "
+    "is imported"
+)
 #: Poses the HMD process's scene as the cell is: part position, quaternion (x, y, z, w), arm joints.
 ScenePoser = Callable[[ArrayLike, ArrayLike, ArrayLike], None]
 
@@ -137,7 +146,12 @@ def _mujoco_hmd(
 ) -> tuple[ObjectPoseSource, ScenePoser, dict]:
     """The HMD of the MuJoCo cell rendered by MuJoCo offscreen (EGL unless MUJOCO_GL says otherwise)."""
     from mrguide.twin.markers import hmd_marker_pose_source
-    from mrguide.twin.mujoco_hmd import MujocoHmd, calibrate_mujoco_hmd
+
+    try:
+        from mrguide.twin.mujoco_hmd import MujocoHmd, calibrate_mujoco_hmd
+    except Exception as exc:  # importing mujoco loads the OpenGL backend MUJOCO_GL names, and fails without it
+        backend = os.environ.get("MUJOCO_GL")
+        raise RuntimeError(f"mujoco cannot be imported with MUJOCO_GL={backend}: {exc}. {OFFSCREEN_GL_HELP}") from exc
 
     hmd = MujocoHmd(
         arm.spec,
@@ -303,6 +317,7 @@ class HmdPoseStream(ObjectPoseSource):
                     self._latest = (np.asarray(value, dtype=float), t)
                 elif kind != "pose":
                     self.misses += 1
+            self._stop.wait(t + 1.0 / MAX_FRAME_RATE - time.monotonic())
 
     def invalidate(self) -> None:
         """Forget the current estimate (the object was moved by hand)."""

@@ -37,6 +37,7 @@ from mrguide.mujoco_cell.config import MujocoCellConfig
 from mrguide.mujoco_cell.model import arm_spec
 from mrguide.robot import RobotSpec
 from mrguide.twin.camera import Intrinsics, look_at
+from mrguide.twin.hmd_stream import OFFSCREEN_GL_HELP
 from mrguide.twin.markers import HOLOLENS2_PV, MARKER_THICKNESS, marker_on_cube_top, slab_mesh, texture_path
 
 #: The geom group of the calibration targets (MuJoCo draws groups 0-2 unless told otherwise).
@@ -119,9 +120,7 @@ def _renderer(model: mujoco.MjModel, height: int, width: int) -> mujoco.Renderer
     except Exception as exc:
         backend = os.environ.get("MUJOCO_GL", "glfw (MUJOCO_GL unset)")
         raise RendererError(
-            f"MuJoCo's offscreen renderer could not start with MUJOCO_GL={backend}: {exc}. It needs EGL "
-            "(Debian: apt-get install libegl1 libegl-mesa0 libgl1-mesa-dri; MUJOCO_GL=egl) or OSMesa "
-            "(apt-get install libosmesa6; MUJOCO_GL=osmesa), set before mujoco is imported"
+            f"the renderer could not start with MUJOCO_GL={backend}: {exc}. {OFFSCREEN_GL_HELP}"
         ) from exc
 
 

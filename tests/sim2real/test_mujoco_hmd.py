@@ -2,6 +2,7 @@
 does, finds the part's marker where MuJoCo has the part, loses it under the cup, and streams the part's position
 from a separate process while the MuJoCo cell runs."""
 
+import time
 from pathlib import Path
 
 import numpy as np
@@ -15,7 +16,15 @@ from mrguide.pose_source import PoseUnavailable
 from mrguide.robot import load_robot
 from mrguide.twin.camera import Intrinsics
 from mrguide.twin.env import EnvConfig
-from mrguide.twin.hmd_stream import OBJECT_MARKER_ID, WATCH_EYE, WATCH_TARGET, HmdPoseStream, MujocoDrawing
+from mrguide.twin.hmd_stream import (
+    MAX_FRAME_RATE,
+    OBJECT_MARKER_ID,
+    WATCH_EYE,
+    WATCH_TARGET,
+    HmdPoseStream,
+    HmdStartError,
+    MujocoDrawing,
+)
 from mrguide.twin.markers import TwinCalibrationConfig, hmd_marker_pose_source
 
 mujoco_hmd = pytest.importorskip("mrguide.twin.mujoco_hmd")  # the mujoco extra (in dev)
@@ -113,5 +122,19 @@ def test_the_hmd_process_streams_the_mujoco_cells_part():
         assert stream.calibration["T_base_hmd_translation_error_m"] < 1e-3
         stream.wait_fresh(timeout=60.0)
         assert np.linalg.norm(stream.object_position() - plant.object_position()) < 2e-3
+        t0, frames0 = time.monotonic(), stream.frames
+        time.sleep(1.0)
+        # paced: never more frames than MAX_FRAME_RATE allows (MuJoCo alone would draw more); fewer on a busy machine
+        assert stream.frames - frames0 <= MAX_FRAME_RATE * (time.monotonic() - t0) + 1
     finally:
         stream.close()
+
+
+def test_without_an_offscreen_backend_the_hmd_says_what_to_install(monkeypatch):
+    """mujoco picks its OpenGL backend when it is imported: a backend it cannot load stops the HMD at start-up with
+    the packages to install, instead of a traceback from inside OpenGL."""
+    monkeypatch.setenv("MUJOCO_GL", "no-such-backend")  # the HMD process inherits it (an explicit choice is kept)
+    env = EnvConfig.load(MUJOCO_CELL)
+    spec = load_robot(env.robot)
+    with pytest.raises(HmdStartError, match="libegl1 libegl-mesa0 libgl1-mesa-dri"):
+        HmdPoseStream(None, MUJOCO_CELL, env.task.object_height, MujocoDrawing(spec, env.twin.cup))
