@@ -104,8 +104,8 @@ def arm_spec(spec: RobotSpec, cfg: MujocoCellConfig, cup: CupConfig) -> mujoco.M
     return s
 
 
-def _add_cell(s: mujoco.MjSpec, part_size: float, part_mass: float) -> None:
-    """The table (top face at z = 0) and the part, a free cube."""
+def add_table(s: mujoco.MjSpec) -> None:
+    """The table, its top face at z = 0."""
     s.worldbody.add_geom(
         name="table",
         type=mujoco.mjtGeom.mjGEOM_BOX,
@@ -113,6 +113,11 @@ def _add_cell(s: mujoco.MjSpec, part_size: float, part_mass: float) -> None:
         pos=TABLE_CENTER,
         rgba=[0.75, 0.72, 0.66, 1],
     )
+
+
+def _add_cell(s: mujoco.MjSpec, part_size: float, part_mass: float) -> None:
+    """The table and the part, a free cube."""
+    add_table(s)
     h = 0.5 * part_size
     part = s.worldbody.add_body(name="part", pos=[*PART_START, h])
     part.add_freejoint(name="part_free")

@@ -253,11 +253,14 @@ class TwinHmd:
 
 
 class HmdCamera(Protocol):
-    """An HMD as the marker pose source uses it: frames with head-tracked poses, and its camera's model."""
+    """An HMD as the calibration and the marker pose source use it: frames with head-tracked poses, its camera's
+    model, and where it looks from."""
 
     camera_model: CameraModel
 
     def frame(self) -> HmdFrame: ...
+
+    def look_from(self, eye, target, up=(0.0, 0.0, 1.0)) -> None: ...
 
 
 def hmd_marker_pose_source(
@@ -342,14 +345,23 @@ def calibrate_twin_hmd(
     """Run the calibration procedure in the twin: the targets are put on the table, the HMD looks at them
     from each view (tracking noise per `noise`), the frames are registered, and the targets are removed."""
     bodies = add_targets(hmd.client, cfg)
-    frames = with_tracking_noise(hmd.frame, noise)
     try:
-        shots = []
-        for i, eye in enumerate(views):
-            hmd.look_from(eye, look_at_point)
-            f = frames()
-            shots.append((f"view{i}", f.image, f.T_hmd_cam))
+        shots = calibration_shots(hmd, views, look_at_point, noise)
     finally:
         for body in bodies:
             pb.removeBody(body, physicsClientId=hmd.client)
     return calibrate_frames(shots, cfg, hmd.camera_model)
+
+
+def calibration_shots(
+    hmd: HmdCamera, views, look_at_point, noise: HmdNoiseConfig
+) -> list[tuple[str, np.ndarray, np.ndarray]]:
+    """The calibration's frames: the HMD looks at `look_at_point` from each of `views` (tracking noise per `noise`);
+    (label, image, T_hmd_cam) per view."""
+    frames = with_tracking_noise(hmd.frame, noise)
+    shots = []
+    for i, eye in enumerate(views):
+        hmd.look_from(eye, look_at_point)
+        f = frames()
+        shots.append((f"view{i}", f.image, f.T_hmd_cam))
+    return shots

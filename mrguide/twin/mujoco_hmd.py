@@ -27,18 +27,25 @@ from mrguide.calibration.boards import Board, printable_board, printable_marker,
 from mrguide.calibration.camera_model import CameraModel
 from mrguide.calibration.config import CalibrationConfig, HmdNoiseConfig
 from mrguide.calibration.detection import MarkerDetector, get_dictionary
-from mrguide.calibration.hmd import HmdFrame, with_tracking_noise
+from mrguide.calibration.hmd import HmdFrame
 from mrguide.calibration.procedure import CalibrationRun, calibrate_frames
 from mrguide.calibration.se3 import invert
 from mrguide.calibration.targets import layout_from_config
-from mrguide.cell_layout import TABLE_CENTER, TABLE_HALF_EXTENTS, CupConfig
+from mrguide.cell_layout import CupConfig
 from mrguide.config import ConfigError
 from mrguide.mujoco_cell.config import MujocoCellConfig
-from mrguide.mujoco_cell.model import arm_spec
+from mrguide.mujoco_cell.model import add_table, arm_spec
 from mrguide.robot import RobotSpec
 from mrguide.twin.camera import Intrinsics, look_at
 from mrguide.twin.hmd_stream import OFFSCREEN_GL_HELP
-from mrguide.twin.markers import HOLOLENS2_PV, MARKER_THICKNESS, marker_on_cube_top, slab_mesh, texture_path
+from mrguide.twin.markers import (
+    HOLOLENS2_PV,
+    MARKER_THICKNESS,
+    calibration_shots,
+    marker_on_cube_top,
+    slab_mesh,
+    texture_path,
+)
 
 #: The geom group of the calibration targets (MuJoCo draws groups 0-2 unless told otherwise).
 TARGET_GROUP = 3
@@ -147,13 +154,7 @@ class MujocoHmd:
             )
         s = arm_spec(spec, MujocoCellConfig(), cup)
         s.compiler.discardvisual = False  # the URDF's visual meshes were skipped when parsing; keep the prints
-        s.worldbody.add_geom(
-            name="table",
-            type=mujoco.mjtGeom.mjGEOM_BOX,
-            size=TABLE_HALF_EXTENTS,
-            pos=TABLE_CENTER,
-            rgba=[0.75, 0.72, 0.66, 1],
-        )
+        add_table(s)
         part = s.worldbody.add_body(name="part", mocap=True)
         h = 0.5 * part_size
         part.add_geom(name="part", type=mujoco.mjtGeom.mjGEOM_BOX, size=[h, h, h], rgba=[0.85, 0.1, 0.1, 1])
@@ -230,14 +231,9 @@ def calibrate_mujoco_hmd(
 ) -> CalibrationRun:
     """The calibration procedure in the MuJoCo cell: the targets are shown, the HMD looks at them from each view
     (tracking noise per `noise`), the frames are registered, and the targets are hidden again."""
-    frames = with_tracking_noise(hmd.frame, noise)
     hmd.show_targets(True)
     try:
-        shots = []
-        for i, eye in enumerate(views):
-            hmd.look_from(eye, look_at_point)
-            f = frames()
-            shots.append((f"view{i}", f.image, f.T_hmd_cam))
+        shots = calibration_shots(hmd, views, look_at_point, noise)
     finally:
         hmd.show_targets(False)
     return calibrate_frames(shots, cfg, hmd.camera_model)
