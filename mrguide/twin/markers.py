@@ -43,15 +43,50 @@ MARKER_THICKNESS = 0.0005  # m; a printed sticker, thick enough to avoid z-fight
 _TEXTURE_DIR: Path | None = None
 
 
-def texture_path(image: np.ndarray, name: str) -> str:
-    global _TEXTURE_DIR
-    if _TEXTURE_DIR is None:
-        _TEXTURE_DIR = Path(tempfile.mkdtemp(prefix="mrguide-markers-"))
-        atexit.register(shutil.rmtree, _TEXTURE_DIR, ignore_errors=True)
-    path = _TEXTURE_DIR / f"{name}.png"
-    if not path.exists():
-        cv2.imwrite(str(path), image)
-    return str(path)
+#: Print resolution of markers and boards (px/m): 5 cm markers 12.5 mm apart come out in whole pixels.
+PX_PER_M = 4000.0
+
+
+@dataclass(frozen=True)
+class Sheet:
+    """A print to put on a slab: its image, the face-frame corners of the image (TL, TR, BR, BL) and a name that
+    says what is printed (its texture file is cached under that name)."""
+
+    image: np.ndarray
+    corners: np.ndarray
+    name: str
+
+    def texture_path(self) -> str:
+        """The image as a colour PNG in this process's texture folder (written once per name)."""
+        global _TEXTURE_DIR
+        if _TEXTURE_DIR is None:
+            _TEXTURE_DIR = Path(tempfile.mkdtemp(prefix="mrguide-markers-"))
+            atexit.register(shutil.rmtree, _TEXTURE_DIR, ignore_errors=True)
+        path = _TEXTURE_DIR / f"{self.name}.png"
+        if not path.exists():
+            rgb = cv2.cvtColor(self.image, cv2.COLOR_GRAY2BGR) if self.image.ndim == 2 else self.image
+            cv2.imwrite(str(path), rgb)
+        return str(path)
+
+
+def marker_sheet(
+    dictionary: str, marker_id: int, size_m: float, quiet_zone_m: float | None = None, px_per_m: float = PX_PER_M
+) -> Sheet:
+    """One printed marker with its white quiet zone (default: a quarter of the marker size), in the marker frame
+    (z out of the print, corner 0 at (-s/2, s/2))."""
+    quiet = size_m / 4.0 if quiet_zone_m is None else quiet_zone_m
+    image = printable_marker(get_dictionary(dictionary), marker_id, size_m, quiet, px_per_m)
+    corners = single_marker_corners(size_m + 2 * quiet)
+    return Sheet(image, corners, f"marker-{dictionary}-{marker_id}-{size_m}-{quiet}-{px_per_m}")
+
+
+def board_sheet(board: Board, px_per_m: float = PX_PER_M) -> Sheet:
+    """The printed board with its white margin, in the board frame (see `mrguide.calibration.boards`)."""
+    c, m = board.cfg, board.cfg.margin_m
+    w, h = board.size_m
+    corners = np.array([[-m, -m, 0.0], [w + m, -m, 0.0], [w + m, h + m, 0.0], [-m, h + m, 0.0]])
+    name = f"board-{c.kind}-{c.columns}x{c.rows}-{c.marker_size_m}-{c.separation_m}-{c.square_size_m}-{c.first_id}-{m}-{px_per_m}"
+    return Sheet(printable_board(board, px_per_m), corners, name)
 
 
 def _quat_xyzw(R: np.ndarray) -> list[float]:
@@ -101,20 +136,16 @@ def slab_mesh(corners: np.ndarray, thickness: float, tex_shape: tuple[int, int])
     return vertices, indices, normals, uvs
 
 
-def add_textured_slab(
-    client: int, image: np.ndarray, T_base_face: np.ndarray, corners_face: np.ndarray, thickness: float, name: str
-) -> int:
-    """A static, visual-only body showing `image` on the quad `corners_face` (TL, TR, BR, BL of the image,
-    in the face frame placed at `T_base_face`); returns its body id."""
-    vertices, indices, normals, uvs = slab_mesh(np.asarray(corners_face, dtype=float), thickness, image.shape[:2])
+def add_textured_slab(client: int, sheet: Sheet, T_base_face: np.ndarray, thickness: float) -> int:
+    """A static, visual-only body showing `sheet` on its corners' quad (in the face frame placed at `T_base_face`),
+    the slab extending `thickness` behind the face; returns its body id."""
+    vertices, indices, normals, uvs = slab_mesh(sheet.corners, thickness, sheet.image.shape[:2])
     vis = pb.createVisualShape(
         pb.GEOM_MESH, vertices=vertices, indices=indices, normals=normals, uvs=uvs, physicsClientId=client
     )
-    body = pb.createMultiBody(
-        0, -1, vis, T_base_face[:3, 3].tolist(), _quat_xyzw(T_base_face[:3, :3]), physicsClientId=client
-    )
-    rgb = cv2.cvtColor(image, cv2.COLOR_GRAY2BGR) if image.ndim == 2 else image
-    tex = pb.loadTexture(texture_path(rgb, name), physicsClientId=client)
+    T = np.asarray(T_base_face, dtype=float)
+    body = pb.createMultiBody(0, -1, vis, T[:3, 3].tolist(), _quat_xyzw(T[:3, :3]), physicsClientId=client)
+    tex = pb.loadTexture(sheet.texture_path(), physicsClientId=client)
     pb.changeVisualShape(body, -1, textureUniqueId=tex, rgbaColor=[1, 1, 1, 1], physicsClientId=client)
     return body
 
@@ -127,7 +158,7 @@ def add_marker_plane(
     T_base_marker: np.ndarray,
     quiet_zone_m: float | None = None,
     thickness_m: float = MARKER_THICKNESS,
-    px_per_m: float = 4000.0,
+    px_per_m: float = PX_PER_M,
 ) -> int:
     """A printed marker whose face has pose `T_base_marker` (marker frame: z out of the print, corner 0 at
     (-s/2, s/2)); the slab extends `thickness_m` behind the face. Returns the body id.
@@ -135,25 +166,15 @@ def add_marker_plane(
     A marker lying on a surface at height z needs its face at z + thickness_m (to avoid z-fighting).
     `quiet_zone_m` defaults to a quarter of the marker size.
     """
-    quiet = size_m / 4.0 if quiet_zone_m is None else quiet_zone_m
-    dic = get_dictionary(dictionary)
-    image = printable_marker(dic, marker_id, size_m, quiet, px_per_m)
-    corners = single_marker_corners(size_m + 2 * quiet)
-    name = f"marker-{dictionary}-{marker_id}-{size_m}-{quiet}-{px_per_m}"
-    return add_textured_slab(client, image, np.asarray(T_base_marker, dtype=float), corners, thickness_m, name)
+    sheet = marker_sheet(dictionary, marker_id, size_m, quiet_zone_m, px_per_m)
+    return add_textured_slab(client, sheet, T_base_marker, thickness_m)
 
 
-def add_board(client: int, board: Board, T_base_board: np.ndarray, px_per_m: float = 4000.0) -> int:
+def add_board(client: int, board: Board, T_base_board: np.ndarray, px_per_m: float = PX_PER_M) -> int:
     """The printed board, its pattern at `T_base_board` (board frame: see `mrguide.calibration.boards`), as a
     slab `board.cfg.thickness_m` thick behind the printed face. For a board on the table use
     `board_pose_on_table((x, y, thickness), yaw)`. Returns the body id."""
-    image = printable_board(board, px_per_m)
-    m = board.cfg.margin_m
-    w, h = board.size_m
-    corners = np.array([[-m, -m, 0.0], [w + m, -m, 0.0], [w + m, h + m, 0.0], [-m, h + m, 0.0]])
-    c = board.cfg
-    name = f"board-{c.kind}-{c.columns}x{c.rows}-{c.marker_size_m}-{c.separation_m}-{c.square_size_m}-{c.first_id}-{m}-{px_per_m}"
-    return add_textured_slab(client, image, np.asarray(T_base_board, dtype=float), corners, c.thickness_m, name)
+    return add_textured_slab(client, board_sheet(board, px_per_m), T_base_board, board.cfg.thickness_m)
 
 
 def marker_on_cube_top(cube_size: float, thickness_m: float = MARKER_THICKNESS) -> np.ndarray:

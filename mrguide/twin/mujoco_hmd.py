@@ -23,10 +23,9 @@ import mujoco
 import numpy as np
 from numpy.typing import ArrayLike
 
-from mrguide.calibration.boards import Board, printable_board, printable_marker, single_marker_corners
 from mrguide.calibration.camera_model import CameraModel
 from mrguide.calibration.config import CalibrationConfig, HmdNoiseConfig
-from mrguide.calibration.detection import MarkerDetector, get_dictionary
+from mrguide.calibration.detection import MarkerDetector
 from mrguide.calibration.hmd import HmdFrame
 from mrguide.calibration.procedure import CalibrationRun, calibrate_frames
 from mrguide.calibration.se3 import invert
@@ -41,17 +40,18 @@ from mrguide.twin.hmd_stream import OFFSCREEN_GL_HELP
 from mrguide.twin.markers import (
     HOLOLENS2_PV,
     MARKER_THICKNESS,
+    Sheet,
+    board_sheet,
     calibration_shots,
     marker_on_cube_top,
+    marker_sheet,
     slab_mesh,
-    texture_path,
 )
 
 #: The geom group of the calibration targets (MuJoCo draws groups 0-2 unless told otherwise).
 TARGET_GROUP = 3
 #: OpenCV camera frame (x right, y down, z forward) -> MuJoCo camera frame (x right, y up, looking along -z).
 _CV_TO_MJ = np.diag([1.0, -1.0, -1.0])
-PX_PER_M = 4000.0  # print resolution of markers and board, as the PyBullet HMD prints them
 
 
 def _quat_wxyz(R: np.ndarray) -> np.ndarray:
@@ -60,36 +60,26 @@ def _quat_wxyz(R: np.ndarray) -> np.ndarray:
     return quat
 
 
-def _add_print(
-    s: mujoco.MjSpec,
-    body,
-    name: str,
-    image: np.ndarray,
-    corners: np.ndarray,
-    T: np.ndarray,
-    thickness: float,
-    group: int,
-) -> None:
-    """A slab on `body` at pose `T` (body frame) whose face `corners` (TL, TR, BR, BL of the image) shows `image`."""
-    vertices, indices, normals, uvs = slab_mesh(np.asarray(corners, dtype=float), thickness, image.shape[:2])
-    rgb = cv2.cvtColor(image, cv2.COLOR_GRAY2BGR) if image.ndim == 2 else image
-    path = Path(texture_path(rgb, name))
+def _add_print(s: mujoco.MjSpec, body, sheet: Sheet, T: np.ndarray, thickness: float, group: int) -> None:
+    """A slab on `body` at pose `T` (body frame) whose face shows `sheet`, `thickness` deep."""
+    vertices, indices, normals, uvs = slab_mesh(sheet.corners, thickness, sheet.image.shape[:2])
+    path = Path(sheet.texture_path())
     s.compiler.texturedir = str(path.parent)  # the arm's compiler strips paths: textures are found by name there
-    s.add_texture(name=name, type=mujoco.mjtTexture.mjTEXTURE_2D, file=path.name)
-    material = s.add_material(name=name, specular=0.0, shininess=0.0, reflectance=0.0)
-    material.textures[mujoco.mjtTextureRole.mjTEXROLE_RGB] = name
+    s.add_texture(name=sheet.name, type=mujoco.mjtTexture.mjTEXTURE_2D, file=path.name)
+    material = s.add_material(name=sheet.name, specular=0.0, shininess=0.0, reflectance=0.0)
+    material.textures[mujoco.mjtTextureRole.mjTEXROLE_RGB] = sheet.name
     s.add_mesh(
-        name=name,
+        name=sheet.name,
         uservert=np.ravel(vertices).tolist(),
         usernormal=np.ravel(normals).tolist(),
         usertexcoord=np.ravel(np.asarray(uvs) * (1.0, -1.0) + (0.0, 1.0)).tolist(),  # MuJoCo's v runs the other way
         userface=list(indices),
     )
     body.add_geom(
-        name=name,
+        name=sheet.name,
         type=mujoco.mjtGeom.mjGEOM_MESH,
-        meshname=name,
-        material=name,
+        meshname=sheet.name,
+        material=sheet.name,
         pos=T[:3, 3],
         quat=_quat_wxyz(T[:3, :3]),
         contype=0,
@@ -103,18 +93,12 @@ def _add_targets(s: mujoco.MjSpec, cfg: CalibrationConfig) -> None:
     """The configured calibration board and single markers on the table, in TARGET_GROUP."""
     layout = layout_from_config(cfg, MarkerDetector(cfg.detector))
     if layout.board is not None:
-        board: Board = layout.board
         assert layout.T_base_board is not None  # a layout with a board has its pose
-        m, (w, h) = board.cfg.margin_m, board.size_m
-        corners = np.array([[-m, -m, 0.0], [w + m, -m, 0.0], [w + m, h + m, 0.0], [-m, h + m, 0.0]])
-        image = printable_board(board, PX_PER_M)
-        _add_print(s, s.worldbody, "board", image, corners, layout.T_base_board, board.cfg.thickness_m, TARGET_GROUP)
-    dic = get_dictionary(cfg.detector.dictionary)
-    size = cfg.detector.marker_size_m
+        sheet = board_sheet(layout.board)
+        _add_print(s, s.worldbody, sheet, layout.T_base_board, layout.board.cfg.thickness_m, TARGET_GROUP)
     for marker_id, T in layout.markers.items():
-        image = printable_marker(dic, marker_id, size, size / 4.0, PX_PER_M)
-        corners = single_marker_corners(1.5 * size)
-        _add_print(s, s.worldbody, f"target{marker_id}", image, corners, T, MARKER_THICKNESS, TARGET_GROUP)
+        sheet = marker_sheet(cfg.detector.dictionary, marker_id, cfg.detector.marker_size_m)
+        _add_print(s, s.worldbody, sheet, T, MARKER_THICKNESS, TARGET_GROUP)
 
 
 class RendererError(RuntimeError):
@@ -158,12 +142,9 @@ class MujocoHmd:
         part = s.worldbody.add_body(name="part", mocap=True)
         h = 0.5 * part_size
         part.add_geom(name="part", type=mujoco.mjtGeom.mjGEOM_BOX, size=[h, h, h], rgba=[0.85, 0.1, 0.1, 1])
-        size = cfg.detector.marker_size_m
-        image = printable_marker(get_dictionary(cfg.detector.dictionary), marker_id, size, size / 4.0, PX_PER_M)
+        sheet = marker_sheet(cfg.detector.dictionary, marker_id, cfg.detector.marker_size_m)
         self.T_part_marker = marker_on_cube_top(part_size)
-        _add_print(
-            s, part, "part_marker", image, single_marker_corners(1.5 * size), self.T_part_marker, MARKER_THICKNESS, 0
-        )
+        _add_print(s, part, sheet, self.T_part_marker, MARKER_THICKNESS, 0)
         _add_targets(s, cfg)
         s.worldbody.add_light(name="overhead", pos=[0.5, 0.0, 1.6], dir=[0.0, 0.0, -1.0], castshadow=False)
         s.worldbody.add_camera(name="hmd", fovy=math.degrees(2.0 * math.atan(k.height / 2.0 / k.fy)))
@@ -177,7 +158,7 @@ class MujocoHmd:
         self.T_base_hmd = np.asarray(T_base_hmd, dtype=float)
         self.intrinsics, self.supersample = intrinsics, supersample
         self.camera_model = CameraModel.from_pinhole(intrinsics)
-        self._renderers: dict[int, mujoco.Renderer] = {}
+        self._renderer: tuple[int, mujoco.Renderer] | None = None  # (supersample, renderer): one context at a time
         self.move_to(np.eye(4))
 
     def move_to(self, T_base_cam: np.ndarray) -> None:
@@ -206,10 +187,12 @@ class MujocoHmd:
     def render(self) -> np.ndarray:
         """RGB image, each pixel the mean of supersample x supersample samples over its area."""
         k, s = self.intrinsics, self.supersample
-        renderer = self._renderers.get(s)
-        if renderer is None:  # one context at a time: each holds an offscreen buffer of the largest size
+        if (
+            self._renderer is None or self._renderer[0] != s
+        ):  # each context holds an offscreen buffer of the largest size
             self.close()
-            renderer = self._renderers[s] = _renderer(self.model, k.height * s, k.width * s)
+            self._renderer = (s, _renderer(self.model, k.height * s, k.width * s))
+        renderer = self._renderer[1]
         mujoco.mj_kinematics(self.model, self.data)
         mujoco.mj_camlight(self.model, self.data)
         renderer.update_scene(self.data, camera=self._camera, scene_option=self._option)
@@ -221,9 +204,9 @@ class MujocoHmd:
         return HmdFrame(self.render(), self.T_hmd_cam())
 
     def close(self) -> None:
-        for renderer in self._renderers.values():
-            renderer.close()
-        self._renderers.clear()
+        if self._renderer is not None:
+            self._renderer[1].close()
+            self._renderer = None
 
 
 def calibrate_mujoco_hmd(
