@@ -45,7 +45,7 @@ WATCH_EYE = (1.0, -0.05, 0.55)
 WATCH_TARGET = (0.50, -0.05, 0.0)
 OBJECT_MARKER_ID = 0
 #: Frames per second the HMD process is asked for at most. The runtime reads one pose per decision (10 Hz); a render
-#: process drawing flat out (MuJoCo's draws ~25 frames/s here) takes CPU the simulated cell's real-time threads need.
+#: process drawing flat out (MuJoCo's draws faster than that) takes CPU the simulated cell's real-time threads need.
 MAX_FRAME_RATE = 15.0
 
 
