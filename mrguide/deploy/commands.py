@@ -77,9 +77,14 @@ def add_deploy_command(sub: argparse._SubParsersAction, dry_run_factory: Callabl
     sp.add_argument("--enable-drives", action="store_true", help="confirm enabling the real drives (real bus only)")
     sp.add_argument("--episodes", type=positive_int, help="default: [deploy] episodes")
     sp.add_argument(
-        "--cycles", type=positive_int, help="production: this many parts, one after another, lost ones picked again"
+        "--cycles",
+        type=positive_int,
+        help="production: this many parts, one after another, lost ones picked again (with --resume: in all, "
+        "the log's cycles counted)",
     )
-    sp.add_argument("--resume", action="store_true", help="with --cycles and --log: go on from that run log's count")
+    sp.add_argument(
+        "--resume", action="store_true", help="with --cycles and --log: go on from that run log's count up to --cycles"
+    )
     sp.add_argument("--seed", type=nonnegative_int, help="dry run: object/goal layouts; default: [deploy] seed")
     sp.add_argument("--log", help="run log path (JSONL); default under [deploy] log_dir")
     add_set_argument(
@@ -171,7 +176,7 @@ def _overridden(dcfg: DeployConfig, safety: Any, overrides: list[tuple[str, Any]
 
 def _first_cycle(args: argparse.Namespace, log_path: Path) -> tuple[int, int]:
     """The first cycle to run and its first attempt's episode index: (0, 0), or with --resume where the run log
-    being continued left off."""
+    being continued left off; InputError if that log already holds the --cycles asked for."""
     from mrguide.deploy.cycle_commands import cycles_done
 
     if args.cycles is not None and args.episodes is not None:
@@ -180,7 +185,13 @@ def _first_cycle(args: argparse.Namespace, log_path: Path) -> tuple[int, int]:
         return 0, 0
     if args.cycles is None or not args.log:
         raise InputError("--resume needs --cycles and --log (the run log whose count it goes on from)")
-    return cycles_done(log_path)
+    start = cycles_done(log_path)
+    if start[0] >= args.cycles:
+        raise InputError(
+            f"--resume {log_path}: the log already holds {start[0]} cycles, --cycles {args.cycles} asks for "
+            f"{args.cycles} in all; ask for more to go on"
+        )
+    return start
 
 
 def _run(
@@ -196,7 +207,8 @@ def _run(
 
     desc = "deploy" + (" (dry run)" if dry else "")
     total, unit = (args.cycles, "part") if args.cycles else (episodes, "ep")
-    with tqdm(total=total, desc=desc, unit=unit, disable=args.quiet) as bar:
+    first = start[0] if args.cycles else 0  # a resumed run's bar counts the log's cycles
+    with tqdm(total=total, initial=first, desc=desc, unit=unit, disable=args.quiet) as bar:
         if args.cycles:
             return run_cycles(cycle_run(args, inputs.dcfg, seed, start, bar), dry, inputs)
 

@@ -66,7 +66,7 @@ def cycle_run(args: argparse.Namespace, dcfg: DeployConfig, seed: int, start: tu
         bar.update(1)
         bar.set_postfix(placed=report.placed, attempts=len(report.outcomes), s=f"{report.cycle_s:.1f}")
 
-    return CycleRun(start[0], args.cycles, seed, dcfg.cycles, tick, first_attempt=start[1])
+    return CycleRun(start[0], args.cycles - start[0], seed, dcfg.cycles, tick, first_attempt=start[1])
 
 
 def run_cycles(run: CycleRun, dry: Any, inputs: DeployInputs) -> CycleSummary:

@@ -14,7 +14,7 @@ import csv
 import io
 import logging
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -305,7 +305,7 @@ COLORS = {
 }
 
 
-def report_files(results: list[ConditionResult], gap_text: str) -> dict[str, bytes]:
+def report_files(results: list[ConditionResult], cells_text: str) -> dict[str, bytes]:
     """{"sim2real.csv", "sim2real.md", "fig8_sim2real.png"}: pooled success per condition, CI, causes, figure."""
     if not results:
         raise ValueError("no results to report")
@@ -325,7 +325,7 @@ def report_files(results: list[ConditionResult], gap_text: str) -> dict[str, byt
             + " | ".join(str(r[c]) for c in CAUSES)
             + " |"
         )
-    lines += ["", gap_text]
+    lines += ["", cells_text] if cells_text else []
     return {
         "sim2real.csv": table.getvalue().encode(),
         "sim2real.md": ("\n".join(lines) + "\n").encode(),
@@ -373,24 +373,39 @@ def _figure(rows: list[dict]) -> bytes:
     return report.png_bytes(fig)
 
 
-def write_report(results: list[ConditionResult], out: Path, gap_text: str) -> Path:
+def write_report(results: list[ConditionResult], out: Path, cells_text: str) -> Path:
     """sim2real.csv, fig8_sim2real.png and sim2real.md in `out`, written together (whole or not at all)."""
-    files = report_files(results, gap_text)
+    files = report_files(results, cells_text)
     write_files_atomically({out / name: data for name, data in files.items()})
     return out / "sim2real.md"
 
 
-def gap_description(real_cfg: EnvConfig, hmd_config: Path | None) -> str:
-    from mrguide.calibration.config import load_calibration_config
+def cells_description(cells: dict[str, RealCell], conditions: Iterable[str]) -> str:
+    """What the played conditions ran on: the PyBullet 'real' twin's reality gap, the MuJoCo cell's config, and the
+    HMD of each cell that an HMD condition played (as the run used it, `--set` included)."""
+    paragraphs = []
+    for name, cell in cells.items():
+        played = [c for c in conditions if c in CELL_CONDITIONS and CELL_CONDITIONS[c][0] == name]
+        if not played:
+            continue
+        text = _gap_sentence(cell.env) if name == "real" else f"The MuJoCo cell: {cell.path.name}."
+        if any(CELL_CONDITIONS[c][1] for c in played):
+            h = cell.hmd
+            text += (
+                f" HMD: tracking noise {h.tracking_noise_m * 1e3:.1f} mm / {h.tracking_noise_deg}° per frame, "
+                f"calibration error {h.calibration_error_m * 1e3:.1f} mm / {h.calibration_error_deg}°."
+            )
+        paragraphs.append(text)
+    return "\n\n".join(paragraphs)
 
+
+def _gap_sentence(real_cfg: EnvConfig) -> str:
     g, cup = real_cfg.twin.reality_gap, real_cfg.twin.cup
-    h = load_calibration_config(hmd_config).hmd
     mounting = f"cup on a {cup.stroke * 1e3:.0f} mm level-compensator" if cup.stroke > 0 else "rigid cup"
     return (
         f"Reality gap of the 'real' twin: object {g.object_mass} kg, friction {g.object_friction}, suction break "
         f"force {g.suction_break_force} N, actuator latency {g.actuator_latency} cycles, lag {g.actuator_lag * 1e3:.0f} ms, "
-        f"joint noise {g.joint_noise} rad, vacuum noise {g.vacuum_noise} kPa, {mounting}. HMD: tracking noise {h.tracking_noise_m * 1e3:.1f} mm / "
-        f"{h.tracking_noise_deg}° per frame, calibration error {h.calibration_error_m * 1e3:.1f} mm / {h.calibration_error_deg}°."
+        f"joint noise {g.joint_noise} rad, vacuum noise {g.vacuum_noise} kPa, {mounting}."
     )
 
 

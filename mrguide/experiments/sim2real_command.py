@@ -145,7 +145,7 @@ def cmd_sim2real(args: argparse.Namespace) -> int:
     if {"mujoco_exact", "mujoco_hmd"} & set(args.conditions):
         mujoco = s2r.load_real_cell(args.mujoco_config or shipped_config("cells", "mujoco_cell.toml"))
         cells["mujoco"] = set_cell_keys(mujoco, args.set)
-    real_cfg, real_path, hmd = cell.env, cell.path, cell.hmd
+    real_cfg, hmd = cell.env, cell.hmd
     hmd_sets = {key.removeprefix("calibration.hmd."): v for key, v in args.set if key.startswith("calibration.hmd.")}
     policy = s2r.load_policy(args.policy, train_cfg, cell)
     _check_sweeps(args.sweep, real_cfg, hmd)
@@ -158,7 +158,7 @@ def cmd_sim2real(args: argparse.Namespace) -> int:
     )
     out.mkdir(parents=True, exist_ok=True)
     results = _play(args, runs, cells, train_cfg, policy, hmd_sets, out)
-    md = s2r.write_report(results, out, s2r.gap_description(real_cfg, real_path))
+    md = s2r.write_report(results, out, s2r.cells_description(cells, [c for c, _, _ in runs]))
     print(md.read_text())
     print(f"figure and CSV in {out}")
     return 0

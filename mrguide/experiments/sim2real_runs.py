@@ -106,9 +106,8 @@ def sim2real_report(cfg: Sim2RealConfig, root: Path, run_list: list[TrainRun]) -
             res.outcomes[run.seed] = [r["outcome"] for r in rows]
             all_rows += [{"train_seed": run.seed, **r} for r in rows]
         results.append(res)
-    files = s2r.report_files(
-        results, s2r.gap_description(s2r.load_real_cell(cfg.real_config).env, Path(cfg.real_config))
-    )
+    cells = {"real": s2r.load_real_cell(cfg.real_config), "mujoco": s2r.load_real_cell(cfg.mujoco_config)}
+    files = s2r.report_files(results, s2r.cells_description(cells, cfg.conditions))
     intro = (
         f"Sim-to-real: {cfg.seeds} guided training seeds × {cfg.steps} steps, each policy under every condition for "
         f"{cfg.eval_seeds} evaluation seeds × {cfg.episodes} episodes; success pooled over all episodes (95 % Wilson "

@@ -176,10 +176,10 @@ def test_virtual_interface_without_dry_run_is_refused_for_users(tmp_path, policy
     assert connected == []
 
 
-def test_cycles_on_the_robot_retry_alarm_skip_and_resume(robot_on_virtual_bus, tmp_path, capsys):
+def test_cycles_on_the_robot_retry_alarm_skip_and_resume(robot_on_virtual_bus, tmp_path, capsys, run_cli):
     """`--cycles` on the real-bus path with the fixed pose (the operator feeds the fixture): this policy never grips,
     so each part is tried twice (one retry), the alarm leaves it for the operator, and the next one is fed;
-    `--resume` goes on from the log's count."""
+    `--resume` goes on from the log's count up to --cycles in all."""
     cfg, policy, _sim, prompts = robot_on_virtual_bus
     cfg.write_text(cfg.read_text() + "[deploy.cycles]\nmax_retries = 3\n")
     log = tmp_path / "cycles.jsonl"
@@ -195,7 +195,9 @@ def test_cycles_on_the_robot_retry_alarm_skip_and_resume(robot_on_virtual_bus, t
     assert [(r["cycle"], r["cause"]) for r in records if r["kind"] == "retry"] == [(0, "no_grasp"), (1, "no_grasp")]
     assert [r["action"] for r in records if r["kind"] == "alarm"] == ["skip", "skip"]
 
-    assert main([*args, "--cycles", "1", "--resume"]) == 0
+    run_cli([*args, "--cycles", "2", "--resume"]).assert_refused("already holds 2 cycles", "--cycles 2")
+    assert len([r for r in read_log(log) if r["kind"] == "run"]) == 1  # refused before the log was opened
+    assert main([*args, "--cycles", "3", "--resume"]) == 0
     assert "cycles 2..2" in capsys.readouterr().out
     records = read_log(log)
     assert [h["first_cycle"] for h in records if h["kind"] == "run"] == [0, 2]

@@ -111,6 +111,23 @@ def test_report_files(tmp_path):
     assert "75 %" in md.read_text() and (tmp_path / "fig8_sim2real.png").stat().st_size > 1000
 
 
+def test_the_report_describes_only_the_cells_it_played():
+    """The PyBullet twin's reality gap under its conditions only, each cell's HMD (as set) under an HMD condition."""
+    from dataclasses import replace
+
+    from mrguide.shipped_configs import shipped_config
+
+    real = s2r.load_real_cell(REAL)
+    mujoco = s2r.load_real_cell(shipped_config("cells", "mujoco_cell.toml"))
+    cells = {"real": real, "mujoco": replace(mujoco, hmd=replace(mujoco.hmd, tracking_noise_m=0.0071))}
+    only_mujoco = s2r.cells_description(cells, ["sim", "mujoco_exact", "mujoco_hmd"])
+    assert "Reality gap" not in only_mujoco and "mujoco_cell.toml" in only_mujoco
+    assert "tracking noise 7.1 mm" in only_mujoco
+    exact = s2r.cells_description(cells, ["real_exact", "mujoco_exact"])
+    assert "Reality gap" in exact and "mujoco_cell.toml" in exact and "HMD" not in exact
+    assert s2r.cells_description(cells, ["sim"]) == ""
+
+
 def test_cli_refuses_a_bad_policy(tmp_path, capsys):
     bad = tmp_path / "bad.npz"
     np.savez(bad, W0=np.zeros((4, 11)))
