@@ -13,6 +13,25 @@ import numpy as np
 from mrguide.deploy.runlog import RunLogError, read_log, slim_records, write_gzipped
 from mrguide.errors import InputError
 
+#: Cycles a session runs before its resident set is taken as the baseline of "RSS growth after warm-up": the
+#: allocator's pools, the camera's frame buffers and the run log's buffers fill in the first cycles, a leak goes on.
+WARMUP_CYCLES = 100
+
+
+def rss_growth_after_warmup(records: list[dict]) -> float | None:
+    """The largest growth of the resident set (MB) from a session's cycle WARMUP_CYCLES to its last cycle, over the
+    log's sessions (a `run` record starts one); None if no session ran more cycles than that with `rss_mb` logged."""
+    growth: list[float] = []
+    rss: list[float] = []
+    for r in [*records, {"kind": "run"}]:
+        if r.get("kind") == "run":
+            if len(rss) > WARMUP_CYCLES:
+                growth.append(rss[-1] - rss[WARMUP_CYCLES - 1])
+            rss = []
+        elif r.get("kind") == "cycle_end" and isinstance(r.get("rss_mb"), int | float):
+            rss.append(float(r["rss_mb"]))
+    return max(growth) if growth else None
+
 
 def cycle_figures(records: list[dict]) -> dict[str, Any]:
     """A production run's figures from its records (a resumed run's segments together)."""
@@ -36,6 +55,7 @@ def cycle_figures(records: list[dict]) -> dict[str, Any]:
         "missed_cycles": sum(int(s["missed_cycles"]) for s in segments) if segments else None,
         "underruns": sum(int(s["underruns"]) for s in segments) if segments else None,
         "rss_growth_mb": max(float(s["rss_growth_mb"]) for s in segments) if segments else None,
+        "rss_growth_after_warmup_mb": rss_growth_after_warmup(records),
     }
 
 
@@ -43,7 +63,7 @@ def table(rows: dict[str, dict[str, Any]]) -> str:
     """One markdown row per run."""
     head = (
         "| run | parts placed | without alarm | first attempt | retries (cause) | alarms | cycle time median / p95 "
-        "| parts per hour | missed control cycles | queue ran dry | peak RSS growth |"
+        "| parts per hour | missed control cycles | queue ran dry | peak RSS growth | RSS growth after warm-up |"
     )
     lines = [head, "| " + " | ".join(["---"] * (head.count("|") - 1)) + " |"]
     for name, f in rows.items():
@@ -53,14 +73,15 @@ def table(rows: dict[str, dict[str, Any]]) -> str:
             f"| {name} | {f['placed']} / {n} | {(n - f['alarms']) / n:.1%} | {f['placed_first_attempt']} | {retries} "
             f"| {f['alarms']} | {_num(f['cycle_s_median'], '.2f')} / {_num(f['cycle_s_p95'], '.2f')} s "
             f"| {_num(f['parts_per_hour'], '.0f')} | {_num(f['missed_cycles'], 'd')} | {_num(f['underruns'], 'd')} "
-            f"| {_num(f['rss_growth_mb'], '.1f')} MB |"
+            f"| {_num(f['rss_growth_mb'], '.1f', ' MB')} | {_num(f['rss_growth_after_warmup_mb'], '.1f', ' MB')} |"
         )
     return "\n".join(lines) + "\n"
 
 
-def _num(value: float | int | None, fmt: str) -> str:
-    """A figure, or "—" where the log does not have it (a run that ended without its summary record)."""
-    return "—" if value is None else format(value, fmt)
+def _num(value: float | int | None, fmt: str, unit: str = "") -> str:
+    """A figure and its unit, or "—" where the log does not have it (a run that ended without its summary record, a
+    log from before the figure was recorded)."""
+    return "—" if value is None else format(value, fmt) + unit
 
 
 def add_cycles_command(sub: argparse._SubParsersAction) -> None:

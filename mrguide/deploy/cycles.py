@@ -23,6 +23,7 @@ import time
 from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Annotated, Protocol
 
 import numpy as np
@@ -196,6 +197,15 @@ def _peak_rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # Linux: KiB
 
 
+def resident_mb() -> float | None:
+    """The process's resident set now (MB), from /proc/self/statm; None where there is no /proc (not Linux)."""
+    try:
+        pages = int(Path("/proc/self/statm").read_text().split()[1])
+    except (OSError, IndexError, ValueError):
+        return None
+    return pages * resource.getpagesize() / 2**20  # MiB, as ru_maxrss / 1024
+
+
 class CycleRunner:
     """Runs cycles `start`, `start + 1`, ... on a runtime whose cobot is connected and enabled."""
 
@@ -284,6 +294,7 @@ class CycleRunner:
                 retries=report.retries,
                 alarm=report.alarm,
                 cycle_s=report.cycle_s,
+                rss_mb=resident_mb(),
             )
             self.rt.log.sync()
         return report

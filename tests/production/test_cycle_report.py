@@ -8,7 +8,7 @@ import json
 import pytest
 
 from mrguide.cli import main
-from mrguide.deploy.cycle_report import cycle_figures
+from mrguide.deploy.cycle_report import WARMUP_CYCLES, cycle_figures, rss_growth_after_warmup
 from mrguide.deploy.runlog import RunLog, read_log, slim_records
 
 
@@ -58,7 +58,7 @@ def test_a_run_without_its_summary_record_reports_the_driver_counters_as_unknown
     f = cycle_figures(read_log(tmp_path / "killed.jsonl"))
     assert f["missed_cycles"] is None and f["parts_per_hour"] is None
     assert main(["cycles", "report", str(tmp_path / "killed.jsonl")]) == 0
-    assert "| killed | 2 / 3 | 66.7% | 1 | dropped 1, no_grasp 1 | 1 | 6.00 / 7.80 s | — | — | — | — MB |" in (
+    assert "| killed | 2 / 3 | 66.7% | 1 | dropped 1, no_grasp 1 | 1 | 6.00 / 7.80 s | — | — | — | — | — |" in (
         capsys.readouterr().out
     )
 
@@ -77,3 +77,25 @@ def test_a_log_without_cycles_is_refused_with_its_name(tmp_path, run_cli):
     with RunLog(tmp_path / "episodes.jsonl", {"command": "deploy"}) as log:
         log.write("episode_end", episode=0, outcome="success")
     run_cli(["cycles", "report", str(tmp_path / "episodes.jsonl")]).assert_refused("episodes.jsonl", "no cycle_end")
+
+
+def _session(log: RunLog, rss: list[float]) -> None:
+    for i, mb in enumerate(rss):
+        log.write(
+            "cycle_end", cycle=i, placed=True, outcomes=["success"], retries=[], alarm=None, cycle_s=4.0, rss_mb=mb
+        )
+
+
+def test_rss_growth_after_warm_up_is_per_session_from_the_warm_up_cycle_on(tmp_path):
+    """The resident set a session grows from its cycle WARMUP_CYCLES to its last: the warm-up's growth is not a
+    leak, a later one is; each session (a resumed run's `run` record starts one) from its own baseline."""
+    warm, later = [50.0 + i for i in range(WARMUP_CYCLES)], [150.0] * 50 + [157.5]
+    with RunLog(tmp_path / "run.jsonl", {"command": "deploy"}) as log:
+        _session(log, warm + later)
+    assert rss_growth_after_warmup(read_log(tmp_path / "run.jsonl")) == pytest.approx(157.5 - warm[-1])
+    with RunLog(tmp_path / "run.jsonl", {"command": "deploy"}) as log:  # resumed: a second process, 2 MB more
+        _session(log, [300.0] * WARMUP_CYCLES + [302.0])
+    assert rss_growth_after_warmup(read_log(tmp_path / "run.jsonl")) == pytest.approx(157.5 - warm[-1])
+    with RunLog(tmp_path / "short.jsonl", {"command": "deploy"}) as log:
+        _session(log, warm)  # no cycle after the warm-up
+    assert rss_growth_after_warmup(read_log(tmp_path / "short.jsonl")) is None

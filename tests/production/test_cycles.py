@@ -102,6 +102,7 @@ def test_each_cycle_feeds_a_part_and_places_it(tmp_path):
     assert rt.homes == 3 and rt.departs == [0.05] * 3  # each place departs straight up; each attempt starts home
     ends = [r for r in records if r["kind"] == "cycle_end"]
     assert [(r["cycle"], r["placed"], r["outcomes"]) for r in ends] == [(c, True, ["success"]) for c in range(3)]
+    assert all(10 < r["rss_mb"] < 100_000 for r in ends)  # the resident set after each cycle, MB (Linux)
     (final,) = [r for r in records if r["kind"] == "cycles_end"]
     assert final["placed"] == 3 and final["alarms"] == []
 
