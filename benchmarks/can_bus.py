@@ -25,7 +25,7 @@ import numpy as np
 from mrguide.drivers import Cobot, CobotBusConfig, CycleSample, DriverError
 from mrguide.drivers.config import BusConfig, TimingConfig
 from mrguide.drivers.mock import FirstOrderPlant, SimulatedCobot
-from mrguide.drivers.realtime import make_current_thread_realtime, realtime_hygiene
+from mrguide.drivers.realtime import make_current_thread_realtime, settled_heap
 from mrguide.drivers.tracking import TrackingRecorder
 from mrguide.robot import load_robot
 
@@ -50,7 +50,7 @@ def run_rate(rate: int, seconds: float, priority: int) -> dict[str, float]:
         lateness.append(sample.lateness)
         tracking(sample)
 
-    with realtime_hygiene(), SimulatedCobot(config, FirstOrderPlant(robot.q_home)) as sim, Cobot(config, robot) as cobot:
+    with settled_heap(), SimulatedCobot(config, FirstOrderPlant(robot.q_home)) as sim, Cobot(config, robot) as cobot:
         cobot.enable()
         q0 = cobot.setpoint
         before = cobot.stats()

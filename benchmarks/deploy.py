@@ -1,9 +1,9 @@
 """Deploy benchmark: decision latency, policy inference time and control-cycle jitter during a dry run.
 
-Run: python benchmarks/deploy.py [--episodes N] [--robot ur10] [--cell configs/cells/mujoco_cell.toml]
-[--gil-switch-interval S]. The dry run drives the scripted expert through the whole stack (IK, Ruckig, CANopen over
-the virtual bus, simulated drives, the cell of --cell with the chosen arm: default the "real" twin of
-configs/cells/real_cell.toml and the UR5); inference is timed on an exported actor of the default size. Prints a table; the last line is one JSON object.
+Run: python benchmarks/deploy.py [--episodes N] [--robot ur10] [--cell configs/cells/mujoco_cell.toml]. The dry
+run drives the scripted expert through the whole stack (IK, Ruckig, CANopen over the virtual bus, simulated drives,
+the cell of --cell with the chosen arm: default the "real" twin of configs/cells/real_cell.toml and the UR5); inference is timed on an exported actor of the
+default size. Prints a table; the last line is one JSON object.
 """
 
 from __future__ import annotations
@@ -22,7 +22,6 @@ import numpy as np
 from mrguide.cli_args import positive_int
 from mrguide.deploy.policy import ExportedPolicy
 from mrguide.deploy.runlog import RunLog
-from mrguide.drivers import realtime
 from mrguide.drivers.config import load_cobot_bus_config
 from mrguide.robot import RobotConfig, load_robot
 from mrguide.task import oracle_action
@@ -63,14 +62,7 @@ def main() -> None:
         default=Path(__file__).parents[1] / "configs" / "cells" / "real_cell.toml",
         help="the cell's TOML ([plant] engine: the PyBullet twin or the MuJoCo cell)",
     )
-    ap.add_argument(
-        "--gil-switch-interval",
-        type=float,
-        default=realtime.GIL_SWITCH_INTERVAL_S,
-        help="s: the GIL switch interval while the bus runs, in place of the runtime's (Python's default: 0.005)",
-    )
     args = ap.parse_args()
-    realtime.GIL_SWITCH_INTERVAL_S = args.gil_switch_interval
     cfg = EnvConfig.load(args.cell)
     if args.robot:
         cfg = dataclasses.replace(cfg, robot=RobotConfig(name=args.robot))
@@ -98,7 +90,6 @@ def main() -> None:
         "missed_cycles": summary.missed_cycles,
         "dry_run_success": summary.successes / max(len(summary.episodes), 1),
         "episodes": len(summary.episodes),
-        "gil_switch_interval_s": args.gil_switch_interval,
     }
     print(
         f"machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}; arm {spec.name}, "

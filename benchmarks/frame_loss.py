@@ -39,7 +39,7 @@ import numpy as np
 from mrguide.drivers import Cobot, CobotBusConfig, DriverError, load_cobot_bus_config
 from mrguide.drivers.mock import FirstOrderPlant, SimulatedCobot
 from mrguide.drivers.mock.drive_sim import OPERATION_ENABLED
-from mrguide.drivers.realtime import make_current_thread_realtime, realtime_hygiene
+from mrguide.drivers.realtime import make_current_thread_realtime, settled_heap
 from mrguide.robot import RobotSpec, load_robot
 
 REPO_CONFIG = Path(__file__).resolve().parents[1] / "configs" / "devices" / "cobot_bus.toml"
@@ -161,7 +161,7 @@ def main() -> int:
     realtime = args.realtime_priority > 0 and make_current_thread_realtime(args.realtime_priority)
     config = replace(config, timing=replace(config.timing, realtime_priority=args.realtime_priority if realtime else 0))
     robot = load_robot()
-    with realtime_hygiene():
+    with settled_heap():
         return _run(args, config, robot)
 
 

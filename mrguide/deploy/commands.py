@@ -294,7 +294,7 @@ def _deploy_real(policy, bus, spec, task, dcfg, safety, episodes, run_log, tick,
     from mrguide.deploy.runtime import Runtime
     from mrguide.deploy.session import FixedObjectPose, run_session
     from mrguide.drivers.cobot import Cobot
-    from mrguide.drivers.realtime import realtime_hygiene
+    from mrguide.drivers.realtime import settled_heap
 
     goals = [dcfg.goals[i % len(dcfg.goals)] for i in range(episodes)]
 
@@ -305,7 +305,7 @@ def _deploy_real(policy, bus, spec, task, dcfg, safety, episodes, run_log, tick,
         input(f"episode {i}: place the object in view of the camera and press Enter ")
         camera.wait_for_pose(after=time.monotonic(), timeout=dcfg.camera.max_pose_age_s + 5.0)
 
-    with realtime_hygiene(), Cobot(bus, spec) as cobot:
+    with settled_heap(), Cobot(bus, spec) as cobot:
         cobot.enable()
         pose = camera or FixedObjectPose(dcfg.object_position)
         with Runtime(cobot, policy, pose, spec, task, run_log, policy.decision_period, dcfg.runtime, safety) as rt:

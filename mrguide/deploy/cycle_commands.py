@@ -83,11 +83,11 @@ def _robot_cycles(run: CycleRun, inputs: DeployInputs) -> CycleSummary:
     from mrguide.deploy.runtime import Runtime
     from mrguide.deploy.session import FixedObjectPose
     from mrguide.drivers.cobot import Cobot
-    from mrguide.drivers.realtime import realtime_hygiene
+    from mrguide.drivers.realtime import settled_heap
 
     i = inputs
     goals = i.dcfg.goals
-    with realtime_hygiene(), Cobot(i.bus, i.spec) as cobot:
+    with settled_heap(), Cobot(i.bus, i.spec) as cobot:
         cobot.enable()
         pose = i.camera or FixedObjectPose(i.dcfg.object_position)
         with Runtime(

@@ -111,14 +111,14 @@ def _selftest_command(args: argparse.Namespace) -> int:
 def _monitor_command(args: argparse.Namespace) -> int:
     from mrguide.drivers.config import load_cobot_bus_config
     from mrguide.drivers.monitor import monitor
-    from mrguide.drivers.realtime import realtime_hygiene
+    from mrguide.drivers.realtime import settled_heap
 
     robot = _robot(args)
     config = load_cobot_bus_config(args.config, robot)
     if args.simulate and config.bus.interface != "virtual":
         raise ConfigError("--simulate needs the virtual bus: simulated devices must not join a real bus")
     demo = _SimulatedDemo(config, robot) if args.simulate else None
-    with realtime_hygiene():  # no full garbage collection pauses the monitor's receiver or the demo's control cycle
+    with settled_heap():  # no full garbage collection pauses the monitor's receiver or the demo's control cycle
         try:
             counts = monitor(config, robot.joint_names, args.duration, print, demo.start if demo else None)
         finally:

@@ -15,7 +15,7 @@ from mrguide.drivers.cobot import Cobot
 from mrguide.drivers.config import CobotBusConfig
 from mrguide.drivers.mock.first_order_plant import FirstOrderPlant
 from mrguide.drivers.mock.sim_cobot import SimulatedCobot, shared_pc_config
-from mrguide.drivers.realtime import realtime_hygiene
+from mrguide.drivers.realtime import settled_heap
 from mrguide.drivers.tracking import TrackingRecorder
 from mrguide.motion.trajectory import point_to_point
 from mrguide.robot import RobotSpec
@@ -32,8 +32,8 @@ OPEN_CUP_MIN_KPA = 1.0
 
 def run_selftest(config: CobotBusConfig, robot: RobotSpec, write: Callable[[str], None]) -> bool:
     """Run the self-test, writing a report line by line; True if every check passed. The heap is settled while the
-    bus runs (`realtime_hygiene`), as in a deploy: no full garbage collection pauses the control cycle."""
-    with realtime_hygiene():
+    bus runs (`settled_heap`), as in a deploy: no full garbage collection pauses the control cycle."""
+    with settled_heap():
         return _selftest(config, robot, write)
 
 

@@ -26,7 +26,7 @@ from mrguide.drivers.cobot import Cobot
 from mrguide.drivers.config import CobotBusConfig
 from mrguide.drivers.mock.plant import CellPlant
 from mrguide.drivers.mock.sim_cobot import SimulatedCobot, shared_pc_config
-from mrguide.drivers.realtime import realtime_hygiene
+from mrguide.drivers.realtime import settled_heap
 from mrguide.pose_source import ObjectPoseSource
 from mrguide.registries import register
 from mrguide.robot import RobotSpec, load_robot
@@ -86,7 +86,7 @@ def simulated_cell(env_cfg: EnvConfig, bus_cfg: CobotBusConfig, seed: int = 0) -
     bus_cfg = shared_pc_config(bus_cfg)
     twin_cfg = replace(env_cfg.twin, control_period=bus_cfg.timing.control_period, gui=False)
     spec = load_robot(env_cfg.robot)
-    with realtime_hygiene():
+    with settled_heap():
         plant, scene = PLANT_BUILDERS[env_cfg.plant.engine](env_cfg, twin_cfg, spec, seed)
         sim = SimulatedCobot(bus_cfg, plant, seed=seed)
         sim.start()

@@ -19,7 +19,7 @@ import pytest
 from mrguide.drivers import Cobot, CobotBusConfig
 from mrguide.drivers.config import BusConfig, TimingConfig
 from mrguide.drivers.mock import FirstOrderParams, FirstOrderPlant, SimulatedCobot
-from mrguide.drivers.realtime import realtime_hygiene
+from mrguide.drivers.realtime import settled_heap
 from mrguide.robot import RobotSpec, load_robot
 
 TEST_TIMING = TimingConfig(
@@ -87,7 +87,7 @@ def make_rig(robot: RobotSpec) -> Iterator[Callable[..., Rig]]:
         cobot.connect()
         return rig
 
-    with realtime_hygiene():  # as the deploy does: no collection (and no finalizer of an old rig) in the bus threads
+    with settled_heap():  # as the deploy does: no collection (and no finalizer of an old rig) in the bus threads
         yield factory
         for rig in started:
             rig.cobot.disconnect()

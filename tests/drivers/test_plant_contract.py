@@ -18,7 +18,7 @@ import pytest
 from mrguide.drivers import Cobot
 from mrguide.drivers.mock import SimulatedCobot
 from mrguide.drivers.mock.sim_cobot import shared_pc_config
-from mrguide.drivers.realtime import realtime_hygiene
+from mrguide.drivers.realtime import settled_heap
 from mrguide.motion.kinematics import Kinematics
 from mrguide.motion.trajectory import point_to_point
 from mrguide.twin.dry_run import PLANT_BUILDERS
@@ -37,7 +37,7 @@ def cell(request, make_config, robot) -> Iterator[tuple]:
     twin_cfg = replace(env_cfg.twin, control_period=config.timing.control_period, gui=False)
     plant, scene = PLANT_BUILDERS[request.param](env_cfg, twin_cfg, robot, 0)
     plant.place_objects(PART, GOAL)
-    with realtime_hygiene():
+    with settled_heap():
         sim = SimulatedCobot(config, plant)
         sim.start()
         cobot = Cobot(config, robot)
