@@ -135,6 +135,7 @@ def cmd_sim2real(args: argparse.Namespace) -> int:
     """Every input is checked before the first episode: configs, bus, policy (against both twins), swept values,
     the output directory."""
     from mrguide.experiments import sim2real as s2r
+    from mrguide.experiments.sim2real_report import cells_description, write_report
     from mrguide.output_files import check_output_dir
     from mrguide.twin.env import EnvConfig
 
@@ -158,7 +159,7 @@ def cmd_sim2real(args: argparse.Namespace) -> int:
     )
     out.mkdir(parents=True, exist_ok=True)
     results = _play(args, runs, cells, train_cfg, policy, hmd_sets, out)
-    md = s2r.write_report(results, out, s2r.cells_description(cells, [c for c, _, _ in runs]))
+    md = write_report(results, out, cells_description(cells, [c for c, _, _ in runs]))
     print(md.read_text())
     print(f"figure and CSV in {out}")
     return 0

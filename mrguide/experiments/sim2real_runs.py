@@ -97,6 +97,7 @@ def evaluate(run: TrainRun, root: str, cfg: Sim2RealConfig) -> str:
 def sim2real_report(cfg: Sim2RealConfig, root: Path, run_list: list[TrainRun]) -> dict[str, bytes]:
     """summary.csv / summary.md / fig8_sim2real.png pooled over training seeds, and every episode in outcomes.csv."""
     from mrguide.experiments import sim2real as s2r
+    from mrguide.experiments.sim2real_report import cells_description, report_files
 
     all_rows, results = [], []
     for cond in cfg.conditions:
@@ -107,7 +108,7 @@ def sim2real_report(cfg: Sim2RealConfig, root: Path, run_list: list[TrainRun]) -
             all_rows += [{"train_seed": run.seed, **r} for r in rows]
         results.append(res)
     cells = {"real": s2r.load_real_cell(cfg.real_config), "mujoco": s2r.load_real_cell(cfg.mujoco_config)}
-    files = s2r.report_files(results, s2r.cells_description(cells, cfg.conditions))
+    files = report_files(results, cells_description(cells, cfg.conditions))
     intro = (
         f"Sim-to-real: {cfg.seeds} guided training seeds × {cfg.steps} steps, each policy under every condition for "
         f"{cfg.eval_seeds} evaluation seeds × {cfg.episodes} episodes; success pooled over all episodes (95 % Wilson "

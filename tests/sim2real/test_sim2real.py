@@ -7,6 +7,7 @@ import numpy as np
 from mrguide.cli import main
 from mrguide.drivers.config import BusConfig, CobotBusConfig
 from mrguide.experiments import sim2real as s2r
+from mrguide.experiments import sim2real_report
 from mrguide.robot import load_robot
 from mrguide.task import oracle_action
 from mrguide.twin.env import EnvConfig
@@ -107,7 +108,7 @@ def test_real_hmd_condition_uses_marker_pipeline_poses(tmp_path, monkeypatch):
 
 def test_report_files(tmp_path):
     res = [s2r.ConditionResult("sim", {0: ["success", "no_grasp"], 1: ["success", "success"]})]
-    md = s2r.write_report(res, tmp_path, "gap")
+    md = sim2real_report.write_report(res, tmp_path, "gap")
     assert "75 %" in md.read_text() and (tmp_path / "fig8_sim2real.png").stat().st_size > 1000
 
 
@@ -120,12 +121,12 @@ def test_the_report_describes_only_the_cells_it_played():
     real = s2r.load_real_cell(REAL)
     mujoco = s2r.load_real_cell(shipped_config("cells", "mujoco_cell.toml"))
     cells = {"real": real, "mujoco": replace(mujoco, hmd=replace(mujoco.hmd, tracking_noise_m=0.0071))}
-    only_mujoco = s2r.cells_description(cells, ["sim", "mujoco_exact", "mujoco_hmd"])
+    only_mujoco = sim2real_report.cells_description(cells, ["sim", "mujoco_exact", "mujoco_hmd"])
     assert "Reality gap" not in only_mujoco and "mujoco_cell.toml" in only_mujoco
     assert "tracking noise 7.1 mm" in only_mujoco
-    exact = s2r.cells_description(cells, ["real_exact", "mujoco_exact"])
+    exact = sim2real_report.cells_description(cells, ["real_exact", "mujoco_exact"])
     assert "Reality gap" in exact and "mujoco_cell.toml" in exact and "HMD" not in exact
-    assert s2r.cells_description(cells, ["sim"]) == ""
+    assert sim2real_report.cells_description(cells, ["sim"]) == ""
 
 
 def test_cli_refuses_a_bad_policy(tmp_path, capsys):
