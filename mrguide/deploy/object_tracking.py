@@ -17,8 +17,9 @@ class ObjectStartUnknown(RuntimeError):
 class ObjectTracker:
     """The object's position per decision, and where it came from (`source`: for the run log).
 
-    While the part hangs under the cup (after the grasp) it is where the TCP is; just released, where the cup let
-    it go. Otherwise the pose source says; when it has no pose, the last one is used for at most `max_misses`
+    While the vacuum says the part is held (from the grasp on) it is under the cup, where the TCP is; just
+    released, where the cup let it go. A source that lost sight of the part as the cup came down (its marker under
+    the cup) would otherwise keep the task model in the grasp, far from where the part was sealed and dragged. Otherwise the pose source says; when it has no pose, the last one is used for at most `max_misses`
     decisions in a row (`max_misses_before_grasp` before the grasp, when the arm hides the part as it reaches for
     it), each reported to the supervisor; then None (the episode ends)."""
 
@@ -50,8 +51,8 @@ class ObjectTracker:
     def position(self, tcp: np.ndarray, vac: VacuumState, phase: int) -> np.ndarray | None:
         """The object's position for this decision; None once the pose has been missing for too long.
         ObjectStartUnknown if the source has none before the first pose of the episode."""
-        if self.track_carried and phase >= Phase.LIFT:
-            if vac.part_gripped:
+        if self.track_carried and phase >= Phase.GRASP:
+            if vac.part_gripped:  # sealed: the part is on the cup, wherever the pose source last saw it
                 self._carried = tcp - self.hang
                 self.source = "carried"
                 return self._carried

@@ -14,8 +14,9 @@ class RuntimeConfig:
     period is not set here: it is the one the policy was trained with (its metadata)."""
 
     home_tolerance: Annotated[float, Range(1e-4, 0.5, " rad")] = 0.01  # the arm counts as home within this
-    #: While the vacuum generator reports a part after the grasp, the object hangs under the cup: take its
-    #: position from the TCP (forward kinematics) instead of the pose source, which may lag (an HMD does).
+    #: While the vacuum generator reports a part (from the grasp on), the object is under the cup: take its
+    #: position from the TCP (forward kinematics) instead of the pose source, which may lag (an HMD does) or
+    #: not see it (its marker under the cup).
     track_carried_object: bool = True
     #: Decisions in a row that may use the last object pose when the pose source has none (a marker out of
     #: view, a dead HMD process); one more ends the episode as `pose_lost` with the arm held. In [0, 1000].
