@@ -1,10 +1,22 @@
-"""The following-error monitor of the deploy runtime: a cycle observer of the driver's control loop."""
+"""The following-error monitor of the deploy runtime: a cycle observer of the driver's control loop.
+
+It runs in the control thread, so it must not let go of the GIL mid-cycle: NumPy releases it around any
+ufunc loop over more than 500 elements (`NPY_BEGIN_THREADS_THRESHOLDED`), and a thread that took it then (the
+simulated devices stepping their plant, the runtime computing setpoints) keeps the control thread waiting up
+to Python's 5 ms switch interval, longer than the 4 ms control period. With a (250, 6) ring in one call the
+observer did exactly that: measured in dry runs, the cycle's own work took 1.1-1.7 ms at the median and up to
+8 ms, and the cycles after the long ones started late (docs/performance.md). So every NumPy call here works on
+at most `GIL_SAFE_ELEMENTS` elements.
+"""
 
 from __future__ import annotations
 
 import numpy as np
 
 from mrguide.drivers.cobot_state import CycleSample
+
+#: NumPy keeps the GIL through a ufunc loop over at most this many elements (its threading threshold).
+GIL_SAFE_ELEMENTS = 500
 
 
 class FollowingMonitor:
@@ -14,8 +26,8 @@ class FollowingMonitor:
     by its own amount (a silent drive's feedback freezes; the feedback and heartbeat checks name it)."""
 
     def __init__(self, depth: int):
-        self.recent: np.ndarray | None = None  # ring of the last `depth` setpoints
-        self._distance: np.ndarray | None = None  # scratch of the ring's shape: no allocation per control cycle
+        self.recent: np.ndarray | None = None  # per joint, a ring of its last `depth` setpoints: (joints, depth)
+        self._distance = np.empty(min(depth, GIL_SAFE_ELEMENTS))  # scratch: no allocation per control cycle
         self.depth, self.count = depth, 0
         self.error = 0.0
         self.joint = 0  # the joint furthest from its nearest recent setpoint
@@ -23,12 +35,23 @@ class FollowingMonitor:
     def __call__(self, sample: CycleSample) -> None:
         if sample.setpoint is not None:
             if self.recent is None:
-                self.recent = np.tile(sample.setpoint, (self.depth, 1))
-                self._distance = np.empty_like(self.recent)
-            self.recent[self.count % self.depth] = sample.setpoint
+                self.recent = np.repeat(np.asarray(sample.setpoint, dtype=float)[:, None], self.depth, axis=1)
+            self.recent[:, self.count % self.depth] = sample.setpoint
             self.count += 1
-        if self.recent is not None and self._distance is not None:
-            np.subtract(self.recent, sample.positions, out=self._distance)
-            per_joint = np.abs(self._distance, out=self._distance).min(axis=0)
-            self.joint = int(per_joint.argmax())
-            self.error = float(per_joint[self.joint])
+        if self.recent is None:
+            return
+        per_joint = np.array([self._nearest(ring, float(q)) for ring, q in zip(self.recent, sample.positions)])
+        self.joint = int(per_joint.argmax())  # the first NaN where a position is not a number
+        self.error = float(per_joint[self.joint])
+
+    def _nearest(self, ring: np.ndarray, position: float) -> float:
+        """Distance from `position` to the nearest value of `ring`, in chunks the GIL is kept through."""
+        if not np.isfinite(position):
+            return float("nan")
+        best = np.inf
+        for start in range(0, len(ring), GIL_SAFE_ELEMENTS):
+            chunk = ring[start : start + GIL_SAFE_ELEMENTS]
+            d = self._distance[: len(chunk)]
+            np.subtract(chunk, position, out=d)
+            best = min(best, float(np.abs(d, out=d).min()))
+        return best

@@ -74,6 +74,8 @@ class DeploySummary:
     stopped: str | None = None  # why the run ended early, if it did
     recoveries: int = 0  # safety stops after which the run went on (fault reset, next episode)
     cycle_lateness_p99_ms: float = 0.0
+    cycle_work_p99_ms: float = 0.0
+    cycle_work_max_ms: float = 0.0
     missed_cycles: int = 0
 
     @property
@@ -109,7 +111,8 @@ class DeploySummary:
                 f"policy inference median {np.median(inf):.3f} ms"
             )
         lines.append(
-            f"control cycle lateness p99: {self.cycle_lateness_p99_ms:.2f} ms, missed cycles: {self.missed_cycles}"
+            f"control cycle lateness p99: {self.cycle_lateness_p99_ms:.2f} ms, work p99/max: "
+            f"{self.cycle_work_p99_ms:.2f} / {self.cycle_work_max_ms:.2f} ms, missed cycles: {self.missed_cycles}"
         )
         if self.recoveries:
             lines.append(f"safety stops recovered from (fault reset, next episode): {self.recoveries}")
@@ -162,6 +165,7 @@ def run_session(
     finally:
         stats = runtime.cobot.stats()
         summary.cycle_lateness_p99_ms = stats.lateness_p99 * 1e3
+        summary.cycle_work_p99_ms, summary.cycle_work_max_ms = stats.work_p99 * 1e3, stats.work_max * 1e3
         summary.missed_cycles = stats.missed_cycles
     return summary
 

@@ -314,6 +314,8 @@ class Cobot:
             lateness_p50=cyc.lateness_p50,
             lateness_p99=cyc.lateness_p99,
             lateness_max=cyc.lateness_max,
+            work_p99=cyc.work_p99,
+            work_max=cyc.work_max,
             frames_tx=core.frames_tx,
             bits_tx=core.bits_tx,
             frames_rx=rx.frames_rx if rx else 0,

@@ -62,6 +62,9 @@ class DriverStats:
     lateness_p50: float
     lateness_p99: float
     lateness_max: float
+    #: A cycle's work (s), its start to the end of its observers: 99th percentile and maximum.
+    work_p99: float
+    work_max: float
     frames_tx: int
     bits_tx: int
     frames_rx: int

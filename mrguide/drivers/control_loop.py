@@ -71,11 +71,13 @@ class ControlLoop:
         timer.start()
         while not stop.is_set():
             tick = timer.wait()
+            started = time.monotonic()
             try:
                 self.cycle(tick)
             except Exception as exc:  # the control thread must keep running and stop the arm
                 logger.exception("control cycle %d failed", tick.index)
                 supervision.latch(self.core, DriverError(f"control cycle {tick.index} failed: {exc!r}"))
+            self.core.cycle_stats.record_work(time.monotonic() - started)
 
     def cycle(self, tick: Tick) -> None:
         """One control period (see the module docstring)."""

@@ -67,14 +67,20 @@ class CycleSummary:
     lateness_p50: float
     lateness_p99: float
     lateness_max: float
+    #: How long a cycle's work took (s), from its start to the end of its observers: past one period, the next
+    #: cycle starts late.
+    work_p99: float = 0.0
+    work_max: float = 0.0
 
 
 class CycleStats:
-    """Records each cycle's lateness (actual start minus deadline) in a ring buffer."""
+    """Records each cycle's lateness (actual start minus deadline) and its work's duration in ring buffers."""
 
     def __init__(self, capacity: int = 1 << 17) -> None:
         self._lateness = np.zeros(capacity)
+        self._work = np.zeros(capacity)
         self._n = 0
+        self._n_work = 0
         self._missed = 0
 
     def record(self, lateness: float, skipped: int) -> None:
@@ -82,10 +88,16 @@ class CycleStats:
         self._n += 1
         self._missed += skipped
 
+    def record_work(self, duration: float) -> None:
+        self._work[self._n_work % len(self._work)] = duration
+        self._n_work += 1
+
     def summary(self) -> CycleSummary:
         n = min(self._n, len(self._lateness))
         if n == 0:
             return CycleSummary(0, self._missed, 0.0, 0.0, 0.0)
-        x = self._lateness[:n].copy()
-        p50, p99 = np.percentile(x, [50, 99])
-        return CycleSummary(self._n, self._missed, float(p50), float(p99), float(x.max()))
+        p50, p99 = np.percentile(self._lateness[:n], [50, 99])
+        lateness_max = float(self._lateness[:n].max())
+        w = self._work[: min(self._n_work, len(self._work))]
+        work_p99, work_max = (float(np.percentile(w, 99)), float(w.max())) if len(w) else (0.0, 0.0)
+        return CycleSummary(self._n, self._missed, float(p50), float(p99), lateness_max, work_p99, work_max)

@@ -60,3 +60,14 @@ def test_cycle_stats_percentiles_and_missed():
     summary = stats.summary()
     assert summary.cycles == 10 and summary.missed == 1
     assert summary.lateness_max == pytest.approx(9e-4)  # ring buffer keeps the last 8
+
+
+def test_cycle_stats_work_time():
+    stats = CycleStats(capacity=8)
+    assert stats.summary().work_max == 0.0
+    for i in range(10):
+        stats.record(0.0, skipped=0)
+        stats.record_work((i + 1) * 1e-3)
+    summary = stats.summary()
+    assert summary.work_max == pytest.approx(10e-3)
+    assert 9e-3 < summary.work_p99 < 10e-3  # the last 8 cycles: 3..10 ms

@@ -51,7 +51,7 @@ class ScriptedRuntime:
         return np.array(self._where, dtype=float)
 
     def stats(self):
-        return DriverStats(*([0] * 2), *([0.0] * 3), *([0] * 11))
+        return DriverStats(*([0] * 2), *([0.0] * 5), *([0] * 11))
 
     def home(self):
         self.homes += 1
