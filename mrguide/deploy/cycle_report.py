@@ -56,7 +56,15 @@ def cycle_figures(records: list[dict]) -> dict[str, Any]:
         "underruns": sum(int(s["underruns"]) for s in segments) if segments else None,
         "rss_growth_mb": max(float(s["rss_growth_mb"]) for s in segments) if segments else None,
         "rss_growth_after_warmup_mb": rss_growth_after_warmup(records),
+        "cycles_with_missed": _cycles_with_missed(ends),
     }
+
+
+def _cycles_with_missed(ends: list[dict]) -> int | None:
+    """How many production cycles missed a control cycle; None unless every cycle_end records its count (logs from
+    before the count was recorded)."""
+    counts = [c for r in ends if isinstance(c := r.get("missed_cycles"), int)]
+    return sum(c > 0 for c in counts) if len(counts) == len(ends) else None
 
 
 def table(rows: dict[str, dict[str, Any]]) -> str:
@@ -72,10 +80,14 @@ def table(rows: dict[str, dict[str, Any]]) -> str:
         lines.append(
             f"| {name} | {f['placed']} / {n} | {(n - f['alarms']) / n:.1%} | {f['placed_first_attempt']} | {retries} "
             f"| {f['alarms']} | {_num(f['cycle_s_median'], '.2f')} / {_num(f['cycle_s_p95'], '.2f')} s "
-            f"| {_num(f['parts_per_hour'], '.0f')} | {_num(f['missed_cycles'], 'd')} | {_num(f['underruns'], 'd')} "
+            f"| {_num(f['parts_per_hour'], '.0f')} | {_num(f['missed_cycles'], 'd')}{_in_cycles(f['cycles_with_missed'])} | {_num(f['underruns'], 'd')} "
             f"| {_num(f['rss_growth_mb'], '.1f', ' MB')} | {_num(f['rss_growth_after_warmup_mb'], '.1f', ' MB')} |"
         )
     return "\n".join(lines) + "\n"
+
+
+def _in_cycles(count: int | None) -> str:
+    return "" if count is None else f" (in {count} cycles)"
 
 
 def _num(value: float | int | None, fmt: str, unit: str = "") -> str:

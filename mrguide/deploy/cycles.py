@@ -260,7 +260,7 @@ class CycleRunner:
     def _cycle(self, cycle: int) -> CycleReport:
         """Feed a part, then attempts until it is placed, an alarm, or a safety stop (RunStopped propagates)."""
         goal = np.asarray(self.goal_for(cycle), dtype=float)
-        t0 = time.perf_counter()
+        t0, stats0 = time.perf_counter(), self.rt.cobot.stats()
         report = CycleReport(cycle, placed=False)
         self.rt.log.write("cycle_start", cycle=cycle, goal=goal)
         try:
@@ -286,6 +286,7 @@ class CycleRunner:
                     break
         finally:
             report.cycle_s = time.perf_counter() - t0
+            stats = self.rt.cobot.stats()
             self.rt.log.write(
                 "cycle_end",
                 cycle=cycle,
@@ -295,6 +296,8 @@ class CycleRunner:
                 alarm=report.alarm,
                 cycle_s=report.cycle_s,
                 rss_mb=resident_mb(),
+                missed_cycles=stats.missed_cycles - stats0.missed_cycles,
+                underruns=stats.underruns - stats0.underruns,
             )
             self.rt.log.sync()
         return report

@@ -51,6 +51,28 @@ def test_the_figures_come_from_the_cycle_records(tmp_path):
     assert f["retries"] == {"dropped": 1, "no_grasp": 1}
     assert f["cycle_s_median"] == pytest.approx(6.0) and f["parts_per_hour"] == pytest.approx(200.0)
     assert (f["missed_cycles"], f["underruns"], f["rss_growth_mb"]) == (2, 1, 3.5)
+    assert f["cycles_with_missed"] is None  # the cycles do not record their own count (logs before it did)
+
+
+def test_the_cycles_that_missed_control_cycles_are_counted(tmp_path, capsys):
+    with RunLog(tmp_path / "run.jsonl", {"command": "deploy"}) as log:
+        for i, missed in enumerate([0, 3, 0, 1]):
+            log.write(
+                "cycle_end",
+                cycle=i,
+                placed=True,
+                outcomes=["success"],
+                retries=[],
+                alarm=None,
+                cycle_s=4.0,
+                missed_cycles=missed,
+                underruns=0,
+            )
+        log.write("cycles_end", wall_s=16.0, missed_cycles=4, underruns=0, rss_growth_mb=0.5)
+    f = cycle_figures(read_log(tmp_path / "run.jsonl"))
+    assert (f["missed_cycles"], f["cycles_with_missed"]) == (4, 2)
+    assert main(["cycles", "report", str(tmp_path / "run.jsonl")]) == 0
+    assert "| 4 (in 2 cycles) |" in capsys.readouterr().out
 
 
 def test_a_run_without_its_summary_record_reports_the_driver_counters_as_unknown(tmp_path, capsys):

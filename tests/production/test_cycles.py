@@ -39,6 +39,7 @@ class ScriptedRuntime:
     can_depart: bool = True  # False: no joint configuration reaches the point above (an IK failure)
     episodes: list = field(default_factory=list)
     blind_reads: int = 0  # the pose source's next reads that have no pose
+    missed: list = field(default_factory=list)  # control cycles the driver misses during each attempt in turn
 
     def __post_init__(self):
         self.pose, self.cobot = self, self
@@ -51,7 +52,8 @@ class ScriptedRuntime:
         return np.array(self._where, dtype=float)
 
     def stats(self):
-        return DriverStats(*([0] * 2), *([0.0] * 5), *([0] * 11))
+        missed = sum(self.missed[: len(self.episodes)])
+        return DriverStats(0, missed, *([0.0] * 5), *([0] * 11))
 
     def home(self):
         self.homes += 1
@@ -105,6 +107,16 @@ def test_each_cycle_feeds_a_part_and_places_it(tmp_path):
     assert all(10 < r["rss_mb"] < 100_000 for r in ends)  # the resident set after each cycle, MB (Linux)
     (final,) = [r for r in records if r["kind"] == "cycles_end"]
     assert final["placed"] == 3 and final["alarms"] == []
+
+
+def test_each_cycle_records_the_control_cycles_missed_during_it(tmp_path):
+    log_path = tmp_path / "cycles.jsonl"
+    with RunLog(log_path, {"test": "cycles"}) as log:
+        rt = ScriptedRuntime([S, D, S, S], log, missed=[0, 2, 1, 0])
+        summary = CycleRunner(rt, Feeder(), lambda c: np.array([0.5, 0.21, 0.025]), CycleConfig()).run(0, 3)
+    ends = [r for r in read_log(log_path) if r["kind"] == "cycle_end"]
+    assert [r["missed_cycles"] for r in ends] == [0, 3, 0]  # cycle 1's two attempts missed 2 and 1
+    assert summary.missed_cycles == 3
 
 
 def test_a_dropped_part_is_picked_again_and_the_retry_counted(tmp_path):
