@@ -71,7 +71,9 @@ class CobotInterface(Protocol):
         ...
 
     def add_cycle_observer(self, observer: Callable[[CycleSample], None]) -> None:
-        """Call `observer` after every control cycle; an exception in it quick-stops (fails closed)."""
+        """Call `observer` after every control cycle, in the control thread; an exception in it quick-stops (fails
+        closed). Keep it short and never let go of the GIL in it (no I/O, no lock another thread holds, no NumPy call
+        over 500 elements): the thread that takes the GIL then holds the cycle up to Python's 5 ms switch interval."""
         ...
 
     def remove_cycle_observer(self, observer: Callable[[CycleSample], None]) -> None: ...
