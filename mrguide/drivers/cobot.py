@@ -56,6 +56,7 @@ class Cobot:
         self.limits = self._core.limits
         self.joint_names = self._core.joint_names
         self.period = self._core.period
+        self._underruns_logged = 0  # the underrun count `stream` last logged
 
     @property
     def setpoint_queue_depth(self) -> int:
@@ -139,6 +140,10 @@ class Cobot:
         except (TypeError, ValueError) as exc:
             core.refused += 1
             raise SetpointError(f"setpoint is not an array of joint positions: {exc}") from exc
+        underruns = core.underruns  # counted by the control thread, logged here (no I/O there, nor under the lock)
+        if underruns > self._underruns_logged:
+            logger.warning("setpoint queue ran dry while moving: the last setpoint was held (%d so far)", underruns)
+        self._underruns_logged = underruns  # (lower after a reconnect: the counters start again)
         end = time.monotonic() + timeout
         while True:
             with core.lock.bounded():

@@ -143,12 +143,9 @@ class ControlLoop:
                     core.space.set()
                     core.moving = bool(np.any(np.abs(setpoint - core.hold) > MOVING_FRACTION * core.max_step))
                     core.hold = setpoint
-                elif core.moving:
+                elif core.moving:  # counted here, logged by `Cobot.stream` (no I/O in the control thread)
                     core.moving = False
                     core.underruns += 1
-                    logger.warning(
-                        "setpoint queue ran dry while moving: holding the last setpoint (%d so far)", core.underruns
-                    )
             return command, setpoint, core.hold if core.motion else None
 
     def _send_commands(self) -> np.ndarray | None:
