@@ -18,17 +18,16 @@ A safety stop (quick stop) ends the run, as it does in episodes.
 from __future__ import annotations
 
 import logging
-import resource
 import time
 from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Annotated, Protocol
 
 import numpy as np
 
 from mrguide.config import ConfigError, Range, check_number, check_ranges
+from mrguide.deploy.host_stats import cpu_steal_s, peak_rss_mb, resident_mb
 from mrguide.deploy.interrupt import CycleInterrupt
 from mrguide.deploy.runtime import EpisodeReport, RunStopped, Runtime
 from mrguide.drivers.errors import DriverError
@@ -193,19 +192,6 @@ class CycleSummary:
         return "\n".join(lines)
 
 
-def _peak_rss_mb() -> float:
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # Linux: KiB
-
-
-def resident_mb() -> float | None:
-    """The process's resident set now (MB), from /proc/self/statm; None where there is no /proc (not Linux)."""
-    try:
-        pages = int(Path("/proc/self/statm").read_text().split()[1])
-    except (OSError, IndexError, ValueError):
-        return None
-    return pages * resource.getpagesize() / 2**20  # MiB, as ru_maxrss / 1024
-
-
 class CycleRunner:
     """Runs cycles `start`, `start + 1`, ... on a runtime whose cobot is connected and enabled."""
 
@@ -230,7 +216,7 @@ class CycleRunner:
         `interrupt` (the current cycle is finished first); the attempts numbered from `first_attempt` on."""
         summary = CycleSummary(start=start)
         self._attempt = first_attempt
-        rss0, t0 = _peak_rss_mb(), time.perf_counter()
+        rss0, t0 = peak_rss_mb(), time.perf_counter()
         stats0 = self.rt.cobot.stats()
         try:
             for cycle in range(start, start + count):
@@ -252,7 +238,7 @@ class CycleRunner:
             summary.wall_s = time.perf_counter() - t0
             summary.missed_cycles = stats.missed_cycles - stats0.missed_cycles
             summary.underruns = stats.underruns - stats0.underruns
-            summary.rss_growth_mb = _peak_rss_mb() - rss0
+            summary.rss_growth_mb = peak_rss_mb() - rss0
             self.rt.log.write("cycles_end", **summary.as_dict())
             self.rt.log.sync()
         return summary
@@ -260,7 +246,7 @@ class CycleRunner:
     def _cycle(self, cycle: int) -> CycleReport:
         """Feed a part, then attempts until it is placed, an alarm, or a safety stop (RunStopped propagates)."""
         goal = np.asarray(self.goal_for(cycle), dtype=float)
-        t0, stats0 = time.perf_counter(), self.rt.cobot.stats()
+        t0, stats0, steal0 = time.perf_counter(), self.rt.cobot.stats(), cpu_steal_s()
         report = CycleReport(cycle, placed=False)
         self.rt.log.write("cycle_start", cycle=cycle, goal=goal)
         try:
@@ -298,6 +284,7 @@ class CycleRunner:
                 rss_mb=resident_mb(),
                 missed_cycles=stats.missed_cycles - stats0.missed_cycles,
                 underruns=stats.underruns - stats0.underruns,
+                steal_s=None if steal0 is None or (steal := cpu_steal_s()) is None else steal - steal0,
             )
             self.rt.log.sync()
         return report
