@@ -57,14 +57,17 @@ def cycle_figures(records: list[dict]) -> dict[str, Any]:
         "rss_growth_mb": max(float(s["rss_growth_mb"]) for s in segments) if segments else None,
         "rss_growth_after_warmup_mb": rss_growth_after_warmup(records),
         "cycles_with_missed": _cycles_with_missed(ends),
+        "cycles_with_missed_and_steal": _cycles_with_missed(ends, steal=True),
     }
 
 
-def _cycles_with_missed(ends: list[dict]) -> int | None:
-    """How many production cycles missed a control cycle; None unless every cycle_end records its count (logs from
-    before the count was recorded)."""
-    counts = [c for r in ends if isinstance(c := r.get("missed_cycles"), int)]
-    return sum(c > 0 for c in counts) if len(counts) == len(ends) else None
+def _cycles_with_missed(ends: list[dict], steal: bool = False) -> int | None:
+    """How many production cycles missed a control cycle (with `steal`: and lost CPU time to the host); None unless
+    every cycle_end records the counts (logs from before they were recorded)."""
+    keys = ("missed_cycles", "steal_s") if steal else ("missed_cycles",)
+    if not all(isinstance(r.get(k), int | float) for r in ends for k in keys):
+        return None
+    return sum(r["missed_cycles"] > 0 and (not steal or r["steal_s"] > 0) for r in ends)
 
 
 def table(rows: dict[str, dict[str, Any]]) -> str:
@@ -80,14 +83,17 @@ def table(rows: dict[str, dict[str, Any]]) -> str:
         lines.append(
             f"| {name} | {f['placed']} / {n} | {(n - f['alarms']) / n:.1%} | {f['placed_first_attempt']} | {retries} "
             f"| {f['alarms']} | {_num(f['cycle_s_median'], '.2f')} / {_num(f['cycle_s_p95'], '.2f')} s "
-            f"| {_num(f['parts_per_hour'], '.0f')} | {_num(f['missed_cycles'], 'd')}{_in_cycles(f['cycles_with_missed'])} | {_num(f['underruns'], 'd')} "
+            f"| {_num(f['parts_per_hour'], '.0f')} | {_num(f['missed_cycles'], 'd')}{_in_cycles(f['cycles_with_missed'], f['cycles_with_missed_and_steal'])} | {_num(f['underruns'], 'd')} "
             f"| {_num(f['rss_growth_mb'], '.1f', ' MB')} | {_num(f['rss_growth_after_warmup_mb'], '.1f', ' MB')} |"
         )
     return "\n".join(lines) + "\n"
 
 
-def _in_cycles(count: int | None) -> str:
-    return "" if count is None else f" (in {count} cycles)"
+def _in_cycles(count: int | None, with_steal: int | None) -> str:
+    """Where a run's missed control cycles fell: in how many production cycles, how many of them with host steal."""
+    if count is None:
+        return ""
+    return f" (in {count} cycles" + ("" if with_steal is None else f", {with_steal} with host steal") + ")"
 
 
 def _num(value: float | int | None, fmt: str, unit: str = "") -> str:

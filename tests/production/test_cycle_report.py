@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import gzip
 import json
+import os
 
 import pytest
 
 from mrguide.cli import main
 from mrguide.deploy.cycle_report import WARMUP_CYCLES, cycle_figures, rss_growth_after_warmup
+from mrguide.deploy.host_stats import cpu_steal_s
 from mrguide.deploy.runlog import RunLog, read_log, slim_records
 
 
@@ -56,7 +58,7 @@ def test_the_figures_come_from_the_cycle_records(tmp_path):
 
 def test_the_cycles_that_missed_control_cycles_are_counted(tmp_path, capsys):
     with RunLog(tmp_path / "run.jsonl", {"command": "deploy"}) as log:
-        for i, missed in enumerate([0, 3, 0, 1]):
+        for i, (missed, steal) in enumerate([(0, 0.0), (3, 0.02), (0, 0.01), (1, 0.0)]):
             log.write(
                 "cycle_end",
                 cycle=i,
@@ -67,12 +69,22 @@ def test_the_cycles_that_missed_control_cycles_are_counted(tmp_path, capsys):
                 cycle_s=4.0,
                 missed_cycles=missed,
                 underruns=0,
+                steal_s=steal,
             )
         log.write("cycles_end", wall_s=16.0, missed_cycles=4, underruns=0, rss_growth_mb=0.5)
     f = cycle_figures(read_log(tmp_path / "run.jsonl"))
-    assert (f["missed_cycles"], f["cycles_with_missed"]) == (4, 2)
+    assert (f["missed_cycles"], f["cycles_with_missed"], f["cycles_with_missed_and_steal"]) == (4, 2, 1)
     assert main(["cycles", "report", str(tmp_path / "run.jsonl")]) == 0
-    assert "| 4 (in 2 cycles) |" in capsys.readouterr().out
+    assert "| 4 (in 2 cycles, 1 with host steal) |" in capsys.readouterr().out
+
+
+def test_host_steal_is_read_from_proc_stat(tmp_path):
+    stat = tmp_path / "stat"
+    stat.write_text("cpu  1806041 3306981 374110 1889507 9876 0 3411 11995 0 0\ncpu0 1 2 3 4 5 6 7 8 0 0\n")
+    assert cpu_steal_s(stat) == pytest.approx(11995 / os.sysconf("SC_CLK_TCK"))
+    stat.write_text("cpu  1 2 3\n")  # a kernel that does not count steal
+    assert cpu_steal_s(stat) is None
+    assert cpu_steal_s(tmp_path / "missing") is None
 
 
 def test_a_run_without_its_summary_record_reports_the_driver_counters_as_unknown(tmp_path, capsys):
