@@ -27,7 +27,7 @@ from typing import Annotated, Protocol
 import numpy as np
 
 from mrguide.config import ConfigError, Range, check_number, check_ranges
-from mrguide.deploy.host_stats import cpu_steal_s, peak_rss_mb, resident_mb
+from mrguide.deploy.host_stats import FullCollections, cpu_steal_s, peak_rss_mb, resident_mb
 from mrguide.deploy.interrupt import CycleInterrupt
 from mrguide.deploy.runtime import EpisodeReport, RunStopped, Runtime
 from mrguide.drivers.errors import DriverError
@@ -208,6 +208,7 @@ class CycleRunner:
         self.rest_z = 0.5 * runtime.task.object_height
         self._attempt = 0  # episode index in the run log of the next attempt
         self._departed = False  # whether the arm rose from a place and the next attempt may start there
+        self._collections = FullCollections()
 
     def run(
         self, start: int, count: int, interrupt: CycleInterrupt | None = None, first_attempt: int = 0
@@ -218,6 +219,7 @@ class CycleRunner:
         self._attempt = first_attempt
         rss0, t0 = peak_rss_mb(), time.perf_counter()
         stats0 = self.rt.cobot.stats()
+        self._collections.start()
         try:
             for cycle in range(start, start + count):
                 if interrupt is not None and interrupt.requested:
@@ -234,6 +236,7 @@ class CycleRunner:
             summary.stopped = str(exc) or "interrupted (Ctrl-C twice): quick stop"
             log.error("run stopped: %s", summary.stopped)
         finally:
+            self._collections.stop()
             stats = self.rt.cobot.stats()
             summary.wall_s = time.perf_counter() - t0
             summary.missed_cycles = stats.missed_cycles - stats0.missed_cycles
@@ -247,6 +250,7 @@ class CycleRunner:
         """Feed a part, then attempts until it is placed, an alarm, or a safety stop (RunStopped propagates)."""
         goal = np.asarray(self.goal_for(cycle), dtype=float)
         t0, stats0, steal0 = time.perf_counter(), self.rt.cobot.stats(), cpu_steal_s()
+        gc0 = (self._collections.count, self._collections.seconds)
         report = CycleReport(cycle, placed=False)
         self.rt.log.write("cycle_start", cycle=cycle, goal=goal)
         try:
@@ -285,6 +289,8 @@ class CycleRunner:
                 missed_cycles=stats.missed_cycles - stats0.missed_cycles,
                 underruns=stats.underruns - stats0.underruns,
                 steal_s=None if steal0 is None or (steal := cpu_steal_s()) is None else steal - steal0,
+                full_gc=self._collections.count - gc0[0],
+                full_gc_s=self._collections.seconds - gc0[1],
             )
             self.rt.log.sync()
         return report

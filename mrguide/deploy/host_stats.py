@@ -7,8 +7,10 @@ while the host stole is told apart from one the process missed itself.
 
 from __future__ import annotations
 
+import gc
 import os
 import resource
+import time
 from pathlib import Path
 
 
@@ -35,3 +37,32 @@ def cpu_steal_s(stat: Path = Path("/proc/stat")) -> float | None:
     except (OSError, IndexError, ValueError):
         return None
     return ticks / os.sysconf("SC_CLK_TCK")
+
+
+class FullCollections:
+    """Counts Python's full (generation-2) garbage collections and the time they held the interpreter: one such
+    collection scans every tracked object the process did not freeze, with the GIL held, in whatever thread triggered
+    it, the control thread included. Installed as a `gc` callback by `start`, removed by `stop`."""
+
+    def __init__(self) -> None:
+        self.count = 0
+        self.seconds = 0.0
+        self._started: float | None = None
+
+    def start(self) -> None:
+        if self._callback not in gc.callbacks:
+            gc.callbacks.append(self._callback)
+
+    def stop(self) -> None:
+        if self._callback in gc.callbacks:
+            gc.callbacks.remove(self._callback)
+
+    def _callback(self, phase: str, info: dict) -> None:
+        if info.get("generation") != 2:
+            return
+        if phase == "start":
+            self._started = time.perf_counter()
+        elif self._started is not None:
+            self.count += 1
+            self.seconds += time.perf_counter() - self._started
+            self._started = None

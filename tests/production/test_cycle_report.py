@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gc
 import gzip
 import json
 import os
@@ -10,7 +11,7 @@ import pytest
 
 from mrguide.cli import main
 from mrguide.deploy.cycle_report import WARMUP_CYCLES, cycle_figures, rss_growth_after_warmup
-from mrguide.deploy.host_stats import cpu_steal_s
+from mrguide.deploy.host_stats import FullCollections, cpu_steal_s
 from mrguide.deploy.runlog import RunLog, read_log, slim_records
 
 
@@ -133,3 +134,15 @@ def test_rss_growth_after_warm_up_is_per_session_from_the_warm_up_cycle_on(tmp_p
     with RunLog(tmp_path / "short.jsonl", {"command": "deploy"}) as log:
         _session(log, warm)  # no cycle after the warm-up
     assert rss_growth_after_warmup(read_log(tmp_path / "short.jsonl")) is None
+
+
+def test_full_collections_are_counted_while_started():
+    collections = FullCollections()
+    gc.collect()
+    assert collections.count == 0  # not started
+    collections.start()
+    gc.collect(1)  # a young generation: not counted
+    gc.collect()
+    collections.stop()
+    gc.collect()
+    assert collections.count == 1 and collections.seconds > 0.0
