@@ -11,6 +11,8 @@ at most `GIL_SAFE_ELEMENTS` elements.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from mrguide.drivers.cobot_state import CycleSample
@@ -46,7 +48,7 @@ class FollowingMonitor:
 
     def _nearest(self, ring: np.ndarray, position: float) -> float:
         """Distance from `position` to the nearest value of `ring`, in chunks the GIL is kept through."""
-        if not np.isfinite(position):
+        if not math.isfinite(position):
             return float("nan")
         best = np.inf
         for start in range(0, len(ring), GIL_SAFE_ELEMENTS):
