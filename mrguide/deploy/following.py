@@ -4,9 +4,9 @@ It runs in the control thread, so it must not let go of the GIL mid-cycle: NumPy
 ufunc loop over more than 500 elements (`NPY_BEGIN_THREADS_THRESHOLDED`), and a thread that took it then (the
 simulated devices stepping their plant, the runtime computing setpoints) keeps the control thread waiting up
 to Python's 5 ms switch interval, longer than the 4 ms control period. With a (250, 6) ring in one call the
-observer did exactly that: measured in dry runs, the cycle's own work took 1.1-1.7 ms at the median and up to
-8 ms, and the cycles after the long ones started late (docs/performance.md). So every NumPy call here works on
-at most `GIL_SAFE_ELEMENTS` elements.
+observer did exactly that: in dry runs the cycle's work p99 was 2.5 ms against 0.9 ms since, and cycles after
+the long ones started late (docs/performance.md, results/benchmarks/deploy-quiet-2026-12-04.txt). So every NumPy
+call here works on at most `GIL_SAFE_ELEMENTS` elements.
 """
 
 from __future__ import annotations
