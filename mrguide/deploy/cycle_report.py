@@ -33,6 +33,17 @@ def rss_growth_after_warmup(records: list[dict]) -> float | None:
     return max(growth) if growth else None
 
 
+#: cycle_end's counters that tell a missed control cycle's cause apart, with how the report names them: a control
+#: cycle's own work running past the period, the host stealing CPU time, some task waiting for I/O, a page read from
+#: disk.
+MISS_CONTEXT = {
+    "work_overruns": "work overruns",
+    "steal_s": "host steal",
+    "io_stall_s": "I/O stall",
+    "major_faults": "major page faults",
+}
+
+
 def cycle_figures(records: list[dict]) -> dict[str, Any]:
     """A production run's figures from its records (a resumed run's segments together)."""
     ends = [r for r in records if r.get("kind") == "cycle_end"]
@@ -57,17 +68,17 @@ def cycle_figures(records: list[dict]) -> dict[str, Any]:
         "rss_growth_mb": max(float(s["rss_growth_mb"]) for s in segments) if segments else None,
         "rss_growth_after_warmup_mb": rss_growth_after_warmup(records),
         "cycles_with_missed": _cycles_with_missed(ends),
-        "cycles_with_missed_and_steal": _cycles_with_missed(ends, steal=True),
+        **{f"cycles_with_missed_and_{key}": _cycles_with_missed(ends, key) for key in MISS_CONTEXT},
     }
 
 
-def _cycles_with_missed(ends: list[dict], steal: bool = False) -> int | None:
-    """How many production cycles missed a control cycle (with `steal`: and lost CPU time to the host); None unless
-    every cycle_end records the counts (logs from before they were recorded)."""
-    keys = ("missed_cycles", "steal_s") if steal else ("missed_cycles",)
+def _cycles_with_missed(ends: list[dict], also: str | None = None) -> int | None:
+    """How many production cycles missed a control cycle (with `also`, a cycle_end counter: and counted some of it);
+    None unless every cycle_end records the counts (logs from before they were recorded)."""
+    keys = ("missed_cycles",) if also is None else ("missed_cycles", also)
     if not all(isinstance(r.get(k), int | float) for r in ends for k in keys):
         return None
-    return sum(r["missed_cycles"] > 0 and (not steal or r["steal_s"] > 0) for r in ends)
+    return sum(r["missed_cycles"] > 0 and (also is None or r[also] > 0) for r in ends)
 
 
 def table(rows: dict[str, dict[str, Any]]) -> str:
@@ -83,17 +94,23 @@ def table(rows: dict[str, dict[str, Any]]) -> str:
         lines.append(
             f"| {name} | {f['placed']} / {n} | {(n - f['alarms']) / n:.1%} | {f['placed_first_attempt']} | {retries} "
             f"| {f['alarms']} | {_num(f['cycle_s_median'], '.2f')} / {_num(f['cycle_s_p95'], '.2f')} s "
-            f"| {_num(f['parts_per_hour'], '.0f')} | {_num(f['missed_cycles'], 'd')}{_in_cycles(f['cycles_with_missed'], f['cycles_with_missed_and_steal'])} | {_num(f['underruns'], 'd')} "
+            f"| {_num(f['parts_per_hour'], '.0f')} | {_num(f['missed_cycles'], 'd')}{_in_cycles(f)} | {_num(f['underruns'], 'd')} "
             f"| {_num(f['rss_growth_mb'], '.1f', ' MB')} | {_num(f['rss_growth_after_warmup_mb'], '.1f', ' MB')} |"
         )
     return "\n".join(lines) + "\n"
 
 
-def _in_cycles(count: int | None, with_steal: int | None) -> str:
-    """Where a run's missed control cycles fell: in how many production cycles, how many of them with host steal."""
-    if count is None:
+def _in_cycles(f: dict[str, Any]) -> str:
+    """Where a run's missed control cycles fell: in how many production cycles, and how many of those counted each
+    of MISS_CONTEXT that the log records."""
+    if f["cycles_with_missed"] is None:
         return ""
-    return f" (in {count} cycles" + ("" if with_steal is None else f", {with_steal} with host steal") + ")"
+    events = [
+        f"{f[f'cycles_with_missed_and_{key}']} with {name}"
+        for key, name in MISS_CONTEXT.items()
+        if f[f"cycles_with_missed_and_{key}"] is not None
+    ]
+    return f" (in {f['cycles_with_missed']} cycles" + "".join(f", {e}" for e in events) + ")"
 
 
 def _num(value: float | int | None, fmt: str, unit: str = "") -> str:

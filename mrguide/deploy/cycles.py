@@ -27,7 +27,7 @@ from typing import Annotated, Protocol
 import numpy as np
 
 from mrguide.config import ConfigError, Range, check_number, check_ranges
-from mrguide.deploy.host_stats import FullCollections, cpu_steal_s, peak_rss_mb, resident_mb
+from mrguide.deploy.host_stats import FullCollections, HostCounters, peak_rss_mb, resident_mb
 from mrguide.deploy.interrupt import CycleInterrupt
 from mrguide.deploy.runtime import EpisodeReport, RunStopped, Runtime
 from mrguide.drivers.errors import DriverError
@@ -249,7 +249,7 @@ class CycleRunner:
     def _cycle(self, cycle: int) -> CycleReport:
         """Feed a part, then attempts until it is placed, an alarm, or a safety stop (RunStopped propagates)."""
         goal = np.asarray(self.goal_for(cycle), dtype=float)
-        t0, stats0, steal0 = time.perf_counter(), self.rt.cobot.stats(), cpu_steal_s()
+        t0, stats0, host0 = time.perf_counter(), self.rt.cobot.stats(), HostCounters.now()
         gc0 = (self._collections.count, self._collections.seconds)
         report = CycleReport(cycle, placed=False)
         self.rt.log.write("cycle_start", cycle=cycle, goal=goal)
@@ -288,7 +288,8 @@ class CycleRunner:
                 rss_mb=resident_mb(),
                 missed_cycles=stats.missed_cycles - stats0.missed_cycles,
                 underruns=stats.underruns - stats0.underruns,
-                steal_s=None if steal0 is None or (steal := cpu_steal_s()) is None else steal - steal0,
+                work_overruns=stats.work_overruns - stats0.work_overruns,
+                **HostCounters.now().since(host0),
                 full_gc=self._collections.count - gc0[0],
                 full_gc_s=self._collections.seconds - gc0[1],
             )

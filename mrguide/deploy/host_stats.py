@@ -1,8 +1,12 @@
-"""What the process and its host spent, for the production logs: memory, and the CPU time a hypervisor took.
+"""What the process and its host spent, for the production logs: memory, the CPU time a hypervisor took, and what
+held the machine's tasks up.
 
 Linux only (/proc); elsewhere the readings are None. A virtual machine's "steal" time is time its virtual CPUs were
 ready to run and the host ran something else: no priority inside the guest gets it back, so a control cycle missed
-while the host stole is told apart from one the process missed itself.
+while the host stole is told apart from one the process missed itself. The kernel's pressure stall information
+(/proc/pressure) says how long some task waited for a CPU or for I/O; the process's major page faults (a page read
+from disk, with whatever lock the faulting thread held) and involuntary context switches (a thread put off a CPU for
+another) say what happened to this process.
 """
 
 from __future__ import annotations
@@ -11,6 +15,7 @@ import gc
 import os
 import resource
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 
@@ -37,6 +42,48 @@ def cpu_steal_s(stat: Path = Path("/proc/stat")) -> float | None:
     except (OSError, IndexError, ValueError):
         return None
     return ticks / os.sysconf("SC_CLK_TCK")
+
+
+def pressure_stall_s(resource_name: str, root: Path = Path("/proc/pressure")) -> float | None:
+    """Total time since boot that some task waited for `resource_name` ("cpu", "io" or "memory") (s), from the
+    kernel's pressure stall information; None where the kernel does not provide it."""
+    try:
+        some = (root / resource_name).read_text().split("\n", 1)[0].split()
+        if some[0] != "some":
+            return None
+        return int(dict(f.split("=", 1) for f in some[1:])["total"]) / 1e6  # µs
+    except (OSError, IndexError, KeyError, ValueError):
+        return None
+
+
+@dataclass(frozen=True)
+class HostCounters:
+    """Counters of the host and the process at one moment; `since` turns two of them into a cycle's record."""
+
+    steal_s: float | None
+    cpu_stall_s: float | None
+    io_stall_s: float | None
+    major_faults: int
+    preemptions: int
+
+    @classmethod
+    def now(cls) -> HostCounters:
+        usage = resource.getrusage(resource.RUSAGE_SELF)
+        return cls(cpu_steal_s(), pressure_stall_s("cpu"), pressure_stall_s("io"), usage.ru_majflt, usage.ru_nivcsw)
+
+    def since(self, earlier: HostCounters) -> dict[str, float | int | None]:
+        """What happened between `earlier` and this reading, by field (None where either reading is missing)."""
+
+        def diff(a: float | None, b: float | None) -> float | None:
+            return None if a is None or b is None else a - b
+
+        return {
+            "steal_s": diff(self.steal_s, earlier.steal_s),
+            "cpu_stall_s": diff(self.cpu_stall_s, earlier.cpu_stall_s),
+            "io_stall_s": diff(self.io_stall_s, earlier.io_stall_s),
+            "major_faults": self.major_faults - earlier.major_faults,
+            "preemptions": self.preemptions - earlier.preemptions,
+        }
 
 
 class FullCollections:

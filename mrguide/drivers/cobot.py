@@ -321,6 +321,7 @@ class Cobot:
             lateness_max=cyc.lateness_max,
             work_p99=cyc.work_p99,
             work_max=cyc.work_max,
+            work_overruns=cyc.overruns,
             frames_tx=core.frames_tx,
             bits_tx=core.bits_tx,
             frames_rx=rx.frames_rx if rx else 0,

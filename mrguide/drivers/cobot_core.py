@@ -67,7 +67,7 @@ class CobotCore:
         self.last_rx: dict[int, int] = {}
         self.misses: dict[int, int] = {}
         self.lost_logged: set[int] = set()
-        self.cycle_stats = CycleStats()
+        self.cycle_stats = CycleStats(period=self.period)
         self.frames_tx = self.bits_tx = 0
         self.lost_feedback = self.underruns = self.refused = self.emcy_count = 0
         self.queue.clear()

@@ -65,6 +65,9 @@ class DriverStats:
     #: A cycle's work (s), its start to the end of its observers: 99th percentile and maximum.
     work_p99: float
     work_max: float
+    #: Cycles whose work took longer than one period: a missed cycle after one was the process's own work (or a
+    #: wait for the GIL) running long, a missed cycle without one a late wake-up.
+    work_overruns: int
     frames_tx: int
     bits_tx: int
     frames_rx: int

@@ -71,17 +71,22 @@ class CycleSummary:
     #: cycle starts late.
     work_p99: float = 0.0
     work_max: float = 0.0
+    #: Cycles whose work took longer than the period (each makes the next start late, or skips it).
+    overruns: int = 0
 
 
 class CycleStats:
-    """Records each cycle's lateness (actual start minus deadline) and its work's duration in ring buffers."""
+    """Records each cycle's lateness (actual start minus deadline) and its work's duration in ring buffers, and
+    counts the cycles whose work took longer than `period`."""
 
-    def __init__(self, capacity: int = 1 << 17) -> None:
+    def __init__(self, capacity: int = 1 << 17, period: float = float("inf")) -> None:
         self._lateness = np.zeros(capacity)
         self._work = np.zeros(capacity)
+        self._period = period
         self._n = 0
         self._n_work = 0
         self._missed = 0
+        self._overruns = 0
 
     def record(self, lateness: float, skipped: int) -> None:
         self._lateness[self._n % len(self._lateness)] = lateness
@@ -91,13 +96,16 @@ class CycleStats:
     def record_work(self, duration: float) -> None:
         self._work[self._n_work % len(self._work)] = duration
         self._n_work += 1
+        self._overruns += duration > self._period
 
     def summary(self) -> CycleSummary:
         n = min(self._n, len(self._lateness))
         if n == 0:
-            return CycleSummary(0, self._missed, 0.0, 0.0, 0.0)
+            return CycleSummary(0, self._missed, 0.0, 0.0, 0.0, overruns=self._overruns)
         p50, p99 = np.percentile(self._lateness[:n], [50, 99])
         lateness_max = float(self._lateness[:n].max())
         w = self._work[: min(self._n_work, len(self._work))]
         work_p99, work_max = (float(np.percentile(w, 99)), float(w.max())) if len(w) else (0.0, 0.0)
-        return CycleSummary(self._n, self._missed, float(p50), float(p99), lateness_max, work_p99, work_max)
+        return CycleSummary(
+            self._n, self._missed, float(p50), float(p99), lateness_max, work_p99, work_max, self._overruns
+        )

@@ -73,7 +73,8 @@ def _selftest(config: CobotBusConfig, robot: RobotSpec, write: Callable[[str], N
         write(
             f"  cycles {stats.cycles}, missed {stats.missed_cycles}, SYNC lateness p50/p99/max "
             f"{stats.lateness_p50 * 1e3:.2f}/{stats.lateness_p99 * 1e3:.2f}/{stats.lateness_max * 1e3:.2f} ms, "
-            f"work p99/max {stats.work_p99 * 1e3:.2f}/{stats.work_max * 1e3:.2f} ms, "
+            f"work p99/max {stats.work_p99 * 1e3:.2f}/{stats.work_max * 1e3:.2f} ms "
+            f"({stats.work_overruns} past the period), "
             f"lost feedback {stats.lost_feedback}, frames tx/rx {stats.frames_tx}/{stats.frames_rx}"
         )
     finally:

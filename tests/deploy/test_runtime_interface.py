@@ -59,7 +59,7 @@ class IdealCobot:
         return VacuumState(0.0, False, False, self.vacuum, False, 0.0)
 
     def stats(self):
-        return DriverStats(*([0] * 2), *([0.0] * 5), *([0] * 11))
+        return DriverStats(*([0] * 2), *([0.0] * 5), *([0] * 12))
 
     def add_cycle_observer(self, observer):
         self.observers.append(observer)

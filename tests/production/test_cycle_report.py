@@ -11,7 +11,7 @@ import pytest
 
 from mrguide.cli import main
 from mrguide.deploy.cycle_report import WARMUP_CYCLES, cycle_figures, rss_growth_after_warmup
-from mrguide.deploy.host_stats import FullCollections, cpu_steal_s
+from mrguide.deploy.host_stats import FullCollections, HostCounters, cpu_steal_s, pressure_stall_s
 from mrguide.deploy.runlog import RunLog, read_log, slim_records
 
 
@@ -59,7 +59,8 @@ def test_the_figures_come_from_the_cycle_records(tmp_path):
 
 def test_the_cycles_that_missed_control_cycles_are_counted(tmp_path, capsys):
     with RunLog(tmp_path / "run.jsonl", {"command": "deploy"}) as log:
-        for i, (missed, steal) in enumerate([(0, 0.0), (3, 0.02), (0, 0.01), (1, 0.0)]):
+        rows = [(0, 0, 0.0, 0.0, 0), (3, 2, 0.02, 0.0, 2), (0, 1, 0.01, 0.3, 1), (1, 0, 0.0, 0.1, 0)]
+        for i, (missed, overruns, steal, io, faults) in enumerate(rows):
             log.write(
                 "cycle_end",
                 cycle=i,
@@ -70,13 +71,20 @@ def test_the_cycles_that_missed_control_cycles_are_counted(tmp_path, capsys):
                 cycle_s=4.0,
                 missed_cycles=missed,
                 underruns=0,
+                work_overruns=overruns,
                 steal_s=steal,
+                io_stall_s=io,
+                major_faults=faults,
             )
         log.write("cycles_end", wall_s=16.0, missed_cycles=4, underruns=0, rss_growth_mb=0.5)
     f = cycle_figures(read_log(tmp_path / "run.jsonl"))
-    assert (f["missed_cycles"], f["cycles_with_missed"], f["cycles_with_missed_and_steal"]) == (4, 2, 1)
+    assert (f["missed_cycles"], f["cycles_with_missed"], f["cycles_with_missed_and_steal_s"]) == (4, 2, 1)
+    assert (f["cycles_with_missed_and_io_stall_s"], f["cycles_with_missed_and_major_faults"]) == (1, 1)
     assert main(["cycles", "report", str(tmp_path / "run.jsonl")]) == 0
-    assert "| 4 (in 2 cycles, 1 with host steal) |" in capsys.readouterr().out
+    assert (
+        "| 4 (in 2 cycles, 1 with work overruns, 1 with host steal, 1 with I/O stall, 1 with major page faults) |"
+        in (capsys.readouterr().out)
+    )
 
 
 def test_host_steal_is_read_from_proc_stat(tmp_path):
@@ -86,6 +94,30 @@ def test_host_steal_is_read_from_proc_stat(tmp_path):
     stat.write_text("cpu  1 2 3\n")  # a kernel that does not count steal
     assert cpu_steal_s(stat) is None
     assert cpu_steal_s(tmp_path / "missing") is None
+
+
+def test_pressure_stalls_are_read_from_proc_pressure(tmp_path):
+    (tmp_path / "io").write_text(
+        "some avg10=0.04 avg60=0.27 avg300=1.14 total=131027427\nfull avg10=0.00 avg60=0.16 avg300=0.83 total=85494393\n"
+    )
+    assert pressure_stall_s("io", tmp_path) == pytest.approx(131.027427)
+    (tmp_path / "cpu").write_text("full avg10=0.00 total=5\n")  # no "some" line first: not a format we know
+    assert pressure_stall_s("cpu", tmp_path) is None
+    assert pressure_stall_s("memory", tmp_path) is None  # a kernel without PSI
+
+
+def test_host_counters_give_a_cycle_what_happened_since_the_last_reading():
+    before = HostCounters(steal_s=1.0, cpu_stall_s=None, io_stall_s=2.0, major_faults=3, preemptions=10)
+    after = HostCounters(steal_s=1.5, cpu_stall_s=4.0, io_stall_s=2.25, major_faults=5, preemptions=12)
+    assert after.since(before) == {
+        "steal_s": 0.5,
+        "cpu_stall_s": None,  # one reading missing: unknown, not zero
+        "io_stall_s": 0.25,
+        "major_faults": 2,
+        "preemptions": 2,
+    }
+    now = HostCounters.now()  # this process, read for real
+    assert now.major_faults >= 0 and now.preemptions >= 0
 
 
 def test_a_run_without_its_summary_record_reports_the_driver_counters_as_unknown(tmp_path, capsys):

@@ -53,7 +53,7 @@ class ScriptedRuntime:
 
     def stats(self):
         missed = sum(self.missed[: len(self.episodes)])
-        return DriverStats(0, missed, *([0.0] * 5), *([0] * 11))
+        return DriverStats(0, missed, *([0.0] * 5), *([0] * 12))
 
     def home(self):
         self.homes += 1
@@ -117,6 +117,9 @@ def test_each_cycle_records_the_control_cycles_missed_during_it(tmp_path):
     ends = [r for r in read_log(log_path) if r["kind"] == "cycle_end"]
     assert [r["missed_cycles"] for r in ends] == [0, 3, 0]  # cycle 1's two attempts missed 2 and 1
     assert all(r["steal_s"] is None or r["steal_s"] >= 0.0 for r in ends)  # the host's steal during it (Linux)
+    assert all(r["io_stall_s"] is None or r["io_stall_s"] >= 0.0 for r in ends)  # /proc/pressure/io, if any
+    assert all(r["major_faults"] >= 0 and r["preemptions"] >= 0 for r in ends)  # the process's own counters
+    assert [r["work_overruns"] for r in ends] == [0, 0, 0]  # control cycles whose work ran past the period
     assert summary.missed_cycles == 3
 
 
