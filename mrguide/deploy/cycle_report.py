@@ -67,18 +67,18 @@ def cycle_figures(records: list[dict]) -> dict[str, Any]:
         "underruns": sum(int(s["underruns"]) for s in segments) if segments else None,
         "rss_growth_mb": max(float(s["rss_growth_mb"]) for s in segments) if segments else None,
         "rss_growth_after_warmup_mb": rss_growth_after_warmup(records),
-        "cycles_with_missed": _cycles_with_missed(ends),
-        **{f"cycles_with_missed_and_{key}": _cycles_with_missed(ends, key) for key in MISS_CONTEXT},
+        "cycles_with_missed": _cycles_with(ends, "missed_cycles"),
+        **{f"cycles_with_{key}": _cycles_with(ends, key) for key in MISS_CONTEXT},
+        **{f"cycles_with_missed_and_{key}": _cycles_with(ends, "missed_cycles", key) for key in MISS_CONTEXT},
     }
 
 
-def _cycles_with_missed(ends: list[dict], also: str | None = None) -> int | None:
-    """How many production cycles missed a control cycle (with `also`, a cycle_end counter: and counted some of it);
-    None unless every cycle_end records the counts (logs from before they were recorded)."""
-    keys = ("missed_cycles",) if also is None else ("missed_cycles", also)
+def _cycles_with(ends: list[dict], *keys: str) -> int | None:
+    """How many production cycles counted some of every cycle_end counter in `keys`; None unless every cycle_end
+    records them (logs from before they were recorded)."""
     if not all(isinstance(r.get(k), int | float) for r in ends for k in keys):
         return None
-    return sum(r["missed_cycles"] > 0 and (also is None or r[also] > 0) for r in ends)
+    return sum(all(r[k] > 0 for k in keys) for r in ends)
 
 
 def table(rows: dict[str, dict[str, Any]]) -> str:
@@ -101,16 +101,17 @@ def table(rows: dict[str, dict[str, Any]]) -> str:
 
 
 def _in_cycles(f: dict[str, Any]) -> str:
-    """Where a run's missed control cycles fell: in how many production cycles, and how many of those counted each
-    of MISS_CONTEXT that the log records."""
+    """Where a run's missed control cycles fell: in how many production cycles, how many of those counted each of
+    MISS_CONTEXT that the log records, and [in brackets] how many of all the run's cycles did: a context as common in
+    every cycle as in those with a miss does not explain it."""
     if f["cycles_with_missed"] is None:
         return ""
     events = [
-        f"{f[f'cycles_with_missed_and_{key}']} with {name}"
+        f"{f[f'cycles_with_missed_and_{key}']} with {name} [{f[f'cycles_with_{key}']}]"
         for key, name in MISS_CONTEXT.items()
         if f[f"cycles_with_missed_and_{key}"] is not None
     ]
-    return f" (in {f['cycles_with_missed']} cycles" + "".join(f", {e}" for e in events) + ")"
+    return f" (in {f['cycles_with_missed']} cycles" + (": " + ", ".join(events) if events else "") + ")"
 
 
 def _num(value: float | int | None, fmt: str, unit: str = "") -> str:

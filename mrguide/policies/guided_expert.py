@@ -61,6 +61,7 @@ class ExpertCounts:
     remarks: int = 0  # waypoints asked again because the arm did not reach them
     probes: int = 0  # targets a demonstration's search tried beyond a waypoint that did not complete its phase
     measured: int = 0  # seals and placements the cell measured (recorded as pick and place measurements)
+    withdrawn: int = 0  # measurements dropped because the search around them found nothing (MarkFusion.withdraw)
 
 
 class PerceivedPose:
@@ -95,7 +96,9 @@ class GuidedExpert:
 
     A waypoint the arm has followed for `reask_after` consecutive expert steps without the phase advancing was
     not reachable as marked (noise, a slip of the hand): it is asked again, as a person watching the arm would
-    re-mark it, and the new mark supersedes the old one in the cache.
+    re-mark it, and the new mark supersedes the old one in the cache. Where the waypoint came from what the cell
+    measured and the search around it found nothing, the measurement was wrong (a part the cup dragged before it
+    sealed): it is withdrawn, and the marks, the new one with them, stand for the point again.
     """
 
     def __init__(
@@ -215,6 +218,7 @@ class GuidedExpert:
         target = self.demo.next_target(self._plan[kind][1])
         if target is None:  # nothing around the waypoint completes the phase: the person marks again
             self.counts.remarks += 1
+            self.counts.withdrawn += self.fusion.withdraw(kind)
             if not self._plan_mark(obs, kind, self._plan[kind][0], force=True):
                 return None
             self.demo.restart_phase()

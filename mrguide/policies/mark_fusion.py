@@ -13,7 +13,9 @@ Two things end the need for more marks of a kind. A grasp that sealed (`add_seal
 without the person's bias, a part set down where the episode succeeded (`add_placement`) the place offset: from
 then on the pick or the place is the median of those measurements. And once the median of the marks
 is known to within `precision` per axis (its standard error, from the marks' own spread), another mark of that
-kind tells the learner nothing new: `settled` says so, and the person is not asked.
+kind tells the learner nothing new: `settled` says so, and the person is not asked. A measurement can be wrong — a
+part the cup dragged along before it sealed is measured against where it lay before — and a demonstration whose
+search finds nothing around it says so: `withdraw` drops it, and the marks decide again.
 """
 
 from __future__ import annotations
@@ -66,6 +68,13 @@ class MarkFusion:
         """Record where the cell found the pick (a grasp target that sealed, the part's centre at `at`) or the place
         (a set-down point of a success, the goal at `at`)."""
         self.measured[kind].append(np.asarray(point, dtype=float) - np.asarray(at, dtype=float))
+
+    def withdraw(self, kind: int) -> int:
+        """Drop the measurements of `kind` (a demonstration planned from them found nothing around them): the marks
+        stand for it again. Returns how many were dropped."""
+        dropped = len(self.measured[kind])
+        self.measured[kind] = []
+        return dropped
 
     def point(self, kind: int, at: np.ndarray) -> np.ndarray:
         """The fused mark (m) for an anchor at `at`; needs at least one mark of `kind`."""

@@ -284,6 +284,40 @@ def test_where_the_grasp_sealed_becomes_the_pick_of_later_demonstrations(tmp_pat
     assert np.allclose(first, other + measured, atol=1e-6) and expert.counts.asked == 2  # the place only
 
 
+def test_a_measured_pick_whose_search_finds_nothing_is_withdrawn_and_the_marks_decide_again(tmp_path):
+    """A pick measured 46 mm beside the part (a part the cup dragged before it sealed, measured where it had lain):
+    the demonstrations plan their grasp there, the search around it finds nothing, and the measurement is withdrawn;
+    the person's new mark and the earlier ones are the pick again, and the next demonstration plans from them."""
+    grasp = ws.PATTERNS[Phase.GRASP]
+    src = _Recorder()  # exact marks
+    expert, _ = _pick_place(src, tmp_path)
+    expert.begin_demonstration()
+    exact = _target_m(expert.action(_obs(1)).executed)  # the first mark: the part's top centre
+    expert.fusion.add_measurement(PICK_PHASE, OBJ, exact + [-0.046, 0.0, 0.0])
+    expert.begin_demonstration()
+    beside = _target_m(expert.action(_obs(1)).executed)
+    assert np.allclose(beside, exact + [-0.046, 0.0, 0.0], atol=1e-6) and expert.counts.asked == 1  # not asked
+    for _ in range(grasp.first_dwell + len(grasp.grid) * (grasp.hover + grasp.press) - 1):
+        expert.action(_obs(1))
+    assert expert.counts.withdrawn == 0 and expert.counts.asked == 1
+    after = _target_m(expert.action(_obs(1)).executed)  # every probe failed: withdrawn, the person marks again
+    assert expert.counts.withdrawn == 1 and expert.fusion.measured[PICK_PHASE] == []
+    assert expert.counts.asked == 2 and np.allclose(after, exact, atol=1e-6)
+    expert.begin_demonstration()
+    assert np.allclose(_target_m(expert.action(_obs(1)).executed), exact, atol=1e-6)
+
+
+def test_withdrawing_drops_only_the_measurements_of_that_kind():
+    fusion = MarkFusion()
+    fusion.add(PICK_PHASE, OBJ, OBJ + [0.0, 0.0, 0.03])
+    fusion.add_measurement(PICK_PHASE, OBJ, OBJ + [0.01, 0.0, 0.025])
+    fusion.add_measurement(PLACE_PHASE, GOAL, GOAL + [0.0, 0.0, 0.03])
+    assert fusion.settled(PICK_PHASE, 0.005) and fusion.withdraw(PICK_PHASE) == 1
+    assert not fusion.settled(PICK_PHASE, 0.005)  # one mark: not known to 5 mm
+    assert np.allclose(fusion.estimate(PICK_PHASE), [0.0, 0.0, 0.03])  # the marks again
+    assert len(fusion.measured[PLACE_PHASE]) == 1 and fusion.withdraw(PICK_PHASE) == 0
+
+
 def test_an_approach_completed_beside_the_mark_moves_the_grasp_there(tmp_path):
     """A pick mark 30 mm beside the part: the approach does not complete above it, the search completes it above the
     part, and the grasp goes down where the approach completed, not under the mark."""

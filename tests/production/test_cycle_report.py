@@ -80,11 +80,11 @@ def test_the_cycles_that_missed_control_cycles_are_counted(tmp_path, capsys):
     f = cycle_figures(read_log(tmp_path / "run.jsonl"))
     assert (f["missed_cycles"], f["cycles_with_missed"], f["cycles_with_missed_and_steal_s"]) == (4, 2, 1)
     assert (f["cycles_with_missed_and_io_stall_s"], f["cycles_with_missed_and_major_faults"]) == (1, 1)
+    assert (f["cycles_with_steal_s"], f["cycles_with_io_stall_s"]) == (2, 2)  # in all cycles, with a miss or not
     assert main(["cycles", "report", str(tmp_path / "run.jsonl")]) == 0
-    assert (
-        "| 4 (in 2 cycles, 1 with work overruns, 1 with host steal, 1 with I/O stall, 1 with major page faults) |"
-        in (capsys.readouterr().out)
-    )
+    out = capsys.readouterr().out
+    assert "| 4 (in 2 cycles: 1 with work overruns [2], 1 with host steal [2], 1 with I/O stall [2], " in out
+    assert "1 with major page faults [2]) |" in out
 
 
 def test_host_steal_is_read_from_proc_stat(tmp_path):
