@@ -33,14 +33,15 @@ def rss_growth_after_warmup(records: list[dict]) -> float | None:
     return max(growth) if growth else None
 
 
-#: cycle_end's counters that tell a missed control cycle's cause apart, with how the report names them: a control
-#: cycle's own work running past the period, the host stealing CPU time, some task waiting for I/O, a page read from
-#: disk.
+#: cycle_end's counters that tell a missed control cycle's cause apart: how the report names each, and how much of it
+#: a production cycle must count to have it — a control cycle's work running past the period; the host stealing at
+#: least 0.1 s of CPU time (the kernel counts steal in 10 ms ticks, and a tick or two is every cycle's); some task
+#: waiting at least 10 ms for I/O; a page read from disk.
 MISS_CONTEXT = {
-    "work_overruns": "work overruns",
-    "steal_s": "host steal",
-    "io_stall_s": "I/O stall",
-    "major_faults": "major page faults",
+    "work_overruns": ("work overruns", 1),
+    "steal_s": ("host steal >= 0.1 s", 0.1),
+    "io_stall_s": ("I/O stall >= 10 ms", 0.01),
+    "major_faults": ("major page faults", 1),
 }
 
 
@@ -74,11 +75,12 @@ def cycle_figures(records: list[dict]) -> dict[str, Any]:
 
 
 def _cycles_with(ends: list[dict], *keys: str) -> int | None:
-    """How many production cycles counted some of every cycle_end counter in `keys`; None unless every cycle_end
-    records them (logs from before they were recorded)."""
+    """How many production cycles counted, of every cycle_end counter in `keys`, at least its MISS_CONTEXT amount
+    (any, for a counter not in it); None unless every cycle_end records them (logs from before they were)."""
     if not all(isinstance(r.get(k), int | float) for r in ends for k in keys):
         return None
-    return sum(all(r[k] > 0 for k in keys) for r in ends)
+    least = {k: MISS_CONTEXT[k][1] if k in MISS_CONTEXT else 1 for k in keys}
+    return sum(all(r[k] >= least[k] for k in keys) for r in ends)
 
 
 def table(rows: dict[str, dict[str, Any]]) -> str:
@@ -108,7 +110,7 @@ def _in_cycles(f: dict[str, Any]) -> str:
         return ""
     events = [
         f"{f[f'cycles_with_missed_and_{key}']} with {name} [{f[f'cycles_with_{key}']}]"
-        for key, name in MISS_CONTEXT.items()
+        for key, (name, _) in MISS_CONTEXT.items()
         if f[f"cycles_with_missed_and_{key}"] is not None
     ]
     return f" (in {f['cycles_with_missed']} cycles" + (": " + ", ".join(events) if events else "") + ")"
