@@ -7,6 +7,7 @@ seals' offsets). A person marks the real part: the source is asked with the obse
 
 from __future__ import annotations
 
+import logging
 import zlib
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -37,6 +38,8 @@ from mrguide.task import (
 )
 from mrguide.twin.env import PickPlaceEnv
 
+log = logging.getLogger(__name__)
+
 ACTION_NOISE_SEED_OFFSET = 104_729  # the expert-action noise of training seed s draws from RNG seed s + this
 POSE_SEED_OFFSET = 15_485_863  # the perceived part's registration bias of training seed s: RNG seed (s, this)
 
@@ -61,7 +64,6 @@ class ExpertCounts:
     remarks: int = 0  # waypoints asked again because the arm did not reach them
     probes: int = 0  # targets a demonstration's search tried beyond a waypoint that did not complete its phase
     measured: int = 0  # seals and placements the cell measured (recorded as pick and place measurements)
-    withdrawn: int = 0  # measurements dropped because the search around them found nothing (MarkFusion.withdraw)
 
 
 class PerceivedPose:
@@ -218,7 +220,10 @@ class GuidedExpert:
         target = self.demo.next_target(self._plan[kind][1])
         if target is None:  # nothing around the waypoint completes the phase: the person marks again
             self.counts.remarks += 1
-            self.counts.withdrawn += self.fusion.withdraw(kind)
+            if withdrawn := self.fusion.withdraw(kind):
+                log.info(
+                    "the search found nothing around %d measurement(s) of mark phase %d: withdrawn", withdrawn, kind
+                )
             if not self._plan_mark(obs, kind, self._plan[kind][0], force=True):
                 return None
             self.demo.restart_phase()
