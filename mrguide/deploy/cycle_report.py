@@ -71,6 +71,7 @@ def cycle_figures(records: list[dict]) -> dict[str, Any]:
         "cycles_with_missed": _cycles_with(ends, "missed_cycles"),
         **{f"cycles_with_{key}": _cycles_with(ends, key) for key in MISS_CONTEXT},
         **{f"cycles_with_missed_and_{key}": _cycles_with(ends, "missed_cycles", key) for key in MISS_CONTEXT},
+        **{f"missed_with_{key}": _missed_with(ends, key) for key in MISS_CONTEXT},
     }
 
 
@@ -81,6 +82,14 @@ def _cycles_with(ends: list[dict], *keys: str) -> int | None:
         return None
     least = {k: MISS_CONTEXT[k][1] if k in MISS_CONTEXT else 1 for k in keys}
     return sum(all(r[k] >= least[k] for k in keys) for r in ends)
+
+
+def _missed_with(ends: list[dict], key: str) -> int | None:
+    """How many control cycles were missed in the production cycles that counted at least `key`'s MISS_CONTEXT
+    amount; None unless every cycle_end records both."""
+    if not all(isinstance(r.get(k), int | float) for r in ends for k in ("missed_cycles", key)):
+        return None
+    return sum(int(r["missed_cycles"]) for r in ends if r[key] >= MISS_CONTEXT[key][1])
 
 
 def table(rows: dict[str, dict[str, Any]]) -> str:
@@ -104,12 +113,14 @@ def table(rows: dict[str, dict[str, Any]]) -> str:
 
 def _in_cycles(f: dict[str, Any]) -> str:
     """Where a run's missed control cycles fell: in how many production cycles, how many of those counted each of
-    MISS_CONTEXT that the log records, and [in brackets] how many of all the run's cycles did: a context as common in
-    every cycle as in those with a miss does not explain it."""
+    MISS_CONTEXT that the log records, [in brackets] how many of all the run's cycles did (a context as common in every
+    cycle as in those with a miss does not explain it), and (in parentheses) how many control cycles were missed in the
+    cycles with it."""
     if f["cycles_with_missed"] is None:
         return ""
     events = [
-        f"{f[f'cycles_with_missed_and_{key}']} with {name} [{f[f'cycles_with_{key}']}]"
+        f"{f[f'cycles_with_missed_and_{key}']} with {name} [{f[f'cycles_with_{key}']}] "
+        f"({f[f'missed_with_{key}']} missed)"
         for key, (name, _) in MISS_CONTEXT.items()
         if f[f"cycles_with_missed_and_{key}"] is not None
     ]
