@@ -138,7 +138,10 @@ def add_cycles_command(sub: argparse._SubParsersAction) -> None:
     kinds = sp.add_subparsers(dest="cycles_command", required=True)
     rp = kinds.add_parser("report", help="a table of production runs, recomputed from their run logs")
     rp.add_argument("logs", nargs="+", help="run logs of `deploy --cycles` (.jsonl or .jsonl.gz)")
-    rp.add_argument("--out", help="also write cycles.md and slim gzipped copies of the logs into this folder")
+    rp.add_argument(
+        "--out",
+        help="also write cycles.md and slim gzipped copies of the logs into this folder (logs already in it stay)",
+    )
     rp.set_defaults(func=cmd_cycles_report)
 
 
@@ -154,7 +157,8 @@ def cmd_cycles_report(args: argparse.Namespace) -> int:
         if args.out:
             out = Path(args.out)
             out.mkdir(parents=True, exist_ok=True)
-            write_gzipped(out / f"{name}.jsonl.gz", slim_records(records))
+            if path.resolve().parent != out.resolve():  # a published log is not slimmed again by a newer rule
+                write_gzipped(out / f"{name}.jsonl.gz", slim_records(records))
     md = table(rows)
     if args.out:
         (Path(args.out) / "cycles.md").write_text(md)

@@ -141,6 +141,16 @@ def test_the_slim_copy_keeps_every_cycle_record_and_the_failed_attempts(tmp_path
     assert (tmp_path / "out" / "cycles.md").read_text().startswith("| run | parts placed |")
 
 
+def test_a_log_already_in_the_out_folder_is_left_as_it_is(tmp_path):
+    out = tmp_path / "out"
+    out.mkdir()
+    write_run(out / "published.jsonl")  # a published log, slimmed by whatever rule held when it was published
+    before = (out / "published.jsonl").read_bytes()
+    assert main(["cycles", "report", str(out / "published.jsonl"), "--out", str(out)]) == 0
+    assert (out / "published.jsonl").read_bytes() == before and not (out / "published.jsonl.gz").exists()
+    assert (out / "cycles.md").read_text().count("| published |") == 1
+
+
 def test_a_log_without_cycles_is_refused_with_its_name(tmp_path, run_cli):
     with RunLog(tmp_path / "episodes.jsonl", {"command": "deploy"}) as log:
         log.write("episode_end", episode=0, outcome="success")
