@@ -53,7 +53,8 @@ def cmd_expert(args: argparse.Namespace) -> int:
 
 
 class TwinDryRun:
-    """`deploy --dry-run` on the twin of `config` (its [twin] decision period, reality gap, camera rendering)."""
+    """`deploy --dry-run` on the twin of `config` (its [twin] decision period, reality gap, camera rendering); the
+    simulated cell runs in a process of its own, beside the deploy stack as a real cell's drives are."""
 
     def __init__(self, config: str | None):
         from mrguide.twin.env import (
@@ -86,6 +87,7 @@ class TwinDryRun:
             policy=inputs.policy,
             on_placed=camera.refresh if camera else None,
             runtime_cfg=inputs.dcfg.runtime,
+            own_process=True,
         )
 
     def run(
@@ -116,6 +118,7 @@ class TwinDryRun:
             runtime_cfg=runtime,
             pose_factory=camera,
             on_placed=camera.refresh if camera else None,
+            own_process=True,
         )
 
 

@@ -30,9 +30,10 @@ from mrguide.drivers.realtime import settled_heap
 from mrguide.pose_source import ObjectPoseSource
 from mrguide.registries import register
 from mrguide.robot import RobotSpec, load_robot
+from mrguide.twin.cell_process import cell_process
 from mrguide.twin.config import PLANT_ENGINES, TwinConfig
 from mrguide.twin.env import EnvConfig
-from mrguide.twin.plant import TwinObjectPose, TwinPlant
+from mrguide.twin.plant import FedCell, TwinObjectPose, TwinPlant
 from mrguide.twin.scene import Scene
 
 if TYPE_CHECKING:
@@ -41,12 +42,13 @@ if TYPE_CHECKING:
 
 @dataclass
 class SimulatedCell:
-    """A plant on the virtual bus, with the master-side `Cobot` connected and enabled. `scene` is the PyBullet
-    twin's scene when the engine is PyBullet, else None."""
+    """A plant behind simulated devices, with the master-side `Cobot` connected and enabled. In one process
+    (the virtual bus): `scene` is the PyBullet twin's scene when the engine is PyBullet, else None, and `sim` the
+    devices. With the cell in a process of its own (`cell_process`), `plant` is its proxy, `scene` and `sim` None."""
 
     scene: Scene | None
-    plant: CellPlant
-    sim: SimulatedCobot
+    plant: FedCell
+    sim: SimulatedCobot | None
     cobot: Cobot
 
 
@@ -78,14 +80,26 @@ register_plant("mujoco", _mujoco_plant)
 
 
 @contextlib.contextmanager
-def simulated_cell(env_cfg: EnvConfig, bus_cfg: CobotBusConfig, seed: int = 0) -> Iterator[SimulatedCell]:
+def simulated_cell(
+    env_cfg: EnvConfig, bus_cfg: CobotBusConfig, seed: int = 0, own_process: bool = False
+) -> Iterator[SimulatedCell]:
     """Start the cell's plant ([plant] engine) + simulated devices, connect and enable the cobot; tear everything
-    down on exit."""
+    down on exit. `own_process`: the plant and the devices in a process of their own (`cell_process`), so that
+    their work does not run in the deploy stack's interpreter; else in this one, on the virtual bus."""
     if bus_cfg.bus.interface != "virtual":
         raise ConfigError(f"a dry run needs the virtual CAN interface, the bus config says {bus_cfg.bus.interface!r}")
     bus_cfg = shared_pc_config(bus_cfg)
     twin_cfg = replace(env_cfg.twin, control_period=bus_cfg.timing.control_period, gui=False)
     spec = load_robot(env_cfg.robot)
+    if own_process:
+        with (
+            cell_process(env_cfg, bus_cfg, seed) as (proxy, master_cfg),
+            settled_heap(),
+            Cobot(master_cfg, spec) as cobot,
+        ):
+            cobot.enable()
+            yield SimulatedCell(None, proxy, None, cobot)
+        return
     with settled_heap():
         plant, scene = PLANT_BUILDERS[env_cfg.plant.engine](env_cfg, twin_cfg, spec, seed)
         sim = SimulatedCobot(bus_cfg, plant, seed=seed)
@@ -140,6 +154,7 @@ def dry_run(
     on_placed: Callable[[], None] | None = None,
     max_recoveries: int = 0,
     runtime_cfg: RuntimeConfig | None = None,
+    own_process: bool = False,
 ) -> DeploySummary:
     """Run `episodes` seeded episodes of a policy through the whole stack against the simulated cell.
 
@@ -149,12 +164,13 @@ def dry_run(
     an episode (e.g. to wait for a fresh HMD estimate). `max_recoveries` safety stops may be followed by a fault
     reset and the next episode (see `run_session`). `runtime_cfg` sets the runtime (its decision period is
     the twin's). The pose source `pose_factory` gives is closed, if it can be, before the cell is torn down.
+    `own_process`: the cell in a process of its own (`simulated_cell`).
     """
     spec = load_robot(env_cfg.robot)
     policy = _checked_policy(policy_path, policy, spec, env_cfg, bus_cfg)
     layouts = episode_layouts(env_cfg, episodes, seed)
     with (
-        simulated_cell(env_cfg, bus_cfg, seed) as cell,
+        simulated_cell(env_cfg, bus_cfg, seed, own_process) as cell,
         _cell_runtime(cell, env_cfg, spec, policy, run_log, pose_factory, safety, runtime_cfg) as runtime,
     ):
 
@@ -243,13 +259,14 @@ def dry_run_cycles(
     policy=None,
     on_placed: Callable[[], None] | None = None,
     runtime_cfg: RuntimeConfig | None = None,
+    own_process: bool = False,
 ) -> CycleSummary:
     """Production cycles `run.start` .. of a policy through the whole stack against the simulated cell, parts fed
     by a `TwinFeeder` of seed `run.seed` (the arguments otherwise as `dry_run`'s)."""
     spec = load_robot(env_cfg.robot)
     policy = _checked_policy(policy_path, policy, spec, env_cfg, bus_cfg)
     with (
-        simulated_cell(env_cfg, bus_cfg, run.seed) as cell,
+        simulated_cell(env_cfg, bus_cfg, run.seed, own_process) as cell,
         _cell_runtime(cell, env_cfg, spec, policy, run_log, pose_factory, safety, runtime_cfg) as runtime,
     ):
         feeder = TwinFeeder(cell, env_cfg, run.seed, on_placed)

@@ -99,6 +99,12 @@ class CellView(Protocol):
     def view(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
 
 
+class FedCell(CellView, Protocol):
+    """What a dry run reads of and does to its cell's plant, in its own process or in the cell's (`cell_process`)."""
+
+    def place_objects(self, obj: np.ndarray, goal: np.ndarray) -> None: ...
+
+
 class TwinObjectPose(ObjectPoseSource):
     """Exact object position from the environment model (sim-to-real conditions 1 and 2)."""
 

@@ -1,0 +1,88 @@
+"""Missed control cycles with the simulated cell in the deploy stack's process or in its own: alternating pairs.
+
+Run: python benchmarks/cell_process.py --policy docs/results/sim2real-main5k/policy.npz [--cycles N] [--pairs P]
+[--cell ...]. Each pair runs `--cycles` production cycles of the policy (the same feeder seed: the same parts and
+goals) with the simulated devices and the plant in the deploy process (python-can's virtual bus, as the tests and
+the sim2real experiment run them) and then in a process of their own (the pipe link, as `mrguide deploy
+--dry-run` runs them). Per run: missed control cycles, control cycles whose work ran past the period, the cycle
+work's p99 and maximum, dry setpoint queues, host steal and the median cycle time. Run it on a quiet machine: other
+work on the two cores says more about itself than about the cell. The last line is one JSON object.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import tempfile
+from pathlib import Path
+from typing import Any
+
+from mrguide.cli_args import nonnegative_int, positive_int
+from mrguide.deploy.cycle_report import cycle_figures
+from mrguide.deploy.cycles import CycleConfig, CycleRun
+from mrguide.deploy.runlog import RunLog, read_log
+from mrguide.experiments.sim2real import load_real_cell
+from mrguide.twin.dry_run import dry_run_cycles
+
+WHERE = {False: "shared", True: "own"}
+
+
+def run(policy: str, cell: Any, cycles: int, seed: int, own_process: bool) -> dict[str, Any]:
+    """One run's figures from its run log."""
+    with tempfile.TemporaryDirectory() as tmp:
+        log = Path(tmp) / "log.jsonl"
+        with RunLog(log, {"benchmark": "cell_process"}) as run_log:
+            summary = dry_run_cycles(
+                policy,
+                cell.env,
+                cell.bus,
+                CycleRun(0, cycles, seed, CycleConfig()),
+                run_log,
+                cell.safety,
+                own_process=own_process,
+            )
+        records = read_log(log)
+    f = cycle_figures(records)
+    ends = [r for r in records if r["kind"] == "cycle_end"]
+    return {
+        "cell": WHERE[own_process],
+        "placed": summary.placed,
+        "cycles": cycles,
+        "missed_cycles": f["missed_cycles"],
+        "work_overruns": sum(int(r["work_overruns"]) for r in ends),
+        "underruns": f["underruns"],
+        "steal_s": round(sum(float(r["steal_s"]) for r in ends), 2),
+        "cycle_s_median": f["cycle_s_median"],
+    }
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--policy", required=True, help="exported policy file (.npz)")
+    ap.add_argument("--cycles", type=positive_int, default=50)
+    ap.add_argument("--pairs", type=positive_int, default=2)
+    ap.add_argument("--seed", type=nonnegative_int, default=0, help="the feeder's seed")
+    ap.add_argument("--cell", type=Path, default=Path(__file__).parents[1] / "configs" / "cells" / "real_cell.toml")
+    args = ap.parse_args()
+    cell = load_real_cell(args.cell)
+    print(
+        f"machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}; {args.cell.name}"
+    )
+    print(f"{'cell':<7} {'placed':>9} {'missed':>7} {'overruns':>9} {'dry':>4} {'steal s':>8} {'median s':>9}")
+    rows = []
+    for _ in range(args.pairs):
+        for own in (False, True):
+            r = run(args.policy, cell, args.cycles, args.seed, own)
+            rows.append(r)
+            print(
+                f"{r['cell']:<7} {r['placed']:>4} / {r['cycles']:<3} {r['missed_cycles']:>7} {r['work_overruns']:>9} "
+                f"{r['underruns']:>4} {r['steal_s']:>8.2f} {r['cycle_s_median']:>9.2f}",
+                flush=True,
+            )
+    print(json.dumps({"policy": args.policy, "cell": args.cell.name, "cycles": args.cycles, "runs": rows}))
+
+
+if __name__ == "__main__":
+    main()

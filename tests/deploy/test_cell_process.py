@@ -1,0 +1,76 @@
+"""A dry run's simulated cell in a process of its own: the deploy stack drives it over the pipe link, reads the
+part's pose and feeds parts through the cell process, and the cell outlives a Ctrl-C meant for deploy."""
+
+from __future__ import annotations
+
+import os
+import signal
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from mrguide.deploy.cycles import CycleConfig, CycleRun
+from mrguide.deploy.runlog import RunLog, read_log
+from mrguide.twin.cell_process import CellProcessError, cell_process
+from mrguide.twin.dry_run import dry_run_cycles
+from mrguide.twin.env import EnvConfig
+from tests.deploy.conftest import Expert, bus_config
+
+
+def test_production_cycles_run_against_a_cell_in_its_own_process(tmp_path):
+    cfg = EnvConfig()
+    cells = []
+
+    def pose_factory(cell):
+        from mrguide.twin.plant import TwinObjectPose
+
+        cells.append(cell)
+        return TwinObjectPose(cell.plant)
+
+    resting = []  # where each placed part came to rest, read from the cell's process after its cycle
+
+    def after_cycle(report):
+        resting.append(cells[0].plant.object_position())
+
+    log = tmp_path / "own.jsonl"
+    with RunLog(log, {"test": "own process"}) as run_log:
+        summary = dry_run_cycles(
+            None,
+            cfg,
+            bus_config(),
+            CycleRun(0, 2, seed=1, config=CycleConfig(), after_cycle=after_cycle),
+            run_log,
+            pose_factory=pose_factory,
+            policy=Expert(cfg),
+            own_process=True,
+        )
+    assert summary.stopped is None and summary.placed == 2, summary.text()
+    (cell,) = cells
+    assert cell.sim is None and cell.scene is None  # the devices and the physics ran in the other process
+    goals = [r["goal"] for r in read_log(log) if r["kind"] == "episode_start"]
+    assert len(goals) == 2 and len(resting) == 2
+    for goal, rest in zip(goals, resting, strict=True):
+        assert np.linalg.norm(np.asarray(goal)[:2] - rest[:2]) < 0.02
+
+
+def test_the_cell_process_ignores_ctrl_c_and_ends_with_the_block():
+    cfg = EnvConfig()
+    with cell_process(cfg, bus_config(), seed=0) as (plant, master_cfg):
+        assert master_cfg.bus.interface == "mrguide_pipe"
+        pid = plant.pid
+        os.kill(pid, signal.SIGINT)  # what a terminal's Ctrl-C sends to every process of the group
+        plant.place_objects(np.array([0.5, 0.0, 0.025]), np.array([0.6, 0.15, 0.025]))
+        assert np.allclose(plant.object_position()[:2], [0.5, 0.0], atol=1e-3)
+    with pytest.raises(ProcessLookupError):
+        os.kill(pid, 0)
+
+
+def test_a_cell_that_cannot_start_is_reported_with_the_reason():
+    env = EnvConfig()
+    cfg = replace(env, robot=replace(env.robot, file="/no/such/arm.toml"))
+    with (
+        pytest.raises(CellProcessError, match="arm file not found: /no/such/arm"),
+        cell_process(cfg, bus_config(), seed=0),
+    ):
+        pass
