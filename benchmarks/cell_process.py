@@ -4,7 +4,8 @@ Run: python benchmarks/cell_process.py --policy docs/results/sim2real-main5k/pol
 [--cell ...]. Each pair runs `--cycles` production cycles of the policy (the same feeder seed: the same parts and
 goals) with the simulated devices and the plant in the deploy process (python-can's virtual bus, as the tests and
 the sim2real experiment run them) and then in a process of their own (the pipe link, as `mrguide deploy
---dry-run` runs them). Per run: missed control cycles, control cycles whose work ran past the period, the cycle
+--dry-run` runs them); the part's pose comes from the cell's pose source (exact, or the twin-rendered camera of
+configs/cells/camera_cell.toml). Per run: missed control cycles, control cycles whose work ran past the period, the cycle
 work's p99 and maximum, dry setpoint queues, host steal and the median cycle time. Run it on a quiet machine: other
 work on the two cores says more about itself than about the cell. The last line is one JSON object.
 """
@@ -20,29 +21,47 @@ from pathlib import Path
 from typing import Any
 
 from mrguide.cli_args import nonnegative_int, positive_int
+from mrguide.config import load_section
 from mrguide.deploy.cycle_report import cycle_figures
 from mrguide.deploy.cycles import CycleConfig, CycleRun
 from mrguide.deploy.runlog import RunLog, read_log
+from mrguide.deploy.session import DeployConfig
 from mrguide.experiments.sim2real import load_real_cell
+from mrguide.twin.commands import TwinDryRun
 from mrguide.twin.dry_run import dry_run_cycles
 
 WHERE = {False: "shared", True: "own"}
 
 
+def twin_camera(cell: Any) -> Any:
+    """The cell's twin-rendered camera pose source if its [deploy] pose_source is "camera", else None."""
+    dcfg = load_section(DeployConfig, cell.path, "deploy")
+    if dcfg.pose_source != "camera":
+        return None
+    return TwinDryRun(str(cell.path)).camera(dcfg.camera, cell.path.parent, cell.env.task.object_height)
+
+
 def run(policy: str, cell: Any, cycles: int, seed: int, own_process: bool) -> dict[str, Any]:
     """One run's figures from its run log."""
+    camera = twin_camera(cell)
     with tempfile.TemporaryDirectory() as tmp:
         log = Path(tmp) / "log.jsonl"
-        with RunLog(log, {"benchmark": "cell_process"}) as run_log:
-            summary = dry_run_cycles(
-                policy,
-                cell.env,
-                cell.bus,
-                CycleRun(0, cycles, seed, CycleConfig()),
-                run_log,
-                cell.safety,
-                own_process=own_process,
-            )
+        try:
+            with RunLog(log, {"benchmark": "cell_process"}) as run_log:
+                summary = dry_run_cycles(
+                    policy,
+                    cell.env,
+                    cell.bus,
+                    CycleRun(0, cycles, seed, CycleConfig()),
+                    run_log,
+                    cell.safety,
+                    pose_factory=camera,
+                    on_placed=camera.refresh if camera else None,
+                    own_process=own_process,
+                )
+        finally:
+            if camera:
+                camera.close()
         records = read_log(log)
     f = cycle_figures(records)
     ends = [r for r in records if r["kind"] == "cycle_end"]
