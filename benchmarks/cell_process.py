@@ -41,28 +41,26 @@ def twin_camera(cell: Any) -> Any:
     return TwinDryRun(str(cell.path)).camera(dcfg.camera, cell.path.parent, cell.env.task.object_height)
 
 
-def run(policy: str, cell: Any, cycles: int, seed: int, own_process: bool) -> dict[str, Any]:
-    """One run's figures from its run log."""
+def run(policy: str, cell: Any, cycles: int, seed: int, own_process: bool, log: Path) -> dict[str, Any]:
+    """One run, logged to `log`; its figures from the log."""
     camera = twin_camera(cell)
-    with tempfile.TemporaryDirectory() as tmp:
-        log = Path(tmp) / "log.jsonl"
-        try:
-            with RunLog(log, {"benchmark": "cell_process"}) as run_log:
-                summary = dry_run_cycles(
-                    policy,
-                    cell.env,
-                    cell.bus,
-                    CycleRun(0, cycles, seed, CycleConfig()),
-                    run_log,
-                    cell.safety,
-                    pose_factory=camera,
-                    on_placed=camera.refresh if camera else None,
-                    own_process=own_process,
-                )
-        finally:
-            if camera:
-                camera.close()
-        records = read_log(log)
+    try:
+        with RunLog(log, {"benchmark": "cell_process", "cell": WHERE[own_process]}) as run_log:
+            summary = dry_run_cycles(
+                policy,
+                cell.env,
+                cell.bus,
+                CycleRun(0, cycles, seed, CycleConfig()),
+                run_log,
+                cell.safety,
+                pose_factory=camera,
+                on_placed=camera.refresh if camera else None,
+                own_process=own_process,
+            )
+    finally:
+        if camera:
+            camera.close()
+    records = read_log(log)
     f = cycle_figures(records)
     ends = [r for r in records if r["kind"] == "cycle_end"]
     return {
@@ -84,6 +82,7 @@ def main() -> None:
     ap.add_argument("--pairs", type=positive_int, default=2)
     ap.add_argument("--seed", type=nonnegative_int, default=0, help="the feeder's seed")
     ap.add_argument("--cell", type=Path, default=Path(__file__).parents[1] / "configs" / "cells" / "real_cell.toml")
+    ap.add_argument("--logs", type=Path, help="keep each run's log here (PAIR-shared.jsonl, PAIR-own.jsonl)")
     args = ap.parse_args()
     cell = load_real_cell(args.cell)
     print(
@@ -91,16 +90,22 @@ def main() -> None:
     )
     print(f"{'cell':<7} {'placed':>9} {'missed':>7} {'overruns':>9} {'dry':>4} {'steal s':>8} {'median s':>9}")
     rows = []
-    for _ in range(args.pairs):
-        for own in (False, True):
-            r = run(args.policy, cell, args.cycles, args.seed, own)
-            rows.append(r)
-            print(
-                f"{r['cell']:<7} {r['placed']:>4} / {r['cycles']:<3} {r['missed_cycles']:>7} {r['work_overruns']:>9} "
-                f"{r['underruns']:>4} {r['steal_s']:>8.2f} {r['cycle_s_median']:>9.2f}",
-                flush=True,
-            )
+    with tempfile.TemporaryDirectory() as tmp:
+        logs = args.logs or Path(tmp)
+        logs.mkdir(parents=True, exist_ok=True)
+        for pair in range(args.pairs):
+            for own in (False, True):
+                rows.append(run(args.policy, cell, args.cycles, args.seed, own, logs / f"{pair}-{WHERE[own]}.jsonl"))
+                print_row(rows[-1])
     print(json.dumps({"policy": args.policy, "cell": args.cell.name, "cycles": args.cycles, "runs": rows}))
+
+
+def print_row(r: dict[str, Any]) -> None:
+    print(
+        f"{r['cell']:<7} {r['placed']:>4} / {r['cycles']:<3} {r['missed_cycles']:>7} {r['work_overruns']:>9} "
+        f"{r['underruns']:>4} {r['steal_s']:>8.2f} {r['cycle_s_median']:>9.2f}",
+        flush=True,
+    )
 
 
 if __name__ == "__main__":
