@@ -21,8 +21,11 @@ from __future__ import annotations
 import contextlib
 import logging
 import multiprocessing
+import multiprocessing.connection
+import os
 import signal
 import socket
+import threading
 from collections.abc import Iterator
 from dataclasses import replace
 from multiprocessing.managers import BaseManager, RemoteError
@@ -109,6 +112,22 @@ class CellProxy:
             raise CellProcessError(f"the simulated cell's process: {name} failed: {exc!r}") from exc
 
 
+def _start_cell_process() -> None:
+    """In the cell's process before it serves: Ctrl-C reaches every process of the terminal's group, and the cell
+    must stay while deploy finishes its cycle; and the process ends with the deploy process, however that ends (a
+    killed deploy leaves no simulated cell behind)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    parent = multiprocessing.parent_process()
+    if parent is not None:
+        sentinel = parent.sentinel
+        threading.Thread(target=_exit_with, args=(sentinel,), name="cell-parent-watch", daemon=True).start()
+
+
+def _exit_with(sentinel: int) -> None:
+    multiprocessing.connection.wait([sentinel])
+    os._exit(0)
+
+
 class _CellManager(BaseManager):
     """Runs `CellServer`s in its server process."""
 
@@ -123,8 +142,7 @@ def cell_process(env_cfg: EnvConfig, bus_cfg: CobotBusConfig, seed: int) -> Iter
     block."""
     master_end, device_end = pipe_link()
     manager = _CellManager(ctx=multiprocessing.get_context("spawn"))
-    # Ctrl-C reaches every process of the terminal's group: the cell must stay while deploy finishes its cycle
-    manager.start(initializer=signal.signal, initargs=(signal.SIGINT, signal.SIG_IGN))
+    manager.start(initializer=_start_cell_process)
     server = None
     try:
         try:

@@ -3,8 +3,10 @@ part's pose and feeds parts through the cell process, and the cell outlives a Ct
 
 from __future__ import annotations
 
+import multiprocessing
 import os
 import signal
+import time
 from dataclasses import replace
 
 import numpy as np
@@ -74,3 +76,30 @@ def test_a_cell_that_cannot_start_is_reported_with_the_reason():
         cell_process(cfg, bus_config(), seed=0),
     ):
         pass
+
+
+def _hold_a_cell(ready) -> None:
+    """A deploy process that starts a cell, reports the cell's PID and waits to be killed."""
+    with cell_process(EnvConfig(), bus_config(), seed=0) as (plant, _cfg):
+        ready.send(plant.pid)
+        time.sleep(600)
+
+
+def test_a_killed_deploy_process_leaves_no_cell_behind():
+    ctx = multiprocessing.get_context("spawn")
+    ours, theirs = ctx.Pipe()
+    deploy = ctx.Process(target=_hold_a_cell, args=(theirs,))
+    deploy.start()
+    assert ours.poll(120), "the cell did not start"
+    cell_pid = ours.recv()
+    deploy.kill()  # SIGKILL: no cleanup in the deploy process
+    deploy.join()
+    for _ in range(200):
+        try:
+            os.kill(cell_pid, 0)
+        except ProcessLookupError:
+            break
+        time.sleep(0.05)
+    else:
+        os.kill(cell_pid, signal.SIGKILL)
+        pytest.fail("the cell's process outlived the deploy process by 10 s")
