@@ -60,12 +60,9 @@ class CellServer:
     def __init__(self, env_cfg: EnvConfig, bus_cfg: CobotBusConfig, seed: int, end: socket.socket) -> None:
         from mrguide.drivers.mock.sim_cobot import SimulatedCobot
         from mrguide.robot import load_robot
-        from mrguide.twin.dry_run import PLANT_BUILDERS
+        from mrguide.twin.dry_run import build_plant
 
-        twin_cfg = replace(env_cfg.twin, control_period=bus_cfg.timing.control_period, gui=False)
-        self.plant, self.scene = PLANT_BUILDERS[env_cfg.plant.engine](
-            env_cfg, twin_cfg, load_robot(env_cfg.robot), seed
-        )
+        self.plant, self.scene = build_plant(env_cfg, bus_cfg, load_robot(env_cfg.robot), seed)
         self._end = end
         self.sim = SimulatedCobot(replace(bus_cfg, bus=link_bus(bus_cfg.bus, end)), self.plant, seed=seed)
         self.sim.start()

@@ -79,6 +79,14 @@ register_plant("pybullet", _pybullet_plant)
 register_plant("mujoco", _mujoco_plant)
 
 
+def build_plant(
+    env_cfg: EnvConfig, bus_cfg: CobotBusConfig, spec: RobotSpec, seed: int
+) -> tuple[CellPlant, Scene | None]:
+    """The plant of the cell's [plant] engine, stepping one control period of `bus_cfg` per SYNC, no GUI."""
+    twin_cfg = replace(env_cfg.twin, control_period=bus_cfg.timing.control_period, gui=False)
+    return PLANT_BUILDERS[env_cfg.plant.engine](env_cfg, twin_cfg, spec, seed)
+
+
 @contextlib.contextmanager
 def simulated_cell(
     env_cfg: EnvConfig, bus_cfg: CobotBusConfig, seed: int = 0, own_process: bool = False
@@ -89,7 +97,6 @@ def simulated_cell(
     if bus_cfg.bus.interface != "virtual":
         raise ConfigError(f"a dry run needs the virtual CAN interface, the bus config says {bus_cfg.bus.interface!r}")
     bus_cfg = shared_pc_config(bus_cfg)
-    twin_cfg = replace(env_cfg.twin, control_period=bus_cfg.timing.control_period, gui=False)
     spec = load_robot(env_cfg.robot)
     if own_process:
         with (
@@ -101,7 +108,7 @@ def simulated_cell(
             yield SimulatedCell(None, proxy, None, cobot)
         return
     with settled_heap():
-        plant, scene = PLANT_BUILDERS[env_cfg.plant.engine](env_cfg, twin_cfg, spec, seed)
+        plant, scene = build_plant(env_cfg, bus_cfg, spec, seed)
         sim = SimulatedCobot(bus_cfg, plant, seed=seed)
         sim.start()
         try:
