@@ -111,6 +111,37 @@ def table(rows: dict[str, dict[str, Any]]) -> str:
     return "\n".join(lines) + "\n"
 
 
+#: cycle_end's sums over the gaps between control cycle starts that skipped deadlines (`MissAnatomy.since`), and how
+#: the report's second table heads them.
+MISS_ANATOMY = {
+    "miss_gaps": "gaps that skipped deadlines",
+    "miss_wall_s": "their time",
+    "miss_cpu_s": "on a CPU",
+    "miss_runq_s": "waiting for a CPU",
+    "miss_off_cpu_s": "off a CPU unasked (GIL, I/O, host)",
+    "miss_slept_s": "asleep as planned",
+}
+
+
+def miss_anatomy(records: list[dict]) -> dict[str, float] | None:
+    """A run's gaps that skipped deadlines, summed over its production cycles by where the control thread's time
+    went; None unless every cycle_end records them (logs from before they were, or a host without /proc)."""
+    ends = [r for r in records if r.get("kind") == "cycle_end"]
+    if not ends or not all(isinstance(r.get(k), int | float) for r in ends for k in MISS_ANATOMY):
+        return None
+    return {k: sum(float(r[k]) for r in ends) for k in MISS_ANATOMY}
+
+
+def anatomy_table(rows: dict[str, dict[str, float]]) -> str:
+    """One markdown row per run that records where its missed gaps' time went (s)."""
+    head = "| run | " + " | ".join(MISS_ANATOMY.values()) + " |"
+    lines = [head, "| " + " | ".join(["---"] * (len(MISS_ANATOMY) + 1)) + " |"]
+    for name, a in rows.items():
+        cells = [f"{int(a['miss_gaps'])}"] + [f"{a[k]:.3f} s" for k in list(MISS_ANATOMY)[1:]]
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
 def _in_cycles(f: dict[str, Any]) -> str:
     """Where a run's missed control cycles fell: in how many production cycles, how many of those counted each of
     MISS_CONTEXT that the log records, [in brackets] how many of all the run's cycles did (a context as common in every
@@ -146,7 +177,7 @@ def add_cycles_command(sub: argparse._SubParsersAction) -> None:
 
 
 def cmd_cycles_report(args: argparse.Namespace) -> int:
-    rows = {}
+    rows, anatomies = {}, {}
     for path in map(Path, args.logs):
         name = path.name.removesuffix(".gz").removesuffix(".jsonl")
         records = read_log(path)
@@ -154,12 +185,19 @@ def cmd_cycles_report(args: argparse.Namespace) -> int:
             rows[name] = cycle_figures(records)
         except InputError as exc:
             raise RunLogError(f"{path}: {exc}") from exc
+        anatomy = miss_anatomy(records)
+        if anatomy is not None:
+            anatomies[name] = anatomy
         if args.out:
             out = Path(args.out)
             out.mkdir(parents=True, exist_ok=True)
             if path.resolve().parent != out.resolve():  # a published log is not slimmed again by a newer rule
                 write_gzipped(out / f"{name}.jsonl.gz", slim_records(records))
     md = table(rows)
+    if anatomies:
+        md += "\nWhere the control thread's time went in the gaps that skipped deadlines:\n\n" + anatomy_table(
+            anatomies
+        )
     if args.out:
         (Path(args.out) / "cycles.md").write_text(md)
     print(md, end="")

@@ -27,7 +27,7 @@ from typing import Annotated, Protocol
 import numpy as np
 
 from mrguide.config import ConfigError, Range, check_number, check_ranges
-from mrguide.deploy.host_stats import FullCollections, HostCounters, peak_rss_mb, resident_mb
+from mrguide.deploy.host_stats import FullCollections, HostCounters, miss_anatomy_text, peak_rss_mb, resident_mb
 from mrguide.deploy.interrupt import CycleInterrupt
 from mrguide.deploy.runtime import EpisodeReport, RunStopped, Runtime
 from mrguide.drivers.errors import DriverError
@@ -139,6 +139,8 @@ class CycleSummary:
     missed_cycles: int = 0
     underruns: int = 0
     rss_growth_mb: float = 0.0
+    #: Where the control thread's time went in the gaps that skipped deadlines (`MissAnatomy.since`).
+    misses: dict = field(default_factory=dict)
 
     @property
     def placed(self) -> int:
@@ -168,6 +170,7 @@ class CycleSummary:
             "missed_cycles": self.missed_cycles,
             "underruns": self.underruns,
             "rss_growth_mb": self.rss_growth_mb,
+            **self.misses,
             "stopped": self.stopped,
         }
 
@@ -186,6 +189,8 @@ class CycleSummary:
             f"missed control cycles: {self.missed_cycles}, setpoint queue ran dry while moving: {self.underruns}, "
             f"peak RSS growth {self.rss_growth_mb:.1f} MB"
         )
+        if self.misses.get("miss_gaps"):
+            lines.append(miss_anatomy_text(self.misses))
         lines += [f"alarm in cycle {a['cycle']}: {a['reason']}" for a in d["alarms"]]
         if self.stopped:
             lines.append(f"run stopped: {self.stopped}")
@@ -242,6 +247,7 @@ class CycleRunner:
             summary.missed_cycles = stats.missed_cycles - stats0.missed_cycles
             summary.underruns = stats.underruns - stats0.underruns
             summary.rss_growth_mb = peak_rss_mb() - rss0
+            summary.misses = stats.misses.since(stats0.misses)
             self.rt.log.write("cycles_end", **summary.as_dict())
             self.rt.log.sync()
         return summary
@@ -289,6 +295,7 @@ class CycleRunner:
                 missed_cycles=stats.missed_cycles - stats0.missed_cycles,
                 underruns=stats.underruns - stats0.underruns,
                 work_overruns=stats.work_overruns - stats0.work_overruns,
+                **stats.misses.since(stats0.misses),
                 **HostCounters.now().since(host0),
                 full_gc=self._collections.count - gc0[0],
                 full_gc_s=self._collections.seconds - gc0[1],

@@ -15,8 +15,10 @@ import gc
 import os
 import resource
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 
 def peak_rss_mb() -> float:
@@ -113,3 +115,14 @@ class FullCollections:
             self.count += 1
             self.seconds += time.perf_counter() - self._started
             self._started = None
+
+
+def miss_anatomy_text(misses: Mapping[str, Any]) -> str:
+    """One line on the control thread's gaps that skipped deadlines, by where their time went (the fields of
+    `MissAnatomy.since`)."""
+    parts = [f"{misses['miss_cpu_s']:.3f} s on a CPU", f"{misses['miss_slept_s']:.3f} s asleep as planned"]
+    if misses.get("miss_runq_s") is not None:
+        parts.append(f"{misses['miss_runq_s']:.3f} s waiting for a CPU")
+    if misses.get("miss_off_cpu_s") is not None:
+        parts.append(f"{misses['miss_off_cpu_s']:.3f} s off a CPU unasked (the GIL, I/O or the host)")
+    return f"{misses['miss_gaps']} gaps that skipped deadlines, {misses['miss_wall_s']:.3f} s: " + ", ".join(parts)

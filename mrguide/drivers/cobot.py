@@ -333,6 +333,7 @@ class Cobot:
             bad_length_frames=rx.bad_length if rx else 0,
             error_frames=rx.error_frames if rx else 0,
             emcy_received=core.emcy_count,
+            misses=cyc.misses,
         )
 
     def add_cycle_observer(self, observer: Callable[[CycleSample], None]) -> None:

@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
+from mrguide.drivers.cycle import MissAnatomy
 from mrguide.drivers.errors import DriverError
 
 
@@ -81,6 +82,8 @@ class DriverStats:
     bad_length_frames: int
     error_frames: int
     emcy_received: int
+    #: The gaps between control cycle starts that skipped deadlines: where the control thread's time went.
+    misses: MissAnatomy = field(default_factory=MissAnatomy)
 
 
 @dataclass(frozen=True)

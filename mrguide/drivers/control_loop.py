@@ -28,6 +28,7 @@ from mrguide.drivers.errors import BusError, DeviceFaultError, DriverError
 from mrguide.drivers.heartbeat import OPERATIONAL
 from mrguide.drivers.realtime import make_current_thread_realtime
 from mrguide.drivers.setpoint_guard import plan_rpdos
+from mrguide.drivers.thread_clock import Gap, ThreadClock
 
 logger = logging.getLogger(__name__)
 
@@ -68,16 +69,24 @@ class ControlLoop:
         if priority:
             make_current_thread_realtime(priority)
         timer = CycleTimer(self.core.period)
+        clock = ThreadClock()  # this thread's: where the time went when deadlines are skipped
         timer.start()
-        while not stop.is_set():
-            tick = timer.wait()
-            started = time.monotonic()
-            try:
-                self.cycle(tick)
-            except Exception as exc:  # the control thread must keep running and stop the arm
-                logger.exception("control cycle %d failed", tick.index)
-                supervision.latch(self.core, DriverError(f"control cycle {tick.index} failed: {exc!r}"))
-            self.core.cycle_stats.record_work(time.monotonic() - started)
+        previous = clock.read()
+        try:
+            while not stop.is_set():
+                tick = timer.wait()
+                started = clock.read()
+                if tick.skipped:
+                    self.core.cycle_stats.record_miss(Gap.between(previous, started, tick.slept))
+                previous = started
+                try:
+                    self.cycle(tick)
+                except Exception as exc:  # the control thread must keep running and stop the arm
+                    logger.exception("control cycle %d failed", tick.index)
+                    supervision.latch(self.core, DriverError(f"control cycle {tick.index} failed: {exc!r}"))
+                self.core.cycle_stats.record_work(time.monotonic() - started.wall)
+        finally:
+            clock.close()
 
     def cycle(self, tick: Tick) -> None:
         """One control period (see the module docstring)."""

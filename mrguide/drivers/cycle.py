@@ -9,18 +9,22 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
+
+from mrguide.drivers.thread_clock import Gap
 
 
 @dataclass(frozen=True)
 class Tick:
-    """One cycle: its number (skipped deadlines included), when it was due, and how many were skipped."""
+    """One cycle: its number (skipped deadlines included), when it was due, how many were skipped, and how long
+    the timer slept before it (s)."""
 
     index: int
     deadline: float
     skipped: int
+    slept: float = 0.0
 
 
 class CycleTimer:
@@ -47,15 +51,57 @@ class CycleTimer:
         k = self._k + 1
         deadline = self._t0 + k * self.period
         now = self._clock()
-        skipped = 0
+        skipped, slept = 0, 0.0
         if now < deadline:
-            self._sleep(deadline - now)
-        elif now - deadline >= self.period:
+            slept = deadline - now
+            self._sleep(slept)
+            now = self._clock()  # a wake-up more than a period late skips too, in this cycle's gap
+        if now - deadline >= self.period:
             skipped = int((now - deadline) // self.period)
             k += skipped
             deadline = self._t0 + k * self.period
         self._k = k
-        return Tick(k, deadline, skipped)
+        return Tick(k, deadline, skipped, slept)
+
+
+@dataclass(frozen=True)
+class MissAnatomy:
+    """The gaps between two cycle starts with deadlines skipped between them, summed by where the control thread's
+    time went (s; see `thread_clock`). The run-queue wait and the rest off a CPU are None when a gap's were unknown."""
+
+    gaps: int = 0
+    wall_s: float = 0.0
+    cpu_s: float = 0.0
+    slept_s: float = 0.0
+    runq_s: float | None = 0.0
+    off_cpu_s: float | None = 0.0
+
+    def add(self, gap: Gap) -> MissAnatomy:
+        off_cpu = gap.off_cpu
+        return replace(
+            self,
+            gaps=self.gaps + 1,
+            wall_s=self.wall_s + gap.wall,
+            cpu_s=self.cpu_s + gap.cpu,
+            slept_s=self.slept_s + gap.slept,
+            runq_s=None if self.runq_s is None or gap.runq is None else self.runq_s + gap.runq,
+            off_cpu_s=None if self.off_cpu_s is None or off_cpu is None else self.off_cpu_s + off_cpu,
+        )
+
+    def since(self, earlier: MissAnatomy) -> dict[str, float | int | None]:
+        """The gaps added after `earlier` (a snapshot of the same counters), by field, for a run log's record."""
+
+        def diff(a: float | None, b: float | None) -> float | None:
+            return None if a is None or b is None else a - b
+
+        return {
+            "miss_gaps": self.gaps - earlier.gaps,
+            "miss_wall_s": self.wall_s - earlier.wall_s,
+            "miss_cpu_s": self.cpu_s - earlier.cpu_s,
+            "miss_slept_s": self.slept_s - earlier.slept_s,
+            "miss_runq_s": diff(self.runq_s, earlier.runq_s),
+            "miss_off_cpu_s": diff(self.off_cpu_s, earlier.off_cpu_s),
+        }
 
 
 @dataclass(frozen=True)
@@ -73,6 +119,7 @@ class CycleSummary:
     work_max: float = 0.0
     #: Cycles whose work took longer than the period (each makes the next start late, or skips it).
     overruns: int = 0
+    misses: MissAnatomy = MissAnatomy()
 
 
 class CycleStats:
@@ -87,6 +134,7 @@ class CycleStats:
         self._n_work = 0
         self._missed = 0
         self._overruns = 0
+        self._misses = MissAnatomy()
 
     def record(self, lateness: float, skipped: int) -> None:
         self._lateness[self._n % len(self._lateness)] = lateness
@@ -98,14 +146,26 @@ class CycleStats:
         self._n_work += 1
         self._overruns += duration > self._period
 
+    def record_miss(self, gap: Gap) -> None:
+        """The gap from the previous cycle's start to this one's, for a cycle that skipped deadlines."""
+        self._misses = self._misses.add(gap)
+
     def summary(self) -> CycleSummary:
         n = min(self._n, len(self._lateness))
         if n == 0:
-            return CycleSummary(0, self._missed, 0.0, 0.0, 0.0, overruns=self._overruns)
+            return CycleSummary(0, self._missed, 0.0, 0.0, 0.0, overruns=self._overruns, misses=self._misses)
         p50, p99 = np.percentile(self._lateness[:n], [50, 99])
         lateness_max = float(self._lateness[:n].max())
         w = self._work[: min(self._n_work, len(self._work))]
         work_p99, work_max = (float(np.percentile(w, 99)), float(w.max())) if len(w) else (0.0, 0.0)
         return CycleSummary(
-            self._n, self._missed, float(p50), float(p99), lateness_max, work_p99, work_max, self._overruns
+            self._n,
+            self._missed,
+            float(p50),
+            float(p99),
+            lateness_max,
+            work_p99,
+            work_max,
+            self._overruns,
+            self._misses,
         )

@@ -43,6 +43,18 @@ def test_late_cycle_skips_missed_deadlines():
     assert tick.deadline == pytest.approx(100.0 + 4 * 0.004)
 
 
+def test_a_wake_up_more_than_a_period_late_skips_in_its_own_cycle():
+    """The sleep that overshot holds the gap's time, so the cycle that wakes from it is the one that skips."""
+    clock = FakeClock(overshoot=0.0)
+    timer = CycleTimer(0.004, clock=clock, sleep=clock.sleep)
+    timer.start()
+    clock.overshoot = 0.009  # woken 2.25 periods late
+    tick = timer.wait()
+    assert (tick.index, tick.skipped, tick.slept) == (3, 2, pytest.approx(0.004))
+    clock.overshoot = 0.0
+    assert timer.wait().skipped == 0
+
+
 def test_real_clock_keeps_the_average_rate():
     timer = CycleTimer(0.002)
     timer.start()

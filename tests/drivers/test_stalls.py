@@ -43,6 +43,21 @@ def test_stalls_shorter_than_the_consumer_time_leave_every_drive_enabled(rig, wa
         assert _enabled(rig), rig.cobot.status()
 
 
+def test_the_control_threads_misses_during_a_stall_are_time_off_a_cpu(rig):
+    """Another thread holding the GIL skips the control thread's deadlines; the gap that skipped them is counted as
+    time the control thread spent not computing (blocked on the GIL, or queued for a CPU on a busy machine)."""
+    before = rig.cobot.stats().misses
+    _hold_the_interpreter(0.125)
+    time.sleep(0.05)
+    misses = rig.cobot.stats().misses
+    assert misses.gaps > before.gaps
+    assert misses.wall_s - before.wall_s >= 0.1
+    assert misses.cpu_s - before.cpu_s < 0.05
+    assert misses.runq_s is not None and misses.off_cpu_s is not None
+    waited = (misses.runq_s - (before.runq_s or 0.0)) + (misses.off_cpu_s - (before.off_cpu_s or 0.0))
+    assert waited >= 0.09
+
+
 def test_a_stall_longer_than_the_consumer_time_disables_the_drives_by_their_own_heartbeat_consumer(rig, wait_until):
     _hold_the_interpreter(2 * TEST_TIMING.heartbeat_timeout)
     assert wait_until(lambda: all(d.state == SWITCH_ON_DISABLED and not d.operational for d in rig.sim.drives))

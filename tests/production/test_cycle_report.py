@@ -10,7 +10,7 @@ import os
 import pytest
 
 from mrguide.cli import main
-from mrguide.deploy.cycle_report import WARMUP_CYCLES, cycle_figures, rss_growth_after_warmup
+from mrguide.deploy.cycle_report import WARMUP_CYCLES, cycle_figures, miss_anatomy, rss_growth_after_warmup
 from mrguide.deploy.host_stats import FullCollections, HostCounters, cpu_steal_s, pressure_stall_s
 from mrguide.deploy.runlog import RunLog, read_log, slim_records
 
@@ -86,6 +86,45 @@ def test_the_cycles_that_missed_control_cycles_are_counted(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "| 4 (in 2 cycles: 1 with work overruns [2] (3 missed), 1 with host steal >= 0.1 s [2] (3 missed), " in out
     assert "1 with I/O stall >= 10 ms [2] (1 missed), 1 with major page faults [2] (3 missed)) |" in out
+
+
+def test_where_the_missed_gaps_time_went_is_summed_over_the_cycles(tmp_path, capsys):
+    with RunLog(tmp_path / "run.jsonl", {"command": "deploy"}) as log:
+        for i, (gaps, wall, cpu, runq, off) in enumerate([(0, 0.0, 0.0, 0.0, 0.0), (2, 0.03, 0.004, 0.02, 0.006)] * 2):
+            log.write(
+                "cycle_end",
+                cycle=i,
+                placed=True,
+                outcomes=["success"],
+                retries=[],
+                alarm=None,
+                cycle_s=4.0,
+                miss_gaps=gaps,
+                miss_wall_s=wall,
+                miss_cpu_s=cpu,
+                miss_slept_s=0.0,
+                miss_runq_s=runq,
+                miss_off_cpu_s=off,
+            )
+        log.write("cycles_end", wall_s=16.0, missed_cycles=4, underruns=0, rss_growth_mb=0.5)
+    anatomy = miss_anatomy(read_log(tmp_path / "run.jsonl"))
+    assert anatomy == pytest.approx(
+        {
+            "miss_gaps": 4,
+            "miss_wall_s": 0.06,
+            "miss_cpu_s": 0.008,
+            "miss_runq_s": 0.04,
+            "miss_off_cpu_s": 0.012,
+            "miss_slept_s": 0.0,
+        }
+    )
+    assert main(["cycles", "report", str(tmp_path / "run.jsonl")]) == 0
+    assert "| run | 4 | 0.060 s | 0.008 s | 0.040 s | 0.012 s | 0.000 s |" in capsys.readouterr().out
+
+
+def test_a_log_without_the_gaps_anatomy_has_no_such_row(tmp_path):
+    write_run(tmp_path / "run.jsonl")
+    assert miss_anatomy(read_log(tmp_path / "run.jsonl")) is None
 
 
 def test_host_steal_is_read_from_proc_stat(tmp_path):

@@ -1,0 +1,71 @@
+"""Where the control thread's time went in the gaps that skipped deadlines: on a CPU, waiting for one, or blocked."""
+
+from __future__ import annotations
+
+import sys
+import threading
+import time
+
+import pytest
+
+from mrguide.drivers.cycle import MissAnatomy
+from mrguide.drivers.thread_clock import Gap, ThreadClock, ThreadReading
+
+linux_only = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="/proc/thread-self/schedstat is Linux's")
+
+
+def test_a_gap_is_split_into_cpu_run_queue_planned_sleep_and_the_rest():
+    gap = Gap.between(ThreadReading(10.0, 1.0, 0.5), ThreadReading(10.1, 1.02, 0.53), slept=0.004)
+    assert (gap.wall, gap.cpu, gap.runq) == pytest.approx((0.1, 0.02, 0.03))
+    assert gap.off_cpu == pytest.approx(0.1 - 0.02 - 0.03 - 0.004)
+    assert Gap.between(ThreadReading(0.0, 0.0, None), ThreadReading(1.0, 0.5, None), 0.0).off_cpu is None
+
+
+def test_the_anatomy_sums_gaps_and_says_unknown_once_a_gap_was():
+    a = MissAnatomy().add(Gap(0.012, 0.001, 0.0, 0.002)).add(Gap(0.02, 0.003, 0.001, 0.006))
+    assert (a.gaps, a.wall_s, a.cpu_s, a.slept_s, a.runq_s) == pytest.approx((2, 0.032, 0.004, 0.001, 0.008))
+    assert a.off_cpu_s == pytest.approx(0.009 + 0.01)
+    since = a.add(Gap(0.01, 0.0, 0.0, 0.01)).since(a)
+    assert since["miss_gaps"] == 1 and since["miss_runq_s"] == pytest.approx(0.01)
+    assert since["miss_off_cpu_s"] == pytest.approx(0.0)
+    unknown = a.add(Gap(0.01, 0.0, 0.0, None))
+    assert unknown.runq_s is None and unknown.off_cpu_s is None and unknown.since(a)["miss_runq_s"] is None
+
+
+@linux_only
+def test_a_thread_that_computes_is_on_a_cpu_and_one_that_waits_for_a_lock_is_not():
+    gaps: dict[str, Gap] = {}
+    lock = threading.Lock()
+    about_to_block = threading.Event()
+
+    def spin() -> None:
+        clock = ThreadClock()
+        before = clock.read()
+        while time.thread_time() - before.cpu < 0.05:
+            pass
+        gaps["spin"] = Gap.between(before, clock.read(), 0.0)
+        clock.close()
+
+    def block() -> None:
+        clock = ThreadClock()
+        before = clock.read()
+        about_to_block.set()
+        with lock:
+            gaps["block"] = Gap.between(before, clock.read(), 0.0)
+        clock.close()
+
+    with lock:
+        waiter = threading.Thread(target=block)
+        waiter.start()
+        about_to_block.wait()
+        time.sleep(0.2)
+    spinner = threading.Thread(target=spin)
+    spinner.start()
+    spinner.join()
+    waiter.join()
+    assert gaps["spin"].cpu >= 0.05 and gaps["spin"].runq is not None
+    # the waiter's 0.2 s: blocked (or, on a busy machine, partly waiting for a CPU), hardly any of it computing
+    block_gap = gaps["block"]
+    assert block_gap.wall >= 0.2 and block_gap.cpu < 0.05
+    assert block_gap.off_cpu is not None and block_gap.runq is not None
+    assert block_gap.off_cpu + block_gap.runq >= 0.15
