@@ -120,24 +120,29 @@ MISS_ANATOMY = {
     "miss_runq_s": "waiting for a CPU",
     "miss_off_cpu_s": "off a CPU unasked (GIL, I/O, host)",
     "miss_slept_s": "asleep as planned",
+    "miss_slices": "times put on a CPU",
 }
 
 
-def miss_anatomy(records: list[dict]) -> dict[str, float] | None:
+def miss_anatomy(records: list[dict]) -> dict[str, float | None] | None:
     """A run's gaps that skipped deadlines, summed over its production cycles by where the control thread's time
-    went; None unless every cycle_end records them (logs from before they were, or a host without /proc)."""
+    went; None unless every cycle_end records them (logs from before they were, or a host without /proc). The times
+    put on a CPU are None in logs from before they were recorded."""
     ends = [r for r in records if r.get("kind") == "cycle_end"]
-    if not ends or not all(isinstance(r.get(k), int | float) for r in ends for k in MISS_ANATOMY):
+    if not ends or not all(isinstance(r.get(k), int | float) for r in ends for k in MISS_ANATOMY if k != "miss_slices"):
         return None
-    return {k: sum(float(r[k]) for r in ends) for k in MISS_ANATOMY}
+    return {
+        k: sum(float(r[k]) for r in ends) if all(isinstance(r.get(k), int | float) for r in ends) else None
+        for k in MISS_ANATOMY
+    }
 
 
-def anatomy_table(rows: dict[str, dict[str, float]]) -> str:
+def anatomy_table(rows: dict[str, dict[str, float | None]]) -> str:
     """One markdown row per run that records where its missed gaps' time went (s)."""
     head = "| run | " + " | ".join(MISS_ANATOMY.values()) + " |"
     lines = [head, "| " + " | ".join(["---"] * (len(MISS_ANATOMY) + 1)) + " |"]
     for name, a in rows.items():
-        cells = [f"{int(a['miss_gaps'])}"] + [f"{a[k]:.3f} s" for k in list(MISS_ANATOMY)[1:]]
+        cells = [_num(a[k], ".3f", " s") if k.endswith("_s") else _num(a[k], ".0f") for k in MISS_ANATOMY]
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 

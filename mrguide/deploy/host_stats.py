@@ -125,4 +125,6 @@ def miss_anatomy_text(misses: Mapping[str, Any]) -> str:
         parts.append(f"{misses['miss_runq_s']:.3f} s waiting for a CPU")
     if misses.get("miss_off_cpu_s") is not None:
         parts.append(f"{misses['miss_off_cpu_s']:.3f} s off a CPU unasked (the GIL, I/O or the host)")
+    if misses.get("miss_slices") is not None:
+        parts.append(f"put on a CPU {misses['miss_slices']} times")
     return f"{misses['miss_gaps']} gaps that skipped deadlines, {misses['miss_wall_s']:.3f} s: " + ", ".join(parts)

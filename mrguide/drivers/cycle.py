@@ -75,6 +75,7 @@ class MissAnatomy:
     slept_s: float = 0.0
     runq_s: float | None = 0.0
     off_cpu_s: float | None = 0.0
+    slices: int | None = 0
 
     def add(self, gap: Gap) -> MissAnatomy:
         off_cpu = gap.off_cpu
@@ -86,12 +87,13 @@ class MissAnatomy:
             slept_s=self.slept_s + gap.slept,
             runq_s=None if self.runq_s is None or gap.runq is None else self.runq_s + gap.runq,
             off_cpu_s=None if self.off_cpu_s is None or off_cpu is None else self.off_cpu_s + off_cpu,
+            slices=None if self.slices is None or gap.slices is None else self.slices + gap.slices,
         )
 
     def since(self, earlier: MissAnatomy) -> dict[str, float | int | None]:
         """The gaps added after `earlier` (a snapshot of the same counters), by field, for a run log's record."""
 
-        def diff(a: float | None, b: float | None) -> float | None:
+        def diff(a: float | int | None, b: float | int | None) -> float | int | None:
             return None if a is None or b is None else a - b
 
         return {
@@ -101,6 +103,7 @@ class MissAnatomy:
             "miss_slept_s": self.slept_s - earlier.slept_s,
             "miss_runq_s": diff(self.runq_s, earlier.runq_s),
             "miss_off_cpu_s": diff(self.off_cpu_s, earlier.off_cpu_s),
+            "miss_slices": diff(self.slices, earlier.slices),
         }
 
 

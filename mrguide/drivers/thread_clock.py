@@ -26,6 +26,8 @@ class ThreadReading:
     cpu: float
     #: Time spent runnable on a run queue since the thread started; None without /proc.
     runq: float | None
+    #: How many times the thread has been put on a CPU since it started; None without /proc.
+    slices: int | None = None
 
 
 @dataclass(frozen=True)
@@ -36,11 +38,16 @@ class Gap:
     cpu: float
     slept: float
     runq: float | None
+    #: Times the thread was put on a CPU in the gap: once per wake-up from a sleep or a block, once more per
+    #: preemption. A gap that skipped deadlines off a CPU in a single stretch after its planned sleep has one (the
+    #: wake-up came late: a timer the host delayed); blocked again after waking (the GIL held), it has more.
+    slices: int | None = None
 
     @classmethod
     def between(cls, earlier: ThreadReading, later: ThreadReading, slept: float) -> Gap:
         runq = None if later.runq is None or earlier.runq is None else later.runq - earlier.runq
-        return cls(later.wall - earlier.wall, later.cpu - earlier.cpu, slept, runq)
+        slices = None if later.slices is None or earlier.slices is None else later.slices - earlier.slices
+        return cls(later.wall - earlier.wall, later.cpu - earlier.cpu, slept, runq, slices)
 
     @property
     def off_cpu(self) -> float | None:
@@ -58,15 +65,19 @@ class ThreadClock:
             self._fd = None
 
     def read(self) -> ThreadReading:
-        return ThreadReading(time.monotonic(), time.thread_time(), self._runq())
+        wall, cpu = time.monotonic(), time.thread_time()
+        runq, slices = self._schedstat()
+        return ThreadReading(wall, cpu, runq, slices)
 
-    def _runq(self) -> float | None:
+    def _schedstat(self) -> tuple[float | None, int | None]:
+        """The run-queue wait (s) and the times put on a CPU, from the schedstat line `run_ns wait_ns timeslices`."""
         if self._fd is None:
-            return None
+            return None, None
         try:
-            return int(os.pread(self._fd, 128, 0).split()[1]) / 1e9  # run_ns wait_ns timeslices
+            fields = os.pread(self._fd, 128, 0).split()
+            return int(fields[1]) / 1e9, int(fields[2])
         except (OSError, IndexError, ValueError):
-            return None
+            return None, None
 
     def close(self) -> None:
         if self._fd is not None:

@@ -15,21 +15,22 @@ linux_only = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="/p
 
 
 def test_a_gap_is_split_into_cpu_run_queue_planned_sleep_and_the_rest():
-    gap = Gap.between(ThreadReading(10.0, 1.0, 0.5), ThreadReading(10.1, 1.02, 0.53), slept=0.004)
-    assert (gap.wall, gap.cpu, gap.runq) == pytest.approx((0.1, 0.02, 0.03))
+    gap = Gap.between(ThreadReading(10.0, 1.0, 0.5, 7), ThreadReading(10.1, 1.02, 0.53, 9), slept=0.004)
+    assert (gap.wall, gap.cpu, gap.runq, gap.slices) == pytest.approx((0.1, 0.02, 0.03, 2))
     assert gap.off_cpu == pytest.approx(0.1 - 0.02 - 0.03 - 0.004)
     assert Gap.between(ThreadReading(0.0, 0.0, None), ThreadReading(1.0, 0.5, None), 0.0).off_cpu is None
 
 
 def test_the_anatomy_sums_gaps_and_says_unknown_once_a_gap_was():
-    a = MissAnatomy().add(Gap(0.012, 0.001, 0.0, 0.002)).add(Gap(0.02, 0.003, 0.001, 0.006))
+    a = MissAnatomy().add(Gap(0.012, 0.001, 0.0, 0.002, 1)).add(Gap(0.02, 0.003, 0.001, 0.006, 3))
     assert (a.gaps, a.wall_s, a.cpu_s, a.slept_s, a.runq_s) == pytest.approx((2, 0.032, 0.004, 0.001, 0.008))
-    assert a.off_cpu_s == pytest.approx(0.009 + 0.01)
-    since = a.add(Gap(0.01, 0.0, 0.0, 0.01)).since(a)
-    assert since["miss_gaps"] == 1 and since["miss_runq_s"] == pytest.approx(0.01)
+    assert a.off_cpu_s == pytest.approx(0.009 + 0.01) and a.slices == 4
+    since = a.add(Gap(0.01, 0.0, 0.0, 0.01, 2)).since(a)
+    assert since["miss_gaps"] == 1 and since["miss_runq_s"] == pytest.approx(0.01) and since["miss_slices"] == 2
     assert since["miss_off_cpu_s"] == pytest.approx(0.0)
     unknown = a.add(Gap(0.01, 0.0, 0.0, None))
     assert unknown.runq_s is None and unknown.off_cpu_s is None and unknown.since(a)["miss_runq_s"] is None
+    assert unknown.slices is None
 
 
 @linux_only
@@ -69,3 +70,4 @@ def test_a_thread_that_computes_is_on_a_cpu_and_one_that_waits_for_a_lock_is_not
     assert block_gap.wall >= 0.2 and block_gap.cpu < 0.05
     assert block_gap.off_cpu is not None and block_gap.runq is not None
     assert block_gap.off_cpu + block_gap.runq >= 0.15
+    assert block_gap.slices is not None and block_gap.slices >= 1  # put on a CPU again when the lock came free
