@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from mrguide.deploy.host_stats import MISS_ANATOMY, anatomy_value
 from mrguide.deploy.runlog import RunLogError, read_log, slim_records, write_gzipped
 from mrguide.errors import InputError
 
@@ -111,19 +112,6 @@ def table(rows: dict[str, dict[str, Any]]) -> str:
     return "\n".join(lines) + "\n"
 
 
-#: cycle_end's sums over the gaps between control cycle starts that skipped deadlines (`MissAnatomy.since`), and how
-#: the report's second table heads them.
-MISS_ANATOMY = {
-    "miss_gaps": "gaps that skipped deadlines",
-    "miss_wall_s": "their time",
-    "miss_cpu_s": "on a CPU",
-    "miss_runq_s": "waiting for a CPU",
-    "miss_off_cpu_s": "off a CPU unasked (GIL, I/O, host)",
-    "miss_slept_s": "asleep as planned",
-    "miss_slices": "times put on a CPU",
-}
-
-
 def miss_anatomy(records: list[dict]) -> dict[str, float | None] | None:
     """A run's gaps that skipped deadlines, summed over its production cycles by where the control thread's time
     went; None unless every cycle_end records them (logs from before they were, or a host without /proc). The times
@@ -142,7 +130,7 @@ def anatomy_table(rows: dict[str, dict[str, float | None]]) -> str:
     head = "| run | " + " | ".join(MISS_ANATOMY.values()) + " |"
     lines = [head, "| " + " | ".join(["---"] * (len(MISS_ANATOMY) + 1)) + " |"]
     for name, a in rows.items():
-        cells = [_num(a[k], ".3f", " s") if k.endswith("_s") else _num(a[k], ".0f") for k in MISS_ANATOMY]
+        cells = [anatomy_value(k, a[k]) for k in MISS_ANATOMY]
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 

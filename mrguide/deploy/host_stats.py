@@ -12,6 +12,7 @@ another) say what happened to this process.
 from __future__ import annotations
 
 import gc
+import operator
 import os
 import resource
 import time
@@ -19,6 +20,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
+
+from mrguide.drivers.thread_clock import if_known
 
 
 def peak_rss_mb() -> float:
@@ -75,14 +78,10 @@ class HostCounters:
 
     def since(self, earlier: HostCounters) -> dict[str, float | int | None]:
         """What happened between `earlier` and this reading, by field (None where either reading is missing)."""
-
-        def diff(a: float | None, b: float | None) -> float | None:
-            return None if a is None or b is None else a - b
-
         return {
-            "steal_s": diff(self.steal_s, earlier.steal_s),
-            "cpu_stall_s": diff(self.cpu_stall_s, earlier.cpu_stall_s),
-            "io_stall_s": diff(self.io_stall_s, earlier.io_stall_s),
+            "steal_s": if_known(operator.sub, self.steal_s, earlier.steal_s),
+            "cpu_stall_s": if_known(operator.sub, self.cpu_stall_s, earlier.cpu_stall_s),
+            "io_stall_s": if_known(operator.sub, self.io_stall_s, earlier.io_stall_s),
             "major_faults": self.major_faults - earlier.major_faults,
             "preemptions": self.preemptions - earlier.preemptions,
         }
@@ -117,14 +116,31 @@ class FullCollections:
             self._started = None
 
 
+#: The fields of `MissAnatomy.since` in a cycle record: where the control thread's time went in the gaps between
+#: control cycle starts that skipped deadlines, and how the summary line and `mrguide cycles report` name them.
+MISS_ANATOMY = {
+    "miss_gaps": "gaps that skipped deadlines",
+    "miss_wall_s": "their time",
+    "miss_cpu_s": "on a CPU",
+    "miss_runq_s": "waiting for a CPU",
+    "miss_off_cpu_s": "off a CPU unasked (GIL, I/O, host)",
+    "miss_slept_s": "asleep as planned",
+    "miss_slices": "times put on a CPU",
+}
+
+
+def anatomy_value(key: str, value: float | None) -> str:
+    """One of MISS_ANATOMY's figures as the report writes it ("—": not recorded)."""
+    if value is None:
+        return "—"
+    return f"{value:.3f} s" if key.endswith("_s") else f"{value:.0f}"
+
+
 def miss_anatomy_text(misses: Mapping[str, Any]) -> str:
-    """One line on the control thread's gaps that skipped deadlines, by where their time went (the fields of
-    `MissAnatomy.since`)."""
-    parts = [f"{misses['miss_cpu_s']:.3f} s on a CPU", f"{misses['miss_slept_s']:.3f} s asleep as planned"]
-    if misses.get("miss_runq_s") is not None:
-        parts.append(f"{misses['miss_runq_s']:.3f} s waiting for a CPU")
-    if misses.get("miss_off_cpu_s") is not None:
-        parts.append(f"{misses['miss_off_cpu_s']:.3f} s off a CPU unasked (the GIL, I/O or the host)")
-    if misses.get("miss_slices") is not None:
-        parts.append(f"put on a CPU {misses['miss_slices']} times")
-    return f"{misses['miss_gaps']} gaps that skipped deadlines, {misses['miss_wall_s']:.3f} s: " + ", ".join(parts)
+    """One line on the control thread's gaps that skipped deadlines (MISS_ANATOMY's fields; those not recorded are
+    left out)."""
+    return ", ".join(
+        f"{label}: {anatomy_value(key, misses[key])}"
+        for key, label in MISS_ANATOMY.items()
+        if misses.get(key) is not None
+    )

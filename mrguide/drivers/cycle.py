@@ -7,13 +7,14 @@ SYNCs) and counts them as missed cycles.
 
 from __future__ import annotations
 
+import operator
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
 
-from mrguide.drivers.thread_clock import Gap
+from mrguide.drivers.thread_clock import Gap, if_known
 
 
 @dataclass(frozen=True)
@@ -78,32 +79,27 @@ class MissAnatomy:
     slices: int | None = 0
 
     def add(self, gap: Gap) -> MissAnatomy:
-        off_cpu = gap.off_cpu
         return replace(
             self,
             gaps=self.gaps + 1,
             wall_s=self.wall_s + gap.wall,
             cpu_s=self.cpu_s + gap.cpu,
             slept_s=self.slept_s + gap.slept,
-            runq_s=None if self.runq_s is None or gap.runq is None else self.runq_s + gap.runq,
-            off_cpu_s=None if self.off_cpu_s is None or off_cpu is None else self.off_cpu_s + off_cpu,
-            slices=None if self.slices is None or gap.slices is None else self.slices + gap.slices,
+            runq_s=if_known(operator.add, self.runq_s, gap.runq),
+            off_cpu_s=if_known(operator.add, self.off_cpu_s, gap.off_cpu),
+            slices=if_known(operator.add, self.slices, gap.slices),
         )
 
     def since(self, earlier: MissAnatomy) -> dict[str, float | int | None]:
         """The gaps added after `earlier` (a snapshot of the same counters), by field, for a run log's record."""
-
-        def diff(a: float | int | None, b: float | int | None) -> float | int | None:
-            return None if a is None or b is None else a - b
-
         return {
             "miss_gaps": self.gaps - earlier.gaps,
             "miss_wall_s": self.wall_s - earlier.wall_s,
             "miss_cpu_s": self.cpu_s - earlier.cpu_s,
             "miss_slept_s": self.slept_s - earlier.slept_s,
-            "miss_runq_s": diff(self.runq_s, earlier.runq_s),
-            "miss_off_cpu_s": diff(self.off_cpu_s, earlier.off_cpu_s),
-            "miss_slices": diff(self.slices, earlier.slices),
+            "miss_runq_s": if_known(operator.sub, self.runq_s, earlier.runq_s),
+            "miss_off_cpu_s": if_known(operator.sub, self.off_cpu_s, earlier.off_cpu_s),
+            "miss_slices": if_known(operator.sub, self.slices, earlier.slices),
         }
 
 

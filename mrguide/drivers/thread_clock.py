@@ -11,11 +11,21 @@ only: elsewhere the run-queue wait is unknown and so is the rest.
 
 from __future__ import annotations
 
+import operator
 import os
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TypeVar
 
 SCHEDSTAT = "/proc/thread-self/schedstat"
+
+N = TypeVar("N", int, float)
+
+
+def if_known(op: Callable[[N, N], N], a: N | None, b: N | None) -> N | None:
+    """`op(a, b)`, or None when either counter is unknown (no /proc)."""
+    return None if a is None or b is None else op(a, b)
 
 
 @dataclass(frozen=True)
@@ -45,8 +55,8 @@ class Gap:
 
     @classmethod
     def between(cls, earlier: ThreadReading, later: ThreadReading, slept: float) -> Gap:
-        runq = None if later.runq is None or earlier.runq is None else later.runq - earlier.runq
-        slices = None if later.slices is None or earlier.slices is None else later.slices - earlier.slices
+        runq = if_known(operator.sub, later.runq, earlier.runq)
+        slices = if_known(operator.sub, later.slices, earlier.slices)
         return cls(later.wall - earlier.wall, later.cpu - earlier.cpu, slept, runq, slices)
 
     @property

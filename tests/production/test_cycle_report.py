@@ -11,14 +11,13 @@ import pytest
 
 from mrguide.cli import main
 from mrguide.deploy.cycle_report import (
-    MISS_ANATOMY,
     WARMUP_CYCLES,
     anatomy_table,
     cycle_figures,
     miss_anatomy,
     rss_growth_after_warmup,
 )
-from mrguide.deploy.host_stats import FullCollections, HostCounters, cpu_steal_s, pressure_stall_s
+from mrguide.deploy.host_stats import MISS_ANATOMY, FullCollections, HostCounters, cpu_steal_s, pressure_stall_s
 from mrguide.deploy.runlog import RunLog, read_log, slim_records
 
 
@@ -54,6 +53,13 @@ def write_run(path, segments=True):
             log.write("cycles_end", wall_s=36.0, missed_cycles=2, underruns=1, rss_growth_mb=3.5)
 
 
+def write_placed_cycle(log: RunLog, cycle: int, **counters: object) -> None:
+    """A cycle_end record of a part placed at the first attempt in 4 s, with the driver and host counters given."""
+    log.write(
+        "cycle_end", cycle=cycle, placed=True, outcomes=["success"], retries=[], alarm=None, cycle_s=4.0, **counters
+    )
+
+
 def test_the_figures_come_from_the_cycle_records(tmp_path):
     write_run(tmp_path / "run.jsonl")
     f = cycle_figures(read_log(tmp_path / "run.jsonl"))
@@ -69,14 +75,9 @@ def test_the_cycles_that_missed_control_cycles_are_counted(tmp_path, capsys):
         # (missed, overruns, steal s, I/O stall s, major faults); a steal of 0.02 s is a tick or two: not counted
         rows = [(0, 0, 0.0, 0.0, 0), (3, 2, 0.2, 0.0, 2), (0, 1, 0.15, 0.3, 1), (1, 0, 0.02, 0.1, 0)]
         for i, (missed, overruns, steal, io, faults) in enumerate(rows):
-            log.write(
-                "cycle_end",
-                cycle=i,
-                placed=True,
-                outcomes=["success"],
-                retries=[],
-                alarm=None,
-                cycle_s=4.0,
+            write_placed_cycle(
+                log,
+                i,
                 missed_cycles=missed,
                 underruns=0,
                 work_overruns=overruns,
@@ -98,14 +99,9 @@ def test_the_cycles_that_missed_control_cycles_are_counted(tmp_path, capsys):
 def test_where_the_missed_gaps_time_went_is_summed_over_the_cycles(tmp_path, capsys):
     with RunLog(tmp_path / "run.jsonl", {"command": "deploy"}) as log:
         for i, (gaps, wall, cpu, runq, off) in enumerate([(0, 0.0, 0.0, 0.0, 0.0), (2, 0.03, 0.004, 0.02, 0.006)] * 2):
-            log.write(
-                "cycle_end",
-                cycle=i,
-                placed=True,
-                outcomes=["success"],
-                retries=[],
-                alarm=None,
-                cycle_s=4.0,
+            write_placed_cycle(
+                log,
+                i,
                 miss_gaps=gaps,
                 miss_wall_s=wall,
                 miss_cpu_s=cpu,
@@ -133,16 +129,7 @@ def test_where_the_missed_gaps_time_went_is_summed_over_the_cycles(tmp_path, cap
 
 def test_a_log_from_before_the_times_put_on_a_cpu_has_them_unknown(tmp_path):
     with RunLog(tmp_path / "run.jsonl", {"command": "deploy"}) as log:
-        log.write(
-            "cycle_end",
-            cycle=0,
-            placed=True,
-            outcomes=["success"],
-            retries=[],
-            alarm=None,
-            cycle_s=4.0,
-            **{k: 0.0 for k in MISS_ANATOMY if k != "miss_slices"},
-        )
+        write_placed_cycle(log, 0, **{k: 0.0 for k in MISS_ANATOMY if k != "miss_slices"})
     anatomy = miss_anatomy(read_log(tmp_path / "run.jsonl"))
     assert anatomy is not None and anatomy["miss_slices"] is None
     assert anatomy_table({"old": anatomy}).splitlines()[-1].endswith("| 0.000 s | — |")
