@@ -112,12 +112,17 @@ def table(rows: dict[str, dict[str, Any]]) -> str:
     return "\n".join(lines) + "\n"
 
 
+#: The anatomy's fields that logs from before them lack (the report writes "—" for them there).
+LATER_ANATOMY = ("miss_slices", "miss_collections", "miss_collecting_s")
+
+
 def miss_anatomy(records: list[dict]) -> dict[str, float | None] | None:
     """A run's gaps that skipped deadlines, summed over its production cycles by where the control thread's time
-    went; None unless every cycle_end records them (logs from before they were, or a host without /proc). The times
-    put on a CPU are None in logs from before they were recorded."""
+    went; None unless every cycle_end records them (logs from before they were, or a host without /proc). The
+    LATER_ANATOMY fields are None in logs from before they were recorded."""
     ends = [r for r in records if r.get("kind") == "cycle_end"]
-    if not ends or not all(isinstance(r.get(k), int | float) for r in ends for k in MISS_ANATOMY if k != "miss_slices"):
+    required = [k for k in MISS_ANATOMY if k not in LATER_ANATOMY]
+    if not ends or not all(isinstance(r.get(k), int | float) for r in ends for k in required):
         return None
     return {
         k: sum(float(r[k]) for r in ends) if all(isinstance(r.get(k), int | float) for r in ends) else None

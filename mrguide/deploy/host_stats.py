@@ -126,6 +126,8 @@ MISS_ANATOMY = {
     "miss_off_cpu_s": "off a CPU unasked (GIL, I/O, host)",
     "miss_slept_s": "asleep as planned",
     "miss_slices": "times put on a CPU",
+    "miss_collections": "garbage collections in the control thread",
+    "miss_collecting_s": "their time",
 }
 
 

@@ -77,6 +77,9 @@ class MissAnatomy:
     runq_s: float | None = 0.0
     off_cpu_s: float | None = 0.0
     slices: int | None = 0
+    #: The control thread's own garbage collections in those gaps, and their time (s).
+    collections: int = 0
+    collecting_s: float = 0.0
 
     def add(self, gap: Gap) -> MissAnatomy:
         return replace(
@@ -88,6 +91,8 @@ class MissAnatomy:
             runq_s=if_known(operator.add, self.runq_s, gap.runq),
             off_cpu_s=if_known(operator.add, self.off_cpu_s, gap.off_cpu),
             slices=if_known(operator.add, self.slices, gap.slices),
+            collections=self.collections + gap.collections,
+            collecting_s=self.collecting_s + gap.collecting,
         )
 
     def since(self, earlier: MissAnatomy) -> dict[str, float | int | None]:
@@ -100,6 +105,8 @@ class MissAnatomy:
             "miss_runq_s": if_known(operator.sub, self.runq_s, earlier.runq_s),
             "miss_off_cpu_s": if_known(operator.sub, self.off_cpu_s, earlier.off_cpu_s),
             "miss_slices": if_known(operator.sub, self.slices, earlier.slices),
+            "miss_collections": self.collections - earlier.collections,
+            "miss_collecting_s": self.collecting_s - earlier.collecting_s,
         }
 
 

@@ -7,12 +7,19 @@ the machine; the second field of /proc/thread-self/schedstat) and the time it as
 a CPU without asking: blocked on the GIL (another thread of the interpreter holding it), on I/O (a CAN send), or,
 on a virtual machine whose guest does not charge steal to the thread, its virtual CPU taken by the host. Linux
 only: elsewhere the run-queue wait is unknown and so is the rest.
+
+A thread's own garbage collections are counted apart (a `gc` callback, installed while a `ThreadClock` is open): the
+interpreter collects in whichever thread's allocation crossed a generation's threshold, the control thread included,
+with the GIL held, so a young collection that meets many objects is time on a CPU that the cycle's own work did not
+ask for.
 """
 
 from __future__ import annotations
 
+import gc
 import operator
 import os
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -38,6 +45,9 @@ class ThreadReading:
     runq: float | None
     #: How many times the thread has been put on a CPU since it started; None without /proc.
     slices: int | None = None
+    #: Garbage collections this thread ran while a ThreadClock was open, and their wall time (s).
+    collections: int = 0
+    collecting: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -52,17 +62,63 @@ class Gap:
     #: preemption. A gap that skipped deadlines off a CPU in a single stretch after its planned sleep has one (the
     #: wake-up came late: a timer the host delayed); blocked again after waking (the GIL held), it has more.
     slices: int | None = None
+    #: The thread's own garbage collections in the gap, of any generation, and their wall time (part of the rest).
+    collections: int = 0
+    collecting: float = 0.0
 
     @classmethod
     def between(cls, earlier: ThreadReading, later: ThreadReading, slept: float) -> Gap:
         runq = if_known(operator.sub, later.runq, earlier.runq)
         slices = if_known(operator.sub, later.slices, earlier.slices)
-        return cls(later.wall - earlier.wall, later.cpu - earlier.cpu, slept, runq, slices)
+        return cls(
+            later.wall - earlier.wall,
+            later.cpu - earlier.cpu,
+            slept,
+            runq,
+            slices,
+            later.collections - earlier.collections,
+            later.collecting - earlier.collecting,
+        )
 
     @property
     def off_cpu(self) -> float | None:
         """Off a CPU without asking to sleep: the GIL, I/O, or the host (see the module docstring)."""
         return None if self.runq is None else max(0.0, self.wall - self.cpu - self.runq - self.slept)
+
+
+class _Collections(threading.local):
+    """Per thread: the garbage collections it ran and their wall time (s), while the callback is installed."""
+
+    count = 0
+    seconds = 0.0
+    started: float | None = None
+
+
+_collections = _Collections()
+_clocks_open = 0  # open ThreadClocks; the callback is installed while there is one
+_clocks_lock = threading.Lock()
+
+
+def _on_collection(phase: str, info: dict) -> None:
+    """gc callback: runs in the thread that collects, at the start and the stop of every collection."""
+    own = _collections
+    if phase == "start":
+        own.started = time.monotonic()
+    elif own.started is not None:
+        own.count += 1
+        own.seconds += time.monotonic() - own.started
+        own.started = None
+
+
+def _count_collections(delta: int) -> None:
+    """Open (+1) or close (-1) a ThreadClock: the first installs the gc callback, the last removes it."""
+    global _clocks_open
+    with _clocks_lock:
+        _clocks_open += delta
+        if _clocks_open == 1 and delta > 0:
+            gc.callbacks.append(_on_collection)
+        elif _clocks_open == 0 and _on_collection in gc.callbacks:
+            gc.callbacks.remove(_on_collection)
 
 
 class ThreadClock:
@@ -73,11 +129,13 @@ class ThreadClock:
             self._fd: int | None = os.open(SCHEDSTAT, os.O_RDONLY)
         except OSError:
             self._fd = None
+        self._open = True
+        _count_collections(+1)
 
     def read(self) -> ThreadReading:
         wall, cpu = time.monotonic(), time.thread_time()
         runq, slices = self._schedstat()
-        return ThreadReading(wall, cpu, runq, slices)
+        return ThreadReading(wall, cpu, runq, slices, _collections.count, _collections.seconds)
 
     def _schedstat(self) -> tuple[float | None, int | None]:
         """The run-queue wait (s) and the times put on a CPU, from the schedstat line `run_ns wait_ns timeslices`."""
@@ -93,3 +151,6 @@ class ThreadClock:
         if self._fd is not None:
             os.close(self._fd)
             self._fd = None
+        if self._open:
+            self._open = False
+            _count_collections(-1)

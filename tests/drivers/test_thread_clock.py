@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gc
 import sys
 import threading
 import time
@@ -31,6 +32,37 @@ def test_the_anatomy_sums_gaps_and_says_unknown_once_a_gap_was():
     unknown = a.add(Gap(0.01, 0.0, 0.0, None))
     assert unknown.runq_s is None and unknown.off_cpu_s is None and unknown.since(a)["miss_runq_s"] is None
     assert unknown.slices is None
+    collected = a.add(Gap(0.03, 0.025, 0.0, 0.0, 1, collections=3, collecting=0.02))
+    assert (collected.collections, collected.collecting_s) == pytest.approx((3, 0.02))
+    assert collected.since(a)["miss_collections"] == 3
+
+
+def test_a_thread_counts_its_own_garbage_collections_not_another_threads():
+    readings: dict[str, int] = {}
+    measured, other_done = threading.Event(), threading.Event()
+
+    def collect_twice() -> None:
+        clock = ThreadClock()
+        gc.collect()  # the allocation count starts at 0: no automatic collection in what follows
+        before = clock.read()
+        gc.collect(0)
+        gc.collect(1)
+        measured.set()
+        other_done.wait()  # the main thread collects meanwhile
+        after = clock.read()
+        readings["own"] = after.collections - before.collections
+        readings["collecting"] = after.collecting >= before.collecting
+        clock.close()
+
+    collector = threading.Thread(target=collect_twice)
+    collector.start()
+    measured.wait()
+    for _ in range(3):
+        gc.collect(0)
+    other_done.set()
+    collector.join()
+    assert readings == {"own": 2, "collecting": True}
+    assert not any(getattr(cb, "__module__", "") == "mrguide.drivers.thread_clock" for cb in gc.callbacks)
 
 
 @linux_only

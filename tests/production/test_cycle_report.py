@@ -11,6 +11,7 @@ import pytest
 
 from mrguide.cli import main
 from mrguide.deploy.cycle_report import (
+    LATER_ANATOMY,
     WARMUP_CYCLES,
     anatomy_table,
     cycle_figures,
@@ -109,6 +110,8 @@ def test_where_the_missed_gaps_time_went_is_summed_over_the_cycles(tmp_path, cap
                 miss_runq_s=runq,
                 miss_off_cpu_s=off,
                 miss_slices=gaps * 2,
+                miss_collections=gaps // 2,
+                miss_collecting_s=0.001 * gaps,
             )
         log.write("cycles_end", wall_s=16.0, missed_cycles=4, underruns=0, rss_growth_mb=0.5)
     anatomy = miss_anatomy(read_log(tmp_path / "run.jsonl"))
@@ -121,18 +124,20 @@ def test_where_the_missed_gaps_time_went_is_summed_over_the_cycles(tmp_path, cap
             "miss_off_cpu_s": 0.012,
             "miss_slept_s": 0.0,
             "miss_slices": 8,
+            "miss_collections": 2,
+            "miss_collecting_s": 0.004,
         }
     )
     assert main(["cycles", "report", str(tmp_path / "run.jsonl")]) == 0
-    assert "| run | 4 | 0.060 s | 0.008 s | 0.040 s | 0.012 s | 0.000 s | 8 |" in capsys.readouterr().out
+    assert "| run | 4 | 0.060 s | 0.008 s | 0.040 s | 0.012 s | 0.000 s | 8 | 2 | 0.004 s |" in capsys.readouterr().out
 
 
-def test_a_log_from_before_the_times_put_on_a_cpu_has_them_unknown(tmp_path):
+def test_a_log_from_before_the_times_put_on_a_cpu_and_the_collections_has_them_unknown(tmp_path):
     with RunLog(tmp_path / "run.jsonl", {"command": "deploy"}) as log:
-        write_placed_cycle(log, 0, **{k: 0.0 for k in MISS_ANATOMY if k != "miss_slices"})
+        write_placed_cycle(log, 0, **{k: 0.0 for k in MISS_ANATOMY if k not in LATER_ANATOMY})
     anatomy = miss_anatomy(read_log(tmp_path / "run.jsonl"))
-    assert anatomy is not None and anatomy["miss_slices"] is None
-    assert anatomy_table({"old": anatomy}).splitlines()[-1].endswith("| 0.000 s | — |")
+    assert anatomy is not None and all(anatomy[k] is None for k in LATER_ANATOMY)
+    assert anatomy_table({"old": anatomy}).splitlines()[-1].endswith("| 0.000 s | — | — | — |")
 
 
 def test_a_log_without_the_gaps_anatomy_has_no_such_row(tmp_path):
