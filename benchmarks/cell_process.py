@@ -22,7 +22,7 @@ from typing import Any
 
 from mrguide.cli_args import nonnegative_int, positive_int
 from mrguide.config import load_section
-from mrguide.deploy.cycle_report import cycle_figures
+from mrguide.deploy.cycle_report import cycle_figures, miss_anatomy
 from mrguide.deploy.cycles import CycleConfig, CycleRun
 from mrguide.deploy.runlog import RunLog, read_log
 from mrguide.deploy.session import DeployConfig
@@ -41,15 +41,17 @@ def twin_camera(cell: Any) -> Any:
     return TwinDryRun(str(cell.path)).camera(dcfg.camera, cell.path.parent, cell.env.task.object_height)
 
 
-def run(policy: str, cell: Any, cycles: int, seed: int, own_process: bool, log: Path) -> dict[str, Any]:
-    """One run, logged to `log`; its figures from the log."""
+def run(
+    policy: str, cell: Any, cycles: int, seed: int, own_process: bool, log: Path, bus: Any = None
+) -> dict[str, Any]:
+    """One run, logged to `log` (the cell's bus config, or `bus`); its figures from the log."""
     camera = twin_camera(cell)
     try:
-        with RunLog(log, {"benchmark": "cell_process", "cell": WHERE[own_process]}) as run_log:
+        with RunLog(log, {"benchmark": Path(__file__).stem, "cell": WHERE[own_process]}) as run_log:
             summary = dry_run_cycles(
                 policy,
                 cell.env,
-                cell.bus,
+                bus or cell.bus,
                 CycleRun(0, cycles, seed, CycleConfig()),
                 run_log,
                 cell.safety,
@@ -72,6 +74,7 @@ def run(policy: str, cell: Any, cycles: int, seed: int, own_process: bool, log: 
         "underruns": f["underruns"],
         "steal_s": round(sum(float(r["steal_s"]) for r in ends), 2),
         "cycle_s_median": f["cycle_s_median"],
+        **{k: round(v, 4) for k, v in (miss_anatomy(records) or {}).items()},
     }
 
 

@@ -26,7 +26,7 @@ from mrguide.drivers.cobot_state import CycleSample
 from mrguide.drivers.cycle import CycleTimer, Tick
 from mrguide.drivers.errors import BusError, DeviceFaultError, DriverError
 from mrguide.drivers.heartbeat import OPERATIONAL
-from mrguide.drivers.realtime import make_current_thread_realtime
+from mrguide.drivers.realtime import hold_switch_interval, make_current_thread_realtime, release_switch_interval
 from mrguide.drivers.setpoint_guard import plan_rpdos
 from mrguide.drivers.thread_clock import Gap, ThreadClock
 
@@ -45,12 +45,16 @@ class ControlLoop:
         self.core = core
         self.thread: threading.Thread | None = None
         self._stop = threading.Event()
+        self._switch_interval = 0.0  # held from `start` to `stop` (timing.switch_interval)
 
     @property
     def alive(self) -> bool:
         return self.thread is not None and self.thread.is_alive()
 
     def start(self) -> None:
+        self._switch_interval = self.core.config.timing.switch_interval
+        if self._switch_interval:
+            hold_switch_interval(self._switch_interval)
         self._stop = threading.Event()  # one per thread: a thread left behind never resumes
         self.thread = threading.Thread(target=self._run, args=(self._stop,), name="mrguide-can-cycle", daemon=True)
         self.thread.start()
@@ -63,6 +67,9 @@ class ControlLoop:
             if self.thread.is_alive():
                 logger.error("the control thread did not stop within %g s; leaving it behind", JOIN_TIMEOUT)
         self.thread = None
+        if self._switch_interval:
+            release_switch_interval(self._switch_interval)
+            self._switch_interval = 0.0
 
     def _run(self, stop: threading.Event) -> None:
         priority = self.core.config.timing.realtime_priority

@@ -6,6 +6,7 @@ import contextlib
 import gc
 import logging
 import os
+import sys
 import threading
 from collections.abc import Iterator
 
@@ -62,3 +63,32 @@ def settled_heap() -> Iterator[None]:
             if _frozen == 0:
                 gc.unfreeze()
                 gc.collect()
+
+
+_switch_users: list[float] = []  # the switch interval each holder asked for, in order
+_switch_default: float | None = None  # the interpreter's before the first holder
+_switch_lock = threading.Lock()
+
+
+def hold_switch_interval(seconds: float) -> None:
+    """Set Python's thread switch interval to `seconds` (the shortest any holder asked for) until the matching
+    `release_switch_interval`: a thread waiting for the GIL waits at most about that long for a thread running Python
+    code to let go of it (the interpreter's default, 5 ms, is longer than a control period)."""
+    global _switch_default
+    with _switch_lock:
+        if not _switch_users:
+            _switch_default = sys.getswitchinterval()
+        _switch_users.append(seconds)
+        sys.setswitchinterval(min(_switch_users))
+
+
+def release_switch_interval(seconds: float) -> None:
+    """End one `hold_switch_interval(seconds)`; the last one restores the interpreter's interval."""
+    with _switch_lock:
+        if seconds not in _switch_users:
+            return
+        _switch_users.remove(seconds)
+        if _switch_users:
+            sys.setswitchinterval(min(_switch_users))
+        elif _switch_default is not None:
+            sys.setswitchinterval(_switch_default)
