@@ -107,8 +107,9 @@ class TimingConfig:
     realtime_priority: Annotated[int, Range(0, 99)] = 0
     #: Python's thread switch interval while the control thread runs (s, 0..0.005): how long it can wait for the GIL
     #: that another thread of the process holds before that thread is made to let go. 0 leaves the interpreter's
-    #: (5 ms, longer than a control period).
-    switch_interval: Annotated[float, Range(0.0, 0.005, " s")] = 0.0
+    #: (5 ms, longer than a control period); 0.5 ms cut the control cycles whose work ran past the period about
+    #: sixfold in the camera cell (docs/performance.md).
+    switch_interval: Annotated[float, Range(0.0, 0.005, " s")] = 0.0005
 
     def __post_init__(self) -> None:
         # Every value arms a supervision: NaN or inf would switch it off (a time-out that never expires).

@@ -21,7 +21,7 @@ def test_the_control_thread_holds_the_configured_interval_until_it_stops(make_ri
 
 def test_zero_leaves_the_interpreters_interval(make_rig):
     before = sys.getswitchinterval()
-    rig = make_rig()
+    rig = make_rig(switch_interval=0.0)
     assert sys.getswitchinterval() == before
     rig.cobot.disconnect()
     assert sys.getswitchinterval() == before
