@@ -78,20 +78,28 @@ def run(
     }
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+def pair_parser(doc: str | None, cycles: int, pairs: int, logs: str) -> argparse.ArgumentParser:
+    """The arguments of an alternating-pairs benchmark (this one, switch_interval.py); `logs` names its log files."""
+    ap = argparse.ArgumentParser(description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--policy", required=True, help="exported policy file (.npz)")
-    ap.add_argument("--cycles", type=positive_int, default=50)
-    ap.add_argument("--pairs", type=positive_int, default=2)
+    ap.add_argument("--cycles", type=positive_int, default=cycles)
+    ap.add_argument("--pairs", type=positive_int, default=pairs)
     ap.add_argument("--seed", type=nonnegative_int, default=0, help="the feeder's seed")
     ap.add_argument("--cell", type=Path, default=Path(__file__).parents[1] / "configs" / "cells" / "real_cell.toml")
-    ap.add_argument("--logs", type=Path, help="keep each run's log here (PAIR-shared.jsonl, PAIR-own.jsonl)")
-    args = ap.parse_args()
-    cell = load_real_cell(args.cell)
-    print(
-        f"machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}; {args.cell.name}"
-    )
+    ap.add_argument("--logs", type=Path, help=f"keep each run's log here ({logs})")
+    return ap
+
+
+def print_header(cell: Path) -> None:
+    """The machine, the cell and the column heads of `print_row`."""
+    print(f"machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}; {cell.name}")
     print(f"{'cell':<7} {'placed':>9} {'missed':>7} {'overruns':>9} {'dry':>4} {'steal s':>8} {'median s':>9}")
+
+
+def main() -> None:
+    args = pair_parser(__doc__, 50, 2, "PAIR-shared.jsonl, PAIR-own.jsonl").parse_args()
+    cell = load_real_cell(args.cell)
+    print_header(args.cell)
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         logs = args.logs or Path(tmp)

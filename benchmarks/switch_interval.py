@@ -11,18 +11,15 @@ unasked: the GIL, I/O or the host). Run it on a quiet machine. The last line is 
 
 from __future__ import annotations
 
-import argparse
 import json
-import os
-import platform
 import tempfile
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from cell_process import print_row, run
+from cell_process import pair_parser, print_header, print_row, run
 
-from mrguide.cli_args import nonnegative_int, positive_float, positive_int
+from mrguide.cli_args import positive_float
 from mrguide.deploy.host_stats import miss_anatomy_text
 from mrguide.experiments.sim2real import load_real_cell
 
@@ -34,20 +31,11 @@ def print_anatomy(r: dict[str, Any]) -> None:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--policy", required=True, help="exported policy file (.npz)")
+    ap = pair_parser(__doc__, 30, 4, "PAIR-INTERVAL.jsonl")
     ap.add_argument("--interval", type=positive_float, default=0.0005, help="the shorter switch interval (s)")
-    ap.add_argument("--cycles", type=positive_int, default=30)
-    ap.add_argument("--pairs", type=positive_int, default=4)
-    ap.add_argument("--seed", type=nonnegative_int, default=0, help="the feeder's seed")
-    ap.add_argument("--cell", type=Path, default=Path(__file__).parents[1] / "configs" / "cells" / "real_cell.toml")
-    ap.add_argument("--logs", type=Path, help="keep each run's log here (PAIR-INTERVAL.jsonl)")
     args = ap.parse_args()
     cell = load_real_cell(args.cell)
-    print(
-        f"machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}; {args.cell.name}"
-    )
-    print(f"{'cell':<7} {'placed':>9} {'missed':>7} {'overruns':>9} {'dry':>4} {'steal s':>8} {'median s':>9}")
+    print_header(args.cell)
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         logs = args.logs or Path(tmp)
