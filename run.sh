@@ -55,6 +55,11 @@ if [ ! -f "$WEB_STAMP" ]; then
   touch "$WEB_STAMP"
 fi
 
+# TorchInductor compiles the DDPG update with the C++ compiler; without one it runs uncompiled, ~2.5x slower.
+if ! command -v g++ >/dev/null && ! command -v c++ >/dev/null; then
+  apt_install "the compiled training update" g++ || true
+fi
+
 cmd=${1:-main}
 shift || true
 case "$cmd" in

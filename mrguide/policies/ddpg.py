@@ -8,7 +8,8 @@ critic plus a behaviour-cloning term on the batch's expert (ζ = 1) samples (TD3
 Polyak updates of the target networks. Evaluations and the exported policy use the target actor — the
 τ-average of the actor's weights — which does not wander from one update to the next as the online actor
 does under noisy labels; exploration uses the online actor plus Gaussian noise. The networks (the anchored
-actor, the critic pair) are in `networks`.
+actor, the critic pair) are in `networks`; the update's arithmetic, one compiled function of tensors, in
+`ddpg_update`.
 """
 
 from __future__ import annotations
@@ -18,16 +19,11 @@ from typing import Annotated
 
 import numpy as np
 import torch
-from torch import nn
 
 from mrguide.config import ConfigError, Range, check_ranges
+from mrguide.policies.ddpg_update import AdamMoments, Networks, Rates, run_update, td_target
 from mrguide.policies.networks import Actor, CriticEnsemble, ObsScaler
 from mrguide.policies.replay_buffer import Batch, TaggedReplay
-
-#: The behaviour-cloning term asks the gripper output for the expert's side of 0 by at least this much, no more:
-#: pulling a tanh output towards a label of exactly ±1 saturates it, and a saturated gripper output never
-#: learns again (ours; seen when early noisy release marks had taught "vacuum on" at the goal).
-GRIP_MARGIN = 0.5
 
 
 @dataclass(frozen=True)
@@ -54,12 +50,6 @@ class DDPGConfig:
         check_ranges(self, "ddpg")
 
 
-def bc_error(pi: torch.Tensor, act: torch.Tensor) -> torch.Tensor:
-    """Per sample: the squared error of the target position plus a squared hinge on the gripper command."""
-    grip = torch.relu(GRIP_MARGIN - torch.sign(act[..., 3]) * pi[..., 3]) ** 2
-    return ((pi[..., :3] - act[..., :3]) ** 2).sum(-1) + grip
-
-
 class DDPG:
     """Actor-critic with target networks; `update` takes one minibatch."""
 
@@ -77,15 +67,11 @@ class DDPG:
         self.critic_target = CriticEnsemble(scaler(), act_dim, cfg.hidden, 2)
         self.actor_target.load_state_dict(self.actor.state_dict())
         self.critic_target.load_state_dict(self.critic.state_dict())
-        # fused: one kernel per step for all parameters (same arithmetic as the loop version)
-        self.actor_params = list(self.actor.parameters())
-        self.actor_opt = torch.optim.Adam(self.actor_params, lr=cfg.lr_actor, fused=True)
-        self.critic_opt = torch.optim.Adam(self.critic.parameters(), lr=cfg.lr_critic, fused=True)
+        self.nets = Networks(self.actor, self.critic, self.actor_target, self.critic_target)
+        self.actor_moments = AdamMoments.zeros_like(list(self.actor.parameters()))
+        self.critic_moments = AdamMoments.zeros_like(list(self.critic.parameters()))
+        self.rates = Rates(cfg.gamma, cfg.tau, cfg.lr_actor, cfg.lr_critic, cfg.bc_weight)
         self.updates = 0  # updates so far
-        self._soft_pairs: list[tuple[list[torch.Tensor], list[torch.Tensor]]] = [
-            (list(net.parameters()), list(tgt.parameters()))
-            for net, tgt in ((self.actor, self.actor_target), (self.critic, self.critic_target))
-        ]
 
     @property
     def policy_actor(self) -> Actor:
@@ -125,56 +111,15 @@ class DDPG:
           batch's expert (ζ = 1) samples; bc_loss is 0 when the batch holds none (always, without guidance)
           or bc_weight is 0.
         """
-        obs = torch.as_tensor(batch.obs)
-        act = torch.as_tensor(batch.act)
-        rew = torch.as_tensor(batch.rew)
-        next_obs = torch.as_tensor(batch.next_obs)
-        target_q = self.td_target(rew, next_obs, torch.as_tensor(batch.done))
-        q = self.critic(obs, act)
-        critic_loss = nn.functional.mse_loss(q, target_q.expand_as(q)) * q.shape[0]  # sum of the members' losses
-        self.critic_opt.zero_grad()
-        critic_loss.backward()
-        self.critic_opt.step()
-
+        expert = torch.as_tensor(batch.expert, dtype=torch.float32)
+        tensors = tuple(torch.as_tensor(x) for x in (batch.obs, batch.act, batch.rew, batch.next_obs, batch.done))
+        stats = run_update(self.nets, (self.actor_moments, self.critic_moments), self.rates, (*tensors, expert))
         self.updates += 1
-        actor_stats = self._actor_step(obs, act, batch.expert)
-        with torch.no_grad():  # the hot path: no autograd records, one tensor-to-Python conversion per update
-            for params, targets in self._soft_pairs:
-                torch._foreach_lerp_(targets, params, self.cfg.tau)
-            q1 = q[0]
-            return dict(
-                zip(
-                    self.CRITIC_STATS + self.ACTOR_STATS,
-                    torch.stack([critic_loss, q1.mean(), q1.max(), *actor_stats]).tolist(),
-                )
-            )
+        return dict(zip(self.CRITIC_STATS + self.ACTOR_STATS, stats.tolist()))
 
-    @torch.no_grad()
     def td_target(self, rew: torch.Tensor, next_obs: torch.Tensor, done: torch.Tensor) -> torch.Tensor:
-        """r + γ (1 − done) min_i Q'_i(s', μ'(s')): no bootstrap past a terminal state (done = terminated,
-        not truncated), the minimum over the two target critics."""
-        next_act = self.actor_target(next_obs)
-        next_q = self.critic_target(next_obs, next_act).min(0).values
-        return rew + self.cfg.gamma * (1.0 - done) * next_q
-
-    def _actor_step(self, obs: torch.Tensor, act: torch.Tensor, expert_mask: np.ndarray) -> list[torch.Tensor]:
-        """Deterministic policy gradient on the first critic, plus behaviour cloning on expert samples.
-        Returns the (actor loss, Q term, BC loss) tensors."""
-        pi = self.actor(obs)
-        q_pi = self.critic(obs, pi, slice(0, 1)).squeeze(0)  # the actor follows the first critic (as TD3)
-        bc_loss = torch.zeros(())
-        if self.cfg.bc_weight > 0 and expert_mask.any():
-            expert = torch.as_tensor(expert_mask)
-            bc_loss = bc_error(pi[expert], act[expert]).mean()
-            q_term = -q_pi.mean() / (q_pi.abs().mean().detach() + 1e-6)
-            actor_loss = q_term + self.cfg.bc_weight * bc_loss
-        else:
-            actor_loss = q_term = -q_pi.mean()
-        # gradients w.r.t. the actor only: the critic's weight gradients are never computed
-        for p, g in zip(self.actor_params, torch.autograd.grad(actor_loss, self.actor_params)):
-            p.grad = g
-        self.actor_opt.step()
-        return [actor_loss, q_term, bc_loss]
+        """The critics' TD target for a batch (`ddpg_update.td_target`)."""
+        return td_target(self.nets, self.cfg.gamma, rew, next_obs, done)
 
     def state_dict(self) -> dict:
         return {
@@ -182,8 +127,8 @@ class DDPG:
             "critic": self.critic.state_dict(),
             "actor_target": self.actor_target.state_dict(),
             "critic_target": self.critic_target.state_dict(),
-            "actor_opt": self.actor_opt.state_dict(),
-            "critic_opt": self.critic_opt.state_dict(),
+            "actor_opt": self.actor_moments.state_dict(),
+            "critic_opt": self.critic_moments.state_dict(),
             "updates": self.updates,
         }
 
@@ -192,6 +137,6 @@ class DDPG:
         self.actor_target.load_state_dict(state["actor_target"])
         self.critic.load_state_dict(state["critic"])
         self.critic_target.load_state_dict(state["critic_target"])
-        self.actor_opt.load_state_dict(state["actor_opt"])
-        self.critic_opt.load_state_dict(state["critic_opt"])
+        self.actor_moments.load_state_dict(state["actor_opt"])
+        self.critic_moments.load_state_dict(state["critic_opt"])
         self.updates = state["updates"]

@@ -8,7 +8,8 @@ import pytest
 import torch
 
 from mrguide.config import ConfigError
-from mrguide.policies.ddpg import DDPG, GRIP_MARGIN, DDPGConfig, bc_error
+from mrguide.policies.ddpg import DDPG, DDPGConfig
+from mrguide.policies.ddpg_update import GRIP_MARGIN, bc_error
 from mrguide.policies.replay_buffer import TaggedReplay
 
 
