@@ -2,7 +2,12 @@
 the same core, the twin alone for as many decisions (the scripted expert acting), so that the cost of learning is a
 ratio that a busier or quieter day of a shared machine changes less than it changes seconds.
 
-Run: python benchmarks/train.py [--steps N] [--config FILE]. Prints a table; the last line is one JSON object.
+The update is compiled by TorchInductor on its first call (`mrguide.policies.ddpg_update`), which costs ~20 s the
+first time on a machine and ~3 s once its build is in TorchInductor's cache; the wall time includes it, and `--cold`
+measures with an empty cache.
+
+Run: python benchmarks/train.py [--steps N] [--config FILE] [--cold]. Prints a table; the last line is one JSON
+object.
 """
 
 from __future__ import annotations
@@ -14,6 +19,9 @@ import os
 import platform
 import tempfile
 import time
+from pathlib import Path
+
+from torch._inductor.runtime.cache_dir_utils import cache_dir
 
 from mrguide.policies.train import Trainer
 from mrguide.policies.train_config import load_sac_config, load_train_config
@@ -40,7 +48,13 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--steps", type=int, default=20_000)
     ap.add_argument("--config", help="training config (TOML); default: the built-in defaults")
+    ap.add_argument("--cold", action="store_true", help="compile the update with an empty TorchInductor cache")
     args = ap.parse_args()
+    scratch = tempfile.TemporaryDirectory()
+    if args.cold:
+        os.environ["TORCHINDUCTOR_CACHE_DIR"] = scratch.name
+    cache = cache_dir()
+    warm = Path(cache).is_dir() and any(Path(cache).iterdir())
     if hasattr(os, "sched_setaffinity"):
         os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
     tc, dc, gc, ec = load_train_config(args.config)
@@ -64,7 +78,9 @@ def main() -> None:
         "ratio_to_twin": wall / twin,
         "final_eval_success": tr.last_eval.get("success_rate"),
         "annotations_asked": tr.counters.asked,
+        "compile_cache": "not empty" if warm else "empty",
     }
+    scratch.cleanup()
     print(
         f"machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}, pinned to one core"
     )
