@@ -85,6 +85,7 @@ def main() -> None:
         f"machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}, pinned to one core"
     )
     print(f"{'guided training steps':<40} {tr.counters.step}")
+    print(f"{'TorchInductor cache at the start':<40} {res['compile_cache']} ({cache})")
     print(f"{'steps/s (env + update)':<40} {res['steps_per_s']:.1f}")
     hidden = "x".join(map(str, (tr.sac_cfg if tc.learner == "sac" else dc).hidden))
     print(f"{f'update (batch {tc.batch_size}, {hidden} MLPs)':<40} {res['update_ms']:.2f} ms")
