@@ -55,7 +55,7 @@ if [ ! -f "$WEB_STAMP" ]; then
   touch "$WEB_STAMP"
 fi
 
-# TorchInductor compiles the DDPG update with the C++ compiler; without one it runs uncompiled, ~2.5x slower.
+# TorchInductor compiles the DDPG update with the C++ compiler; without one it runs uncompiled, about twice as slow.
 if ! command -v g++ >/dev/null && ! command -v c++ >/dev/null; then
   apt_install "the compiled training update" g++ || true
 fi

@@ -2,8 +2,8 @@
 the same core, the twin alone for as many decisions (the scripted expert acting), so that the cost of learning is a
 ratio that a busier or quieter day of a shared machine changes less than it changes seconds.
 
-The update is compiled by TorchInductor on its first call (`mrguide.policies.ddpg_update`), which costs ~20 s the
-first time on a machine and ~3 s once its build is in TorchInductor's cache; the wall time includes it, and `--cold`
+The update is compiled by TorchInductor on its first call (`mrguide.policies.ddpg_update`), which costs ~30 s the
+first time on a machine and ~5 s once its build is in TorchInductor's cache; the wall time includes it, and `--cold`
 measures with an empty cache.
 
 Run: python benchmarks/train.py [--steps N] [--config FILE] [--cold]. Prints a table; the last line is one JSON
@@ -50,11 +50,11 @@ def main() -> None:
     ap.add_argument("--config", help="training config (TOML); default: the built-in defaults")
     ap.add_argument("--cold", action="store_true", help="compile the update with an empty TorchInductor cache")
     args = ap.parse_args()
-    scratch = tempfile.TemporaryDirectory()
-    if args.cold:
+    scratch = tempfile.TemporaryDirectory() if args.cold else None
+    if scratch:
         os.environ["TORCHINDUCTOR_CACHE_DIR"] = scratch.name
-    cache = cache_dir()
-    warm = Path(cache).is_dir() and any(Path(cache).iterdir())
+    cache = cache_dir()  # made if missing
+    warm = any(Path(cache).iterdir())
     if hasattr(os, "sched_setaffinity"):
         os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
     tc, dc, gc, ec = load_train_config(args.config)
@@ -80,7 +80,8 @@ def main() -> None:
         "annotations_asked": tr.counters.asked,
         "compile_cache": "not empty" if warm else "empty",
     }
-    scratch.cleanup()
+    if scratch:
+        scratch.cleanup()
     print(
         f"machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}, pinned to one core"
     )

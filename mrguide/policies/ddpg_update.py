@@ -4,8 +4,8 @@
 actor step (deterministic policy gradient plus the behaviour-cloning term), the two Adam steps and the Polyak
 averaging of the targets. The gradients come from `torch.func.grad` and Adam's arithmetic is written out
 (`adam_`, that of `torch.optim.Adam` without weight decay), so that nothing in it calls back into Python: compiled
-whole, one update of the default learner costs about 40 % of the eager version on this project's machines
-(`benchmarks/train.py`). The eager version runs where the compiler cannot (`run_update`).
+whole, one update of the default learner costs about half the eager version on this project's machines
+(`benchmarks/update.py`). The eager version runs where the compiler cannot (`run_update`).
 """
 
 from __future__ import annotations
@@ -181,5 +181,5 @@ def run_update(
             return _compiled_step(nets, moments, rates, batch)
         except torch._dynamo.exc.BackendCompilerFailed as exc:
             _compiler_works = False
-            log.warning("the DDPG update runs uncompiled, about 2.5x slower: TorchInductor failed (%s)", exc)
+            log.warning("the DDPG update runs uncompiled, about twice as slow: TorchInductor failed (%s)", exc)
     return update_step(nets, moments, rates, batch)
