@@ -84,7 +84,7 @@ class ControlLoop:
                 tick = timer.wait()
                 started = clock.read()
                 if tick.skipped:
-                    self.core.cycle_stats.record_miss(Gap.between(previous, started, tick.slept))
+                    self.core.cycle_stats.record_miss(Gap.between(previous, started, tick.slept), tick.skipped)
                 previous = started
                 try:
                     self.cycle(tick)

@@ -11,6 +11,7 @@ import operator
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
@@ -65,6 +66,10 @@ class CycleTimer:
         return Tick(k, deadline, skipped, slept)
 
 
+#: How many of the latest gaps `MissAnatomy.recent` keeps.
+RECENT_GAPS = 64
+
+
 @dataclass(frozen=True)
 class MissAnatomy:
     """The gaps between two cycle starts with deadlines skipped between them, summed by where the control thread's
@@ -80,10 +85,14 @@ class MissAnatomy:
     #: The control thread's own garbage collections in those gaps, and their time (s).
     collections: int = 0
     collecting_s: float = 0.0
+    #: The latest RECENT_GAPS gaps, each as (when it ended on `time.monotonic()`, its length in s, deadlines
+    #: skipped): one clock for every process of the machine, so another process's late wake-ups can be matched.
+    recent: tuple[tuple[float, float, int], ...] = ()
 
-    def add(self, gap: Gap) -> MissAnatomy:
+    def add(self, gap: Gap, skipped: int = 1) -> MissAnatomy:
         return replace(
             self,
+            recent=(*self.recent[1 - RECENT_GAPS :], (gap.ended, gap.wall, skipped)),
             gaps=self.gaps + 1,
             wall_s=self.wall_s + gap.wall,
             cpu_s=self.cpu_s + gap.cpu,
@@ -95,8 +104,10 @@ class MissAnatomy:
             collecting_s=self.collecting_s + gap.collecting,
         )
 
-    def since(self, earlier: MissAnatomy) -> dict[str, float | int | None]:
-        """The gaps added after `earlier` (a snapshot of the same counters), by field, for a run log's record."""
+    def since(self, earlier: MissAnatomy) -> dict[str, Any]:
+        """The gaps added after `earlier` (a snapshot of the same counters), by field, for a run log's record;
+        `miss_at` lists the latest RECENT_GAPS of them as `recent` holds them."""
+        added = min(self.gaps - earlier.gaps, len(self.recent))
         return {
             "miss_gaps": self.gaps - earlier.gaps,
             "miss_wall_s": self.wall_s - earlier.wall_s,
@@ -107,6 +118,7 @@ class MissAnatomy:
             "miss_slices": if_known(operator.sub, self.slices, earlier.slices),
             "miss_collections": self.collections - earlier.collections,
             "miss_collecting_s": self.collecting_s - earlier.collecting_s,
+            "miss_at": [list(r) for r in self.recent[len(self.recent) - added :]],
         }
 
 
@@ -152,9 +164,9 @@ class CycleStats:
         self._n_work += 1
         self._overruns += duration > self._period
 
-    def record_miss(self, gap: Gap) -> None:
-        """The gap from the previous cycle's start to this one's, for a cycle that skipped deadlines."""
-        self._misses = self._misses.add(gap)
+    def record_miss(self, gap: Gap, skipped: int) -> None:
+        """The gap from the previous cycle's start to this one's, for a cycle that skipped `skipped` deadlines."""
+        self._misses = self._misses.add(gap, skipped)
 
     def summary(self) -> CycleSummary:
         n = min(self._n, len(self._lateness))

@@ -65,6 +65,8 @@ class Gap:
     #: The thread's own garbage collections in the gap, of any generation, and their wall time (part of the rest).
     collections: int = 0
     collecting: float = 0.0
+    #: When the gap ended (`time.monotonic()`, s).
+    ended: float = 0.0
 
     @classmethod
     def between(cls, earlier: ThreadReading, later: ThreadReading, slept: float) -> Gap:
@@ -78,6 +80,7 @@ class Gap:
             slices,
             later.collections - earlier.collections,
             later.collecting - earlier.collecting,
+            later.wall,
         )
 
     @property

@@ -9,7 +9,7 @@ import time
 
 import pytest
 
-from mrguide.drivers.cycle import MissAnatomy
+from mrguide.drivers.cycle import RECENT_GAPS, MissAnatomy
 from mrguide.drivers.thread_clock import Gap, ThreadClock, ThreadReading
 
 linux_only = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="/proc/thread-self/schedstat is Linux's")
@@ -35,6 +35,20 @@ def test_the_anatomy_sums_gaps_and_says_unknown_once_a_gap_was():
     collected = a.add(Gap(0.03, 0.025, 0.0, 0.0, 1, collections=3, collecting=0.02))
     assert (collected.collections, collected.collecting_s) == pytest.approx((3, 0.02))
     assert collected.since(a)["miss_collections"] == 3
+
+
+def test_the_anatomy_keeps_when_the_latest_gaps_ended_for_matching_another_process():
+    a = MissAnatomy()
+    for i in range(RECENT_GAPS + 5):
+        a = a.add(Gap(0.008, 0.0, 0.004, 0.0, 1, ended=100.0 + i), skipped=1 + i % 2)
+    assert len(a.recent) == RECENT_GAPS and a.recent[-1] == (100.0 + RECENT_GAPS + 4, 0.008, 1 + (RECENT_GAPS + 4) % 2)
+    assert a.recent[0][0] == 105.0  # the five oldest are gone
+    b = a.add(Gap(0.02, 0.0, 0.0, 0.0, 1, ended=500.0), skipped=4)
+    assert b.since(a)["miss_at"] == [[500.0, 0.02, 4]]
+    assert len(b.since(MissAnatomy())["miss_at"]) == RECENT_GAPS  # more gaps than kept: the latest
+    assert b.since(b)["miss_at"] == []
+    ended = Gap.between(ThreadReading(10.0, 1.0, 0.5, 7), ThreadReading(10.1, 1.02, 0.53, 9), slept=0.004).ended
+    assert ended == 10.1
 
 
 def test_a_thread_counts_its_own_garbage_collections_not_another_threads():
