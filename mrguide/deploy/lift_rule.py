@@ -8,7 +8,12 @@
   hanging under it and jerks the part at the arm's full speed: in the 'real' cell's twin, the drops in the lift
   were that jerk at full vacuum (docs/robot.md, production cycles).
 
-Both only lower the height the action asks for; the twin trains without them (its rigid cup needs neither).
+- Hold in transit: a release asked while the part is held in the lift or the transport is not carried out: the
+  vacuum stays on. The task model lets a part go only in the release phase, over its goal; anywhere before, a
+  release is a dropped part, so refusing it can only keep a part that the policy would have dropped.
+
+The first two only lower the height the action asks for, the third only keeps the vacuum on; the twin trains without
+them (its rigid cup needs none, and a release in transit ends a training episode as a drop).
 """
 
 from __future__ import annotations
@@ -19,8 +24,22 @@ from mrguide.drivers.cobot_state import VacuumState
 from mrguide.robot import Workspace
 from mrguide.task import ACT_DIM, Phase
 
-#: What `LiftRule.apply` says it did (also the safety event's name).
-VACUUM_NOT_OK, BREAK_AWAY = "vacuum_not_ok", "break_away"
+#: What `LiftRule.apply` and `hold_in_transit` say they did (also the safety events' names).
+VACUUM_NOT_OK, BREAK_AWAY, HOLD_IN_TRANSIT = "vacuum_not_ok", "break_away", "hold_in_transit"
+
+
+def hold_in_transit(action: np.ndarray, phase: int, vac: VacuumState) -> tuple[np.ndarray, str | None]:
+    """(the action to run, HOLD_IN_TRANSIT if its release was refused, else None): in the lift and the transport,
+    with the part reported gripped, a vacuum command g' <= 0 becomes +1. An action the decision step will refuse
+    (wrong shape, NaN) is passed on unchanged for it to refuse."""
+    a = np.asarray(action, dtype=float)
+    if a.shape != (ACT_DIM,) or not np.all(np.isfinite(a)):
+        return action, None
+    if phase in (Phase.LIFT, Phase.TRANSPORT) and a[3] <= 0 and vac.part_gripped:
+        out = a.copy()
+        out[3] = 1.0
+        return out, HOLD_IN_TRANSIT
+    return action, None
 
 
 class LiftRule:

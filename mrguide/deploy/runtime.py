@@ -22,7 +22,7 @@ import numpy as np
 from mrguide.config import ConfigError
 from mrguide.deploy.decision import NON_FINITE, ActionError, DecisionStep
 from mrguide.deploy.following import FollowingMonitor
-from mrguide.deploy.lift_rule import LiftRule
+from mrguide.deploy.lift_rule import LiftRule, hold_in_transit
 from mrguide.deploy.object_tracking import ObjectStartUnknown, ObjectTracker
 from mrguide.deploy.runlog import RunLog
 from mrguide.deploy.runtime_config import RuntimeConfig
@@ -367,6 +367,10 @@ class Runtime:
         if rule is not None:
             self.supervisor.report(Event(rule), f"height target lowered in phase {self.decision.phase}")
             notes["lift_rule"] = rule
+        executed, held = hold_in_transit(executed, self.decision.phase, vac)
+        if held is not None:
+            self.supervisor.report(Event(held), f"release refused in phase {self.decision.phase}: the part is held")
+            notes["hold_rule"] = held
         executed, reseat = self.seal.apply(executed, tcp, obs[OBS_OBJECT], self.decision.phase, vac)
         if reseat is not None:
             self.supervisor.report(Event.RESEAT, f"no seal at {vac.level_kpa:.0f} kPa: re-seat {self.seal.reseats}")

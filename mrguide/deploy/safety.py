@@ -56,6 +56,7 @@ class Event(str, enum.Enum):
     VACUUM_LOST = "vacuum_lost"  # part lost during lift or transport (a drop)
     VACUUM_NOT_OK = "vacuum_not_ok"  # a lift asked before the part was reported gripped: the arm does not rise
     BREAK_AWAY = "break_away"  # the lift's first millimetres slowed (lift_rule.py)
+    HOLD_IN_TRANSIT = "hold_in_transit"  # a release asked in the lift or transport: the vacuum stays on (lift_rule.py)
     RESEAT = "reseat"  # a cup pressed without a seal re-seated at the next point of the search (seal_search.py)
     STALL = "stall"  # the decision loop stopped feeding setpoints (watchdog)
     INTERRUPT = "interrupt"  # Ctrl-C
@@ -76,6 +77,7 @@ REACTIONS: dict[Event, Reaction] = {
     Event.VACUUM_LOST: Reaction.ABORT,
     Event.VACUUM_NOT_OK: Reaction.CLAMP,
     Event.BREAK_AWAY: Reaction.CLAMP,
+    Event.HOLD_IN_TRANSIT: Reaction.CLAMP,
     Event.RESEAT: Reaction.CLAMP,
     Event.STALL: Reaction.QUICK_STOP,
     Event.INTERRUPT: Reaction.QUICK_STOP,

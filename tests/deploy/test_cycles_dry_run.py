@@ -71,3 +71,32 @@ def test_a_part_dropped_in_the_lift_is_picked_again_and_placed(tmp_path):
     assert dropped.events[-1]["event"] == "retry" and "picked again" in dropped.events[-1]["detail"]
     assert main(["replay", f"{log}:0,1", "--save", str(tmp_path / "recovered.rrd")]) == 0
     assert (tmp_path / "recovered.rrd").stat().st_size > 0
+
+
+def test_a_release_asked_in_transport_is_refused_and_the_part_placed(tmp_path):
+    cfg = EnvConfig()
+    asked = []
+
+    def release_in_transport(obs, phase, a):
+        """A policy that lets go half-way: the third decision of the transport asks the vacuum off."""
+        if phase == 3:
+            asked.append(1)
+            if len(asked) == 3:
+                return a * [1, 1, 1, 0] - [0, 0, 0, 1]
+        return a
+
+    log = tmp_path / "cycles.jsonl"
+    with RunLog(log, {"test": "hold in transit"}) as run_log:
+        summary = dry_run_cycles(
+            None,
+            cfg,
+            bus_config(),
+            CycleRun(0, 1, seed=3, config=CycleConfig()),
+            run_log,
+            policy=Expert(cfg, release_in_transport),
+        )
+    assert len(asked) >= 3, "the transport never got to its third decision"
+    assert summary.placed == 1 and summary.retries() == {}, summary.text()
+    decisions = [r for r in read_log(log) if r["kind"] == "decision"]
+    held = [r for r in decisions if r.get("hold_rule") == "hold_in_transit"]
+    assert len(held) == 1 and held[0]["action"][3] == -1.0, held

@@ -1,11 +1,11 @@
-"""The runtime's lift rules (deploy/lift_rule.py): no rise before "vacuum OK", a slow break-away, nothing else."""
+"""The runtime's lift rules (deploy/lift_rule.py): no rise before "vacuum OK", a slow break-away, no release in transit."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from mrguide.deploy.lift_rule import BREAK_AWAY, VACUUM_NOT_OK, LiftRule
+from mrguide.deploy.lift_rule import BREAK_AWAY, HOLD_IN_TRANSIT, VACUUM_NOT_OK, LiftRule, hold_in_transit
 from mrguide.drivers.cobot_state import VacuumState
 from mrguide.robot import load_robot
 from mrguide.task import Phase
@@ -53,3 +53,18 @@ def test_the_lift_rises_slowly_for_its_first_millimetres_then_as_commanded():
 def test_an_action_the_decision_step_refuses_is_passed_on_unchanged(bad):
     rule = LiftRule(WS, PERIOD, DISTANCE, SPEED)
     assert rule.apply(bad, np.array([0.5, -0.07, 0.06]), Phase.GRASP, vacuum(False)) == (bad, None)
+
+
+def test_a_release_in_the_lift_or_transport_is_refused_while_the_part_is_held():
+    release = action_to([0.55, 0.05, 0.2], g=-1.0)
+    for phase in (Phase.LIFT, Phase.TRANSPORT):
+        out, which = hold_in_transit(release, phase, vacuum(True))
+        assert which == HOLD_IN_TRANSIT and out[3] == 1.0 and np.array_equal(out[:3], release[:3])
+        assert hold_in_transit(release * [1, 1, 1, 0], phase, vacuum(True))[0][3] == 1.0  # g' = 0 is no "on" either
+    assert hold_in_transit(release, Phase.RELEASE, vacuum(True)) == (release, None)  # over the goal: let go
+    assert hold_in_transit(release, Phase.GRASP, vacuum(True)) == (release, None)  # giving up a grasp
+    assert hold_in_transit(release, Phase.TRANSPORT, vacuum(False)) == (release, None)  # nothing held to keep
+    keep = action_to([0.55, 0.05, 0.2])
+    assert hold_in_transit(keep, Phase.TRANSPORT, vacuum(True)) == (keep, None)
+    bad = np.array([0.0, np.nan, 0.0, -1.0])
+    assert hold_in_transit(bad, Phase.TRANSPORT, vacuum(True))[0] is bad  # for the decision step to refuse
