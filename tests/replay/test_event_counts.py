@@ -7,7 +7,7 @@ from pathlib import Path
 
 from mrguide.replay.event_counts import main
 
-RUNS = Path(__file__).parents[2] / "docs" / "results" / "sim2real-main5k-deploy"
+RUNS = Path(__file__).parents[2] / "docs" / "results" / "main5k-deploy"
 
 
 def test_the_committed_reseat_counts_are_what_the_logs_say(capsys, monkeypatch):
@@ -16,7 +16,7 @@ def test_the_committed_reseat_counts_are_what_the_logs_say(capsys, monkeypatch):
     assert len(logs) == 12 and main(logs) == 0
     printed = capsys.readouterr().out
     assert printed == (RUNS / "reseats.txt").read_text()
-    assert "log-real_exact-default-None-seed0-055238.jsonl.gz: 10 episodes; 0 with reseat (none)" in printed
+    assert "log-real_exact-default-None-seed0-074455.jsonl.gz: 10 episodes; 0 with reseat (none)" in printed
 
 
 def test_a_missing_log_is_an_error_not_a_traceback(tmp_path, capsys):
