@@ -165,8 +165,8 @@ def main() -> int:
         return _run(args, config, robot)
 
 
-def _run(args: argparse.Namespace, config, robot) -> int:
-    t = config.timing
+def _print_header(args: argparse.Namespace, t) -> None:
+    """The bus timing under test and the machine."""
     print(
         f"frame-loss benchmark, timing of {args.config}: {t.control_period * 1e3:g} ms cycle, heartbeats every "
         f"{t.heartbeat_ms} ms, consumer time {t.heartbeat_timeout_ms} ms (x{t.heartbeat_timeout_factor:g}), "
@@ -177,6 +177,10 @@ def _run(args: argparse.Namespace, config, robot) -> int:
         f"load average {os.getloadavg()[0]:.2f}, python {platform.python_version()}"
     )
 
+
+def _run(args: argparse.Namespace, config, robot) -> int:
+    t = config.timing
+    _print_header(args, t)
     outcomes = [loss_run(config, robot, args.loss, args.seconds, seed) for seed in range(args.runs)]
     faults = [o for o in outcomes if o is not None]
     kinds = Counter(kind for kind, _, _ in faults)
