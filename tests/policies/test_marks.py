@@ -5,37 +5,22 @@ import pytest
 
 from mrguide.policies import waypoint_search as ws
 from mrguide.policies.annotations import Annotation, AnnotationCache
-from mrguide.policies.experts import OracleExpert, SimulatedAnnotator
 from mrguide.policies.guidance import NominalReference
 from mrguide.policies.guided_expert import GuidedExpert
 from mrguide.policies.mark_fusion import MarkFusion
 from mrguide.policies.pick_place_demo import RELEASE_DEPTH
-from mrguide.robot import Workspace, load_robot
+from mrguide.robot import load_robot
 from mrguide.task import (
     GRASP_PRESS,
     PICK_PHASE,
     PLACE_PHASE,
     Phase,
     TaskConfig,
-    observation,
     oracle_target,
     phase_from_progress,
     phase_target,
 )
-
-WIDE = Workspace((-5.0, -5.0, -5.0), (5.0, 5.0, 5.0))  # no clamping: noise statistics as drawn
-OBJ, GOAL = np.array([0.5, -0.1, 0.025]), np.array([0.5, 0.2, 0.025])
-
-
-def _obs(phase, obj=OBJ, goal=GOAL, tcp=(0.5, 0.1, 0.3), g=-1):
-    return observation(np.array(tcp), g, phase / 5, np.asarray(obj), np.asarray(goal))
-
-
-def _errors(noise, seed, n=4000, point=(0.5, -0.1, 0.047)):
-    ann = SimulatedAnnotator(TaskConfig(), noise, WIDE, seed=seed)
-    obs = _obs(1, obj=np.array(point) - [0, 0, 0.022])
-    exact = OracleExpert(TaskConfig()).annotate(obs).target
-    return ann, np.array([ann.annotate(obs).target - exact for _ in range(n)])
+from tests.policies.mark_scene import GOAL, OBJ, scene_obs
 
 
 def test_pick_place_bounds_the_fused_mark_around_the_reference(tmp_path):
@@ -43,7 +28,7 @@ def test_pick_place_bounds_the_fused_mark_around_the_reference(tmp_path):
     src = _Recorder(answers=[OBJ + [0.3, 0.0, 0.022]])  # a wild first mark, 0.3 m off in x
     expert, _ = _pick_place(src, tmp_path)
     expert.begin_demonstration()
-    target = _target_m(expert.action(_obs(1)).executed)
+    target = _target_m(expert.action(scene_obs(1)).executed)
     ref = phase_target(1, OBJ, GOAL, TaskConfig())  # the nominal reference: the part's top centre
     assert (
         np.linalg.norm(target - ref) == pytest.approx(0.05, abs=1e-6) and target[0] > ref[0] + 0.049
@@ -100,8 +85,8 @@ def test_a_pick_place_demonstration_asks_two_marks_and_follows_the_five_waypoint
     for phase in range(5):
         for _ in range(3):
             tcp = resting if phase == 2 else (0.5, 0.1, 0.3)
-            step = expert.action(_obs(phase, tcp=tcp, g=1 if phase in (2, 3) else -1))
-            expected = oracle_target(_obs(phase), task)[0]
+            step = expert.action(scene_obs(phase, tcp=tcp, g=1 if phase in (2, 3) else -1))
+            expected = oracle_target(scene_obs(phase), task)[0]
             if phase == PLACE_PHASE:  # the release sets down a little below the place mark, opening where it stops
                 expected = expected - [0.0, 0.0, RELEASE_DEPTH]
             assert np.allclose(_target_m(step.executed), expected, atol=1e-6), phase
@@ -109,18 +94,18 @@ def test_a_pick_place_demonstration_asks_two_marks_and_follows_the_five_waypoint
     # the same start restored (a replayed demonstration) reuses both marks
     expert.begin_demonstration()
     for phase in range(5):
-        expert.action(_obs(phase, tcp=resting if phase == 2 else (0.5, 0.1, 0.3)))
+        expert.action(scene_obs(phase, tcp=resting if phase == 2 else (0.5, 0.1, 0.3)))
     assert expert.counts.asked == 2 and src.asked == [PICK_PHASE, PLACE_PHASE]
     # the grasp sealed (the demonstration went on to the lift): in another scene the pick is where it sealed, relative
     # to the part, and nobody is asked for it; the place is asked again (one mark of it is not yet settled)
     assert expert.counts.measured == 2 and len(expert.fusion.measured[PICK_PHASE]) == 2  # held through each lift
     expert.begin_demonstration()
     other, goal = OBJ + [0.05, 0.1, 0.0], GOAL + [0.0, 0.05, 0.0]
-    step = expert.action(_obs(1, obj=other, goal=goal))
+    step = expert.action(scene_obs(1, obj=other, goal=goal))
     assert expert.counts.asked == 2 and np.allclose(
-        _target_m(step.executed), oracle_target(_obs(1, obj=other), task)[0], atol=1e-6
+        _target_m(step.executed), oracle_target(scene_obs(1, obj=other), task)[0], atol=1e-6
     )
-    step = expert.action(_obs(4, obj=other, goal=goal, g=1))
+    step = expert.action(scene_obs(4, obj=other, goal=goal, g=1))
     assert expert.counts.asked == 3 and src.asked[-1] == PLACE_PHASE
 
 
@@ -133,7 +118,7 @@ def test_pick_place_fuses_the_marks_of_a_run(tmp_path):
     offsets = []
     for obj in scenes:
         expert.begin_demonstration()
-        offsets.append(_target_m(expert.action(_obs(1, obj=obj)).executed) - obj)
+        offsets.append(_target_m(expert.action(scene_obs(1, obj=obj)).executed) - obj)
     assert expert.counts.asked == 3
     assert np.allclose([o[0] for o in offsets], [0.0, 0.01, 0.02], atol=1e-6)  # medians of 0; 0, 2; 0, 2, 3 cm
     assert np.allclose([o[2] for o in offsets], 0.032, atol=1e-6)
@@ -144,9 +129,9 @@ def test_pick_place_remarks_an_unreached_place_and_resume_rebuilds_the_fusion(tm
     src = _Recorder(answers=[goal_top + [0.0, 0.0, 0.04], goal_top])
     expert, _ = _pick_place(src, tmp_path, reask_after=15)
     expert.begin_demonstration()
-    first = [_target_m(expert.action(_obs(4, g=1)).executed) for _ in range(15)]
+    first = [_target_m(expert.action(scene_obs(4, g=1)).executed) for _ in range(15)]
     assert expert.counts.asked == 1 and expert.counts.remarks == 0
-    again = _target_m(expert.action(_obs(4, g=1)).executed)
+    again = _target_m(expert.action(scene_obs(4, g=1)).executed)
     assert expert.counts.remarks == 1 and expert.counts.asked == 2 and src.previous[1] is not None
     assert np.allclose(src.previous[1].target, goal_top + [0.0, 0.0, 0.04])
     down = goal_top[2] - RELEASE_DEPTH  # the release sets down a little below the fused mark
@@ -166,9 +151,9 @@ def test_a_pick_mark_that_never_seals_is_searched_around_then_marked_again(tmp_p
     src = _Recorder(offset=(0.0, 0.0, 0.011))
     expert, _ = _pick_place(src, tmp_path)
     expert.begin_demonstration()
-    mark = oracle_target(_obs(1), TaskConfig())[0] + [0.0, 0.0, 0.011]
+    mark = oracle_target(scene_obs(1), TaskConfig())[0] + [0.0, 0.0, 0.011]
     per_probe = grasp.hover + grasp.press
-    targets = [_target_m(expert.action(_obs(1)).executed) for _ in range(grasp.first_dwell + 2 * per_probe)]
+    targets = [_target_m(expert.action(scene_obs(1)).executed) for _ in range(grasp.first_dwell + 2 * per_probe)]
     assert all(np.allclose(t, mark, atol=1e-6) for t in targets[: grasp.first_dwell])
     floor = load_robot().workspace.lo[2]
     pressed = targets[grasp.first_dwell + grasp.hover]
@@ -177,9 +162,9 @@ def test_a_pick_mark_that_never_seals_is_searched_around_then_marked_again(tmp_p
     assert np.allclose(above_next, mark + [grasp.pitch, 0.0, grasp.clearance], atol=1e-6)
     assert expert.counts.probes == 2 and expert.counts.asked == 1
     for _ in range(grasp.first_dwell + len(grasp.grid) * per_probe - len(targets)):
-        expert.action(_obs(1))
+        expert.action(scene_obs(1))
     assert expert.counts.asked == 1 and expert.counts.probes == len(grasp.grid)
-    expert.action(_obs(1))  # every probe failed: the person marks again
+    expert.action(scene_obs(1))  # every probe failed: the person marks again
     assert expert.counts.asked == 2 and expert.counts.remarks == 1 and src.previous[-1] is not None
 
 
@@ -189,17 +174,17 @@ def test_where_the_grasp_sealed_becomes_the_pick_of_later_demonstrations(tmp_pat
     expert, _ = _pick_place(src, tmp_path)
     expert.begin_demonstration()
     for _ in range(grasp.first_dwell + grasp.hover + grasp.press):  # up to the pressed probe under the mark
-        sealed_at = _target_m(expert.action(_obs(1)).executed)
+        sealed_at = _target_m(expert.action(scene_obs(1)).executed)
     resting = OBJ + [0.0, 0.0, 0.026]  # the cup rests on the part's top, 1 mm above it
-    expert.action(_obs(2, tcp=resting, g=1))  # the grasp completed: the lift
+    expert.action(scene_obs(2, tcp=resting, g=1))  # the grasp completed: the lift
     assert expert.counts.measured == 0  # not yet: only a part held through the lift counts
-    expert.action(_obs(3, tcp=resting + [0.0, 0.0, 0.1], g=1))
+    expert.action(scene_obs(3, tcp=resting + [0.0, 0.0, 0.1], g=1))
     assert expert.counts.measured == 1
     measured = expert.fusion.measured[PICK_PHASE][0]  # laterally the probe, in height as far as the cup came down
     assert np.allclose(measured, [*(sealed_at - OBJ)[:2], 0.026], atol=1e-6)
     expert.begin_demonstration()
     other = OBJ + [0.04, -0.03, 0.0]
-    first = _target_m(expert.action(_obs(1, obj=other)).executed)
+    first = _target_m(expert.action(scene_obs(1, obj=other)).executed)
     assert np.allclose(first, other + measured, atol=1e-6) and expert.counts.asked == 2  # the place only
 
 
@@ -211,19 +196,19 @@ def test_a_measured_pick_whose_search_finds_nothing_is_withdrawn_and_the_marks_d
     src = _Recorder()  # exact marks
     expert, _ = _pick_place(src, tmp_path)
     expert.begin_demonstration()
-    exact = _target_m(expert.action(_obs(1)).executed)  # the first mark: the part's top centre
+    exact = _target_m(expert.action(scene_obs(1)).executed)  # the first mark: the part's top centre
     expert.fusion.add_measurement(PICK_PHASE, OBJ, exact + [-0.046, 0.0, 0.0])
     expert.begin_demonstration()
-    beside = _target_m(expert.action(_obs(1)).executed)
+    beside = _target_m(expert.action(scene_obs(1)).executed)
     assert np.allclose(beside, exact + [-0.046, 0.0, 0.0], atol=1e-6) and expert.counts.asked == 1  # not asked
     for _ in range(grasp.first_dwell + len(grasp.grid) * (grasp.hover + grasp.press) - 1):
-        expert.action(_obs(1))
+        expert.action(scene_obs(1))
     assert len(expert.fusion.measured[PICK_PHASE]) == 1 and expert.counts.asked == 1
-    after = _target_m(expert.action(_obs(1)).executed)  # every probe failed: withdrawn, the person marks again
+    after = _target_m(expert.action(scene_obs(1)).executed)  # every probe failed: withdrawn, the person marks again
     assert expert.fusion.measured[PICK_PHASE] == []
     assert expert.counts.asked == 2 and np.allclose(after, exact, atol=1e-6)
     expert.begin_demonstration()
-    assert np.allclose(_target_m(expert.action(_obs(1)).executed), exact, atol=1e-6)
+    assert np.allclose(_target_m(expert.action(scene_obs(1)).executed), exact, atol=1e-6)
 
 
 def test_withdrawing_drops_only_the_measurements_of_that_kind():
@@ -245,11 +230,11 @@ def test_an_approach_completed_beside_the_mark_moves_the_grasp_there(tmp_path):
     expert, _ = _pick_place(src, tmp_path)
     expert.begin_demonstration()
     for _ in range(approach.first_dwell + 5 * approach.press):  # up to the grid's probe at -1 pitch in x
-        target = _target_m(expert.action(_obs(0)).executed)
+        target = _target_m(expert.action(scene_obs(0)).executed)
     assert np.allclose(target[0], OBJ[0] + 0.03 - approach.pitch, atol=1e-6)
     completed_at = OBJ + [0.03 - approach.pitch, 0.0, 0.108]
-    grasp = _target_m(expert.action(_obs(1, tcp=completed_at)).executed)
-    mark = oracle_target(_obs(1), TaskConfig())[0] + [0.03, 0.0, 0.0]
+    grasp = _target_m(expert.action(scene_obs(1, tcp=completed_at)).executed)
+    mark = oracle_target(scene_obs(1), TaskConfig())[0] + [0.03, 0.0, 0.0]
     assert np.allclose(grasp, mark - [approach.pitch, 0.0, 0.0], atol=1e-6)
 
 
@@ -260,8 +245,10 @@ def test_the_release_opens_where_the_part_came_to_rest_and_a_success_measures_th
     src = _Recorder(answers=[OBJ + [0.0, 0.0, 0.022], goal_top - [0.0, 0.0, 0.03]])
     expert, _ = _pick_place(src, tmp_path)
     expert.begin_demonstration()
-    expert.action(_obs(1))
-    grips = [expert.action(_obs(4, tcp=goal_top + [0.0, 0.0, dz], g=1)).executed[3] for dz in (0.1, 0.05, 0.001, 0.0)]
+    expert.action(scene_obs(1))
+    grips = [
+        expert.action(scene_obs(4, tcp=goal_top + [0.0, 0.0, dz], g=1)).executed[3] for dz in (0.1, 0.05, 0.001, 0.0)
+    ]
     assert grips == [1.0, 1.0, 1.0, -1.0]  # opened once the descent stopped, 3 cm above where it was sent
     expert.end_demonstration(success=True)
     assert np.allclose(expert.fusion.measured[PLACE_PHASE][0], [0.0, 0.0, 0.025], atol=1e-6)
@@ -280,11 +267,11 @@ def test_a_grasp_seen_hanging_off_the_cup_is_measured_over_the_parts_centre(tmp_
     expert, _ = _pick_place(_Recorder(offset=(beside, 0.0, 0.011)), tmp_path)
     expert.begin_demonstration()
     for _ in range(grasp.first_dwell + grasp.hover + grasp.press):
-        sealed_at = _target_m(expert.action(_obs(1)).executed)
+        sealed_at = _target_m(expert.action(scene_obs(1)).executed)
     assert np.isclose(sealed_at[0] - OBJ[0], beside)
     for dz in (0.0, 0.03, 0.06):  # the lift: the part rises with the cup, `beside` off its axis
-        expert.action(_obs(2, obj=OBJ + [0.0, 0.0, dz], tcp=OBJ + [beside, 0.0, 0.026 + dz], g=1))
-    expert.action(_obs(3, obj=OBJ + [0.0, 0.0, 0.1], tcp=OBJ + [beside, 0.0, 0.126], g=1))
+        expert.action(scene_obs(2, obj=OBJ + [0.0, 0.0, dz], tcp=OBJ + [beside, 0.0, 0.026 + dz], g=1))
+    expert.action(scene_obs(3, obj=OBJ + [0.0, 0.0, 0.1], tcp=OBJ + [beside, 0.0, 0.126], g=1))
     measured = expert.fusion.measured[PICK_PHASE][0]
     assert np.allclose(measured, [0.0 if centred else beside, 0.0, 0.026], atol=1e-6)
 
@@ -297,9 +284,9 @@ def test_a_success_beside_the_goal_measures_the_place_over_it(tmp_path):
     src = _Recorder(answers=[OBJ + [0.0, 0.0, 0.022], goal_top + beside])
     expert, _ = _pick_place(src, tmp_path)
     expert.begin_demonstration()
-    expert.action(_obs(1))
+    expert.action(scene_obs(1))
     for dz in (0.1, 0.0):
-        expert.action(_obs(4, tcp=goal_top + beside + [0.0, 0.0, dz], g=1))
+        expert.action(scene_obs(4, tcp=goal_top + beside + [0.0, 0.0, dz], g=1))
     expert.end_demonstration(success=False)
     assert expert.fusion.measured[PLACE_PHASE] == []  # a failure measures nothing
     expert.end_demonstration(success=True)
@@ -328,7 +315,7 @@ def test_settled_marks_are_not_asked_again(tmp_path):
 def test_pick_place_nobody_answering_ends_the_demonstration(tmp_path):
     expert, cache = _pick_place(_Recorder(answers=[None]), tmp_path)
     expert.begin_demonstration()
-    assert expert.action(_obs(0)) is None and expert.counts.asked == 1 and len(cache) == 0
+    assert expert.action(scene_obs(0)) is None and expert.counts.asked == 1 and len(cache) == 0
 
 
 def test_a_short_guided_run_asks_two_marks_and_then_uses_what_the_cell_measured(tmp_path):

@@ -13,23 +13,18 @@ from mrguide.task import (
     PLACE_PHASE,
     TaskConfig,
     mark_phase,
-    observation,
     oracle_target,
     phase_target,
     waypoint_from_mark,
 )
+from tests.policies.mark_scene import GOAL, OBJ, scene_obs
 
 WIDE = Workspace((-5.0, -5.0, -5.0), (5.0, 5.0, 5.0))  # no clamping: noise statistics as drawn
-OBJ, GOAL = np.array([0.5, -0.1, 0.025]), np.array([0.5, 0.2, 0.025])
-
-
-def _obs(phase, obj=OBJ, goal=GOAL, tcp=(0.5, 0.1, 0.3), g=-1):
-    return observation(np.array(tcp), g, phase / 5, np.asarray(obj), np.asarray(goal))
 
 
 def _errors(noise, seed, n=4000, point=(0.5, -0.1, 0.047)):
     ann = SimulatedAnnotator(TaskConfig(), noise, WIDE, seed=seed)
-    obs = _obs(1, obj=np.array(point) - [0, 0, 0.022])
+    obs = scene_obs(1, obj=np.array(point) - [0, 0, 0.022])
     exact = OracleExpert(TaskConfig()).annotate(obs).target
     return ann, np.array([ann.annotate(obs).target - exact for _ in range(n)])
 
@@ -84,15 +79,15 @@ def test_person_noise_refuses_bad_values(field, value):
 
 def test_waypoints_from_exact_marks_are_the_task_models_targets():
     task = TaskConfig()
-    pick = oracle_target(_obs(PICK_PHASE), task)[0]
-    place = oracle_target(_obs(PLACE_PHASE), task)[0]
+    pick = oracle_target(scene_obs(PICK_PHASE), task)[0]
+    place = oracle_target(scene_obs(PLACE_PHASE), task)[0]
     assert np.allclose(pick, phase_target(1, OBJ, GOAL, task) - [0, 0, GRASP_PRESS])
     for phase in range(5):
         mark = pick if mark_phase(phase) == PICK_PHASE else place
-        expected = oracle_target(_obs(phase), task)[0]
+        expected = oracle_target(scene_obs(phase), task)[0]
         assert np.allclose(waypoint_from_mark(phase, mark, task), expected), phase
     # the lift rises above the grasp point, not above wherever the part has moved to
-    moved = _obs(2, obj=OBJ + [0.01, 0.0, 0.05])
+    moved = scene_obs(2, obj=OBJ + [0.01, 0.0, 0.05])
     assert np.allclose(waypoint_from_mark(2, pick, task), [OBJ[0], OBJ[1], task.lift_height])
     assert not np.allclose(waypoint_from_mark(2, pick, task), oracle_target(moved, task)[0])
 
