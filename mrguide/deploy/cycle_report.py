@@ -60,6 +60,8 @@ def cycle_figures(records: list[dict]) -> dict[str, Any]:
         "placed": len(placed),
         "placed_first_attempt": sum(len(r["outcomes"]) == 1 for r in placed),
         "alarms": sum(r["alarm"] is not None for r in ends),
+        # a cycle ends unplaced without an alarm only when the run stopped in it (a safety stop, Ctrl-C twice)
+        "cut": sum(not r["placed"] and r["alarm"] is None for r in ends),
         "retries": dict(Counter(c for r in ends for c in r["retries"])),
         "cycle_s_median": float(np.median(times)) if len(times) else None,
         "cycle_s_p95": float(np.percentile(times, 95)) if len(times) else None,
@@ -104,7 +106,7 @@ def table(rows: dict[str, dict[str, Any]]) -> str:
         n = f["cycles"]
         retries = ", ".join(f"{k} {v}" for k, v in sorted(f["retries"].items())) or "none"
         lines.append(
-            f"| {name} | {f['placed']} / {n} | {(n - f['alarms']) / n:.1%} | {f['placed_first_attempt']} | {retries} "
+            f"| {name} | {f['placed']} / {n}{f' ({cut} cut by a stop)' if (cut := f['cut']) else ''} | {(n - f['alarms']) / n:.1%} | {f['placed_first_attempt']} | {retries} "
             f"| {f['alarms']} | {_num(f['cycle_s_median'], '.2f')} / {_num(f['cycle_s_p95'], '.2f')} s "
             f"| {_num(f['parts_per_hour'], '.0f')} | {_num(f['missed_cycles'], 'd')}{_in_cycles(f)} | {_num(f['underruns'], 'd')} "
             f"| {_num(f['rss_growth_mb'], '.1f', ' MB')} | {_num(f['rss_growth_after_warmup_mb'], '.1f', ' MB')} |"

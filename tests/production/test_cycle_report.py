@@ -69,6 +69,23 @@ def test_the_figures_come_from_the_cycle_records(tmp_path):
     assert f["cycle_s_median"] == pytest.approx(6.0) and f["parts_per_hour"] == pytest.approx(200.0)
     assert (f["missed_cycles"], f["underruns"], f["rss_growth_mb"]) == (2, 1, 3.5)
     assert f["cycles_with_missed"] is None  # the cycles do not record their own count (logs before it did)
+    assert f["cut"] == 0  # the unplaced cycle has its alarm
+
+
+def test_a_cycle_a_stop_cut_short_is_counted_apart_from_the_alarms(tmp_path, capsys):
+    """A run stopped in a cycle (the watchdog, Ctrl-C twice) ends it unplaced without an alarm; `--resume` goes on
+    with the next one. The table says how many of the unplaced cycles were cut so."""
+    log_path = tmp_path / "cut.jsonl"
+    with RunLog(log_path, {"command": "deploy", "cycles": 3}) as log:
+        write_placed_cycle(log, 0)
+        log.write("cycle_end", cycle=1, placed=False, outcomes=[], retries=[], alarm=None, cycle_s=2.0)
+        log.write("cycles_end", wall_s=6.0, missed_cycles=0, underruns=0, rss_growth_mb=0.0, stopped="watchdog")
+        write_placed_cycle(log, 2)
+        log.write("cycles_end", wall_s=4.0, missed_cycles=0, underruns=0, rss_growth_mb=0.0)
+    f = cycle_figures(read_log(log_path))
+    assert (f["cycles"], f["placed"], f["alarms"], f["cut"]) == (3, 2, 0, 1)
+    assert main(["cycles", "report", str(log_path)]) == 0
+    assert "| cut | 2 / 3 (1 cut by a stop) | 100.0% |" in capsys.readouterr().out
 
 
 def test_the_cycles_that_missed_control_cycles_are_counted(tmp_path, capsys):
