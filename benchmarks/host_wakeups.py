@@ -18,7 +18,6 @@ would by chance. The last line of each command is one JSON object.
 from __future__ import annotations
 
 import argparse
-import gzip
 import json
 import multiprocessing
 import os
@@ -151,9 +150,7 @@ def deploy_gaps(logs: list[str]) -> list[tuple[float, float, int]]:
 
 
 def cmd_match(args: argparse.Namespace) -> None:
-    opener = gzip.open if args.probe.endswith(".gz") else open
-    with opener(args.probe, "rt") as f:
-        records = [json.loads(line) for line in f]
+    records = read_log(args.probe)  # JSON lines, gzipped or not
     heads = [r for r in records if r["kind"] == "probe"]
     started, ended = max(h["started"] for h in heads), min(h["ended"] for h in heads)
     late = [(r["at"] - r["late_s"], r["at"]) for r in records if r["kind"] == "late"]

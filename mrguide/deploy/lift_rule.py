@@ -28,12 +28,18 @@ from mrguide.task import ACT_DIM, Phase
 VACUUM_NOT_OK, BREAK_AWAY, HOLD_IN_TRANSIT = "vacuum_not_ok", "break_away", "hold_in_transit"
 
 
+def _well_formed(action: np.ndarray) -> np.ndarray | None:
+    """The action as floats, or None for one the decision step will refuse (wrong shape, NaN): the rules pass it on."""
+    a = np.asarray(action, dtype=float)
+    return a if a.shape == (ACT_DIM,) and np.all(np.isfinite(a)) else None
+
+
 def hold_in_transit(action: np.ndarray, phase: int, vac: VacuumState) -> tuple[np.ndarray, str | None]:
     """(the action to run, HOLD_IN_TRANSIT if its release was refused, else None): in the lift and the transport,
     with the part reported gripped, a vacuum command g' <= 0 becomes +1. An action the decision step will refuse
     (wrong shape, NaN) is passed on unchanged for it to refuse."""
-    a = np.asarray(action, dtype=float)
-    if a.shape != (ACT_DIM,) or not np.all(np.isfinite(a)):
+    a = _well_formed(action)
+    if a is None:
         return action, None
     if phase in (Phase.LIFT, Phase.TRANSPORT) and a[3] <= 0 and vac.part_gripped:
         out = a.copy()
@@ -55,8 +61,8 @@ class LiftRule:
     def apply(self, action: np.ndarray, tcp: np.ndarray, phase: int, vac: VacuumState) -> tuple[np.ndarray, str | None]:
         """(the action to run, the rule that lowered it or None). An action the decision step will refuse
         (wrong shape, NaN) is passed on unchanged for it to refuse."""
-        a = np.asarray(action, dtype=float)
-        if a.shape != (ACT_DIM,) or not np.all(np.isfinite(a)):
+        a = _well_formed(action)
+        if a is None:
             return action, None
         cap, rule = self._ceiling(a, float(tcp[2]), phase, vac)
         target = self.workspace.to_cartesian(np.clip(a[:3], -1.0, 1.0))
