@@ -66,14 +66,15 @@ def sac_config(run: TrainRun, where: str = "experiment"):
 
 def run_record(run: TrainRun) -> dict[str, Any]:
     """What a run's run.json holds: first the whole configuration it trains with (every section, defaults and
-    overrides resolved), then the run as the experiment described it."""
+    overrides resolved), how the update is built, then the run as the experiment described it."""
     from mrguide.config import to_dict
+    from mrguide.policies.ddpg_update import update_build
 
     tc, dc, gc, ec = configs(run)
     effective = {"train": to_dict(tc), "ddpg": to_dict(dc), "guidance": to_dict(gc), "env": to_dict(ec)}
     if tc.learner == "sac":
         effective["sac"] = to_dict(sac_config(run))
-    return {"effective_config": effective, **dataclasses.asdict(run)}
+    return {"effective_config": effective, "update": update_build(), **dataclasses.asdict(run)}
 
 
 def check_same_config(run: TrainRun, root: Path) -> None:

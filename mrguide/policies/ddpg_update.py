@@ -170,6 +170,14 @@ _compiled_step = torch.compile(update_step, fullgraph=True)
 _compiler_works = True
 
 
+def update_build() -> str:
+    """How this process runs the update, for a run's record: compiled, or eager where torch.compile is disabled
+    (``TORCH_COMPILE_DISABLE=1``, the comparison the results page makes) or has failed."""
+    if torch._dynamo.config.disable:
+        return "eager (torch.compile disabled)"
+    return "compiled" if _compiler_works else "eager (TorchInductor failed)"
+
+
 def run_update(
     nets: Networks, moments: tuple[AdamMoments, AdamMoments], rates: Rates, batch: tuple[torch.Tensor, ...]
 ) -> torch.Tensor:

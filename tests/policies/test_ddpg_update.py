@@ -81,3 +81,16 @@ def test_without_a_compiler_the_update_runs_eagerly_and_says_so(monkeypatch, cap
     ours = [r.message for r in caplog.records if r.name == "mrguide.policies.ddpg_update"]
     assert len(ours) == 1 and "uncompiled" in ours[0] and "No working C++ compiler" in ours[0]  # said once, why
     assert ddpg_update._compiler_works is False
+
+
+def test_update_build_names_an_eager_run(monkeypatch) -> None:
+    """A run's record says when torch.compile was disabled (the eager comparison runs) rather than 'compiled'."""
+    import torch._dynamo
+
+    from mrguide.policies import ddpg_update
+
+    monkeypatch.setattr(torch._dynamo.config, "disable", True)
+    assert ddpg_update.update_build() == "eager (torch.compile disabled)"
+    monkeypatch.setattr(torch._dynamo.config, "disable", False)
+    monkeypatch.setattr(ddpg_update, "_compiler_works", True)
+    assert ddpg_update.update_build() == "compiled"
