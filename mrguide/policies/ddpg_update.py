@@ -181,10 +181,10 @@ def update_build() -> str:
 def run_update(
     nets: Networks, moments: tuple[AdamMoments, AdamMoments], rates: Rates, batch: tuple[torch.Tensor, ...]
 ) -> torch.Tensor:
-    """`update_step`, compiled; eagerly (the same arithmetic, slower) once TorchInductor has failed to build it,
-    e.g. with no C++ compiler on the machine (said once, in the log)."""
+    """`update_step`, compiled; eagerly (the same arithmetic, slower) where torch.compile is disabled or once
+    TorchInductor has failed to build it, e.g. with no C++ compiler on the machine (said once, in the log)."""
     global _compiler_works
-    if _compiler_works:
+    if _compiler_works and not torch._dynamo.config.disable:
         try:
             return _compiled_step(nets, moments, rates, batch)
         except torch._dynamo.exc.BackendCompilerFailed as exc:
