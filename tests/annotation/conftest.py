@@ -13,11 +13,13 @@ import numpy as np
 import pytest
 
 from mrguide.annotation.broker import AnnotationBroker
+from mrguide.annotation.headless import HeadlessBrowser, chromium_path
+from mrguide.annotation.live import hello_fields
 from mrguide.annotation.protocol import AnnotationRequest
-from mrguide.annotation.server import AnnotationServer
+from mrguide.annotation.server import WEB_DIR, AnnotationServer
 from mrguide.motion.kinematics import Kinematics
 from mrguide.robot import load_robot
-from mrguide.task import observation, progress
+from mrguide.task import TaskConfig, observation, progress
 
 OBJ = np.array([0.5, -0.08, 0.025])
 GOAL = np.array([0.48, 0.2, 0.025])
@@ -77,6 +79,32 @@ def served(broker, tmp_path):
     """(broker, server) on a free port, serving a stub page."""
     (tmp_path / "index.html").write_text("<!doctype html><title>stub</title>")
     server = AnnotationServer(broker, load_robot(), port=0, web_dir=tmp_path)
+    server.start()
+    yield broker, server
+    broker.close()
+    server.stop()
+
+
+@pytest.fixture(scope="module")
+def browser():
+    """Headless Chromium for the real page. Missing pieces are errors, not skips: .ci/run installs chromium,
+    ./run.sh runs `npm ci`."""
+    chromium_path()
+    assert (WEB_DIR / "node_modules" / "three").is_dir(), "run `npm ci` in mrguide/annotation/web (./run.sh does)"
+    with HeadlessBrowser() as b:
+        yield b
+
+
+@pytest.fixture
+def spec():
+    return load_robot()
+
+
+@pytest.fixture
+def page_served(spec):
+    """(broker, server) on a free port, serving the real page."""
+    broker = AnnotationBroker(spec.workspace, hello_fields(spec, TaskConfig()))
+    server = AnnotationServer(broker, spec, port=0)
     server.start()
     yield broker, server
     broker.close()

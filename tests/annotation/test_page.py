@@ -19,13 +19,9 @@ import numpy as np
 import pytest
 
 from mrguide.annotation.broker import AnnotationBroker, LiveAnswer, NoAnswer
-from mrguide.annotation.headless import HeadlessBrowser, chromium_path
-from mrguide.annotation.live import hello_fields
 from mrguide.annotation.protocol import PROMPTS
 from mrguide.annotation.server import WEB_DIR, AnnotationServer, ServerError
-from mrguide.robot import load_robot
-from mrguide.task import TaskConfig
-from tests.annotation.conftest import ask_in_thread, make_request, wait_until
+from tests.annotation.conftest import ask_in_thread, make_request
 
 REPO = Path(__file__).resolve().parents[2]
 OBJ = np.array([0.52, -0.06, 0.025])
@@ -42,32 +38,77 @@ def screen_delta(page, p, dp) -> tuple[float, float]:
     return b["x"] - a["x"], b["y"] - a["y"]
 
 
-@pytest.fixture(scope="module")
-def browser():
-    # Missing pieces are errors, not skips: .ci/run installs chromium, ./run.sh runs `npm ci`.
-    chromium_path()
-    assert (WEB_DIR / "node_modules" / "three").is_dir(), "run `npm ci` in mrguide/annotation/web (./run.sh does)"
-    with HeadlessBrowser() as b:
-        yield b
+def _shows_the_request(page, s, req, spec) -> np.ndarray:
+    """What the page shows for `req` (with the status published); returns the gizmo's start."""
+    # What is asked, in words, and the phase.
+    assert page.text("phase") == "Phase 2/5 · grasp"
+    assert page.text("prompt") == PROMPTS[1]
+    assert s["vacuum"] is True  # suggested for grasp
+    # The arm: URDF and meshes loaded, the requested joint values applied, and its TCP link where
+    # Pinocchio puts it (frames and joint order agree between the page and the trainer).
+    robot = page.wait_robot()
+    assert robot["meshErrors"] == 0
+    for name, q in zip(spec.joint_names, spec.q_home):
+        assert robot["joints"][name] == pytest.approx(q, abs=1e-9)
+    np.testing.assert_allclose(robot["tcp"], req.tcp, atol=1e-4)
+    # The gizmo starts at the TCP (clamped into the box), not at any answer.
+    start = np.array(s["target"])
+    np.testing.assert_allclose(start, np.clip(req.tcp, spec.workspace.lo, spec.workspace.hi), atol=1e-4)
+    # Training status.
+    page.wait_state("s.status.step === 3120")
+    assert page.text("st-step") == "3120 / 20000"
+    assert page.text("st-lambda") == "0.775"
+    assert page.text("st-success") == "35 %"
+    assert page.text("st-asked") == "212 / 1930"
+    # No headset in plain headless Chromium: the XR button says so instead of failing later.
+    assert page.page.is_disabled("#xr-button")
+    assert "headset" in page.text("xr-message").lower() or "webxr" in page.text("xr-message").lower()
+    assert s["claimedBy"] is None  # nobody has claimed it yet
+    return start
 
 
-@pytest.fixture
-def spec():
-    return load_robot()
+def _drag_to_the_part(page, start, spec) -> np.ndarray:
+    """The gizmo dragged with the mouse along -y, then down; returns where it ends."""
+    # Drag the gizmo's Y arrow with the mouse toward the object (-y), as far on screen as 17 cm there.
+    after_y = np.array(page.drag_gizmo("Y", *screen_delta(page, start, [0, -0.17, 0])))
+    assert after_y[1] < start[1] - 0.08, (start, after_y)  # moved along -y by a visible amount
+    np.testing.assert_allclose(after_y[[0, 2]], start[[0, 2]], atol=2e-4)  # and only along y
+    # Then down along z toward the object's top, dragging the Z arrow.
+    after_z = np.array(page.drag_gizmo("Z", *screen_delta(page, after_y, [0, 0, -0.25])))
+    assert after_z[2] < after_y[2] - 0.1, (after_y, after_z)
+    np.testing.assert_allclose(after_z[:2], after_y[:2], atol=2e-4)
+    assert spec.workspace.contains(after_z)
+    assert page.state()["claimedBy"] == page.state()["clientId"]  # editing claims the request
+    return after_z
 
 
-@pytest.fixture
-def served(spec):
-    broker = AnnotationBroker(spec.workspace, hello_fields(spec, TaskConfig()))
-    server = AnnotationServer(broker, spec, port=0)
-    server.start()
-    yield broker, server
-    broker.close()
-    server.stop()
+def _keys_move_the_target(page, after_z) -> np.ndarray:
+    """The keyboard's moves and the vacuum toggle; returns the target the page shows and will send."""
+    # Keyboard: PageDown 5 mm down, Shift+PageUp 1 mm up, an arrow 5 mm along one table axis, V toggles.
+    page.press("PageDown")
+    t1 = np.array(page.state()["target"])
+    np.testing.assert_allclose(t1 - after_z, [0, 0, -0.005], atol=1e-9)
+    page.press("Shift+PageUp")
+    t2 = np.array(page.state()["target"])
+    np.testing.assert_allclose(t2 - t1, [0, 0, 0.001], atol=1e-9)
+    axis, sign = page.page.evaluate("() => window.mrguide.viewAxes().right")
+    page.press("ArrowRight")
+    t3 = np.array(page.state()["target"])
+    step = np.zeros(3)
+    step[axis] = 0.005 * sign
+    np.testing.assert_allclose(t3 - t2, step, atol=1e-9)
+    page.press("v")
+    assert page.state()["vacuum"] is False
+    page.press("V")
+    assert page.state()["vacuum"] is True
+    # The numbers shown are the numbers that will be sent.
+    shown = [float(page.text(k)) / 1000 for k in ("tx", "ty", "tz")]
+    np.testing.assert_allclose(shown, t3, atol=1e-12)
+    return t3
 
 
-def test_page_shows_request_drag_keys_and_submit(browser, served, spec, tmp_path):
-    broker, server = served
+def test_page_shows_request_drag_keys_and_submit(browser, page_served, spec, tmp_path):
+    broker, server = page_served
     req = make_request(1, obj=OBJ, goal=GOAL, quat=QUAT)
     fut = ask_in_thread(broker, req)
     broker.publish_status(
@@ -85,61 +126,9 @@ def test_page_shows_request_drag_keys_and_submit(browser, served, spec, tmp_path
     page = browser.open(server.url)
     try:
         s = page.wait_request()
-        # What is asked, in words, and the phase.
-        assert page.text("phase") == "Phase 2/5 · grasp"
-        assert page.text("prompt") == PROMPTS[1]
-        assert s["vacuum"] is True  # suggested for grasp
-        # The arm: URDF and meshes loaded, the requested joint values applied, and its TCP link where
-        # Pinocchio puts it (frames and joint order agree between the page and the trainer).
-        robot = page.wait_robot()
-        assert robot["meshErrors"] == 0
-        for name, q in zip(spec.joint_names, spec.q_home):
-            assert robot["joints"][name] == pytest.approx(q, abs=1e-9)
-        np.testing.assert_allclose(robot["tcp"], req.tcp, atol=1e-4)
-        # The gizmo starts at the TCP (clamped into the box), not at any answer.
-        start = np.array(s["target"])
-        np.testing.assert_allclose(start, np.clip(req.tcp, spec.workspace.lo, spec.workspace.hi), atol=1e-4)
-        # Training status.
-        page.wait_state("s.status.step === 3120")
-        assert page.text("st-step") == "3120 / 20000"
-        assert page.text("st-lambda") == "0.775"
-        assert page.text("st-success") == "35 %"
-        assert page.text("st-asked") == "212 / 1930"
-        # No headset in plain headless Chromium: the XR button says so instead of failing later.
-        assert page.page.is_disabled("#xr-button")
-        assert "headset" in page.text("xr-message").lower() or "webxr" in page.text("xr-message").lower()
-
-        # Drag the gizmo's Y arrow with the mouse toward the object (-y), as far on screen as 17 cm there.
-        after_y = np.array(page.drag_gizmo("Y", *screen_delta(page, start, [0, -0.17, 0])))
-        assert after_y[1] < start[1] - 0.08, (start, after_y)  # moved along -y by a visible amount
-        np.testing.assert_allclose(after_y[[0, 2]], start[[0, 2]], atol=2e-4)  # and only along y
-        # Then down along z toward the object's top, dragging the Z arrow.
-        after_z = np.array(page.drag_gizmo("Z", *screen_delta(page, after_y, [0, 0, -0.25])))
-        assert after_z[2] < after_y[2] - 0.1, (after_y, after_z)
-        np.testing.assert_allclose(after_z[:2], after_y[:2], atol=2e-4)
-        assert spec.workspace.contains(after_z)
-        assert s["claimedBy"] is None and page.state()["claimedBy"] == page.state()["clientId"]  # editing claims
-
-        # Keyboard: PageDown 5 mm down, Shift+PageUp 1 mm up, an arrow 5 mm along one table axis, V toggles.
-        page.press("PageDown")
-        t1 = np.array(page.state()["target"])
-        np.testing.assert_allclose(t1 - after_z, [0, 0, -0.005], atol=1e-9)
-        page.press("Shift+PageUp")
-        t2 = np.array(page.state()["target"])
-        np.testing.assert_allclose(t2 - t1, [0, 0, 0.001], atol=1e-9)
-        axis, sign = page.page.evaluate("() => window.mrguide.viewAxes().right")
-        page.press("ArrowRight")
-        t3 = np.array(page.state()["target"])
-        step = np.zeros(3)
-        step[axis] = 0.005 * sign
-        np.testing.assert_allclose(t3 - t2, step, atol=1e-9)
-        page.press("v")
-        assert page.state()["vacuum"] is False
-        page.press("V")
-        assert page.state()["vacuum"] is True
-        # The numbers shown are the numbers that will be sent.
-        shown = [float(page.text(k)) / 1000 for k in ("tx", "ty", "tz")]
-        np.testing.assert_allclose(shown, t3, atol=1e-12)
+        start = _shows_the_request(page, s, req, spec)
+        after_z = _drag_to_the_part(page, start, spec)
+        t3 = _keys_move_the_target(page, after_z)
 
         page.wait_drawn()
         shot = page.screenshot(tmp_path / "annotation-page.png")
@@ -162,8 +151,8 @@ def test_page_shows_request_drag_keys_and_submit(browser, served, spec, tmp_path
         page.close()
 
 
-def test_target_is_confined_to_the_workspace(browser, served, spec):
-    broker, server = served
+def test_target_is_confined_to_the_workspace(browser, page_served, spec):
+    broker, server = page_served
     fut = ask_in_thread(broker, make_request(0, obj=OBJ, goal=GOAL, quat=QUAT))
     page = browser.open(server.url)
     try:
@@ -186,8 +175,8 @@ def test_target_is_confined_to_the_workspace(browser, served, spec):
         page.close()
 
 
-def test_skip_key_and_deadline_countdown(browser, served, spec):
-    broker, server = served
+def test_skip_key_and_deadline_countdown(browser, page_served, spec):
+    broker, server = page_served
     fut = ask_in_thread(broker, make_request(3, obj=OBJ, goal=GOAL, quat=QUAT), timeout=60.0)
     page = browser.open(server.url)
     try:
@@ -202,8 +191,8 @@ def test_skip_key_and_deadline_countdown(browser, served, spec):
         page.close()
 
 
-def test_claimed_by_another_client(browser, served, spec):
-    broker, server = served
+def test_claimed_by_another_client(browser, page_served, spec):
+    broker, server = page_served
     fut = ask_in_thread(broker, make_request(2, obj=OBJ, goal=GOAL, quat=QUAT))
     page = browser.open(server.url)
     page_saw_claim = threading.Event()
@@ -245,13 +234,13 @@ async def _until_cancel(ws) -> None:
             return
 
 
-def test_refusal_reason_is_shown(browser, served, spec):
+def test_refusal_reason_is_shown(browser, page_served, spec):
     """An answer to a request that has closed meanwhile: the server's reason reaches the person.
 
     The `cancel` is held back on the wire (playwright's WebSocket routing), so the page still shows the
     request after the trainer timed it out: exactly what a slow network does.
     """
-    broker, server = served
+    broker, server = page_served
     dropped: list[str] = []
 
     def hold_back_cancels(page) -> None:
@@ -287,8 +276,8 @@ def test_refusal_reason_is_shown(browser, served, spec):
         page.close()
 
 
-def test_reconnect_after_reload_and_server_restart(browser, served, spec):
-    broker, server = served
+def test_reconnect_after_reload_and_server_restart(browser, page_served, spec):
+    broker, server = page_served
     fut = ask_in_thread(broker, make_request(1, obj=OBJ, goal=GOAL, quat=QUAT))
     page = browser.open(server.url)
     try:
@@ -379,102 +368,3 @@ def test_a_server_without_the_page_scripts_refuses_to_start_saying_how_to_get_th
     server = AnnotationServer(AnnotationBroker(spec.workspace, {}), spec, port=0, web_dir=web)
     with pytest.raises(ServerError, match=r"needs .*node_modules.*which is not there.*npm ci"):
         server.start()
-
-
-def _click(page, point) -> None:
-    """A person's click on what the page shows at robot-frame `point`."""
-    px = page.page.evaluate("(p) => window.mrguide.screenOf(p)", list(map(float, point)))
-    page.page.mouse.click(px["x"], px["y"])
-
-
-def test_click_to_place_on_the_part_the_goal_and_the_table(browser, served, spec):
-    """One click on the part's top puts the pick mark at its centre; on the goal ring the place mark at the goal; on
-    the table at that point, at the phase's height; a second click submits. A drag is no click: it orbits."""
-    broker, server = served
-    task = TaskConfig()
-    page = browser.open(server.url)
-    try:
-        fut = ask_in_thread(broker, make_request(1, obj=OBJ, goal=GOAL, quat=QUAT))  # the pick mark (grasp)
-        page.wait_request()
-        page.wait_robot()
-        _click(page, OBJ + [0.004, -0.006, 0.5 * task.object_height])  # a little off the top face's centre
-        s = page.wait_state("s.placedOn === 'object'")
-        assert s["target"] == pytest.approx([OBJ[0], OBJ[1], task.object_height], abs=1e-4)  # snapped to the centre
-        page.click_submit()
-        pick = fut.result(10)
-        assert isinstance(pick, LiveAnswer) and pick.target == pytest.approx(
-            [OBJ[0], OBJ[1], task.object_height], abs=1e-4
-        )
-
-        fut = ask_in_thread(broker, make_request(4, obj=OBJ, goal=GOAL, quat=QUAT))  # the place mark (release)
-        page.wait_state("s.phase === 'release'")
-        _click(page, GOAL + [0.03, 0.0, -GOAL[2] + 0.001])  # on the ring, 3 cm from the goal
-        s = page.wait_state("s.placedOn === 'goal'")
-        assert s["target"] == pytest.approx([GOAL[0], GOAL[1], task.object_height], abs=1e-4)
-        page.press("Enter")
-        place = fut.result(10)
-        assert place.target == pytest.approx([GOAL[0], GOAL[1], task.object_height], abs=1e-4)
-
-        fut = ask_in_thread(
-            broker, make_request(3, obj=OBJ, goal=GOAL, quat=QUAT)
-        )  # transport: table point, lift height
-        page.wait_state("s.phase === 'transport'")
-        spot = np.array([0.42, 0.05, 0.0])
-        _click(page, spot)
-        s = page.wait_state("s.placedOn === 'table'")
-        assert s["target"][:2] == pytest.approx(spot[:2], abs=0.003) and s["target"][2] == pytest.approx(
-            task.lift_height
-        ), s["target"]
-        before = s["target"]
-        px = page.page.evaluate("(p) => window.mrguide.screenOf(p)", [0.5, 0.25, 0.0])
-        page.page.mouse.move(px["x"], px["y"])
-        page.page.mouse.down()
-        page.page.mouse.move(px["x"] + 60, px["y"] + 20, steps=5)  # a drag: the camera turns, the target stays
-        page.page.mouse.up()
-        assert page.state()["target"] == before
-        page.skip()
-    finally:
-        page.close()
-
-
-def test_the_person_steps_in_with_the_intervene_button_or_the_i_key(browser, served):
-    """No request outstanding: Intervene (button, or I) asks the trainer to cut the agent's episode; while a
-    request is shown the button is off (answer it instead)."""
-    broker, _ = served
-    page = browser.open(served[1].url)
-    try:
-        page.wait_state("s.connected")
-        assert not page.page.is_disabled("#intervene")
-        page.page.click("#intervene")
-        assert wait_until(lambda: broker._intervene is not None)
-        assert broker.take_intervention() == page.state()["clientId"]
-        assert "Stepping in" in page.text("feedback")
-        page.press("i")
-        assert wait_until(lambda: broker.take_intervention() is not None)
-        fut = ask_in_thread(broker, make_request(1, obj=OBJ, goal=GOAL, quat=QUAT))
-        page.wait_request()
-        assert page.page.is_disabled("#intervene")
-        page.skip()
-        fut.result(10)
-    finally:
-        page.close()
-
-
-def test_a_click_on_a_gizmo_arrow_places_through_it(browser, served):
-    """The gizmo's arrows stand over what is behind them (over the goal while the arm holds the part above
-    it): a click there, without a drag, places the target on the surface behind, as anywhere else."""
-    broker, server = served
-    page = browser.open(server.url)
-    try:
-        fut = ask_in_thread(broker, make_request(3, obj=OBJ, goal=GOAL, quat=QUAT))  # transport: a table point
-        page.wait_request()
-        page.wait_robot()
-        before = page.state()["target"]
-        h = page.gizmo_handle("X")
-        page.page.mouse.click(h["x"], h["y"])
-        s = page.wait_state("s.placedOn !== null")
-        assert s["placedOn"] in ("table", "goal", "object") and s["target"][:2] != pytest.approx(before[:2], abs=0.01)
-        page.skip()
-        fut.result(10)
-    finally:
-        page.close()

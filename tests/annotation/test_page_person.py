@@ -11,19 +11,9 @@ import threading
 import numpy as np
 import pytest
 
-from mrguide.annotation.headless import HeadlessBrowser, chromium_path
 from mrguide.annotation.live import LiveOptions, LiveSession
-from mrguide.annotation.server import WEB_DIR
 from mrguide.policies.train import Trainer
 from mrguide.policies.train_config import load_train_config
-
-
-@pytest.fixture(scope="module")
-def browser():
-    chromium_path()
-    assert (WEB_DIR / "node_modules" / "three").is_dir(), "run `npm ci` in mrguide/annotation/web (./run.sh does)"
-    with HeadlessBrowser() as b:
-        yield b
 
 
 def test_a_person_guides_a_short_run_with_two_clicks_per_mark(browser, tmp_path):
