@@ -87,9 +87,8 @@ def test_with_torch_compile_disabled_the_update_runs_eagerly_and_the_run_says_so
     """TORCH_COMPILE_DISABLE=1 (the eager comparison runs of the results page) trains and is named in run.json."""
     agent, batches = agent_and_batches(1)
     monkeypatch.setattr(ddpg_update, "_compiler_works", True)
-    monkeypatch.setattr(torch._dynamo.config, "disable", True)
-    assert ddpg_update.update_build() == "eager (torch.compile disabled)"
-    stats = agent.update(batches[0])  # fullgraph=True would raise here without the check
+    with torch._dynamo.config.patch(disable=True):  # its own patch: monkeypatch's undo would hide the option
+        assert ddpg_update.update_build() == "eager (torch.compile disabled)"
+        stats = agent.update(batches[0])  # fullgraph=True would raise here without the check
     assert all(np.isfinite(v) for v in stats.values()) and agent.updates == 1
-    monkeypatch.setattr(torch._dynamo.config, "disable", False)
     assert ddpg_update.update_build() == "compiled"
