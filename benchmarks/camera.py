@@ -29,10 +29,10 @@ import pybullet as pb
 
 from mrguide.calibration.calibration_file import CalibrationRecord, save_calibration
 from mrguide.calibration.camera_model import CameraModel
+from mrguide.cell.camera_feed import render_marked_object
 from mrguide.deploy.camera import CameraPoseSource, CameraSourceConfig, CameraStats, load_marker_pipeline
 from mrguide.deploy.frames import memory_frames
 from mrguide.twin.camera import look_at
-from mrguide.twin.camera_feed import render_marked_object
 from mrguide.twin.markers import HOLOLENS2_PV
 
 EYE, TARGET = (1.0, -0.05, 0.55), (0.5, -0.05, 0.0)

@@ -20,6 +20,8 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
+from mrguide.cell.commands import CellDryRun
+from mrguide.cell.dry_run import dry_run_cycles
 from mrguide.cli_args import nonnegative_int, positive_int
 from mrguide.config import load_section
 from mrguide.deploy.cycle_report import cycle_figures, miss_anatomy
@@ -27,8 +29,6 @@ from mrguide.deploy.cycles import CycleConfig, CycleRun
 from mrguide.deploy.runlog import RunLog, read_log
 from mrguide.deploy.session import DeployConfig
 from mrguide.experiments.sim2real import load_real_cell
-from mrguide.twin.commands import TwinDryRun
-from mrguide.twin.dry_run import dry_run_cycles
 
 WHERE = {False: "shared", True: "own"}
 
@@ -38,7 +38,7 @@ def twin_camera(cell: Any) -> Any:
     dcfg = load_section(DeployConfig, cell.path, "deploy")
     if dcfg.pose_source != "camera":
         return None
-    return TwinDryRun(str(cell.path)).camera(dcfg.camera, cell.path.parent, cell.env.task.object_height)
+    return CellDryRun(str(cell.path)).camera(dcfg.camera, cell.path.parent, cell.env.task.object_height)
 
 
 def run(

@@ -24,6 +24,8 @@ from typing import Any
 
 import numpy as np
 
+from mrguide.cell.dry_run import dry_run_cycles
+from mrguide.cell.twin_plant import TwinObjectPose
 from mrguide.cli_args import positive_int
 from mrguide.deploy.cycle_report import cycle_figures
 from mrguide.deploy.cycles import CycleConfig, CycleRun
@@ -32,8 +34,6 @@ from mrguide.experiments.sim2real import load_real_cell
 from mrguide.pose_source import PoseUnavailable
 from mrguide.robot import load_robot
 from mrguide.task import OBS_PROGRESS, Phase, oracle_action, phase_from_progress
-from mrguide.twin.dry_run import dry_run_cycles
-from mrguide.twin.plant import TwinObjectPose
 
 FAULT_CYCLE = 2
 FAULTS = ("drive_emcy", "frame_loss", "vacuum_leak", "camera_gone")

@@ -16,13 +16,13 @@ import platform
 import tempfile
 from pathlib import Path
 
+from mrguide.cell.dry_run import dry_run_cycles
 from mrguide.cli_args import nonnegative_int, positive_int
 from mrguide.deploy.cycles import CycleConfig, CycleRun, CycleSummary
 from mrguide.deploy.runlog import RunLog
 from mrguide.experiments.sim2real import load_real_cell
 from mrguide.robot import load_robot
 from mrguide.task import oracle_action
-from mrguide.twin.dry_run import dry_run_cycles
 
 
 def run(policy_path: str | None, cell, cycles: int, seed: int) -> CycleSummary:

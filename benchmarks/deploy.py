@@ -19,13 +19,13 @@ from pathlib import Path
 
 import numpy as np
 
+from mrguide.cell.dry_run import dry_run
 from mrguide.cli_args import positive_int
 from mrguide.deploy.policy import ExportedPolicy
 from mrguide.deploy.runlog import RunLog
 from mrguide.drivers.config import load_cobot_bus_config
 from mrguide.robot import RobotConfig, load_robot
 from mrguide.task import oracle_action
-from mrguide.twin.dry_run import dry_run
 from mrguide.twin.env import EnvConfig
 
 

@@ -88,11 +88,12 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--quiet", action="store_true", help="no progress bars")
     sp.set_defaults(func=cmd_main)
 
+    from mrguide.cell.commands import CellDryRun
     from mrguide.deploy.commands import add_deploy_command
-    from mrguide.twin.commands import TwinDryRun, add_expert_command, run_twin_calibration
+    from mrguide.twin.commands import add_expert_command, run_twin_calibration
 
     add_expert_command(sub)
-    add_deploy_command(sub, TwinDryRun)
+    add_deploy_command(sub, CellDryRun)
     from mrguide.deploy.cycle_report import add_cycles_command
 
     add_cycles_command(sub)

@@ -1,19 +1,19 @@
 """`mrguide deploy`: an exported policy on the cobot over the real bus, or (`--dry-run`) over the virtual bus
-to simulated drives on a twin. The dry run itself belongs to the twin, which hands it in as a
-`DryRunBackend` (deploy does not import the twin)."""
+to simulated drives on a simulated cell. The dry run itself belongs to the cell harness (`mrguide.cell`), which hands
+it in as a `DryRunBackend` (deploy does not import the cell)."""
 
 from __future__ import annotations
 
 import argparse
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 
 from tqdm import tqdm
 
 from mrguide.cli_args import add_set_argument, nonnegative_int, positive_int
+from mrguide.deploy.deploy_inputs import DeployInputs
 from mrguide.errors import InputError
 
 if TYPE_CHECKING:
@@ -49,21 +49,6 @@ class DryRunBackend(Protocol):
         tick: Any,
         camera: Any,
     ) -> Any: ...
-
-
-@dataclass
-class DeployInputs:
-    """Everything a deploy run was given, checked: the policy and the cell's description, and the open run log."""
-
-    policy_path: str
-    policy: ExportedPolicy
-    bus: CobotBusConfig
-    spec: Any  # RobotSpec
-    task: Any  # TaskConfig
-    safety: Any  # SafetyConfig | None
-    dcfg: DeployConfig
-    camera: Any  # the camera pose source, or None
-    run_log: Any  # RunLog
 
 
 def add_deploy_command(sub: argparse._SubParsersAction, dry_run_factory: Callable[[str | None], DryRunBackend]) -> None:

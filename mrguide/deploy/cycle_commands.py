@@ -17,7 +17,7 @@ from mrguide.deploy.runlog import RunLogError, read_log
 from mrguide.pose_source import PoseUnavailable
 
 if TYPE_CHECKING:
-    from mrguide.deploy.commands import DeployInputs
+    from mrguide.deploy.deploy_inputs import DeployInputs
     from mrguide.deploy.session import DeployConfig
 
 #: How long the robot's feeder waits for the camera to see the next part in the pick region (s).

@@ -20,7 +20,6 @@ from typing import NoReturn
 import numpy as np
 
 from mrguide.config import ConfigError
-from mrguide.deploy.decision import NON_FINITE, ActionError, DecisionStep
 from mrguide.deploy.following import FollowingMonitor
 from mrguide.deploy.lift_rule import LiftRule, hold_in_transit
 from mrguide.deploy.object_tracking import ObjectStartUnknown, ObjectTracker
@@ -31,6 +30,7 @@ from mrguide.deploy.seal_search import SealSearch
 from mrguide.drivers.cobot_state import JointState, VacuumState
 from mrguide.drivers.errors import DriverError
 from mrguide.drivers.interface import CobotInterface
+from mrguide.motion.decision import NON_FINITE, ActionError, DecisionStep
 from mrguide.motion.kinematics import IKError
 from mrguide.motion.trajectory import TrajectoryError
 from mrguide.pose_source import ObjectPoseSource

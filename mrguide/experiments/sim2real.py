@@ -19,6 +19,9 @@ from typing import Any
 
 import numpy as np
 
+from mrguide.cell.dry_run import SimulatedCell, dry_run, episode_layouts
+from mrguide.cell.hmd_stream import HmdPoseStream, HmdStartError, MujocoDrawing
+from mrguide.cell.twin_plant import TwinObjectPose
 from mrguide.config import to_dict
 from mrguide.deploy.policy import ExportedPolicy, check_arm, check_decision_period
 from mrguide.deploy.runlog import RunLog
@@ -30,10 +33,7 @@ from mrguide.drivers.errors import DriverError
 from mrguide.experiments.stats import wilson
 from mrguide.robot import load_robot
 from mrguide.task import Outcome, TaskConfig, placed_at_goal
-from mrguide.twin.dry_run import SimulatedCell, dry_run, episode_layouts
 from mrguide.twin.env import EnvConfig, PickPlaceEnv
-from mrguide.twin.hmd_stream import HmdPoseStream, HmdStartError, MujocoDrawing
-from mrguide.twin.plant import TwinObjectPose
 from mrguide.twin.visual_arm import ArmDrawing
 
 log = logging.getLogger(__name__)

@@ -22,9 +22,9 @@ import numpy as np
 
 from mrguide.cell_layout import CUP_RADIUS, CupConfig
 from mrguide.drivers.mock.first_order_plant import FirstOrderParams
-from mrguide.drivers.mock.plant import CellPlant
 from mrguide.mujoco_cell.config import MujocoCellConfig
 from mrguide.mujoco_cell.model import build_cell
+from mrguide.plant import CellPlant
 from mrguide.robot import RobotSpec
 
 #: The cup's axis must be within this of a face's normal for its lip to seal on that face (cos 10°).

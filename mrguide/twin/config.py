@@ -96,7 +96,7 @@ class TwinConfig:
 
 
 #: The physics engines a simulated cell can run on ([plant] engine): the two shipped ones, and any a module registered
-#: with `twin.dry_run.register_plant` (which builds each).
+#: with `cell.plants.register_plant` (which builds each).
 PLANT_ENGINES: list[str] = ["pybullet", "mujoco"]
 
 

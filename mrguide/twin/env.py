@@ -1,6 +1,6 @@
 """`PickPlaceEnv`: the paper's pick-and-place MDP as a Gymnasium env on the PyBullet twin.
 
-One step is one policy decision, made by the deploy stack's `DecisionStep` (deploy/decision.py), the same
+One step is one policy decision, made by the deploy stack's `DecisionStep` (motion/decision.py), the same
 code the robot runs: the normalized action is clamped and mapped into the workspace box, solved by
 Pinocchio IK (warm-started at the measured joints) and executed as a Ruckig stream through the twin's
 joint servos for one decision period; the task model then gives the reward, phase and outcome.
@@ -17,7 +17,7 @@ import gymnasium as gym
 import numpy as np
 
 from mrguide.config import load_section
-from mrguide.deploy.decision import ActionError, DecisionState, DecisionStep
+from mrguide.motion.decision import ActionError, DecisionState, DecisionStep
 from mrguide.robot import RobotConfig, RobotSpec, load_robot, load_robot_config
 from mrguide.task import ACT_DIM, OBS_DIM, OBS_GRIP, OBS_PROGRESS, Outcome, TaskConfig, oracle_action
 from mrguide.twin.camera import Camera

@@ -41,7 +41,7 @@ class SuctionCup:
         self.break_force = math.inf
         self.leak = 0.0  # fault injection: fraction of the sealed vacuum lost through a leak
         #: Called at each break with the constraint's force (N, in the cup frame) and the cup's pose in the part's
-        #: frame (position, m): for probes (mrguide.experiments.break_probe).
+        #: frame (position, m): for probes (tools/break_probe.py).
         self.on_break: Callable[[tuple[float, ...], tuple[float, ...]], None] | None = None
         self.state = SuctionState()
         self._cid: int | None = None

@@ -7,11 +7,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from mrguide.cell.dry_run import dry_run
 from mrguide.deploy.runlog import RunLog
 from mrguide.drivers.config import BusConfig, CobotBusConfig
 from mrguide.robot import load_robot
 from mrguide.task import oracle_action, phase_from_progress
-from mrguide.twin.dry_run import dry_run
 from mrguide.twin.env import EnvConfig
 
 _channels = itertools.count()
@@ -59,7 +59,7 @@ def run_dry(tmp_path):
         cells = []
 
         def pose_factory(cell):
-            from mrguide.twin.plant import TwinObjectPose
+            from mrguide.cell.twin_plant import TwinObjectPose
 
             cells.append(cell)
             if on_cell:
@@ -108,8 +108,8 @@ def camera_scene(tmp_path_factory) -> CameraScene:
 
     from mrguide.calibration.calibration_file import CalibrationRecord, save_calibration
     from mrguide.calibration.camera_model import CameraModel
+    from mrguide.cell.camera_feed import render_marked_object
     from mrguide.twin.camera import look_at
-    from mrguide.twin.camera_feed import render_marked_object
     from mrguide.twin.markers import HOLOLENS2_PV
 
     d = tmp_path_factory.mktemp("camera")

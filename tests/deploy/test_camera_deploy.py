@@ -6,12 +6,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from mrguide.cell.camera_feed import TwinCameraFeed, TwinCameraPoses
 from mrguide.deploy.camera import CameraSourceConfig
 from mrguide.deploy.runlog import read_log
 from mrguide.deploy.runtime_config import RuntimeConfig
 from mrguide.robot import load_robot
 from mrguide.task import Outcome
-from mrguide.twin.camera_feed import TwinCameraFeed, TwinCameraPoses
 from mrguide.twin.visual_arm import ArmDrawing
 
 #: No test here is about a pose's age: the twin renders every frame on the CPU, which a busy machine slows to

@@ -12,10 +12,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from mrguide.cell.cell_process import CellProcessError, cell_process
+from mrguide.cell.dry_run import dry_run_cycles
 from mrguide.deploy.cycles import CycleConfig, CycleRun
 from mrguide.deploy.runlog import RunLog, read_log
-from mrguide.twin.cell_process import CellProcessError, cell_process
-from mrguide.twin.dry_run import dry_run_cycles
 from mrguide.twin.env import EnvConfig
 from tests.deploy.conftest import Expert, bus_config
 
@@ -25,7 +25,7 @@ def test_production_cycles_run_against_a_cell_in_its_own_process(tmp_path):
     cells = []
 
     def pose_factory(cell):
-        from mrguide.twin.plant import TwinObjectPose
+        from mrguide.cell.twin_plant import TwinObjectPose
 
         cells.append(cell)
         return TwinObjectPose(cell.plant)

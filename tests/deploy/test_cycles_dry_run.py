@@ -3,13 +3,13 @@ where it fell, and the lift rules of the runtime act on every lift."""
 
 from __future__ import annotations
 
+from mrguide.cell.dry_run import dry_run_cycles
 from mrguide.cli import main
 from mrguide.deploy.cycles import CycleConfig, CycleRun
 from mrguide.deploy.runlog import RunLog, read_log
 from mrguide.motion.kinematics import Kinematics
 from mrguide.replay.runs import load_run
 from mrguide.robot import load_robot
-from mrguide.twin.dry_run import dry_run_cycles
 from mrguide.twin.env import EnvConfig
 from tests.deploy.conftest import Expert, bus_config
 
@@ -30,7 +30,7 @@ def test_a_part_dropped_in_the_lift_is_picked_again_and_placed(tmp_path):
     cells = []
 
     def pose_factory(cell):
-        from mrguide.twin.plant import TwinObjectPose
+        from mrguide.cell.twin_plant import TwinObjectPose
 
         cells.append(cell)
         return TwinObjectPose(cell.plant)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mrguide.deploy.decision import BAD_SHAPE, NON_FINITE, ActionError, DecisionStep
+from mrguide.motion.decision import BAD_SHAPE, NON_FINITE, ActionError, DecisionStep
 from mrguide.robot import RobotConfig, Workspace, load_robot
 from mrguide.task import Outcome, TaskConfig, progress
 

@@ -15,13 +15,13 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from mrguide.cell.plants import PLANT_BUILDERS
 from mrguide.drivers import Cobot
 from mrguide.drivers.mock import SimulatedCobot
 from mrguide.drivers.mock.sim_cobot import shared_pc_config
 from mrguide.drivers.realtime import settled_heap
 from mrguide.motion.kinematics import Kinematics
 from mrguide.motion.trajectory import point_to_point
-from mrguide.twin.dry_run import PLANT_BUILDERS
 from mrguide.twin.env import EnvConfig
 
 PART = np.array([0.50, -0.10, 0.025])  # on the table, in reach

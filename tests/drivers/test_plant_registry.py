@@ -8,10 +8,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from mrguide.cell import dry_run, plants
 from mrguide.config import ConfigError
 from mrguide.drivers.mock import FirstOrderPlant
-from mrguide.drivers.mock.plant import CellPlant
-from mrguide.twin import dry_run
+from mrguide.plant import CellPlant
 from mrguide.twin.config import PLANT_ENGINES, PlantConfig
 from mrguide.twin.env import EnvConfig
 
@@ -35,9 +35,9 @@ def _toy(env_cfg, twin_cfg, spec, seed):
 
 @pytest.fixture
 def toy_engine():
-    dry_run.register_plant("toy-first-order", _toy)
+    plants.register_plant("toy-first-order", _toy)
     yield "toy-first-order"
-    del dry_run.PLANT_BUILDERS["toy-first-order"]
+    del plants.PLANT_BUILDERS["toy-first-order"]
     PLANT_ENGINES.remove("toy-first-order")
 
 
@@ -54,4 +54,4 @@ def test_an_engine_nobody_registered_is_refused_and_a_name_is_registered_once():
     with pytest.raises(ConfigError, match=r"plant\.engine = 'toy-first-order'"):
         PlantConfig(engine="toy-first-order")
     with pytest.raises(ValueError, match="registered already"):
-        dry_run.register_plant("mujoco", _toy)
+        plants.register_plant("mujoco", _toy)

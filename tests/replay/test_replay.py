@@ -10,10 +10,10 @@ from pathlib import Path
 
 import pytest
 
+from mrguide.cell.dry_run import dry_run
 from mrguide.cli import main
 from mrguide.deploy.runlog import RunLog, read_log
 from mrguide.replay.runs import load_run
-from mrguide.twin.dry_run import dry_run
 from mrguide.twin.env import EnvConfig
 from tests.deploy.conftest import Expert, bus_config
 

@@ -8,6 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from mrguide.cell.hmd_stream import HmdPoseStream
+from mrguide.cell.twin_plant import TwinPlant
 from mrguide.deploy.runlog import read_log
 from mrguide.deploy.runtime_config import RuntimeConfig
 from mrguide.deploy.safety import SafetyConfig
@@ -17,8 +19,6 @@ from mrguide.pose_source import PoseUnavailable
 from mrguide.robot import load_robot
 from mrguide.task import oracle_action, phase_from_progress
 from mrguide.twin.env import EnvConfig
-from mrguide.twin.hmd_stream import HmdPoseStream
-from mrguide.twin.plant import TwinPlant
 from mrguide.twin.scene import Scene
 from mrguide.twin.visual_arm import ArmDrawing
 

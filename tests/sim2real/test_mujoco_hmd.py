@@ -10,13 +10,7 @@ import pytest
 
 from mrguide.calibration.config import load_calibration_config
 from mrguide.calibration.detection import MarkerDetector
-from mrguide.config import ConfigError, load_section
-from mrguide.motion.kinematics import Kinematics
-from mrguide.pose_source import PoseUnavailable
-from mrguide.robot import load_robot
-from mrguide.twin.camera import Intrinsics
-from mrguide.twin.env import EnvConfig
-from mrguide.twin.hmd_stream import (
+from mrguide.cell.hmd_stream import (
     MAX_FRAME_RATE,
     OBJECT_MARKER_ID,
     WATCH_EYE,
@@ -25,9 +19,15 @@ from mrguide.twin.hmd_stream import (
     HmdStartError,
     MujocoDrawing,
 )
+from mrguide.config import ConfigError, load_section
+from mrguide.motion.kinematics import Kinematics
+from mrguide.pose_source import PoseUnavailable
+from mrguide.robot import load_robot
+from mrguide.twin.camera import Intrinsics
+from mrguide.twin.env import EnvConfig
 from mrguide.twin.markers import TwinCalibrationConfig, hmd_marker_pose_source
 
-mujoco_hmd = pytest.importorskip("mrguide.twin.mujoco_hmd")  # the mujoco extra (in dev)
+mujoco_hmd = pytest.importorskip("mrguide.cell.mujoco_hmd")  # the mujoco extra (in dev)
 
 MUJOCO_CELL = Path(__file__).parents[2] / "configs" / "cells" / "mujoco_cell.toml"
 NO_NOISE = {

@@ -4,6 +4,7 @@ from pathlib import Path
 
 import numpy as np
 
+from mrguide.cell.hmd_stream import HmdPoseStream
 from mrguide.cli import main
 from mrguide.drivers.config import BusConfig, CobotBusConfig
 from mrguide.experiments import sim2real as s2r
@@ -11,7 +12,6 @@ from mrguide.experiments import sim2real_report
 from mrguide.robot import load_robot
 from mrguide.task import oracle_action
 from mrguide.twin.env import EnvConfig
-from mrguide.twin.hmd_stream import HmdPoseStream
 
 REAL = Path(__file__).parents[2] / "configs" / "cells" / "real_cell.toml"
 

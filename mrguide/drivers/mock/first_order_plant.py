@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mrguide.drivers.mock.plant import Plant
+from mrguide.plant import Plant
 
 
 @dataclass(frozen=True)

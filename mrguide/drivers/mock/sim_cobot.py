@@ -31,8 +31,8 @@ from mrguide.drivers.conversion import JointConversion
 from mrguide.drivers.errors import NotReadyError
 from mrguide.drivers.mock.drive_sim import SimulatedDrive
 from mrguide.drivers.mock.faults import FaultInjector, FaultStats, FaultyBus
-from mrguide.drivers.mock.plant import Plant
 from mrguide.drivers.mock.vacuum_sim import SimulatedVacuumGenerator
+from mrguide.plant import Plant
 
 logger = logging.getLogger(__name__)
 

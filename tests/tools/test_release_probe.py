@@ -4,7 +4,9 @@ import csv
 import math
 from pathlib import Path
 
-from mrguide.experiments import release_probe
+from tests.tools.conftest import load_tool
+
+release_probe = load_tool("release_probe")
 
 MAIN5K = Path(__file__).parents[2] / "docs/results/sim2real-main5k/policy.npz"
 

@@ -1,7 +1,7 @@
 """How far a held part drifts across the cup's lip in a scripted transport, with MuJoCo's default contact time
 constant and with the MuJoCo cell's (the evidence for `model.CONTACT_TIMECONST_STEPS`).
 
-    python -m mrguide.mujoco_cell.slip_probe
+    python tools/slip_probe.py
 
 The cup seals on a part at (0.50, -0.10), lifts it 12.5 cm and carries it to (0.45, 0.25) on a jerk-limited joint
 trajectory at the arm's limits; printed: the part's displacement in the TCP frame over the transport (mm) and

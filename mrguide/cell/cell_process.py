@@ -58,9 +58,9 @@ class CellServer:
     side may read of and do to the cell."""
 
     def __init__(self, env_cfg: EnvConfig, bus_cfg: CobotBusConfig, seed: int, end: socket.socket) -> None:
+        from mrguide.cell.plants import build_plant
         from mrguide.drivers.mock.sim_cobot import SimulatedCobot
         from mrguide.robot import load_robot
-        from mrguide.twin.dry_run import build_plant
 
         self.plant, self.scene = build_plant(env_cfg, bus_cfg, load_robot(env_cfg.robot), seed)
         self._end = end

@@ -5,7 +5,7 @@ The scripted expert runs each episode, except that its grasp phase drives the cu
 (no seal: the sim-to-real EMCY 0x8611 case). Prints one line per case and writes one row per episode to
 OUT/press_probe.csv.
 
-    python -m mrguide.twin.press_probe [--episodes 10] [--cell configs/cells/real_cell.toml] [--out docs/results/compliance]
+    python tools/press_probe.py [--episodes 10] [--cell configs/cells/real_cell.toml] [--out docs/results/compliance]
 """
 
 from __future__ import annotations
@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from mrguide.cell.dry_run import dry_run
 from mrguide.cell_layout import CupConfig
 from mrguide.config import load_section
 from mrguide.deploy.runlog import RunLog
@@ -26,7 +27,6 @@ from mrguide.drivers.config import BusConfig, CobotBusConfig
 from mrguide.robot import load_robot
 from mrguide.task import OBS_OBJECT, OBS_PROGRESS, Phase, oracle_action, phase_from_progress
 from mrguide.twin.config import TwinConfig
-from mrguide.twin.dry_run import dry_run
 from mrguide.twin.env import EnvConfig
 
 #: case -> (offset of the cup from the part's centre in x (m), vacuum command)

@@ -1,4 +1,5 @@
-"""The plant interface: the physical arm and vacuum gripper behind the simulated CANopen devices.
+"""The plant interface: the physical arm and vacuum gripper behind the simulated CANopen devices, and what a simulated
+cell's plant shows the dry-run harness and its cameras (`CellView`, `FedCell`). A seam every layer shares: numpy only.
 
 The simulated cobot steps its plant exactly once per SYNC, from its CAN receive thread: it reads the
 joint state, passes the drives' position targets and the vacuum command, then calls `step(dt)` with the
@@ -11,6 +12,7 @@ atmosphere* (0 = atmospheric pressure, positive = vacuum; e.g. 60 kPa below atmo
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from typing import Protocol
 
 import numpy as np
 
@@ -59,7 +61,7 @@ class Plant(ABC):
 class CellPlant(Plant):
     """A plant that is a whole simulated cell: a part to pick and a goal to place it at (dry runs, the sim-to-real
     conditions and their judges), and a view for the cameras. The PyBullet twin's and the MuJoCo cell's plants are
-    ones; an engine registers its builder with `twin.dry_run.register_plant`."""
+    ones; an engine registers its builder with `cell.plants.register_plant`."""
 
     @abstractmethod
     def place_objects(self, obj: np.ndarray, goal: np.ndarray) -> None:
@@ -72,3 +74,18 @@ class CellPlant(Plant):
     @abstractmethod
     def view(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """What a camera sees, read at one instant: part position, quaternion (x, y, z, w), true joints."""
+
+
+class CellView(Protocol):
+    """What pose sources and cameras read of a simulated cell's plant, whatever its engine (`TwinPlant`, the MuJoCo
+    cell's `MujocoPlant`)."""
+
+    def object_position(self) -> np.ndarray: ...
+
+    def view(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
+
+
+class FedCell(CellView, Protocol):
+    """What a dry run reads of and does to its cell's plant, in its own process or in the cell's (`cell_process`)."""
+
+    def place_objects(self, obj: np.ndarray, goal: np.ndarray) -> None: ...

@@ -8,11 +8,10 @@ thread-safe, so every access (also the exact object pose read by the deploy runt
 from __future__ import annotations
 
 import threading
-from typing import Protocol
 
 import numpy as np
 
-from mrguide.drivers.mock.plant import CellPlant
+from mrguide.plant import CellPlant, CellView
 from mrguide.pose_source import ObjectPoseSource
 from mrguide.twin.scene import Scene
 
@@ -88,21 +87,6 @@ class TwinPlant(CellPlant):
         with self.lock:
             pos, orn = self.scene.object_pose()
             return pos, orn, self.scene.joint_positions(noisy=False)
-
-
-class CellView(Protocol):
-    """What pose sources and cameras read of a simulated cell's plant, whatever its engine (`TwinPlant`, the MuJoCo
-    cell's `MujocoPlant`)."""
-
-    def object_position(self) -> np.ndarray: ...
-
-    def view(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
-
-
-class FedCell(CellView, Protocol):
-    """What a dry run reads of and does to its cell's plant, in its own process or in the cell's (`cell_process`)."""
-
-    def place_objects(self, obj: np.ndarray, goal: np.ndarray) -> None: ...
 
 
 class TwinObjectPose(ObjectPoseSource):

@@ -30,13 +30,13 @@ from mrguide.calibration.hmd import HmdFrame
 from mrguide.calibration.procedure import CalibrationRun, calibrate_frames
 from mrguide.calibration.se3 import invert
 from mrguide.calibration.targets import layout_from_config
+from mrguide.cell.rendering import OFFSCREEN_GL_HELP
 from mrguide.cell_layout import CupConfig
 from mrguide.config import ConfigError
 from mrguide.mujoco_cell.config import MujocoCellConfig
 from mrguide.mujoco_cell.model import add_table, arm_spec
 from mrguide.robot import RobotSpec
 from mrguide.twin.camera import Intrinsics, look_at
-from mrguide.twin.hmd_stream import OFFSCREEN_GL_HELP
 from mrguide.twin.markers import (
     HOLOLENS2_PV,
     MARKER_THICKNESS,

@@ -21,39 +21,16 @@ import numpy as np
 import pybullet as pb
 
 from mrguide.calibration.camera_model import CameraModel
-from mrguide.cell_layout import TABLE_CENTER, TABLE_HALF_EXTENTS
+from mrguide.cell.rendering import RENDER_NICENESS, marked_object_scene, stop_render_process
 from mrguide.deploy.camera import CameraPoseSource, CameraSourceConfig, CameraStats, load_marker_pipeline
 from mrguide.deploy.frames import Frame
 from mrguide.twin.camera import Camera, Intrinsics
-from mrguide.twin.hmd_stream import stop_render_process
-from mrguide.twin.markers import MarkerOnBody, marker_on_cube_top
 from mrguide.twin.visual_arm import ArmDrawing, VisualArm
 
 #: How long a dry run waits for the camera to see the object after it was placed (s).
 PLACED_TIMEOUT_S = 30.0
-#: The render process yields the CPU to the control loop (it uses a core of its own while it renders).
-RENDER_NICENESS = 10
 #: How long the render process may take to start (s).
 START_TIMEOUT_S = 120.0
-
-
-def marked_object_scene(
-    client: int, object_size: float, dictionary: str, marker_id: int, marker_size_m: float
-) -> tuple[int, MarkerOnBody]:
-    """A visual-only table and cube with the object marker on its top face (5 mm quiet zone); (cube, marker)."""
-    vis = pb.createVisualShape(
-        pb.GEOM_BOX, halfExtents=TABLE_HALF_EXTENTS, rgbaColor=(0.75, 0.72, 0.66, 1), physicsClientId=client
-    )
-    pb.createMultiBody(0, -1, vis, TABLE_CENTER, physicsClientId=client)
-    h = object_size / 2
-    cube_vis = pb.createVisualShape(
-        pb.GEOM_BOX, halfExtents=(h, h, h), rgbaColor=(0.85, 0.1, 0.1, 1), physicsClientId=client
-    )
-    cube = pb.createMultiBody(0, -1, cube_vis, (0.5, -0.1, h), physicsClientId=client)
-    marker = MarkerOnBody(
-        client, cube, marker_on_cube_top(object_size), dictionary, marker_id, marker_size_m, quiet_zone_m=0.005
-    )
-    return cube, marker
 
 
 def _pinhole(camera: CameraModel) -> Intrinsics:

@@ -8,12 +8,15 @@ from __future__ import annotations
 
 import contextlib
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
+from mrguide.cell.cell_process import cell_process
+from mrguide.cell.plants import build_plant
+from mrguide.cell.twin_plant import TwinObjectPose
 from mrguide.config import ConfigError
 from mrguide.deploy.cycles import CycleRun, CycleRunner, CycleSummary
 from mrguide.deploy.policy import ExportedPolicy, check_decision_period
@@ -24,20 +27,16 @@ from mrguide.deploy.safety import SafetyConfig
 from mrguide.deploy.session import DeploySummary, run_session
 from mrguide.drivers.cobot import Cobot
 from mrguide.drivers.config import CobotBusConfig
-from mrguide.drivers.mock.plant import CellPlant
 from mrguide.drivers.mock.sim_cobot import SimulatedCobot, shared_pc_config
 from mrguide.drivers.realtime import settled_heap
+from mrguide.plant import FedCell
 from mrguide.pose_source import ObjectPoseSource
-from mrguide.registries import register
 from mrguide.robot import RobotSpec, load_robot
-from mrguide.twin.cell_process import cell_process
-from mrguide.twin.config import PLANT_ENGINES, TwinConfig
 from mrguide.twin.env import EnvConfig
-from mrguide.twin.plant import FedCell, TwinObjectPose, TwinPlant
 from mrguide.twin.scene import Scene
 
 if TYPE_CHECKING:
-    from mrguide.mujoco_cell.plant import MujocoPlant
+    pass
 
 
 @dataclass
@@ -50,41 +49,6 @@ class SimulatedCell:
     plant: FedCell
     sim: SimulatedCobot | None
     cobot: Cobot
-
-
-def _pybullet_plant(env_cfg: EnvConfig, twin_cfg: TwinConfig, spec: RobotSpec, seed: int) -> tuple[TwinPlant, Scene]:
-    scene = Scene(spec, twin_cfg, env_cfg.task.object_height, seed=seed)
-    return TwinPlant(scene), scene
-
-
-def _mujoco_plant(env_cfg: EnvConfig, twin_cfg: TwinConfig, spec: RobotSpec, seed: int) -> tuple[MujocoPlant, None]:
-    from mrguide.mujoco_cell.plant import MujocoPlant  # the `mujoco` extra: only for a cell that asks for it
-
-    return MujocoPlant(spec, env_cfg.plant.mujoco, env_cfg.task.object_height, cup=twin_cfg.cup), None
-
-
-#: (env config, twin config, arm, seed) → the plant behind the simulated drives, and the twin's scene if it has one.
-PlantBuilder = Callable[[EnvConfig, TwinConfig, RobotSpec, int], tuple[CellPlant, Scene | None]]
-#: How each engine of [plant] engine builds its plant (`register_plant`).
-PLANT_BUILDERS: dict[str, PlantBuilder] = {}
-
-
-def register_plant(engine: str, builder: PlantBuilder) -> None:
-    """Make `[plant] engine = ENGINE` a cell's engine, built by `builder`; ValueError if the name is taken. The plant
-    contract tests (`tests/drivers/test_plant_contract.py`) run on every registered engine."""
-    register(PLANT_BUILDERS, PLANT_ENGINES, engine, builder, "plant engine")
-
-
-register_plant("pybullet", _pybullet_plant)
-register_plant("mujoco", _mujoco_plant)
-
-
-def build_plant(
-    env_cfg: EnvConfig, bus_cfg: CobotBusConfig, spec: RobotSpec, seed: int
-) -> tuple[CellPlant, Scene | None]:
-    """The plant of the cell's [plant] engine, stepping one control period of `bus_cfg` per SYNC, no GUI."""
-    twin_cfg = replace(env_cfg.twin, control_period=bus_cfg.timing.control_period, gui=False)
-    return PLANT_BUILDERS[env_cfg.plant.engine](env_cfg, twin_cfg, spec, seed)
 
 
 @contextlib.contextmanager

@@ -5,7 +5,9 @@ from __future__ import annotations
 import csv
 from pathlib import Path
 
-from mrguide.twin import press_probe
+from tests.tools.conftest import load_tool
+
+press_probe = load_tool("press_probe")
 
 ROOT = Path(__file__).parents[2]
 

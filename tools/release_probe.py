@@ -6,7 +6,7 @@ policy whose openings sit near ε fails at the slightest drift.
 
 Prints one line per policy and writes OUT/release_probe.csv:
 
-    python -m mrguide.experiments.release_probe POLICY... [--episodes 15] [--out DIR]
+    python tools/release_probe.py POLICY... [--episodes 15] [--out DIR]
 """
 
 from __future__ import annotations
@@ -73,7 +73,7 @@ def _median(values: list[float]) -> float:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m mrguide.experiments.release_probe", description=__doc__.split("\n")[0])
+    p = argparse.ArgumentParser(prog="python tools/release_probe.py", description=__doc__.split("\n")[0])
     p.add_argument("policies", nargs="+", help="exported policy files (policy.npz)")
     p.add_argument("--episodes", type=positive_int, default=15)
     p.add_argument("--out", default=None, help="directory for release_probe.csv (default: print only)")

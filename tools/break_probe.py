@@ -7,7 +7,7 @@ OUT/breaks.csv with the phase the episode was in, the constraint's force (N; z <
 it) and the cup's position in the part's frame (m; the top face is at z = half the part's height); the outcomes to
 OUT/break_outcomes.csv. Prints one line per variant.
 
-    python -m mrguide.experiments.break_probe --policy P [--seeds 3] [--episodes 20] [--out docs/results/compliance]
+    python tools/break_probe.py --policy P [--seeds 3] [--episodes 20] [--out docs/results/compliance]
 """
 
 from __future__ import annotations
@@ -20,14 +20,14 @@ from pathlib import Path
 
 import numpy as np
 
+from mrguide.cell.dry_run import dry_run
+from mrguide.cell.twin_plant import TwinObjectPose
 from mrguide.deploy.policy import ExportedPolicy
 from mrguide.deploy.runlog import RunLog
 from mrguide.deploy.runtime_config import RuntimeConfig
 from mrguide.experiments.sim2real import load_real_cell
 from mrguide.robot import load_robot
 from mrguide.task import OBS_PROGRESS, phase_from_progress
-from mrguide.twin.dry_run import dry_run
-from mrguide.twin.plant import TwinObjectPose
 
 #: variant -> the runtime it runs with
 VARIANTS = {"break-away (default)": RuntimeConfig(), "no break-away": RuntimeConfig(break_away_distance=0.0)}

@@ -12,7 +12,6 @@ cell (`MujocoDrawing`). At start-up the HMD is calibrated against the board exac
 
 from __future__ import annotations
 
-import contextlib
 import logging
 import multiprocessing as mp
 import multiprocessing.connection
@@ -27,10 +26,11 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import ArrayLike
 
+from mrguide.cell.rendering import OFFSCREEN_GL_HELP, RENDER_NICENESS, stop_render_process
 from mrguide.cell_layout import CupConfig
+from mrguide.plant import CellView
 from mrguide.pose_source import ObjectPoseSource, PoseUnavailable
 from mrguide.robot import RobotSpec
-from mrguide.twin.plant import CellView
 from mrguide.twin.visual_arm import ArmDrawing
 
 if TYPE_CHECKING:
@@ -57,12 +57,6 @@ class MujocoDrawing:
     cup: CupConfig
 
 
-#: What MuJoCo's offscreen renderer needs, for the errors that say it is missing.
-OFFSCREEN_GL_HELP = (
-    "MuJoCo's offscreen renderer needs EGL (Debian: apt-get install libegl1 libegl-mesa0 libgl1-mesa-dri; "
-    "MUJOCO_GL=egl, the default here) or OSMesa (apt-get install libosmesa6; MUJOCO_GL=osmesa), set before mujoco "
-    "is imported"
-)
 #: Poses the HMD process's scene as the cell is: part position, quaternion (x, y, z, w), arm joints.
 ScenePoser = Callable[[ArrayLike, ArrayLike, ArrayLike], None]
 
@@ -76,8 +70,6 @@ def _hmd_worker(
     arm: ArmDrawing | MujocoDrawing,
 ) -> None:
     """Runs in the HMD process: calibrate, then answer each true (object pose, joints) with the HMD's estimate."""
-    from mrguide.twin.camera_feed import RENDER_NICENESS
-
     os.nice(RENDER_NICENESS)  # the simulated drives and the deploy loop share this machine: they go first
 
     from mrguide.calibration.config import load_calibration_config
@@ -109,8 +101,8 @@ def _pybullet_hmd(
     """The HMD rendered by PyBullet: calibrated, looking at the cell; its pose source, poser and start-up report."""
     import pybullet as pb
 
+    from mrguide.cell.rendering import marked_object_scene
     from mrguide.twin.camera import look_at
-    from mrguide.twin.camera_feed import marked_object_scene
     from mrguide.twin.markers import TwinHmd, calibrate_twin_hmd, hmd_marker_pose_source
     from mrguide.twin.visual_arm import VisualArm
 
@@ -148,7 +140,7 @@ def _mujoco_hmd(
     from mrguide.twin.markers import hmd_marker_pose_source
 
     try:
-        from mrguide.twin.mujoco_hmd import MujocoHmd, calibrate_mujoco_hmd
+        from mrguide.cell.mujoco_hmd import MujocoHmd, calibrate_mujoco_hmd
     except Exception as exc:  # importing mujoco loads the OpenGL backend MUJOCO_GL names, and fails without it
         backend = os.environ.get("MUJOCO_GL")
         raise RuntimeError(f"mujoco cannot be imported with MUJOCO_GL={backend}: {exc}. {OFFSCREEN_GL_HELP}") from exc
@@ -203,15 +195,6 @@ def _start(proc: mp.process.BaseProcess, offscreen_gl: bool) -> None:
         proc.start()
     finally:
         del os.environ["MUJOCO_GL"]
-
-
-def stop_render_process(conn, proc) -> None:
-    """Ask a render process to end (None on its pipe), wait 5 s, then kill it."""
-    with contextlib.suppress(BrokenPipeError, OSError):
-        conn.send(None)
-    proc.join(timeout=5)
-    if proc.is_alive():
-        proc.kill()
 
 
 class HmdStartError(RuntimeError):
