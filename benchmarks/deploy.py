@@ -9,7 +9,6 @@ default size. Prints a table; the last line is one JSON object.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import os
 import platform
@@ -19,14 +18,14 @@ from pathlib import Path
 
 import numpy as np
 
+from mrguide.cell.config import CellConfig
 from mrguide.cell.dry_run import dry_run
 from mrguide.cli_args import positive_int
 from mrguide.deploy.policy import ExportedPolicy
 from mrguide.deploy.runlog import RunLog
 from mrguide.drivers.config import load_cobot_bus_config
-from mrguide.robot import RobotConfig, load_robot
+from mrguide.robot import load_robot
 from mrguide.task import oracle_action
-from mrguide.twin.env import EnvConfig
 
 
 def bench_inference(n: int = 20000) -> tuple[float, str]:
@@ -63,9 +62,9 @@ def main() -> None:
         help="the cell's TOML ([plant] engine: the PyBullet twin or the MuJoCo cell)",
     )
     args = ap.parse_args()
-    cfg = EnvConfig.load(args.cell)
+    cfg = CellConfig.load(args.cell)
     if args.robot:
-        cfg = dataclasses.replace(cfg, robot=RobotConfig(name=args.robot))
+        cfg = cfg.with_value("robot.name", args.robot, "--robot")
     spec = load_robot(cfg.robot)
     ws = spec.workspace
     with tempfile.TemporaryDirectory() as tmp, RunLog(Path(tmp) / "log.jsonl", {"benchmark": "deploy"}) as run_log:

@@ -24,7 +24,7 @@ from pathlib import Path
 from torch._inductor.runtime.cache_dir_utils import cache_dir
 
 from mrguide.policies.train import Trainer
-from mrguide.policies.train_config import load_sac_config, load_train_config
+from mrguide.policies.train_config import RunConfig
 from mrguide.task import oracle_action
 from mrguide.twin.env import EnvConfig, PickPlaceEnv
 
@@ -57,10 +57,11 @@ def main() -> None:
     warm = any(Path(cache).iterdir())
     if hasattr(os, "sched_setaffinity"):
         os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
-    tc, dc, gc, ec = load_train_config(args.config)
-    tc = dataclasses.replace(tc, total_steps=args.steps, checkpoint_every=args.steps)
+    run = RunConfig.load(args.config)
+    run = run.replace(train=dataclasses.replace(run.train, total_steps=args.steps, checkpoint_every=args.steps))
+    tc, ec = run.train, run.env
     with tempfile.TemporaryDirectory() as out:
-        tr = Trainer(tc, dc, gc, ec, out, sac_cfg=load_sac_config(args.config))
+        tr = Trainer(run, out)
         try:
             tr.run()
         finally:
@@ -88,7 +89,7 @@ def main() -> None:
     print(f"{'guided training steps':<40} {tr.counters.step}")
     print(f"{'TorchInductor cache at the start':<40} {res['compile_cache']} ({cache})")
     print(f"{'steps/s (env + update)':<40} {res['steps_per_s']:.1f}")
-    hidden = "x".join(map(str, (tr.sac_cfg if tc.learner == "sac" else dc).hidden))
+    hidden = "x".join(map(str, run.learner.hidden))
     print(f"{f'update (batch {tc.batch_size}, {hidden} MLPs)':<40} {res['update_ms']:.2f} ms")
     print(f"{'wall time, scaled to 20k steps':<40} {res['wall_s_20k']:.0f} s")
     print(f"{'the twin alone, as many decisions':<40} {twin:.0f} s")

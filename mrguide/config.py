@@ -188,9 +188,12 @@ def load_toml(path: str | Path) -> dict[str, Any]:
         raise ConfigError(f"{path}: not valid TOML: {exc}") from exc
 
 
-#: The sections a run config may hold: one file may serve several commands (`configs/cells/real_cell.toml` is
-#: read by `deploy` and `sim2real`), so each command reads its sections and any other known one is left to
-#: the command it belongs to; an unknown section (a typo: `[deplyo]`) is refused instead of ignored.
+#: The sections a run config may hold besides its learners' (a learner's section is named by its registry entry,
+#: `policies.learners`, and known to `mrguide train` and `mrguide config show`, which import the registry): one file
+#: may serve several commands (`configs/cells/real_cell.toml` is read by `deploy` and `sim2real`), so each command
+#: reads its sections and any other known one is left to the command it belongs to; an unknown section (a typo:
+#: `[deplyo]`) is refused instead of ignored. The shipped learners' sections are listed for the commands that do
+#: not import the learner registry (deploy, the cell, calibration).
 RUN_SECTIONS = (
     "robot",
     "task",
@@ -207,22 +210,45 @@ RUN_SECTIONS = (
 )
 
 
+@dataclasses.dataclass(frozen=True)
+class ConfigFile:
+    """A run config file parsed once: its sections' tables, each read into its dataclass by name (`section`).
+
+    `path` None is the empty file: every section at its defaults."""
+
+    path: Path | None = None
+    tables: dict[str, Any] = dataclasses.field(default_factory=dict)
+
+    @classmethod
+    def read(cls, path: str | Path | None, known: tuple[str, ...] = RUN_SECTIONS) -> ConfigFile:
+        """Parse `path` (ConfigError naming it if it is missing or malformed); only the sections in `known`."""
+        if path is None:
+            return cls()
+        whole = load_toml(path)
+        unknown = [key for key in whole if key not in known]
+        if unknown:
+            raise ConfigError(
+                f"{path}: unknown section [{unknown[0]}]; this file may hold " + ", ".join(f"[{k}]" for k in known)
+            )
+        return cls(Path(path), whole)
+
+    def has(self, section: str) -> bool:
+        return section in self.tables
+
+    def section(self, cls: type[T], section: str) -> T:
+        """`[section]` read into dataclass `cls`; its defaults when the section is absent."""
+        data = self.tables.get(section, {})
+        if not isinstance(data, dict):
+            raise ConfigError(f"{self.path}: [{section}] must be a table")
+        return from_dict(cls, data, where=f"{self.path} [{section}]") if self.path else cls()
+
+
 def load_section(cls: type[T], path: str | Path | None, section: str, known: tuple[str, ...] = RUN_SECTIONS) -> T:
     """Load `[section]` of TOML file `path` into `cls`; defaults when `path` is None or the section is absent.
 
-    The file may hold only the sections in `known`; any other top-level key raises ConfigError naming it."""
-    if path is None:
-        return cls()
-    whole = load_toml(path)
-    unknown = [key for key in whole if key not in known]
-    if unknown:
-        raise ConfigError(
-            f"{path}: unknown section [{unknown[0]}]; this file may hold " + ", ".join(f"[{k}]" for k in known)
-        )
-    data = whole.get(section, {})
-    if not isinstance(data, dict):
-        raise ConfigError(f"{path}: [{section}] must be a table")
-    return from_dict(cls, data, where=f"{path} [{section}]")
+    The file may hold only the sections in `known`; any other top-level key raises ConfigError naming it. For a
+    command that reads one section; one that reads several parses the file once (`ConfigFile`)."""
+    return ConfigFile.read(path, known).section(cls, section)
 
 
 def load_optional_section(cls: type[T], path: str | Path | None, section: str) -> T | None:

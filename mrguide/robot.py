@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from mrguide.config import ConfigError, from_dict, load_section, load_toml, to_dict
+from mrguide.config import ConfigError, ConfigFile, from_dict, load_toml, to_dict
 from mrguide.urdf import UrdfError, example_robot_data, kinematic_chain
 
 #: The arm of a run config without `[robot] name` or `file`.
@@ -207,9 +207,14 @@ def arm_file(cfg: RobotConfig) -> Path:
 
 def load_robot_config(path: str | Path | None) -> RobotConfig:
     """[robot] of run config `path`, with a relative `file` made relative to the config's directory."""
-    cfg = load_section(RobotConfig, path, "robot")
-    if path is not None and cfg.file and not Path(cfg.file).is_absolute():
-        cfg = dataclasses.replace(cfg, file=str(Path(path).parent / cfg.file))
+    return robot_config(ConfigFile.read(path))
+
+
+def robot_config(file: ConfigFile) -> RobotConfig:
+    """[robot] of a parsed run config, with a relative `file` made relative to the config's directory."""
+    cfg = file.section(RobotConfig, "robot")
+    if file.path is not None and cfg.file and not Path(cfg.file).is_absolute():
+        cfg = dataclasses.replace(cfg, file=str(file.path.parent / cfg.file))
     return cfg
 
 

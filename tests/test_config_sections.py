@@ -7,11 +7,11 @@ from pathlib import Path
 import pytest
 
 from mrguide.calibration.config import load_calibration_config
+from mrguide.cell.config import CellConfig
 from mrguide.config import RUN_SECTIONS, ConfigError, load_section
 from mrguide.deploy.safety import SafetyConfig
 from mrguide.deploy.session import DeployConfig
-from mrguide.policies.train_config import load_sac_config, load_train_config
-from mrguide.robot import load_robot_config
+from mrguide.policies.train_config import RunConfig
 from mrguide.twin.markers import TwinCalibrationConfig
 from tests import shipped_files
 
@@ -19,11 +19,10 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def _every_loader(path: Path) -> None:
-    """What the commands read from a run config: train (robot, twin, task, train, ddpg, sac, guidance), deploy and
-    sim2real (deploy, safety), calibrate (calibration, calibration_twin)."""
-    load_train_config(path)
-    load_sac_config(path)
-    load_robot_config(path)
+    """What the commands read from a run config: train (robot, twin, task, train, the learners', guidance), deploy and
+    sim2real (deploy, safety, plant), calibrate (calibration, calibration_twin)."""
+    RunConfig.load(path)
+    CellConfig.load(path)
     load_section(DeployConfig, path, "deploy")
     load_section(SafetyConfig, path, "safety")
     load_calibration_config(path)

@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from mrguide.cell.config import CellConfig
 from mrguide.cell.dry_run import dry_run
 from mrguide.cell_layout import CupConfig
 from mrguide.config import load_section
@@ -57,7 +58,7 @@ def main(argv: list[str] | None = None) -> int:
     rows = []
     with tempfile.TemporaryDirectory() as scratch:
         for stroke in (0.0, real.cup.stroke):
-            cfg = EnvConfig(twin=replace(real, cup=CupConfig(stroke=stroke)))
+            cfg = CellConfig().with_twin(replace(real, cup=CupConfig(stroke=stroke)))
             for case, (offset, vacuum) in CASES.items():
                 bus = CobotBusConfig(bus=BusConfig(interface="virtual", channel=f"press-{stroke}-{offset}"))
                 with RunLog(Path(scratch) / "press_probe.jsonl", {"probe": case}) as log:

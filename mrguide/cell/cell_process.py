@@ -33,10 +33,10 @@ from typing import Any
 
 import numpy as np
 
+from mrguide.cell.config import CellConfig
 from mrguide.drivers.config import BusConfig, CobotBusConfig
 from mrguide.drivers.errors import DriverError
 from mrguide.drivers.mock.pipe_bus import pipe_link
-from mrguide.twin.env import EnvConfig
 
 logger = logging.getLogger(__name__)
 
@@ -57,7 +57,7 @@ class CellServer:
     """In the cell's process: the plant and the simulated devices on the device end of the link, and what the deploy
     side may read of and do to the cell."""
 
-    def __init__(self, env_cfg: EnvConfig, bus_cfg: CobotBusConfig, seed: int, end: socket.socket) -> None:
+    def __init__(self, env_cfg: CellConfig, bus_cfg: CobotBusConfig, seed: int, end: socket.socket) -> None:
         from mrguide.cell.plants import build_plant
         from mrguide.drivers.mock.sim_cobot import SimulatedCobot
         from mrguide.robot import load_robot
@@ -133,7 +133,7 @@ _CellManager.register("CellServer", CellServer, exposed=("place_objects", "objec
 
 
 @contextlib.contextmanager
-def cell_process(env_cfg: EnvConfig, bus_cfg: CobotBusConfig, seed: int) -> Iterator[tuple[CellProxy, CobotBusConfig]]:
+def cell_process(env_cfg: CellConfig, bus_cfg: CobotBusConfig, seed: int) -> Iterator[tuple[CellProxy, CobotBusConfig]]:
     """Start the cell's process (plant + simulated devices, booted and waiting in PRE-OPERATIONAL); yield the deploy
     side's handle on it (`CellProxy`) and the bus config of the master's end of the link. The process ends with the
     block."""

@@ -12,11 +12,9 @@ class CellDryRun:
     simulated cell runs in a process of its own, beside the deploy stack as a real cell's drives are."""
 
     def __init__(self, config: str | None):
-        from mrguide.twin.env import (
-            EnvConfig,  # imports PyBullet: only once deploy's own checks have passed
-        )
+        from mrguide.cell.config import CellConfig  # imports PyBullet: only once deploy's own checks have passed
 
-        self.env_cfg = EnvConfig.load(config)
+        self.env_cfg = CellConfig.load(config)
         self.decision_period = self.env_cfg.twin.decision_period
 
     def camera(self, camera_cfg: Any, base: Path, object_height: float) -> Any:

@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from mrguide.cell.cell_process import cell_process
+from mrguide.cell.config import CellConfig
 from mrguide.cell.plants import build_plant
 from mrguide.cell.twin_plant import TwinObjectPose
 from mrguide.config import ConfigError
@@ -53,7 +54,7 @@ class SimulatedCell:
 
 @contextlib.contextmanager
 def simulated_cell(
-    env_cfg: EnvConfig, bus_cfg: CobotBusConfig, seed: int = 0, own_process: bool = False
+    env_cfg: CellConfig, bus_cfg: CobotBusConfig, seed: int = 0, own_process: bool = False
 ) -> Iterator[SimulatedCell]:
     """Start the cell's plant ([plant] engine) + simulated devices, connect and enable the cobot; tear everything
     down on exit. `own_process`: the plant and the devices in a process of their own (`cell_process`), so that
@@ -85,7 +86,9 @@ def simulated_cell(
                 scene.close()
 
 
-def episode_layouts(env_cfg: EnvConfig, episodes: int, seed: int | list[int]) -> list[tuple[np.ndarray, np.ndarray]]:
+def episode_layouts(
+    env_cfg: EnvConfig | CellConfig, episodes: int, seed: int | list[int]
+) -> list[tuple[np.ndarray, np.ndarray]]:
     """(object, goal) per episode, drawn from the twin's object and goal regions (`seed`: numpy's seed entropy)."""
     rng = np.random.default_rng(seed)
     h = 0.5 * env_cfg.task.object_height
@@ -98,7 +101,7 @@ def episode_layouts(env_cfg: EnvConfig, episodes: int, seed: int | list[int]) ->
 
 
 def _checked_policy(
-    policy_path: str | Path | None, policy, spec: RobotSpec, env_cfg: EnvConfig, bus_cfg: CobotBusConfig
+    policy_path: str | Path | None, policy, spec: RobotSpec, env_cfg: CellConfig, bus_cfg: CobotBusConfig
 ) -> Callable[[np.ndarray], np.ndarray]:
     """The policy to run: `policy` if given, else the file's; an exported one checked against the cell's timing."""
     if policy is None:
@@ -113,7 +116,7 @@ def _checked_policy(
 
 def dry_run(
     policy_path: str | Path | None,
-    env_cfg: EnvConfig,
+    env_cfg: CellConfig,
     bus_cfg: CobotBusConfig,
     episodes: int,
     seed: int,
@@ -162,7 +165,7 @@ def dry_run(
 @contextlib.contextmanager
 def _cell_runtime(
     cell: SimulatedCell,
-    env_cfg: EnvConfig,
+    env_cfg: CellConfig,
     spec: RobotSpec,
     policy: Callable[[np.ndarray], np.ndarray],
     run_log: RunLog,
@@ -199,7 +202,7 @@ class TwinFeeder:
 
     tracks_part = True  # the dry run's pose sources (exact, camera, HMD) see the part wherever it lies
 
-    def __init__(self, cell: SimulatedCell, env_cfg: EnvConfig, seed: int, on_placed: Callable[[], None] | None):
+    def __init__(self, cell: SimulatedCell, env_cfg: CellConfig, seed: int, on_placed: Callable[[], None] | None):
         self.cell, self.env_cfg, self.seed, self.on_placed = cell, env_cfg, seed, on_placed
 
     def layout(self, cycle: int) -> tuple[np.ndarray, np.ndarray]:
@@ -221,7 +224,7 @@ class TwinFeeder:
 
 def dry_run_cycles(
     policy_path: str | Path | None,
-    env_cfg: EnvConfig,
+    env_cfg: CellConfig,
     bus_cfg: CobotBusConfig,
     run: CycleRun,
     run_log: RunLog,

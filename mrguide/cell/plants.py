@@ -7,32 +7,32 @@ from collections.abc import Callable
 from dataclasses import replace
 from typing import TYPE_CHECKING
 
+from mrguide.cell.config import PLANT_ENGINES, CellConfig
 from mrguide.cell.twin_plant import TwinPlant
 from mrguide.drivers.config import CobotBusConfig
 from mrguide.plant import CellPlant
 from mrguide.registries import register
 from mrguide.robot import RobotSpec
-from mrguide.twin.config import PLANT_ENGINES, TwinConfig
-from mrguide.twin.env import EnvConfig
+from mrguide.twin.config import TwinConfig
 from mrguide.twin.scene import Scene
 
 if TYPE_CHECKING:
     from mrguide.mujoco_cell.plant import MujocoPlant
 
 
-def _pybullet_plant(env_cfg: EnvConfig, twin_cfg: TwinConfig, spec: RobotSpec, seed: int) -> tuple[TwinPlant, Scene]:
-    scene = Scene(spec, twin_cfg, env_cfg.task.object_height, seed=seed)
+def _pybullet_plant(cell: CellConfig, twin_cfg: TwinConfig, spec: RobotSpec, seed: int) -> tuple[TwinPlant, Scene]:
+    scene = Scene(spec, twin_cfg, cell.task.object_height, seed=seed)
     return TwinPlant(scene), scene
 
 
-def _mujoco_plant(env_cfg: EnvConfig, twin_cfg: TwinConfig, spec: RobotSpec, seed: int) -> tuple[MujocoPlant, None]:
+def _mujoco_plant(cell: CellConfig, twin_cfg: TwinConfig, spec: RobotSpec, seed: int) -> tuple[MujocoPlant, None]:
     from mrguide.mujoco_cell.plant import MujocoPlant  # the `mujoco` extra: only for a cell that asks for it
 
-    return MujocoPlant(spec, env_cfg.plant.mujoco, env_cfg.task.object_height, cup=twin_cfg.cup), None
+    return MujocoPlant(spec, cell.plant.mujoco, cell.task.object_height, cup=twin_cfg.cup), None
 
 
 #: (env config, twin config, arm, seed) → the plant behind the simulated drives, and the twin's scene if it has one.
-PlantBuilder = Callable[[EnvConfig, TwinConfig, RobotSpec, int], tuple[CellPlant, Scene | None]]
+PlantBuilder = Callable[[CellConfig, TwinConfig, RobotSpec, int], tuple[CellPlant, Scene | None]]
 #: How each engine of [plant] engine builds its plant (`register_plant`).
 PLANT_BUILDERS: dict[str, PlantBuilder] = {}
 
@@ -40,7 +40,7 @@ PLANT_BUILDERS: dict[str, PlantBuilder] = {}
 def register_plant(engine: str, builder: PlantBuilder) -> None:
     """Make `[plant] engine = ENGINE` a cell's engine, built by `builder`; ValueError if the name is taken. The plant
     contract tests (`tests/drivers/test_plant_contract.py`) run on every registered engine."""
-    register(PLANT_BUILDERS, PLANT_ENGINES, engine, builder, "plant engine")
+    register(PLANT_BUILDERS, engine, builder, "plant engine", PLANT_ENGINES)
 
 
 register_plant("pybullet", _pybullet_plant)
@@ -48,8 +48,8 @@ register_plant("mujoco", _mujoco_plant)
 
 
 def build_plant(
-    env_cfg: EnvConfig, bus_cfg: CobotBusConfig, spec: RobotSpec, seed: int
+    cell: CellConfig, bus_cfg: CobotBusConfig, spec: RobotSpec, seed: int
 ) -> tuple[CellPlant, Scene | None]:
     """The plant of the cell's [plant] engine, stepping one control period of `bus_cfg` per SYNC, no GUI."""
-    twin_cfg = replace(env_cfg.twin, control_period=bus_cfg.timing.control_period, gui=False)
-    return PLANT_BUILDERS[env_cfg.plant.engine](env_cfg, twin_cfg, spec, seed)
+    twin_cfg = replace(cell.twin, control_period=bus_cfg.timing.control_period, gui=False)
+    return PLANT_BUILDERS[cell.plant.engine](cell, twin_cfg, spec, seed)

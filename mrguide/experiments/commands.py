@@ -16,7 +16,7 @@ from typing import Any
 from mrguide.cli_args import add_set_argument, positive_int
 from mrguide.config import ConfigError, load_section
 from mrguide.experiments.registry import Experiment, experiments
-from mrguide.experiments.train_runs import check_same_config, configs, sac_config
+from mrguide.experiments.train_runs import check_same_config, run_config
 from mrguide.shipped_configs import shipped_config
 
 
@@ -84,8 +84,7 @@ def _setup(args: argparse.Namespace) -> tuple[Experiment, Any, str | None, Path]
             cfg = dataclasses.replace(cfg, **{key: str(cell)})
     out = Path(args.out or exp.default_out)
     for run in exp.runs(cfg, base):  # every run's configuration is checked before anything starts
-        configs(run, f"{path} [experiment]")
-        sac_config(run, f"{path} [experiment]")
+        run_config(run, f"{path} [experiment]")
     return exp, cfg, base, out
 
 
@@ -124,7 +123,7 @@ def cmd_report(args: argparse.Namespace) -> int:
 def _write_report(exp: Experiment, cfg: Any, base: str | None, out: Path) -> int:
     from mrguide.experiments.report import write_report
 
-    eval_episodes = configs(exp.runs(cfg, base)[0])[0].eval_episodes
+    eval_episodes = run_config(exp.runs(cfg, base)[0]).train.eval_episodes
     files = exp.report(cfg, base, out, eval_episodes)
     write_report(out, files)
     print(files["summary.md"].decode())

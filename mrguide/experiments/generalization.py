@@ -20,7 +20,7 @@ from mrguide.config import ConfigError, Range, check_ranges
 from mrguide.experiments import report
 from mrguide.experiments.registry import Experiment, register
 from mrguide.experiments.stats import wilson
-from mrguide.experiments.train_runs import TrainRun, configs
+from mrguide.experiments.train_runs import TrainRun, run_config
 
 #: The paper's Fig. 6 in words: above 90 % near the training region, below 20 % at the largest offset (0.18 m).
 PAPER_NEAR, PAPER_FAR, PAPER_FAR_AT = 0.90, 0.20, 0.18
@@ -71,7 +71,7 @@ def goal_targets(cfg: GeneralizationConfig, run: TrainRun) -> list[tuple[float, 
     from mrguide.motion.kinematics import IKError, Kinematics
     from mrguide.robot import load_robot
 
-    _, _, _, env = configs(run)
+    env = run_config(run).env
     spec, task, region = load_robot(env.robot), env.task, env.twin.goal_region
     kin = Kinematics(spec)
     lo, hi = spec.workspace.lo, spec.workspace.hi
@@ -102,7 +102,7 @@ def evaluate(run: TrainRun, root: str, cfg: GeneralizationConfig) -> str:
     out = run.directory(Path(root))
     if (out / "goals.csv").exists():
         return str(out / "goals.csv")
-    _, _, _, env_cfg = configs(run)
+    env_cfg = run_config(run).env
     env = PickPlaceEnv(env_cfg)
     policy = ExportedPolicy.load(out / "policy.npz", env.robot_spec, env.task_cfg)
     rows = []

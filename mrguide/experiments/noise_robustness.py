@@ -154,11 +154,12 @@ def _run_row(sigma: float, r: RunRecord, reading: str) -> dict[str, Any]:
 def registration_bias_mm(run: TrainRun) -> np.ndarray:
     """The registration bias (mm, x y z) that the simulated person of `run` drew for its whole run: its annotator
     built from the run's configuration and seed as the trainer builds it (`IN_PROCESS_SOURCES["annotator"]`)."""
-    from mrguide.experiments.train_runs import configs
+    from mrguide.experiments.train_runs import run_config
     from mrguide.policies.experts import ANNOTATOR_SEED_OFFSET, SimulatedAnnotator
     from mrguide.robot import load_robot
 
-    _, _, gc, ec = configs(run)
+    cfg = run_config(run)
+    gc, ec = cfg.guidance, cfg.env
     person = SimulatedAnnotator(
         ec.task, gc.noise, load_robot(ec.robot).workspace, seed=run.seed + ANNOTATOR_SEED_OFFSET
     )

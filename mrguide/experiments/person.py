@@ -19,7 +19,7 @@ from mrguide.experiments import report
 from mrguide.experiments.registry import Experiment, register
 from mrguide.experiments.run_records import RunRecord, read_run
 from mrguide.experiments.stats import PERSON_SECONDS_PER_MARK, person_minutes, wilson
-from mrguide.experiments.train_runs import TrainRun, configs
+from mrguide.experiments.train_runs import TrainRun, run_config
 
 #: Fresh start states of the final-policy evaluation: env seeds from here, disjoint from training's evaluations (1e6 + …).
 FRESH_SEED_BASE = 3_000_000
@@ -58,7 +58,7 @@ def evaluate(run: TrainRun, root: str, cfg: PersonConfig) -> str:
     out = fresh_path(run, Path(root))
     if out.exists():
         return str(out)
-    env = PickPlaceEnv(configs(run)[3])
+    env = PickPlaceEnv(run_config(run).env)
     try:
         policy = ExportedPolicy.load(run.directory(Path(root)) / "policy.npz", env.robot_spec, env.task_cfg)
         summary = run_episodes(env, policy, range(FRESH_SEED_BASE, FRESH_SEED_BASE + cfg.episodes))

@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from mrguide.cell.config import CellConfig
 from mrguide.cell.dry_run import SimulatedCell, dry_run, episode_layouts
 from mrguide.cell.hmd_stream import HmdPoseStream, HmdStartError, MujocoDrawing
 from mrguide.cell.twin_plant import TwinObjectPose
@@ -56,7 +57,7 @@ class RealCell:
     """The 'real' cell of conditions 2 and 3, all from one TOML: twin with its reality gap, bus, safety, HMD."""
 
     path: Path
-    env: EnvConfig
+    env: CellConfig
     bus: CobotBusConfig
     safety: SafetyConfig | None
     hmd: Any
@@ -71,7 +72,7 @@ def load_real_cell(path: str | Path) -> RealCell:
     from mrguide.twin.markers import TwinCalibrationConfig
 
     path = Path(path)
-    env = EnvConfig.load(path)
+    env = CellConfig.load(path)
     dcfg = load_section(DeployConfig, path, "deploy")
     bus = load_cobot_bus_config(path.parent / dcfg.bus_config if dcfg.bus_config else None, load_robot(env.robot))
     safety = load_optional_section(SafetyConfig, path, "safety")
@@ -141,7 +142,7 @@ def run_sim(policy: ExportedPolicy, env_cfg: EnvConfig, seed: int, episodes: int
 
 def run_real(
     policy_path: Path,
-    real_cfg: EnvConfig,
+    real_cfg: CellConfig,
     bus_cfg: CobotBusConfig,
     seed: int,
     episodes: int,
@@ -195,7 +196,7 @@ def run_real(
 
 
 def _run_header(
-    policy_path: Path, real_cfg: EnvConfig, seed: int, episodes: int, condition: str, hmd_overrides: dict | None
+    policy_path: Path, real_cfg: CellConfig, seed: int, episodes: int, condition: str, hmd_overrides: dict | None
 ) -> dict[str, Any]:
     """The run log's header for one seed of conditions 2 and 3 in the 'real' cell `real_cfg`."""
     return {
@@ -211,7 +212,7 @@ def _run_header(
 
 
 def _hmd_streams(
-    real_cfg: EnvConfig, hmd_config: Path | None, seed: int, use_hmd: bool, hmd_overrides: dict | None
+    real_cfg: CellConfig, hmd_config: Path | None, seed: int, use_hmd: bool, hmd_overrides: dict | None
 ) -> list[HmdPoseStream]:
     """With `use_hmd`, the HMD's pose stream, calibrated; otherwise none. HmdStartError if the HMD cannot start.
     The HMD draws the cell with the cell's engine: PyBullet, or MuJoCo's offscreen renderer for the MuJoCo cell."""
@@ -282,6 +283,6 @@ def _unplayed(
     return outcomes
 
 
-def replace_gap(cfg: EnvConfig, **changes) -> EnvConfig:
+def replace_gap(cfg: CellConfig, **changes) -> CellConfig:
     """`cfg` with some reality-gap parameters changed (for sweeps)."""
-    return replace(cfg, twin=replace(cfg.twin, reality_gap=replace(cfg.twin.reality_gap, **changes)))
+    return cfg.with_twin(replace(cfg.twin, reality_gap=replace(cfg.twin.reality_gap, **changes)))

@@ -120,7 +120,7 @@ def set_cell_keys(cell: Any, sets: list[tuple[str, Any]]) -> Any:
     for key, value in sets:
         where = f"--set {key}"
         if key.split(".", 1)[0] in ENV_SECTIONS:
-            cell = replace(cell, env=replace_path(cell.env, key, value, where))
+            cell = replace(cell, env=cell.env.with_value(key, value, where))
         elif key.startswith("safety."):
             safety = cell.safety or SafetyConfig()
             cell = replace(cell, safety=replace_path(safety, key.removeprefix("safety."), value, where))

@@ -10,10 +10,10 @@ from pathlib import Path
 
 import numpy as np
 
+from mrguide.cell.config import CellConfig
 from mrguide.experiments import report
 from mrguide.experiments.sim2real import CAUSES, CELL_CONDITIONS, ConditionResult, RealCell
 from mrguide.output_files import write_files_atomically
-from mrguide.twin.env import EnvConfig
 
 LABELS = {
     "sim": "simulation,\nexact poses",
@@ -129,7 +129,7 @@ def cells_description(cells: dict[str, RealCell], conditions: Iterable[str]) -> 
     return "\n\n".join(paragraphs)
 
 
-def _gap_sentence(real_cfg: EnvConfig) -> str:
+def _gap_sentence(real_cfg: CellConfig) -> str:
     g, cup = real_cfg.twin.reality_gap, real_cfg.twin.cup
     mounting = f"cup on a {cup.stroke * 1e3:.0f} mm level-compensator" if cup.stroke > 0 else "rigid cup"
     return (

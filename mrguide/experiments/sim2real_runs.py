@@ -15,7 +15,7 @@ from typing import Annotated, Any
 from mrguide.config import ConfigError, Range, check_ranges
 from mrguide.experiments import report
 from mrguide.experiments.registry import Experiment, register
-from mrguide.experiments.train_runs import TrainRun, configs
+from mrguide.experiments.train_runs import TrainRun, run_config
 
 CONDITIONS = ("sim", "real_exact", "real_hmd", "mujoco_exact", "mujoco_hmd")
 OUTCOME_FIELDS = ["condition", "eval_seed", "episode", "outcome"]
@@ -63,7 +63,7 @@ def evaluate(run: TrainRun, root: str, cfg: Sim2RealConfig) -> str:
     path = outcomes_path(run, Path(root))
     if path.exists():
         return str(path)
-    train_cfg = configs(run)[3]
+    train_cfg = run_config(run).env
     cells = {"real": s2r.load_real_cell(cfg.real_config)}
     if {"mujoco_exact", "mujoco_hmd"} & set(cfg.conditions):
         cells["mujoco"] = s2r.load_real_cell(cfg.mujoco_config)

@@ -13,7 +13,10 @@ import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from mrguide.policies.train_config import RunConfig
 
 
 @dataclass(frozen=True)
@@ -44,24 +47,16 @@ class RunResult:
     steps: int
 
 
-def _all_configs(run: TrainRun, where: str):
-    """Every config of `run`: its file's sections with its seed, steps, guidance and overrides applied."""
-    from mrguide.policies.train_config import apply_overrides, load_sac_config, load_train_config
+def run_config(run: TrainRun, where: str = "experiment") -> RunConfig:
+    """The root config `run` trains with: its file (parsed once), its seed, steps and guidance, then its overrides."""
+    from mrguide.policies.train_config import RunConfig
 
-    tc, dc, gc, ec = load_train_config(run.config)
-    tc = dataclasses.replace(tc, total_steps=run.steps, seed=run.seed)
-    gc = dataclasses.replace(gc, enabled=run.guided)
-    return apply_overrides((tc, dc, gc, ec, load_sac_config(run.config)), run.overrides, f"{where}: override")
-
-
-def configs(run: TrainRun, where: str = "experiment"):
-    """(TrainConfig, DDPGConfig, GuidanceConfig, EnvConfig) of `run`: its file, its overrides, its seed/steps."""
-    return _all_configs(run, where)[:4]
-
-
-def sac_config(run: TrainRun, where: str = "experiment"):
-    """The SACConfig of `run` (the peer learner): its file's [sac] and its "sac.*" overrides."""
-    return _all_configs(run, where)[4]
+    cfg = RunConfig.load(run.config)
+    cfg = cfg.replace(
+        train=dataclasses.replace(cfg.train, total_steps=run.steps, seed=run.seed),
+        guidance=dataclasses.replace(cfg.guidance, enabled=run.guided),
+    )
+    return cfg.with_overrides(run.overrides, f"{where}: override")
 
 
 def run_record(run: TrainRun) -> dict[str, Any]:
@@ -70,10 +65,11 @@ def run_record(run: TrainRun) -> dict[str, Any]:
     from mrguide.config import to_dict
     from mrguide.policies.ddpg_update import update_build
 
-    tc, dc, gc, ec = configs(run)
-    effective = {"train": to_dict(tc), "ddpg": to_dict(dc), "guidance": to_dict(gc), "env": to_dict(ec)}
-    if tc.learner == "sac":
-        effective["sac"] = to_dict(sac_config(run))
+    cfg = run_config(run)
+    effective = {"train": to_dict(cfg.train), "ddpg": to_dict(cfg.learners["ddpg"]), "guidance": to_dict(cfg.guidance)}
+    effective["env"] = to_dict(cfg.env)
+    if cfg.learner_section != "ddpg":
+        effective[cfg.learner_section] = to_dict(cfg.learner)
     return {"effective_config": effective, "update": update_build(), **dataclasses.asdict(run)}
 
 
@@ -133,7 +129,7 @@ def train(run: TrainRun, root: str, on_episode: Callable[[dict], None] | None = 
     out = run.directory(Path(root))
     if (out / "done").exists():
         return finished(run, Path(root))
-    tc, dc, gc, ec = configs(run)
+    cfg = run_config(run)
     out.mkdir(parents=True, exist_ok=True)
     if not (out / "checkpoint.pt").exists():
         for stale in ("metrics.csv", "eval.csv", "annotations.jsonl"):  # a start that never checkpointed
@@ -143,12 +139,12 @@ def train(run: TrainRun, root: str, on_episode: Callable[[dict], None] | None = 
     if run.client == "bot":
         from mrguide.annotation.bot_session import BotSession
 
-        gc = dataclasses.replace(gc, source="live")
+        cfg = cfg.replace(guidance=dataclasses.replace(cfg.guidance, source="live"))
         stop = threading.Event()
-        bot = BotSession(gc.noise, run.seed, on_failure=stop.set)
+        bot = BotSession(cfg.guidance.noise, run.seed, on_failure=stop.set)
         factory = bot.source_factory
     try:
-        tr = Trainer(tc, dc, gc, ec, out, factory, sac_config(run))
+        tr = Trainer(cfg, out, factory)
     except BaseException:
         if bot:
             bot.close()

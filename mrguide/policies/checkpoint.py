@@ -85,8 +85,9 @@ def read_checkpoint(path: Path) -> dict[str, Any]:
 
 
 def with_defaults(stored: Any, defaults: Any) -> Any:
-    """`stored` (a checkpoint's configuration) with every key it lacks taken from `defaults`, at any depth: a
-    setting added after the checkpoint was written counts as its default, so older runs still resume."""
+    """`stored` (a checkpoint's configuration) in the shape of `defaults` (today's, at their defaults), at any depth: a
+    setting added after the checkpoint was written counts as its default, so older runs still resume; one that
+    training no longer reads (a cell's [plant], the sections of learners the run does not train) is left out."""
     if not isinstance(stored, dict) or not isinstance(defaults, dict):
         return stored
-    return {**defaults, **{k: with_defaults(v, defaults.get(k)) for k, v in stored.items()}}
+    return {k: with_defaults(stored[k], v) if k in stored else v for k, v in defaults.items()}

@@ -9,13 +9,6 @@ from __future__ import annotations
 
 from typing import Literal, get_args
 
-#: train.learner: the paper's guided DDPG ([ddpg]) or the RLPD-style SAC peer ([sac]) — the shipped two (what the
-#: peers experiment compares) — and `LEARNER_NAMES`, what a config may choose: those and any a module registered
-#: (`policies.learners.register_learner`).
-Learner = Literal["ddpg", "sac"]
-LEARNERS: tuple[Learner, ...] = get_args(Learner)
-LEARNER_NAMES: list[str] = list(LEARNERS)
-
 #: guidance.source: the scripted oracle, the simulated MR annotator (oracle + noise), a recorded annotation file,
 #: or a person through the live annotation page (`mrguide train --expert live`) — and any source a module registered
 #: (`policies.guided_expert.register_expert_source`).
@@ -29,7 +22,3 @@ REFERENCES: tuple[ReferenceName, ...] = get_args(ReferenceName)
 #: guidance.marks: a mark per phase (the paper's protocol) or a pick and a place mark per demonstration (ours).
 MarksMode = Literal["phases", "pick_place"]
 MARKS_MODES: tuple[MarksMode, ...] = get_args(MarksMode)
-
-#: The first part of an override key (`mrguide train --set ddpg.lr_actor=0.001`, an experiment's overrides): the
-#: config it addresses — train, the learners' sections, guidance, or the env's robot, twin, task and plant.
-OVERRIDE_SECTIONS = ("train", "ddpg", "sac", "guidance", "robot", "twin", "task", "plant")

@@ -17,12 +17,15 @@ from typing import TYPE_CHECKING, Any, Protocol
 from tqdm import tqdm
 
 from mrguide.cli_args import add_set_argument, nonnegative_int, positive_int
-from mrguide.policies.choices import EXPERT_SOURCES, OVERRIDE_SECTIONS
+from mrguide.policies.choices import EXPERT_SOURCES
+
+#: What a training run's config holds (`policies.train_config.RunConfig`), for the help texts (no torch imported).
+SECTIONS_HELP = "train, guidance, robot, twin, task and each registered learner's (ddpg, sac, ...)"
 
 if TYPE_CHECKING:
     from mrguide.policies.guidance import GuidanceConfig
     from mrguide.policies.train import Trainer
-    from mrguide.policies.train_config import TrainConfig
+    from mrguide.policies.train_config import RunConfig, TrainConfig
 
 
 class LiveSessionLike(Protocol):
@@ -65,7 +68,7 @@ def add_train_command(sub: argparse._SubParsersAction, live: LivePlugin | None =
     add_set_argument(
         p,
         "set any config key for this run, after --config (e.g. --set ddpg.lr_actor=0.001 --set "
-        "guidance.noise.sigma=0.02); repeatable; sections: " + ", ".join(OVERRIDE_SECTIONS),
+        "guidance.noise.sigma=0.02); repeatable; sections: " + SECTIONS_HELP,
     )
     p.add_argument("--no-guidance", action="store_true", help="baseline DDPG (guidance.enabled = false)")
     p.add_argument(
@@ -115,17 +118,15 @@ def cmd_train(args: argparse.Namespace, live: LivePlugin | None = None) -> int:
     """Train (or resume), show progress, export the policy; Ctrl-C checkpoints and exits 130."""
     from mrguide.policies.tensorboard_log import summary_writer_class
     from mrguide.policies.train import Trainer
-    from mrguide.policies.train_config import apply_overrides, load_sac_config, load_train_config
+    from mrguide.policies.train_config import RunConfig
 
     if args.tensorboard:
         try:
             summary_writer_class()
         except ImportError as exc:
             return _refuse(f"--tensorboard needs the tensorboard package (pip install 'mrguide[tensorboard]'): {exc}")
-    tc, dc, gc, ec, sc = apply_overrides(
-        (*load_train_config(args.config), load_sac_config(args.config)), dict(args.set), "--set"
-    )
-    tc, dc, gc, ec = _train_configs(args, (tc, dc, gc, ec))
+    run = _with_command_line(args, RunConfig.load(args.config).with_overrides(dict(args.set), "--set"))
+    tc, gc = run.train, run.guidance
     out = Path(args.out)
     refusal = _output_refusal(out, args.resume)
     if refusal:
@@ -140,7 +141,7 @@ def cmd_train(args: argparse.Namespace, live: LivePlugin | None = None) -> int:
             args, lambda waiting: bar.set_description_str("train | waiting for an annotation" if waiting else "train")
         )
     try:
-        tr = Trainer(tc, dc, gc, ec, out, session.source_factory if session else None, sc)
+        tr = Trainer(run, out, session.source_factory if session else None)
     except BaseException:
         if session:
             session.close()
@@ -214,9 +215,9 @@ def _interrupted(tr, out: Path, bar: tqdm) -> int:
     return 130
 
 
-def _train_configs(args: argparse.Namespace, configs: tuple) -> tuple:
-    """The loaded (train, ddpg, guidance, env) configs with the command line's --steps, --seed, --no-guidance, --expert."""
-    tc, dc, gc, ec = configs
+def _with_command_line(args: argparse.Namespace, run: RunConfig) -> RunConfig:
+    """The loaded config with the command line's --steps, --seed, --no-guidance, --expert."""
+    tc, gc = run.train, run.guidance
     if args.steps is not None:
         tc = dataclasses.replace(tc, total_steps=args.steps)
     if args.seed is not None:
@@ -225,7 +226,7 @@ def _train_configs(args: argparse.Namespace, configs: tuple) -> tuple:
         gc = dataclasses.replace(gc, enabled=False)
     if args.expert:
         gc = dataclasses.replace(gc, source=args.expert)
-    return tc, dc, gc, ec
+    return run.replace(train=tc, guidance=gc)
 
 
 def _output_refusal(out: Path, resume: bool) -> str | None:
@@ -324,8 +325,7 @@ def add_config_command(sub: argparse._SubParsersAction) -> None:
     csub = p.add_subparsers(dest="config_command", required=True)
     show = csub.add_parser(
         "show",
-        help="print every section (" + ", ".join(OVERRIDE_SECTIONS) + ") as JSON: the defaults, then --config's "
-        "values, then --set's",
+        help="print every section (" + SECTIONS_HELP + ") as JSON: the defaults, then --config's values, then --set's",
     )
     show.add_argument("--config", help="TOML config, as `mrguide train --config` takes it")
     add_set_argument(
@@ -337,11 +337,8 @@ def add_config_command(sub: argparse._SubParsersAction) -> None:
 
 def cmd_config_show(args: argparse.Namespace) -> int:
     from mrguide.config import to_dict
-    from mrguide.policies.train_config import apply_overrides, load_sac_config, load_train_config
+    from mrguide.policies.train_config import RunConfig
 
-    tc, dc, gc, ec, sc = apply_overrides(
-        (*load_train_config(args.config), load_sac_config(args.config)), dict(args.set), "--set"
-    )
-    sections = {"train": to_dict(tc), "ddpg": to_dict(dc), "sac": to_dict(sc), "guidance": to_dict(gc), **to_dict(ec)}
-    print(json.dumps(sections, indent=1))
+    run = RunConfig.load(args.config).with_overrides(dict(args.set), "--set")
+    print(json.dumps({name: to_dict(section) for name, section in run.sections().items()}, indent=1))
     return 0

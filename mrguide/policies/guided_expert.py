@@ -306,7 +306,7 @@ def register_expert_source(name: str, factory: SourceFactory) -> None:
     """Make `guidance.source = NAME` build its marks' source with `factory`; ValueError if the name is taken."""
     if name == "live":  # the person's source, attached by the trainer: in the names, never in the table
         raise ValueError(f"expert source {name!r} is registered already")
-    register(IN_PROCESS_SOURCES, EXPERT_SOURCES, name, factory, "expert source")
+    register(IN_PROCESS_SOURCES, name, factory, "expert source", EXPERT_SOURCES)
 
 
 register_expert_source("oracle", lambda g, env, seed: OracleExpert(env.task_cfg))

@@ -3,20 +3,18 @@
 A learner is an agent the trainer drives without knowing which it is (`Learner`): it acts, learns from the
 tagged replay buffer after every environment step, says which actor is evaluated and exported, and gives and
 takes the state a checkpoint saves. `LEARNERS` maps `train.learner` to its class, the TOML section of its
-settings and their dataclass (`register_learner`); `choices.LEARNER_NAMES` holds the same names for the configs,
-without importing torch (tests/policies/test_learners.py checks that the two agree). To add a learner: write the
-class and register it.
+settings and their dataclass (`register_learner`); the run's root config (`train_config.RunConfig`) reads every
+registered learner's section, checks `train.learner` against this table and fingerprints the trained learner's
+section. To add a learner: write the class and its config in one module and register it there.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, Protocol
 
 import numpy as np
 
-from mrguide.policies.choices import LEARNER_NAMES
 from mrguide.policies.ddpg import DDPG, DDPGConfig
 from mrguide.policies.networks import Actor
 from mrguide.policies.replay_buffer import TaggedReplay
@@ -67,9 +65,9 @@ LEARNERS: dict[str, LearnerEntry] = {}
 
 
 def register_learner(name: str, entry: LearnerEntry) -> None:
-    """Make `train.learner = NAME` train `entry`'s class; ValueError if the name is taken. Its settings come from an
-    existing section ([ddpg] or [sac]): a learner with a section of its own also needs it in the configs."""
-    register(LEARNERS, LEARNER_NAMES, name, entry, "learner")
+    """Make `train.learner = NAME` train `entry`'s class, its settings read from `[entry.section]` of a run config (its
+    own, or a section it shares); ValueError if the name is taken."""
+    register(LEARNERS, name, entry, "learner")
 
 
 register_learner("ddpg", LearnerEntry(DDPG, "ddpg", DDPGConfig))
@@ -77,8 +75,7 @@ register_learner("sac", LearnerEntry(SAC, "sac", SACConfig))
 
 
 def make_learner(
-    name: str, settings: Mapping[str, Any], obs_offset: np.ndarray, obs_scale: np.ndarray, act_dim: int, seed: int
+    name: str, settings: Any, obs_offset: np.ndarray, obs_scale: np.ndarray, act_dim: int, seed: int
 ) -> Learner:
-    """The learner `name`, built from its section of `settings` (section name → config dataclass)."""
-    entry = LEARNERS[name]
-    return entry.cls(obs_offset, obs_scale, act_dim, settings[entry.section], seed=seed)
+    """The learner `name`, built with `settings` (its section's config dataclass)."""
+    return LEARNERS[name].cls(obs_offset, obs_scale, act_dim, settings, seed=seed)

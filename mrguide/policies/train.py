@@ -30,19 +30,17 @@ import torch
 from mrguide import __version__
 from mrguide.policies.annotations import AnnotationCache
 from mrguide.policies.checkpoint import CheckpointError, read_checkpoint, with_defaults, write_checkpoint
-from mrguide.policies.ddpg import DDPGConfig
 from mrguide.policies.experts import ExpertSource
-from mrguide.policies.guidance import REFERENCE_POSES, GuidanceConfig, ThresholdTrigger, expert_ratio
+from mrguide.policies.guidance import REFERENCE_POSES, ThresholdTrigger, expert_ratio
 from mrguide.policies.guided_expert import GuidedExpert, make_expert_source
 from mrguide.policies.learners import Learner, make_learner
 from mrguide.policies.networks import obs_scaling
 from mrguide.policies.replay_buffer import TaggedReplay
-from mrguide.policies.sac import SACConfig
-from mrguide.policies.train_config import TrainConfig, arm_record, run_fingerprint
+from mrguide.policies.train_config import RunConfig, TrainConfig, arm_record
 from mrguide.policies.train_counters import TrainerCounters
 from mrguide.policies.train_log import EVAL_FIELDS, METRIC_FIELDS, UPDATE_FIELDS, MetricSink, append_csv, truncate_logs
 from mrguide.task import ACT_DIM, OBS_DIM, OBS_PROGRESS, phase_from_progress
-from mrguide.twin.env import EnvConfig, PickPlaceEnv
+from mrguide.twin.env import PickPlaceEnv
 
 log = logging.getLogger(__name__)
 
@@ -60,25 +58,19 @@ class Trainer:
 
     def __init__(
         self,
-        cfg: TrainConfig,
-        ddpg_cfg: DDPGConfig,
-        guidance: GuidanceConfig,
-        env_cfg: EnvConfig,
+        run: RunConfig,
         out_dir: str | Path,
         source_factory: Callable[[PickPlaceEnv], ExpertSource] | None = None,
-        sac_cfg: SACConfig | None = None,
     ):
-        """`source_factory` builds the expert source from the env (a live annotation session); default: the config's.
-        `sac_cfg` configures the peer learner (train.learner = "sac")."""
-        self.cfg, self.ddpg_cfg, self.guidance, self.env_cfg = cfg, ddpg_cfg, guidance, env_cfg
-        self.sac_cfg = sac_cfg or SACConfig()
+        """`source_factory` builds the expert source from the env (a live annotation session); default: the config's."""
+        self.run_cfg = run
+        self.cfg, self.guidance = cfg, guidance = run.train, run.guidance
         self.out = Path(out_dir)
         self.out.mkdir(parents=True, exist_ok=True)
         torch.set_num_threads(cfg.torch_threads)
-        self.env = PickPlaceEnv(env_cfg)
+        self.env = PickPlaceEnv(run.env)
         scaling = obs_scaling(self.env.workspace)
-        settings = {"ddpg": ddpg_cfg, "sac": self.sac_cfg}
-        self.agent: Learner = make_learner(cfg.learner, settings, *scaling, ACT_DIM, cfg.seed)
+        self.agent: Learner = make_learner(cfg.learner, run.learner, *scaling, ACT_DIM, cfg.seed)
         self.replay = TaggedReplay(cfg.buffer_size, OBS_DIM, ACT_DIM)
         self.rng = np.random.default_rng(cfg.seed)
         self.source = source_factory(self.env) if source_factory else make_expert_source(guidance, self.env, cfg.seed)
@@ -92,13 +84,13 @@ class Trainer:
             guidance.delta,
             self.env.task_cfg,
             self.env.workspace.to_normalized,
-            guidance.reask_after,
-            guidance.action_noise,
-            cfg.seed,
-            guidance.marks,
-            self.counters,
-            guidance.pose,
-            guidance.mark_precision,
+            reask_after=guidance.reask_after,
+            action_noise=guidance.action_noise,
+            seed=cfg.seed,
+            marks=guidance.marks,
+            counts=self.counters,
+            pose_error=guidance.pose,
+            mark_precision=guidance.mark_precision,
         )
         self.trigger = ThresholdTrigger(guidance.r_threshold)
         self.stop_requested = threading.Event()  # set (e.g. on Ctrl-C) to stop at the next step
@@ -323,9 +315,7 @@ class Trainer:
 
     # -- checkpoints -----------------------------------------------------------------------------
     def _fingerprint(self) -> dict:
-        return run_fingerprint(
-            self.cfg, self.ddpg_cfg, self.guidance, self.env_cfg, arm_record(self.env.robot_spec), self.sac_cfg
-        )
+        return self.run_cfg.fingerprint(arm_record(self.env.robot_spec))
 
     def save_checkpoint(self) -> Path:
         """Everything to resume: networks, optimizers, both pools, RNG states, counters. Written atomically."""
@@ -353,10 +343,8 @@ class Trainer:
         """Resume from a checkpoint; a corrupt or mismatched file raises CheckpointError."""
         path = Path(path) if path else self.out / "checkpoint.pt"
         state = read_checkpoint(path)
-        defaults = run_fingerprint(
-            TrainConfig(), DDPGConfig(), GuidanceConfig(), EnvConfig(), arm_record(self.env.robot_spec), SACConfig()
-        )
-        stored = with_defaults(state["config"], defaults)
+        default_run = RunConfig(train=dataclasses.replace(TrainConfig(), learner=self.cfg.learner))
+        stored = with_defaults(state["config"], default_run.fingerprint(arm_record(self.env.robot_spec)))
         if stored != self._fingerprint():
             diff = [k for k in stored if stored[k] != self._fingerprint().get(k)]
             raise CheckpointError(

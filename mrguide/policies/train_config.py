@@ -1,19 +1,17 @@
 """What a training run is configured with: [train] of a TOML config beside the learner's and the guidance's sections,
-and the fingerprint a checkpoint must match to be resumed."""
+gathered in one root (`RunConfig`, parsed once), and the fingerprint a checkpoint must match to be resumed."""
 
 from __future__ import annotations
 
 import dataclasses
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated, Any
 
-from mrguide.config import ConfigError, Range, check_ranges, load_section, replace_path, to_dict
-from mrguide.policies.choices import LEARNER_NAMES, OVERRIDE_SECTIONS, Learner
-from mrguide.policies.ddpg import DDPGConfig
+from mrguide.config import RUN_SECTIONS, ConfigError, ConfigFile, Range, check_ranges, replace_path, to_dict
 from mrguide.policies.guidance import GuidanceConfig
-from mrguide.policies.sac import SACConfig
+from mrguide.policies.learners import LEARNERS
 from mrguide.robot import RobotSpec
 from mrguide.twin.env import EnvConfig
 
@@ -23,8 +21,9 @@ class TrainConfig:
     """A training run ([train] in a TOML config, with [ddpg] and [guidance] beside it)."""
 
     total_steps: Annotated[int, Range(1, 10**9)] = 20_000  # paper: 20k timesteps (Fig. 3)
-    #: "ddpg" (the paper's learner, [ddpg]) or "sac" (the RLPD-style peer, [sac]; `mrguide experiment peers`).
-    learner: Learner | str = "ddpg"  # a shipped learner or a registered one
+    #: "ddpg" (the paper's learner, [ddpg]), "sac" (the RLPD-style peer, [sac]; `mrguide experiment peers`), or any
+    #: learner a module registered (`policies.learners`); checked by the run's root config, which has the registry.
+    learner: str = "ddpg"
     seed: Annotated[int, Range(0, 2**32 - 1)] = 0
     batch_size: Annotated[int, Range(1, 1 << 20)] = 256  # Table I
     buffer_size: Annotated[int, Range(1, 10**8)] = 1_000_000  # Table I
@@ -38,22 +37,6 @@ class TrainConfig:
 
     def __post_init__(self) -> None:
         check_ranges(self, "train")
-        if self.learner not in LEARNER_NAMES:
-            raise ConfigError(f"train.learner = {self.learner!r}: expected one of {', '.join(LEARNER_NAMES)}")
-
-
-def load_sac_config(path: str | Path | None) -> SACConfig:
-    """[sac] of a training config (the peer learner's settings)."""
-    return load_section(SACConfig, path, "sac")
-
-
-def load_train_config(path: str | Path | None) -> tuple[TrainConfig, DDPGConfig, GuidanceConfig, EnvConfig]:
-    return (
-        load_section(TrainConfig, path, "train"),
-        load_section(DDPGConfig, path, "ddpg"),
-        load_section(GuidanceConfig, path, "guidance"),
-        EnvConfig.load(path),
-    )
 
 
 def arm_record(spec: RobotSpec) -> dict[str, Any]:
@@ -71,40 +54,86 @@ def arm_record(spec: RobotSpec) -> dict[str, Any]:
     }
 
 
-def run_fingerprint(
-    tc: TrainConfig, dc: DDPGConfig, gc: GuidanceConfig, ec: EnvConfig, arm: dict[str, Any], sc: SACConfig
-) -> dict:
-    """The configuration a checkpoint must match to be resumed (the run's length and cadences may change)."""
-    return {
-        "train": {k: v for k, v in to_dict(tc).items() if k not in ("total_steps", "checkpoint_every", "eval_every")},
-        "ddpg": to_dict(dc),
-        "guidance": to_dict(gc),
-        "env": {**to_dict(ec), "robot": arm},
-        "sac": to_dict(sc),
-    }
+#: [train] settings that a resumed run may change: its length and cadences.
+RESUMABLE_CHANGES = ("total_steps", "checkpoint_every", "eval_every")
 
 
-RunConfigs = tuple[TrainConfig, DDPGConfig, GuidanceConfig, EnvConfig, SACConfig]
+def _learner_defaults() -> dict[str, Any]:
+    return {entry.section: entry.config() for entry in LEARNERS.values()}
 
 
-def apply_overrides(configs: RunConfigs, overrides: Mapping[str, Any], where: str = "override") -> RunConfigs:
-    """`configs` with each dotted override ("<section>.<key>[.<key>…]" → value) set and checked exactly as a value
-    read from a file (ConfigError naming `where` and the key otherwise)."""
-    tc, dc, gc, ec, sc = configs
-    for key, value in overrides.items():
-        section, _, path = key.partition(".")
-        if section not in OVERRIDE_SECTIONS or not path:
-            raise ConfigError(
-                f"{where}: {key!r}: expected '<section>.<key>' with section one of {', '.join(OVERRIDE_SECTIONS)}"
-            )
-        if section == "train":
-            tc = replace_path(tc, path, value, where)
-        elif section == "ddpg":
-            dc = replace_path(dc, path, value, where)
-        elif section == "guidance":
-            gc = replace_path(gc, path, value, where)
-        elif section == "sac":
-            sc = replace_path(sc, path, value, where)
-        else:
-            ec = dataclasses.replace(ec, **{section: replace_path(getattr(ec, section), path, value, where)})
-    return tc, dc, gc, ec, sc
+@dataclass(frozen=True)
+class RunConfig:
+    """The whole configuration of a training run: one frozen root, parsed once from one file (`load`), with its
+    sections by name. `learners` holds the section of every registered learner (section name → its config); the run
+    trains the one `train.learner` names (`learner`)."""
+
+    train: TrainConfig = field(default_factory=TrainConfig)
+    guidance: GuidanceConfig = field(default_factory=GuidanceConfig)
+    env: EnvConfig = field(default_factory=EnvConfig)
+    learners: dict[str, Any] = field(default_factory=_learner_defaults)
+
+    def __post_init__(self) -> None:
+        if self.train.learner not in LEARNERS:
+            raise ConfigError(f"train.learner = {self.train.learner!r}: expected one of {', '.join(LEARNERS)}")
+
+    @classmethod
+    def load(cls, path: str | Path | None) -> RunConfig:
+        """Every section a training run reads, from `path` parsed once (defaults where absent)."""
+        sections = {entry.section: entry.config for entry in LEARNERS.values()}
+        file = ConfigFile.read(path, tuple(dict.fromkeys((*RUN_SECTIONS, *sections))))
+        return cls(
+            file.section(TrainConfig, "train"),
+            file.section(GuidanceConfig, "guidance"),
+            EnvConfig.from_file(file),
+            {name: file.section(config, name) for name, config in sections.items()},
+        )
+
+    @property
+    def learner_section(self) -> str:
+        return LEARNERS[self.train.learner].section
+
+    @property
+    def learner(self) -> Any:
+        """The settings of the learner this run trains."""
+        return self.learners[self.learner_section]
+
+    def sections(self) -> dict[str, Any]:
+        """Every section by name, as a file holds them (what `mrguide config show` prints)."""
+        env = {"robot": self.env.robot, "twin": self.env.twin, "task": self.env.task}
+        return {"train": self.train, **self.learners, "guidance": self.guidance, **env}
+
+    def replace(self, **sections: Any) -> RunConfig:
+        """This config with whole sections replaced by name (`train=...`, `ddpg=...`, `twin=...`)."""
+        env = {k: sections.pop(k) for k in ("robot", "twin", "task") if k in sections}
+        learners = {k: sections.pop(k) for k in list(sections) if k in self.learners}
+        return dataclasses.replace(
+            self,
+            env=dataclasses.replace(self.env, **env),
+            learners={**self.learners, **learners},
+            **sections,
+        )
+
+    def with_overrides(self, overrides: Mapping[str, Any], where: str = "override") -> RunConfig:
+        """This config with each dotted override ("<section>.<key>[.<key>…]" → value) set, checked exactly as a value
+        read from a file (ConfigError naming `where` and the key otherwise)."""
+        cfg, names = self, self.sections()
+        for key, value in overrides.items():
+            section, _, path = key.partition(".")
+            if section not in names or not path:
+                raise ConfigError(
+                    f"{where}: {key!r}: expected '<section>.<key>' with section one of {', '.join(names)}"
+                )
+            cfg = cfg.replace(**{section: replace_path(cfg.sections()[section], path, value, where)})
+        return cfg
+
+    def fingerprint(self, arm: dict[str, Any]) -> dict:
+        """What a checkpoint must match to be resumed: exactly what training reads (the trained learner's section,
+        not the others; the env's sections and the arm they resolve to; no cell's [plant])."""
+        train = {k: v for k, v in to_dict(self.train).items() if k not in RESUMABLE_CHANGES}
+        return {
+            "train": train,
+            self.learner_section: to_dict(self.learner),
+            "guidance": to_dict(self.guidance),
+            "env": {**to_dict(self.env), "robot": arm},
+        }

@@ -7,7 +7,6 @@ from typing import Annotated
 
 from mrguide.cell_layout import CupConfig
 from mrguide.config import ConfigError, Range, check_ranges
-from mrguide.mujoco_cell.config import MujocoCellConfig
 from mrguide.twin.camera import CameraConfig
 
 
@@ -93,21 +92,3 @@ class TwinConfig:
     @property
     def cycles_per_decision(self) -> int:
         return round(self.decision_period / self.control_period)
-
-
-#: The physics engines a simulated cell can run on ([plant] engine): the two shipped ones, and any a module registered
-#: with `cell.plants.register_plant` (which builds each).
-PLANT_ENGINES: list[str] = ["pybullet", "mujoco"]
-
-
-@dataclass(frozen=True)
-class PlantConfig:
-    """[plant] of a cell config: the engine that plays the robot behind the simulated drives in dry runs and the
-    sim-to-real conditions (the twin trains in PyBullet whatever this says), and the MuJoCo cell's physics."""
-
-    engine: str = "pybullet"
-    mujoco: MujocoCellConfig = field(default_factory=MujocoCellConfig)
-
-    def __post_init__(self) -> None:
-        if self.engine not in PLANT_ENGINES:
-            raise ConfigError(f"plant.engine = {self.engine!r}: expected one of {', '.join(PLANT_ENGINES)}")

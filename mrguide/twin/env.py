@@ -16,12 +16,12 @@ from typing import Any, ClassVar
 import gymnasium as gym
 import numpy as np
 
-from mrguide.config import load_section
+from mrguide.config import ConfigFile
 from mrguide.motion.decision import ActionError, DecisionState, DecisionStep
-from mrguide.robot import RobotConfig, RobotSpec, load_robot, load_robot_config
+from mrguide.robot import RobotConfig, RobotSpec, load_robot, robot_config
 from mrguide.task import ACT_DIM, OBS_DIM, OBS_GRIP, OBS_PROGRESS, Outcome, TaskConfig, oracle_action
 from mrguide.twin.camera import Camera
-from mrguide.twin.config import PlantConfig, Region, TwinConfig
+from mrguide.twin.config import Region, TwinConfig
 from mrguide.twin.scene import Scene, SceneSnapshot
 
 log = logging.getLogger(__name__)
@@ -32,22 +32,19 @@ __all__ = ["ActionError", "EnvConfig", "EnvSnapshot", "PickPlaceEnv"]
 
 @dataclass(frozen=True)
 class EnvConfig:
-    """Robot, twin and task configuration of one env (TOML sections [robot], [twin], [task]), and the engine a
-    simulated cell of it runs on ([plant]: dry runs and sim-to-real; training is always the PyBullet twin)."""
+    """Robot, twin and task configuration of one env (TOML sections [robot], [twin], [task])."""
 
     robot: RobotConfig = field(default_factory=RobotConfig)
     twin: TwinConfig = field(default_factory=TwinConfig)
     task: TaskConfig = field(default_factory=TaskConfig)
-    plant: PlantConfig = field(default_factory=PlantConfig)
 
     @classmethod
     def load(cls, path: str | Path | None) -> EnvConfig:
-        return cls(
-            robot=load_robot_config(path),
-            twin=load_section(TwinConfig, path, "twin"),
-            task=load_section(TaskConfig, path, "task"),
-            plant=load_section(PlantConfig, path, "plant"),
-        )
+        return cls.from_file(ConfigFile.read(path))
+
+    @classmethod
+    def from_file(cls, file: ConfigFile) -> EnvConfig:
+        return cls(robot_config(file), file.section(TwinConfig, "twin"), file.section(TaskConfig, "task"))
 
 
 @dataclass

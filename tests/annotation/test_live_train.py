@@ -22,20 +22,20 @@ from mrguide.annotation.live import LiveOptions, LiveSession
 from mrguide.policies.annotations import anchor_key
 from mrguide.policies.experts import AnnotatorNoise
 from mrguide.policies.train import Trainer
-from mrguide.policies.train_config import load_train_config
 from tests.annotation.conftest import Client
+from tests.run_configs import run_config, sections
 
 SIGMA = 0.02
 
 
 def trainer(out: Path, source: str = "annotator", factory=None) -> Trainer:
-    tc, dc, gc, ec = load_train_config(None)
+    tc, dc, gc, ec = sections()
     tc = dataclasses.replace(
         tc, total_steps=600, learning_starts=64, batch_size=32, eval_every=10_000, checkpoint_every=10_000
     )
     dc = dataclasses.replace(dc, hidden=(32, 32))
     gc = dataclasses.replace(gc, intake_steps=400, source=source, noise=AnnotatorNoise(sigma=SIGMA))
-    return Trainer(tc, dc, gc, ec, out, factory)
+    return Trainer(run_config(tc, dc, gc, ec), out, factory)
 
 
 def rows(path: Path) -> list[dict]:
@@ -203,13 +203,13 @@ def test_a_persons_marks_over_the_wire_in_pick_place_equal_the_in_process_person
     from mrguide.annotation.bot_session import BotSession
 
     def person_trainer(out: Path, source: str, factory=None) -> Trainer:
-        tc, dc, gc, ec = load_train_config(None)
+        tc, dc, gc, ec = sections()
         tc = dataclasses.replace(
             tc, total_steps=600, learning_starts=64, batch_size=32, eval_every=10_000, checkpoint_every=10_000
         )
         dc = dataclasses.replace(dc, hidden=(32, 32))
         gc = dataclasses.replace(gc, intake_steps=400, source=source, noise=PERSON, marks="pick_place")
-        return Trainer(tc, dc, gc, ec, out, factory)
+        return Trainer(run_config(tc, dc, gc, ec), out, factory)
 
     local = person_trainer(tmp_path / "local", "annotator")
     try:

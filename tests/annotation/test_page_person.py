@@ -13,17 +13,19 @@ import pytest
 
 from mrguide.annotation.live import LiveOptions, LiveSession
 from mrguide.policies.train import Trainer
-from mrguide.policies.train_config import load_train_config
+from tests.run_configs import run_config, sections
 
 
 def test_a_person_guides_a_short_run_with_two_clicks_per_mark(browser, tmp_path):
-    tc, dc, gc, ec = load_train_config(None)
+    tc, dc, gc, ec = sections()
     tc = dataclasses.replace(
         tc, total_steps=160, learning_starts=64, batch_size=32, eval_every=10_000, checkpoint_every=10_000
     )
     gc = dataclasses.replace(gc, intake_steps=160)
     session = LiveSession(LiveOptions(port=0))
-    trainer = Trainer(tc, dataclasses.replace(dc, hidden=(16, 16)), gc, ec, tmp_path, session.source_factory)
+    trainer = Trainer(
+        run_config(tc, dataclasses.replace(dc, hidden=(16, 16)), gc, ec), tmp_path, session.source_factory
+    )
     done = threading.Event()
 
     def train() -> None:

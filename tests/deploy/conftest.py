@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from mrguide.cell.config import CellConfig
 from mrguide.cell.dry_run import dry_run
 from mrguide.deploy.runlog import RunLog
 from mrguide.drivers.config import BusConfig, CobotBusConfig
@@ -25,7 +26,7 @@ def bus_config() -> CobotBusConfig:
 class Expert:
     """The scripted expert as a deploy policy; `hook(obs, phase)` may inject faults or misbehave."""
 
-    def __init__(self, cfg: EnvConfig, hook=None):
+    def __init__(self, cfg: EnvConfig | CellConfig, hook=None):
         self.cfg, self.hook = cfg, hook
         self.ws = load_robot(cfg.robot).workspace
 
@@ -55,7 +56,7 @@ def run_dry(tmp_path):
         runtime_cfg=None,
         on_placed=None,
     ):
-        cfg = env_cfg or EnvConfig()
+        cfg = env_cfg or CellConfig()
         cells = []
 
         def pose_factory(cell):

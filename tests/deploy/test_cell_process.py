@@ -7,21 +7,20 @@ import multiprocessing
 import os
 import signal
 import time
-from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from mrguide.cell.cell_process import CellProcessError, cell_process
+from mrguide.cell.config import CellConfig
 from mrguide.cell.dry_run import dry_run_cycles
 from mrguide.deploy.cycles import CycleConfig, CycleRun
 from mrguide.deploy.runlog import RunLog, read_log
-from mrguide.twin.env import EnvConfig
 from tests.deploy.conftest import Expert, bus_config
 
 
 def test_production_cycles_run_against_a_cell_in_its_own_process(tmp_path):
-    cfg = EnvConfig()
+    cfg = CellConfig()
     cells = []
 
     def pose_factory(cell):
@@ -57,7 +56,7 @@ def test_production_cycles_run_against_a_cell_in_its_own_process(tmp_path):
 
 
 def test_the_cell_process_ignores_ctrl_c_and_ends_with_the_block():
-    cfg = EnvConfig()
+    cfg = CellConfig()
     with cell_process(cfg, bus_config(), seed=0) as (plant, master_cfg):
         assert master_cfg.bus.interface == "mrguide_pipe"
         pid = plant.pid
@@ -69,8 +68,7 @@ def test_the_cell_process_ignores_ctrl_c_and_ends_with_the_block():
 
 
 def test_a_cell_that_cannot_start_is_reported_with_the_reason():
-    env = EnvConfig()
-    cfg = replace(env, robot=replace(env.robot, file="/no/such/arm.toml"))
+    cfg = CellConfig().with_value("robot.file", "/no/such/arm.toml", "test")
     with (
         pytest.raises(CellProcessError, match="arm file not found: /no/such/arm"),
         cell_process(cfg, bus_config(), seed=0),
@@ -80,7 +78,7 @@ def test_a_cell_that_cannot_start_is_reported_with_the_reason():
 
 def _hold_a_cell(ready) -> None:
     """A deploy process that starts a cell, reports the cell's PID and waits to be killed."""
-    with cell_process(EnvConfig(), bus_config(), seed=0) as (plant, _cfg):
+    with cell_process(CellConfig(), bus_config(), seed=0) as (plant, _cfg):
         ready.send(plant.pid)
         time.sleep(600)
 

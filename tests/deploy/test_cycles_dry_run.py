@@ -3,6 +3,7 @@ where it fell, and the lift rules of the runtime act on every lift."""
 
 from __future__ import annotations
 
+from mrguide.cell.config import CellConfig
 from mrguide.cell.dry_run import dry_run_cycles
 from mrguide.cli import main
 from mrguide.deploy.cycles import CycleConfig, CycleRun
@@ -10,12 +11,11 @@ from mrguide.deploy.runlog import RunLog, read_log
 from mrguide.motion.kinematics import Kinematics
 from mrguide.replay.runs import load_run
 from mrguide.robot import load_robot
-from mrguide.twin.env import EnvConfig
 from tests.deploy.conftest import Expert, bus_config
 
 
 def test_a_part_dropped_in_the_lift_is_picked_again_and_placed(tmp_path):
-    cfg = EnvConfig()
+    cfg = CellConfig()
     leaks = []
 
     def leak_once(obs, phase, a, cell):
@@ -74,7 +74,7 @@ def test_a_part_dropped_in_the_lift_is_picked_again_and_placed(tmp_path):
 
 
 def test_a_release_asked_in_transport_is_refused_and_the_part_placed(tmp_path):
-    cfg = EnvConfig()
+    cfg = CellConfig()
     asked = []
 
     def release_in_transport(obs, phase, a):

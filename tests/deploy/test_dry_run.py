@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
+from mrguide.cell.config import CellConfig
 from mrguide.deploy.runlog import read_log
 from mrguide.robot import load_robot
-from mrguide.twin.env import EnvConfig
 
 
 def _check_logged_trajectory(log):
@@ -58,7 +58,7 @@ def test_expert_success_rate_over_40_episodes(run_dry):
 def test_real_cell_gap_config_loads():
     from pathlib import Path
 
-    cfg = EnvConfig.load(Path(__file__).parents[2] / "configs" / "cells" / "real_cell.toml")
+    cfg = CellConfig.load(Path(__file__).parents[2] / "configs" / "cells" / "real_cell.toml")
     assert cfg.twin.reality_gap.actuator_latency == 2
 
 
@@ -68,7 +68,7 @@ def test_the_scripted_expert_places_parts_in_the_mujoco_cell(run_dry):
     from pathlib import Path
 
     cell = Path(__file__).parents[2] / "configs" / "cells" / "mujoco_cell.toml"
-    summary, log, used = run_dry(episodes=4, seed=1, env_cfg=EnvConfig.load(cell))
+    summary, log, used = run_dry(episodes=4, seed=1, env_cfg=CellConfig.load(cell))
     assert type(used.plant).__name__ == "MujocoPlant" and used.scene is None
     assert summary.stopped is None and summary.successes == 4, summary.text()
     _check_logged_trajectory(log)

@@ -15,6 +15,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from mrguide.cell.config import CellConfig
 from mrguide.cell.plants import PLANT_BUILDERS
 from mrguide.drivers import Cobot
 from mrguide.drivers.mock import SimulatedCobot
@@ -22,7 +23,6 @@ from mrguide.drivers.mock.sim_cobot import shared_pc_config
 from mrguide.drivers.realtime import settled_heap
 from mrguide.motion.kinematics import Kinematics
 from mrguide.motion.trajectory import point_to_point
-from mrguide.twin.env import EnvConfig
 
 PART = np.array([0.50, -0.10, 0.025])  # on the table, in reach
 GOAL = np.array([0.45, 0.20, 0.025])
@@ -33,7 +33,7 @@ def cell(request, make_config, robot) -> Iterator[tuple]:
     """(config, plant, simulated devices, enabled master) around each registered engine's plant, the part placed. The
     bus timing is a dry run's (`shared_pc_config`): the plant steps in the devices' thread, in the master's process."""
     config = shared_pc_config(make_config())
-    env_cfg = EnvConfig()
+    env_cfg = CellConfig()
     twin_cfg = replace(env_cfg.twin, control_period=config.timing.control_period, gui=False)
     plant, scene = PLANT_BUILDERS[request.param](env_cfg, twin_cfg, robot, 0)
     plant.place_objects(PART, GOAL)

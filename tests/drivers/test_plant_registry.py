@@ -3,17 +3,14 @@ the dry run."""
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 import numpy as np
 import pytest
 
 from mrguide.cell import dry_run, plants
+from mrguide.cell.config import PLANT_ENGINES, CellConfig, PlantConfig
 from mrguide.config import ConfigError
 from mrguide.drivers.mock import FirstOrderPlant
 from mrguide.plant import CellPlant
-from mrguide.twin.config import PLANT_ENGINES, PlantConfig
-from mrguide.twin.env import EnvConfig
 
 
 class ToyCell(FirstOrderPlant, CellPlant):
@@ -42,7 +39,7 @@ def toy_engine():
 
 
 def test_a_registered_engine_is_a_cells_engine_and_its_plant_plays_the_cell(toy_engine, make_config, robot):
-    env_cfg = replace(EnvConfig(), plant=PlantConfig(engine=toy_engine))
+    env_cfg = CellConfig(plant=PlantConfig(engine=toy_engine))
     with dry_run.simulated_cell(env_cfg, make_config()) as cell:
         assert isinstance(cell.plant, ToyCell) and cell.scene is None
         cell.plant.place_objects(np.array([0.5, -0.1, 0.025]), np.array([0.45, 0.2, 0.025]))

@@ -60,7 +60,7 @@ def test_config_show_prints_every_section_with_the_file_and_set_applied(tmp_path
     cfg.write_text("[guidance]\nmarks = 'phases'\n\n[twin.reality_gap]\nobject_mass = 0.3\n")
     assert main(["config", "show", "--config", str(cfg), "--set", "ddpg.lr_actor=0.001"]) == 0
     shown = json.loads(capsys.readouterr().out)
-    assert set(shown) == {"train", "ddpg", "sac", "guidance", "robot", "twin", "task", "plant"}
+    assert set(shown) == {"train", "ddpg", "sac", "guidance", "robot", "twin", "task"}  # [plant] is the cell's
     assert shown["ddpg"]["lr_actor"] == 0.001 and shown["guidance"]["marks"] == "phases"
     assert shown["twin"]["reality_gap"]["object_mass"] == 0.3 and shown["train"]["total_steps"] == 20_000
     assert main(["config", "show", "--set", "twin.reality_gap.object_mass=-1"]) == 2

@@ -13,7 +13,7 @@ from mrguide.policies.choices import EXPERT_SOURCES
 from mrguide.policies.experts import OracleExpert
 from mrguide.policies.guidance import GuidanceConfig
 from mrguide.policies.train import Trainer
-from mrguide.policies.train_config import load_train_config
+from tests.run_configs import run_config, sections
 
 
 class CountingOracle(OracleExpert):
@@ -36,9 +36,12 @@ def toy_source():
 
 
 def test_a_registered_source_answers_the_marks_of_a_training_run(toy_source, tmp_path):
-    tc, dc, gc, ec = load_train_config(None)
+    tc, dc, gc, ec = sections()
     tc = dataclasses.replace(tc, total_steps=300, learning_starts=64, batch_size=32, eval_every=10_000)
-    tr = Trainer(tc, dataclasses.replace(dc, hidden=(16, 16)), dataclasses.replace(gc, source=toy_source), ec, tmp_path)
+    tr = Trainer(
+        run_config(tc, dataclasses.replace(dc, hidden=(16, 16)), dataclasses.replace(gc, source=toy_source), ec),
+        tmp_path,
+    )
     try:
         tr.run(stop_at=200)
     finally:

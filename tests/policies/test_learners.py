@@ -1,28 +1,24 @@
-"""The learner registry: the names a config may choose are the learners the trainer can build, and each of them
-acts, learns, and survives its own checkpoint round trip through the `Learner` interface alone."""
+"""The learner registry: each registered learner acts, learns, and survives its own checkpoint round trip through the
+`Learner` interface alone; a learner added by one module, with a section of its own, trains by its name through
+`mrguide train`, shows in `mrguide config show` and resumes, with its name listed nowhere else."""
 
 import dataclasses
 
 import numpy as np
 import pytest
 
-from mrguide.policies.choices import LEARNER_NAMES
 from mrguide.policies.ddpg import DDPG, DDPGConfig
 from mrguide.policies.learners import LEARNERS, LearnerEntry, make_learner, register_learner
 from mrguide.policies.replay_buffer import TaggedReplay
 from mrguide.policies.train import Trainer
-from mrguide.policies.train_config import load_train_config
 from mrguide.task import ACT_DIM, OBS_DIM
-
-
-def test_the_configs_choices_are_the_registered_learners():
-    assert list(LEARNERS) == LEARNER_NAMES
+from tests.run_configs import run_config, sections
 
 
 @pytest.mark.parametrize("name", sorted(LEARNERS))
 def test_a_registered_learner_acts_learns_and_restores(name):
     entry = LEARNERS[name]
-    settings = {entry.section: entry.config()}
+    settings = entry.config()
     offset, scale = np.zeros(OBS_DIM), np.ones(OBS_DIM)
     agent = make_learner(name, settings, offset, scale, ACT_DIM, seed=3)
     rng = np.random.default_rng(0)
@@ -58,13 +54,15 @@ def toy_learner():
     CountingDDPG.learned = 0
     yield "toy-ddpg"
     del LEARNERS["toy-ddpg"]
-    LEARNER_NAMES.remove("toy-ddpg")
 
 
 def test_a_registered_learner_trains_by_its_name_and_a_name_is_registered_once(toy_learner, tmp_path):
-    tc, dc, gc, ec = load_train_config(None)
+    tc, dc, gc, ec = sections()
     tc = dataclasses.replace(tc, learner=toy_learner, total_steps=200, learning_starts=64, batch_size=32)
-    tr = Trainer(dataclasses.replace(tc, eval_every=10_000), dataclasses.replace(dc, hidden=(16, 16)), gc, ec, tmp_path)
+    tr = Trainer(
+        run_config(dataclasses.replace(tc, eval_every=10_000), dataclasses.replace(dc, hidden=(16, 16)), gc, ec),
+        tmp_path,
+    )
     try:
         tr.run(stop_at=150)
     finally:
@@ -72,3 +70,36 @@ def test_a_registered_learner_trains_by_its_name_and_a_name_is_registered_once(t
     assert isinstance(tr.agent, CountingDDPG) and CountingDDPG.learned == tr.agent.updates > 0
     with pytest.raises(ValueError, match="registered already"):
         register_learner("sac", LearnerEntry(CountingDDPG, "ddpg", DDPGConfig))
+
+
+@dataclasses.dataclass(frozen=True)
+class ToyConfig(DDPGConfig):
+    """[toy]: guided DDPG's settings and one of its own."""
+
+    note: int = 0
+
+
+@pytest.fixture
+def toy_with_section():
+    register_learner("toy", LearnerEntry(CountingDDPG, "toy", ToyConfig))
+    yield "toy"
+    del LEARNERS["toy"]
+
+
+def test_a_learner_with_a_section_of_its_own_trains_shows_and_resumes(toy_with_section, tmp_path, capsys):
+    import json
+
+    from mrguide.cli import main
+
+    cfg = tmp_path / "toy.toml"
+    cfg.write_text("[train]\nlearner = 'toy'\nlearning_starts = 64\nbatch_size = 32\n\n[toy]\nhidden = [16, 16]\n")
+    out = str(tmp_path / "run")
+    argv = ["train", "--config", str(cfg), "--out", out, "--quiet", "--steps", "300"]
+    assert main([*argv, "--stop-after", "100"]) == 0
+    capsys.readouterr()
+    assert main(["config", "show", "--config", str(cfg)]) == 0
+    shown = json.loads(capsys.readouterr().out)
+    assert shown["toy"]["hidden"] == [16, 16] and shown["toy"]["note"] == 0
+    assert main([*argv, "--resume", "--stop-after", "200", "--set", "sac.utd=3"]) == 0  # not the trained learner's
+    assert main([*argv, "--resume", "--set", "toy.note=1"]) == 2
+    assert "sections differ: toy" in capsys.readouterr().err

@@ -322,12 +322,12 @@ def test_a_short_guided_run_asks_two_marks_and_then_uses_what_the_cell_measured(
     import dataclasses
 
     from mrguide.policies.train import Trainer
-    from mrguide.policies.train_config import load_train_config
+    from tests.run_configs import run_config, sections
 
-    tc, dc, gc, ec = load_train_config(None)
+    tc, dc, gc, ec = sections()
     tc = dataclasses.replace(tc, total_steps=600, eval_every=10_000, checkpoint_every=10_000)
     gc = dataclasses.replace(gc, marks="pick_place", source="oracle")
-    tr = Trainer(tc, dc, gc, ec, tmp_path)
+    tr = Trainer(run_config(tc, dc, gc, ec), tmp_path)
     try:
         tr.run()
     finally:

@@ -8,8 +8,8 @@ import math
 import pytest
 
 from mrguide.policies.train import Trainer
-from mrguide.policies.train_config import load_train_config
 from mrguide.policies.train_log import METRIC_FIELDS, UPDATE_FIELDS
+from tests.run_configs import run_config, sections
 
 OLD_FIELDS = (
     "step",
@@ -31,13 +31,13 @@ OLD_FIELDS = (
 
 
 def make(tmp_path, name, guided=True, **train):
-    tc, dc, gc, ec = load_train_config(None)
+    tc, dc, gc, ec = sections()
     tc = dataclasses.replace(
         tc, total_steps=600, learning_starts=64, batch_size=32, eval_every=10_000, checkpoint_every=10_000, **train
     )
     dc = dataclasses.replace(dc, hidden=(32, 32))
     gc = dataclasses.replace(gc, intake_steps=400, enabled=guided)
-    return Trainer(tc, dc, gc, ec, tmp_path / name)
+    return Trainer(run_config(tc, dc, gc, ec), tmp_path / name)
 
 
 def read(path):

@@ -111,20 +111,20 @@ def test_a_short_guided_sac_run_trains_resumes_and_exports(tmp_path):
     from mrguide.deploy.policy import ExportedPolicy
     from mrguide.policies.export import export_actor
     from mrguide.policies.train import Trainer
-    from mrguide.policies.train_config import load_train_config
+    from tests.run_configs import run_config, sections
 
-    tc, dc, gc, ec = load_train_config(None)
+    tc, dc, gc, ec = sections()
     tc = dataclasses.replace(
         tc, total_steps=400, learning_starts=64, batch_size=32, eval_every=10_000, checkpoint_every=200, learner="sac"
     )
     sc = SMALL
-    tr = Trainer(tc, dc, gc, ec, tmp_path, sac_cfg=sc)
+    tr = Trainer(run_config(tc, dc, gc, ec, sac=sc), tmp_path)
     try:
         tr.run(stop_at=200)
         tr.save_checkpoint()
     finally:
         tr.close()
-    again = Trainer(tc, dc, gc, ec, tmp_path, sac_cfg=sc)
+    again = Trainer(run_config(tc, dc, gc, ec, sac=sc), tmp_path)
     try:
         again.load_checkpoint()
         assert again.counters.step == tr.counters.step and again.agent.updates == tr.agent.updates
@@ -143,4 +143,4 @@ def test_a_short_guided_sac_run_trains_resumes_and_exports(tmp_path):
     finally:
         again.close()
     with pytest.raises(Exception, match="different configuration"):
-        Trainer(tc, dc, gc, ec, tmp_path, sac_cfg=dataclasses.replace(sc, utd=3)).load_checkpoint()
+        Trainer(run_config(tc, dc, gc, ec, sac=dataclasses.replace(sc, utd=3)), tmp_path).load_checkpoint()

@@ -8,18 +8,18 @@ import pytest
 import torch
 
 from mrguide.policies.train import CheckpointError, Trainer
-from mrguide.policies.train_config import load_train_config
 from mrguide.policies.train_counters import TrainerCounters
+from tests.run_configs import run_config, sections
 
 
 def make(tmp_path, name, **train):
-    tc, dc, gc, ec = load_train_config(None)
+    tc, dc, gc, ec = sections()
     tc = dataclasses.replace(
         tc, total_steps=600, learning_starts=64, batch_size=32, eval_every=10_000, checkpoint_every=10_000, **train
     )
     dc = dataclasses.replace(dc, hidden=(32, 32))
     gc = dataclasses.replace(gc, intake_steps=400)
-    return Trainer(tc, dc, gc, ec, tmp_path / name)
+    return Trainer(run_config(tc, dc, gc, ec), tmp_path / name)
 
 
 def counters(tr):
@@ -148,8 +148,8 @@ def test_guided_training_converges_within_5000_steps_by_the_experiments_rule(tmp
     80 % by 5,000 steps and stays there through 7,000 (the learning-curves rule on the evaluations so far)."""
     from mrguide.experiments.stats import convergence
 
-    tc, dc, gc, ec = load_train_config(None)
-    tr = Trainer(tc, dc, gc, ec, tmp_path / "slow")
+    tc, dc, gc, ec = sections()
+    tr = Trainer(run_config(tc, dc, gc, ec), tmp_path / "slow")
     try:
         tr.run(stop_at=7_000)
         with (tmp_path / "slow" / "eval.csv").open() as fh:
@@ -166,15 +166,12 @@ class _MustNotBeAsked:
 
 
 def test_a_baseline_never_calls_the_expert(tmp_path):
-    tc, dc, gc, ec = load_train_config(None)
+    tc, dc, gc, ec = sections()
     tc = dataclasses.replace(
         tc, total_steps=400, learning_starts=64, batch_size=32, eval_every=10_000, checkpoint_every=10_000
     )
     tr = Trainer(
-        tc,
-        dataclasses.replace(dc, hidden=(16, 16)),
-        dataclasses.replace(gc, enabled=False),
-        ec,
+        run_config(tc, dataclasses.replace(dc, hidden=(16, 16)), dataclasses.replace(gc, enabled=False), ec),
         tmp_path / "b",
         lambda env: _MustNotBeAsked(),
     )
@@ -196,12 +193,13 @@ def _rows(path):
 
 
 def test_every_demonstration_restarts_its_episode(tmp_path):
-    tc, dc, gc, ec = load_train_config(None)
+    tc, dc, gc, ec = sections()
     tc = dataclasses.replace(
         tc, total_steps=500, learning_starts=64, batch_size=32, eval_every=10_000, checkpoint_every=10_000
     )
     tr = Trainer(
-        tc, dataclasses.replace(dc, hidden=(16, 16)), dataclasses.replace(gc, intake_steps=500), ec, tmp_path / "r"
+        run_config(tc, dataclasses.replace(dc, hidden=(16, 16)), dataclasses.replace(gc, intake_steps=500), ec),
+        tmp_path / "r",
     )
     restored, restore = [], tr.env.restore
     tr.env.restore = lambda snap: restored.append(snap) or restore(snap)
@@ -227,12 +225,14 @@ def test_a_demonstration_is_expert_data_only_for_the_phases_it_completed(tmp_pat
             # 16 mm off in x: the approach above it is within ε = 2 cm, the cup beyond the seal's 13 mm margin
             return Annotation(target + ([0.016, 0.0, 0.0] if phase_from_progress(obs[4]) == 1 else 0.0), grip, "live")
 
-    tc, dc, gc, ec = load_train_config(None)
+    tc, dc, gc, ec = sections()
     tc = dataclasses.replace(
         tc, total_steps=300, learning_starts=64, batch_size=32, eval_every=10_000, checkpoint_every=10_000
     )
     gc = dataclasses.replace(gc, intake_steps=300, reask_after=0)
-    tr = Trainer(tc, dataclasses.replace(dc, hidden=(16, 16)), gc, ec, tmp_path / "f", lambda env: BesideThePart())
+    tr = Trainer(
+        run_config(tc, dataclasses.replace(dc, hidden=(16, 16)), gc, ec), tmp_path / "f", lambda env: BesideThePart()
+    )
     try:
         tr.run(stop_at=300)
         agent = tr.replay.agent.state()
@@ -281,7 +281,8 @@ def test_a_checkpoint_from_before_a_new_setting_resumes_with_its_default(tmp_pat
     base = make(tmp_path, "old")
     base.close()
     other = Trainer(
-        base.cfg, dataclasses.replace(base.ddpg_cfg, bc_weight=5.0), base.guidance, base.env_cfg, tmp_path / "old"
+        base.run_cfg.replace(ddpg=dataclasses.replace(base.run_cfg.learner, bc_weight=5.0)),
+        tmp_path / "old",
     )
     with pytest.raises(CheckpointError, match=r"different configuration \(sections differ: ddpg\)"):
         other.load_checkpoint()
@@ -293,7 +294,7 @@ def test_a_person_stepping_in_cuts_the_agents_episode_and_it_is_demonstrated(tmp
     cut, restored and demonstrated as Eq. 12 would; counted apart, and marked in metrics.csv."""
     from mrguide.policies.experts import OracleExpert
 
-    tc, dc, gc, ec = load_train_config(None)
+    tc, dc, gc, ec = sections()
     tc = dataclasses.replace(
         tc, total_steps=200, learning_starts=64, batch_size=32, eval_every=10_000, checkpoint_every=10_000
     )
@@ -307,7 +308,9 @@ def test_a_person_stepping_in_cuts_the_agents_episode_and_it_is_demonstrated(tmp
             return PersonStepsIn.polls == 5  # at the fifth agent step
 
     tr = Trainer(
-        tc, dataclasses.replace(dc, hidden=(16, 16)), gc, ec, tmp_path / "i", lambda env: PersonStepsIn(ec.task)
+        run_config(tc, dataclasses.replace(dc, hidden=(16, 16)), gc, ec),
+        tmp_path / "i",
+        lambda env: PersonStepsIn(ec.task),
     )
     try:
         tr.run(stop_at=200)

@@ -16,20 +16,20 @@ import pytest
 from mrguide.cli import main
 from mrguide.policies.episode_recorder import FILE_NAME, EpisodeRecorder, read_episodes
 from mrguide.policies.train import Trainer
-from mrguide.policies.train_config import load_train_config
 from mrguide.replay.runs import load_run
+from tests.run_configs import run_config, sections
 
 STEPS = 300
 
 
 def _trainer(out, **guidance):
-    tc, dc, gc, ec = load_train_config(None)
+    tc, dc, gc, ec = sections()
     tc = dataclasses.replace(
         tc, total_steps=STEPS, learning_starts=64, batch_size=32, eval_every=150, checkpoint_every=10_000
     )
     dc = dataclasses.replace(dc, hidden=(32, 32))
     gc = dataclasses.replace(gc, intake_steps=STEPS, source="annotator", **guidance)
-    return Trainer(tc, dc, gc, ec, out)
+    return Trainer(run_config(tc, dc, gc, ec), out)
 
 
 def _without_wall_clock(path):

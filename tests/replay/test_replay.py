@@ -10,11 +10,11 @@ from pathlib import Path
 
 import pytest
 
+from mrguide.cell.config import CellConfig
 from mrguide.cell.dry_run import dry_run
 from mrguide.cli import main
 from mrguide.deploy.runlog import RunLog, read_log
 from mrguide.replay.runs import load_run
-from mrguide.twin.env import EnvConfig
 from tests.deploy.conftest import Expert, bus_config
 
 ROOT = Path(__file__).parents[2]
@@ -24,7 +24,7 @@ ROOT = Path(__file__).parents[2]
 def dry_log(tmp_path_factory) -> Path:
     """Two episodes of the scripted expert, dry-run; the exact pose source logs the truth and its age."""
     log = tmp_path_factory.mktemp("dry") / "deploy.jsonl"
-    cfg = EnvConfig()
+    cfg = CellConfig()
     with RunLog(log, {"command": "deploy", "dry_run": True, "decision_period": cfg.twin.decision_period}) as run_log:
         dry_run(None, cfg, bus_config(), 2, 0, run_log, policy=Expert(cfg))
     return log

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from mrguide.cell.config import CellConfig
 from mrguide.cell.hmd_stream import HmdPoseStream
 from mrguide.cell.twin_plant import TwinPlant
 from mrguide.deploy.runlog import read_log
@@ -18,7 +19,6 @@ from mrguide.experiments import sim2real as s2r
 from mrguide.pose_source import PoseUnavailable
 from mrguide.robot import load_robot
 from mrguide.task import oracle_action, phase_from_progress
-from mrguide.twin.env import EnvConfig
 from mrguide.twin.scene import Scene
 from mrguide.twin.visual_arm import ArmDrawing
 
@@ -39,7 +39,7 @@ def _kill_hmd(wait: bool = True) -> int:
 
 
 def test_dead_hmd_process_is_unavailable_at_once():
-    cfg = EnvConfig.load(REAL)
+    cfg = CellConfig.load(REAL)
     scene = Scene(load_robot(cfg.robot), cfg.twin, cfg.task.object_height)
     stream = HmdPoseStream(TwinPlant(scene), REAL, cfg.task.object_height, ArmDrawing.of(scene.spec))
     try:
@@ -61,7 +61,7 @@ def test_dead_hmd_process_is_unavailable_at_once():
 def test_a_dead_hmd_process_is_gone_even_while_is_alive_has_not_caught_up(monkeypatch):
     """A child reaped by another thread can read as alive for a moment (its exit code not yet stored): the
     stream judges by the process's sentinel, so the last pose is refused at once all the same."""
-    cfg = EnvConfig.load(REAL)
+    cfg = CellConfig.load(REAL)
     scene = Scene(load_robot(cfg.robot), cfg.twin, cfg.task.object_height)
     stream = HmdPoseStream(TwinPlant(scene), REAL, cfg.task.object_height, ArmDrawing.of(scene.spec))
     try:
@@ -81,7 +81,7 @@ def test_hmd_dying_in_the_grasp_finishes_the_episode_on_the_last_pose_then_stops
     """Before the grasp the part lies where it was last seen, so the last pose serves (up to
     `max_pose_misses_before_grasp` decisions, each counted); from the grasp on the carried part is tracked by the
     TCP. The next episode cannot start without a pose: the run stops, naming the HMD process."""
-    cfg = EnvConfig.load(REAL)
+    cfg = CellConfig.load(REAL)
     ws = load_robot(cfg.robot).workspace
     killed = []
 
@@ -124,7 +124,7 @@ def test_an_hmd_that_cannot_start_fails_its_seed_and_the_run_goes_on(tmp_path, m
         raise s2r.HmdStartError("HMD process failed to start: CalibrationError: registration: only 0 of 4 frames agree")
 
     monkeypatch.setattr(s2r, "HmdPoseStream", cannot_start)
-    cfg = EnvConfig.load(REAL)
+    cfg = CellConfig.load(REAL)
     seen = []
     log = tmp_path / "log.jsonl"
     out = s2r.run_real(

@@ -10,6 +10,7 @@ import pytest
 
 from mrguide.calibration.config import load_calibration_config
 from mrguide.calibration.detection import MarkerDetector
+from mrguide.cell.config import CellConfig
 from mrguide.cell.hmd_stream import (
     MAX_FRAME_RATE,
     OBJECT_MARKER_ID,
@@ -24,7 +25,6 @@ from mrguide.motion.kinematics import Kinematics
 from mrguide.pose_source import PoseUnavailable
 from mrguide.robot import load_robot
 from mrguide.twin.camera import Intrinsics
-from mrguide.twin.env import EnvConfig
 from mrguide.twin.markers import TwinCalibrationConfig, hmd_marker_pose_source
 
 mujoco_hmd = pytest.importorskip("mrguide.cell.mujoco_hmd")  # the mujoco extra (in dev)
@@ -41,7 +41,7 @@ NO_NOISE = {
 @pytest.fixture(scope="module")
 def cell():
     """The MuJoCo cell's HMD calibrated without noise, looking at the cell as the wearer does, and its pose source."""
-    env = EnvConfig.load(MUJOCO_CELL)
+    env = CellConfig.load(MUJOCO_CELL)
     spec = load_robot(env.robot)
     cfg = load_calibration_config(MUJOCO_CELL)
     twin = load_section(TwinCalibrationConfig, MUJOCO_CELL, "calibration_twin")
@@ -104,14 +104,14 @@ def test_intrinsics_mujoco_cannot_draw_are_refused(cell):
     spec, cfg, twin, _, _, _ = cell
     off_centre = Intrinsics(width=640, height=480, fx=600.0, fy=600.0, cx=300.0, cy=240.0)
     with pytest.raises(ConfigError, match="centred pinhole"):
-        mujoco_hmd.MujocoHmd(spec, EnvConfig.load(MUJOCO_CELL).twin.cup, 0.05, cfg, 0, twin.T_base_hmd, off_centre)
+        mujoco_hmd.MujocoHmd(spec, CellConfig.load(MUJOCO_CELL).twin.cup, 0.05, cfg, 0, twin.T_base_hmd, off_centre)
 
 
 def test_the_hmd_process_streams_the_mujoco_cells_part():
     """The HMD of condition mujoco_hmd end to end: its own process, MuJoCo's renderer, the MuJoCo plant's state."""
     from mrguide.mujoco_cell.plant import MujocoPlant
 
-    env = EnvConfig.load(MUJOCO_CELL)
+    env = CellConfig.load(MUJOCO_CELL)
     spec = load_robot(env.robot)
     plant = MujocoPlant(spec, env.plant.mujoco, env.task.object_height, cup=env.twin.cup)
     part = np.array([0.45, 0.02, 0.025])
@@ -134,7 +134,7 @@ def test_without_an_offscreen_backend_the_hmd_says_what_to_install(monkeypatch):
     """mujoco picks its OpenGL backend when it is imported: a backend it cannot load stops the HMD at start-up with
     the packages to install, instead of a traceback from inside OpenGL."""
     monkeypatch.setenv("MUJOCO_GL", "no-such-backend")  # the HMD process inherits it (an explicit choice is kept)
-    env = EnvConfig.load(MUJOCO_CELL)
+    env = CellConfig.load(MUJOCO_CELL)
     spec = load_robot(env.robot)
     with pytest.raises(HmdStartError, match="libegl1 libegl-mesa0 libgl1-mesa-dri"):
         HmdPoseStream(None, MUJOCO_CELL, env.task.object_height, MujocoDrawing(spec, env.twin.cup))

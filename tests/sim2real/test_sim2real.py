@@ -4,6 +4,7 @@ from pathlib import Path
 
 import numpy as np
 
+from mrguide.cell.config import CellConfig
 from mrguide.cell.hmd_stream import HmdPoseStream
 from mrguide.cli import main
 from mrguide.drivers.config import BusConfig, CobotBusConfig
@@ -32,7 +33,7 @@ def test_sim_condition_is_reproducible_per_seed():
 
 
 def test_real_exact_condition(tmp_path):
-    cfg = EnvConfig.load(REAL)
+    cfg = CellConfig.load(REAL)
     bus = CobotBusConfig(bus=BusConfig(channel="s2r-exact"))
     out = s2r.run_real(
         None,
@@ -58,7 +59,7 @@ def test_a_cell_whose_drives_do_not_enable_counts_its_episodes_and_says_why(tmp_
         raise DriverError("drives did not reach OPERATION ENABLED within 1.0 s")
 
     monkeypatch.setattr(s2r, "dry_run", no_enable)
-    cfg = EnvConfig.load(REAL)
+    cfg = CellConfig.load(REAL)
     bus = CobotBusConfig(bus=BusConfig(channel="s2r-no-enable"))
     seen = []
     out = s2r.run_real(
@@ -70,7 +71,7 @@ def test_a_cell_whose_drives_do_not_enable_counts_its_episodes_and_says_why(tmp_
 
 
 def test_real_hmd_condition_uses_marker_pipeline_poses(tmp_path, monkeypatch):
-    cfg = EnvConfig.load(REAL)
+    cfg = CellConfig.load(REAL)
     bus = CobotBusConfig(bus=BusConfig(channel="s2r-hmd"))
     seen = []
     original = HmdPoseStream.object_position
