@@ -9,7 +9,7 @@ import pytest
 from mrguide.config import ConfigError
 from mrguide.experiments import noise_robustness
 from mrguide.experiments.commands import _setup
-from mrguide.experiments.train_runs import TrainRun, check_same_config, configs, run_record
+from mrguide.experiments.train_runs import TrainRun, check_same_config, run_config, run_record
 
 
 def _args(**kw):
@@ -24,7 +24,7 @@ def test_set_reaches_every_run_over_the_files_overrides_and_the_swept_key_stays_
     runs = noise_robustness.runs(cfg, base)
     assert len(runs) == len(cfg.sigmas)
     for run, sigma in zip(runs, cfg.sigmas):
-        _, ddpg, guidance, _ = configs(run)
+        ddpg, guidance = run_config(run).learners["ddpg"], run_config(run).guidance
         assert ddpg.lr_actor == 0.001
         assert guidance.noise.sigma == sigma  # what the experiment varies is set last
         assert guidance.pose.sigma == 0.003  # the file's own overrides stay

@@ -5,7 +5,7 @@ import dataclasses
 
 from mrguide.experiments import learning_curves as lc
 from mrguide.experiments import noise_robustness as nr
-from mrguide.experiments.train_runs import configs
+from mrguide.experiments.train_runs import run_config
 from tests.experiments.conftest import write_run
 
 
@@ -187,7 +187,7 @@ def test_the_bias_reading_reports_the_bias_each_person_drew(tmp_path):
     (tmp_path / "r.csv").write_bytes(files["runs.csv"])
     rows = {(r["sigma_m"], r["seed"]): r["registration_bias_mm"] for r in read(tmp_path / "r.csv")}
     run = runs[3]  # 12 mm, seed 1
-    _, _, gc, ec = configs(run)
+    gc, ec = run_config(run).guidance, run_config(run).env
     env = PickPlaceEnv(ec)
     try:
         drawn = 1e3 * make_expert_source(gc, env, run.seed).run_bias
