@@ -26,8 +26,8 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 REALTIME = (
     "tests/deploy/",
     "tests/drivers/",
-    "tests/sim2real/",
-    "tests/experiments/test_sim2real_experiment.py",
+    "tests/cell/",
+    "tests/experiments/test_sim2real",
     "tests/replay/test_replay.py",
     "tests/test_install_profiles.py",
     "tests/test_robot_pc_imports.py",

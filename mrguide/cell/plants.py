@@ -39,7 +39,7 @@ PLANT_BUILDERS: dict[str, PlantBuilder] = {}
 
 def register_plant(engine: str, builder: PlantBuilder) -> None:
     """Make `[plant] engine = ENGINE` a cell's engine, built by `builder`; ValueError if the name is taken. The plant
-    contract tests (`tests/drivers/test_plant_contract.py`) run on every registered engine."""
+    contract tests (`tests/cell/test_plant_contract.py`) run on every registered engine."""
     register(PLANT_BUILDERS, engine, builder, "plant engine", PLANT_ENGINES)
 
 

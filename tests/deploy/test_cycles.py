@@ -2,7 +2,7 @@
 
 The runtime here is a stand-in whose attempts end as a script says and whose part lies where the script puts it,
 so every rule of the cycle runner is checked without threads or a bus (`./run.sh test` runs it in its parallel
-pass); tests/deploy/test_cycles_dry_run.py runs the same runner through the whole stack."""
+pass); tests/cell/test_cycles_dry_run.py runs the same runner through the whole stack."""
 
 from __future__ import annotations
 

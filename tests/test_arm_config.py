@@ -16,7 +16,7 @@ from mrguide.robot import R_TOOL_DOWN, RobotConfig, RobotSpecError, load_robot, 
 from mrguide.twin.env import EnvConfig
 
 UR5_TOML = Path(shipped_arms()["ur5"]).read_text()
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[1]
 
 
 def test_ur10_arm_loads_with_its_own_urdf_limits_and_identity():
