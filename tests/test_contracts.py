@@ -268,7 +268,6 @@ def test_every_name_has_its_entry_in_the_registry():
         ("guidance", "marks", "sideways", "guidance.marks must be 'phases' or 'pick_place', got 'sideways'"),
         ("guidance", "reference", "mean", "guidance.reference must be 'nominal' or 'running_median', got 'mean'"),
         ("guidance", "marks", 3, "guidance.marks must be 'phases' or 'pick_place', got 3"),
-        ("train", "learner", "td3", "train.learner = 'td3': expected one of ddpg, sac"),
         ("peers", "learners", ["sac", "td3"], "experiment.learners = ['sac', 'td3']: expected some of ddpg, sac"),
     ],
 )
@@ -278,12 +277,23 @@ def test_a_value_outside_its_choices_gets_the_keys_own_message(section, key, val
     from mrguide.config import ConfigError, from_dict
     from mrguide.experiments.peers import PeersConfig
     from mrguide.policies.guidance import GuidanceConfig
-    from mrguide.policies.train_config import TrainConfig
 
-    cls = {"guidance": GuidanceConfig, "train": TrainConfig, "peers": PeersConfig}[section]
+    cls = {"guidance": GuidanceConfig, "peers": PeersConfig}[section]
     with pytest.raises(ConfigError) as err:
         from_dict(cls, {key: value}, "run.toml [x]")
     assert str(err.value) == f"run.toml [x]: {message}"
+
+
+def test_a_learner_nobody_registered_is_refused_naming_the_file(tmp_path):
+    """`train.learner` is checked against the learner registry by the run's root config, where the file is known."""
+    from mrguide.config import ConfigError
+    from mrguide.policies.train_config import RunConfig
+
+    path = tmp_path / "run.toml"
+    path.write_text("[train]\nlearner = 'td3'\n")
+    with pytest.raises(ConfigError) as err:
+        RunConfig.load(path)
+    assert str(err.value) == f"{path} [train]: train.learner = 'td3': expected one of ddpg, sac"
 
 
 def test_the_choices_load():
