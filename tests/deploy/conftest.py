@@ -56,7 +56,7 @@ def run_dry(tmp_path):
         runtime_cfg=None,
         on_placed=None,
     ):
-        cfg = env_cfg or CellConfig()
+        cfg = env_cfg if isinstance(env_cfg, CellConfig) else CellConfig(env=env_cfg or EnvConfig())  # a cell of an env
         cells = []
 
         def pose_factory(cell):
