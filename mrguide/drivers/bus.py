@@ -63,6 +63,18 @@ def open_bus(config: BusConfig) -> can.BusABC:
         raise BusError(f"cannot open CAN bus {where}: {exc}") from exc
 
 
+def stop_periodic_tasks(bus: can.BusABC, timeout: float = 1.0) -> None:
+    """Stop `bus`'s periodic tasks and wait for each one's thread to leave its loop, so that none sends on a bus shut down
+    under it: python-can's `stop` only flags a task, and one caught mid-send would raise in its thread (a traceback
+    on stderr at the end of a run, e.g. a heartbeat producer writing to a closed pipe)."""
+    tasks = list(getattr(bus, "_periodic_tasks", ()))
+    bus.stop_all_periodic_tasks()
+    for task in tasks:
+        thread = getattr(task, "thread", None)
+        if thread is not None and thread is not threading.current_thread():
+            thread.join(timeout)
+
+
 def frames_pending(bus: can.BusABC) -> bool | None:
     """Whether frames wait in `bus`'s receive queue now; None if the interface cannot tell. A bus may answer itself
     (a `frames_pending()` method, as the simulator's fault-injecting wrapper does); python-can's virtual bus holds a

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import can
 
-from mrguide.drivers.bus import frames_pending
+from mrguide.drivers.bus import frames_pending, stop_periodic_tasks
 
 logger = logging.getLogger(__name__)
 
@@ -191,6 +191,7 @@ class FaultyBus(can.BusABC):
         return msg, False
 
     def shutdown(self) -> None:
+        stop_periodic_tasks(self)  # before the wrapped bus closes under a task mid-send
         super().shutdown()
         if self._delay_line is not None:
             self._delay_line.stop()

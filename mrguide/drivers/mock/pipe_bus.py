@@ -24,6 +24,8 @@ from typing import Any
 
 import can
 
+from mrguide.drivers.bus import stop_periodic_tasks
+
 #: arbitration ID, flags, DLC, 8 data bytes.
 FRAME = struct.Struct("<IBB8s")
 _EXTENDED, _REMOTE, _ERROR = 1, 2, 4
@@ -108,5 +110,6 @@ class PipeBus(can.BusABC):
         return self._sock.fileno()
 
     def shutdown(self) -> None:
+        stop_periodic_tasks(self)  # before the socket closes under a task mid-send
         super().shutdown()
         self._sock.close()
