@@ -92,7 +92,9 @@ def test_a_learner_with_a_section_of_its_own_trains_shows_and_resumes(toy_with_s
     from mrguide.cli import main
 
     cfg = tmp_path / "toy.toml"
-    cfg.write_text("[train]\nlearner = 'toy'\nlearning_starts = 64\nbatch_size = 32\n\n[toy]\nhidden = [16, 16]\n")
+    cfg.write_text(  # no update (learning starts after the run): what is tested is where the learner is named
+        "[train]\nlearner = 'toy'\nlearning_starts = 100000\neval_episodes = 1\n\n[toy]\nhidden = [16, 16]\n"
+    )
     out = str(tmp_path / "run")
     argv = ["train", "--config", str(cfg), "--out", out, "--quiet", "--steps", "300"]
     assert main([*argv, "--stop-after", "100"]) == 0

@@ -10,8 +10,10 @@ from mrguide.cli import main
 from mrguide.config import ConfigError
 from mrguide.policies.train_config import RunConfig
 
+#: No update (learning starts after the run) and one evaluation episode: what is tested is the config, not learning.
 RUN = (
-    "[train]\nlearning_starts = 64\nbatch_size = 32\n\n[ddpg]\nhidden = [16, 16]\n\n[plant.mujoco]\nseal_gap = {gap}\n"
+    "[train]\nlearning_starts = 100000\neval_episodes = 1\n\n[ddpg]\nhidden = [16, 16]\n\n"
+    "[plant.mujoco]\nseal_gap = {gap}\n"
 )
 
 
