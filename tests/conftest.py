@@ -34,9 +34,19 @@ REALTIME = (
 )
 
 
+#: Of those, the tests that only compute (the production cycles' runner and rules, driven by fakes): the first pass.
+COMPUTE_ONLY = (
+    "tests/deploy/test_cycles.py",
+    "tests/deploy/test_cycle_report.py",
+    "tests/deploy/test_lift_rule.py",
+    "tests/deploy/test_seal_search.py",
+)
+
+
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     for item in items:
-        if item.path.relative_to(config.rootpath).as_posix().startswith(REALTIME):
+        path = item.path.relative_to(config.rootpath).as_posix()
+        if path.startswith(REALTIME) and not path.startswith(COMPUTE_ONLY):
             item.add_marker(pytest.mark.realtime)
 
 
