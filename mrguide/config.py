@@ -232,9 +232,6 @@ class ConfigFile:
             )
         return cls(Path(path), whole)
 
-    def has(self, section: str) -> bool:
-        return section in self.tables
-
     def section(self, cls: type[T], section: str) -> T:
         """`[section]` read into dataclass `cls`; its defaults when the section is absent."""
         data = self.tables.get(section, {})

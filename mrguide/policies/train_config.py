@@ -58,10 +58,6 @@ def arm_record(spec: RobotSpec) -> dict[str, Any]:
 RESUMABLE_CHANGES = ("total_steps", "checkpoint_every", "eval_every")
 
 
-def _unknown_learner(name: str) -> str:
-    return f"train.learner = {name!r}: expected one of {', '.join(LEARNERS)}"
-
-
 def _learner_defaults() -> dict[str, Any]:
     return {entry.section: entry.config() for entry in LEARNERS.values()}
 
@@ -79,18 +75,20 @@ class RunConfig:
 
     def __post_init__(self) -> None:
         if self.train.learner not in LEARNERS:
-            raise ConfigError(_unknown_learner(self.train.learner))
+            raise ConfigError(f"train.learner = {self.train.learner!r}: expected one of {', '.join(LEARNERS)}")
 
     @classmethod
     def load(cls, path: str | Path | None) -> RunConfig:
         """Every section a training run reads, from `path` parsed once (defaults where absent)."""
         sections = {entry.section: entry.config for entry in LEARNERS.values()}
         file = ConfigFile.read(path, tuple(dict.fromkeys((*RUN_SECTIONS, *sections))))
-        train = file.section(TrainConfig, "train")
-        if train.learner not in LEARNERS:
-            raise ConfigError(f"{path} [train]: {_unknown_learner(train.learner)}")
+        train, guidance = file.section(TrainConfig, "train"), file.section(GuidanceConfig, "guidance")
+        env = EnvConfig.from_file(file)
         learners: dict[str, Any] = {name: file.section(config, name) for name, config in sections.items()}
-        return cls(train, file.section(GuidanceConfig, "guidance"), EnvConfig.from_file(file), learners)
+        try:
+            return cls(train, guidance, env, learners)
+        except ConfigError as exc:  # the root's own check (the learner's name): say where
+            raise ConfigError(f"{path} [train]: {exc}") from exc
 
     @property
     def learner_section(self) -> str:

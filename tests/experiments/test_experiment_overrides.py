@@ -24,7 +24,8 @@ def test_set_reaches_every_run_over_the_files_overrides_and_the_swept_key_stays_
     runs = noise_robustness.runs(cfg, base)
     assert len(runs) == len(cfg.sigmas)
     for run, sigma in zip(runs, cfg.sigmas):
-        ddpg, guidance = run_config(run).learners["ddpg"], run_config(run).guidance
+        cfg = run_config(run)
+        ddpg, guidance = cfg.learners["ddpg"], cfg.guidance
         assert ddpg.lr_actor == 0.001
         assert guidance.noise.sigma == sigma  # what the experiment varies is set last
         assert guidance.pose.sigma == 0.003  # the file's own overrides stay

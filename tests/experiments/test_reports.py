@@ -187,7 +187,8 @@ def test_the_bias_reading_reports_the_bias_each_person_drew(tmp_path):
     (tmp_path / "r.csv").write_bytes(files["runs.csv"])
     rows = {(r["sigma_m"], r["seed"]): r["registration_bias_mm"] for r in read(tmp_path / "r.csv")}
     run = runs[3]  # 12 mm, seed 1
-    gc, ec = run_config(run).guidance, run_config(run).env
+    cfg = run_config(run)
+    gc, ec = cfg.guidance, cfg.env
     env = PickPlaceEnv(ec)
     try:
         drawn = 1e3 * make_expert_source(gc, env, run.seed).run_bias
