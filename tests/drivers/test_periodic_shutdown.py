@@ -39,7 +39,7 @@ def _heartbeat() -> can.Message:
 def test_a_pipe_bus_waits_for_a_task_mid_send_before_closing_its_socket(thread_errors):
     near, far = pipe_link()
     bus = PipeBus(channel=near.fileno())
-    slow = _SlowSend(bus, 0.2)
+    slow = _SlowSend(bus, 0.05)
     bus.send = slow  # type: ignore[method-assign]
     bus.send_periodic(_heartbeat(), 0.01)
     assert slow.started.wait(5.0)
@@ -53,7 +53,7 @@ def test_a_pipe_bus_waits_for_a_task_mid_send_before_closing_its_socket(thread_e
 def test_a_faulty_bus_waits_for_a_task_mid_send_before_shutting_down_the_bus_it_wraps(thread_errors):
     inner = can.Bus(interface="virtual", channel="periodic-shutdown")
     bus = FaultyBus(inner, FaultInjector())
-    slow = _SlowSend(inner, 0.2)
+    slow = _SlowSend(inner, 0.05)
     inner.send = slow  # type: ignore[method-assign]
     bus.send_periodic(_heartbeat(), 0.01)
     assert slow.started.wait(5.0)
