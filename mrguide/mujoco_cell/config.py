@@ -1,7 +1,8 @@
 """The MuJoCo cell's physical parameters ([plant.mujoco] of a cell config), each with where its value comes from.
 
 None is fitted to a policy or copied from the PyBullet twin's tuning: contact, friction and solver settings are
-MuJoCo's own defaults; the rest are the part's material, the cup's geometry and assumptions named as such.
+MuJoCo's own defaults; the rest are the part's material and assumptions named as such. The cup and its seal are the
+cell's hardware (`cell_layout`, `mrguide.seal`), the same as the twin's.
 """
 
 from __future__ import annotations
@@ -24,9 +25,6 @@ class MujocoCellConfig:
     servo_damping_ratio: Annotated[float, Range(0.1, 5.0)] = 1.0
     #: The part: a solid 5 cm cube of ABS (density 1.04 g/cm³ → 0.13 kg).
     part_mass: Annotated[float, Range(1e-3, 10.0, " kg")] = 0.13
-    #: How far the cup's lip may stand off the part's top face and still seal (m): the lip's compliance.
-    #: Assumed (a flat cup's lip deforms by about a millimetre).
-    seal_gap: Annotated[float, Range(0.0, 0.01, " m")] = 0.001
 
     def __post_init__(self) -> None:
         check_ranges(self, "plant.mujoco")

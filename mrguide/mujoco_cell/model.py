@@ -28,6 +28,7 @@ import numpy as np
 from mrguide.cell_layout import CUP_RADIUS, TABLE_CENTER, TABLE_HALF_EXTENTS, CupConfig
 from mrguide.mujoco_cell.config import MujocoCellConfig
 from mrguide.robot import RobotSpec, urdf_with_tool
+from mrguide.seal import LIP_COMPLIANCE
 
 #: Pa per kPa: the adhesion gain is the cup's area (m²) times this, its ctrl the vacuum level in kPa.
 PA_PER_KPA = 1000.0
@@ -124,10 +125,10 @@ def _add_cell(s: mujoco.MjSpec, part_size: float, part_mass: float) -> None:
     part.add_geom(name="part", type=mujoco.mjtGeom.mjGEOM_BOX, size=[h, h, h], mass=part_mass, rgba=[0.85, 0.1, 0.1, 1])
 
 
-def _add_lip(s: mujoco.MjSpec, length: float, seal_gap: float) -> None:
-    """The cup's lip: the ring of spheres at the TCP end of the cup (`length` from the flange). Contacts of the lip within `seal_gap`
-    are found but push nothing: there the adhesion pulls a sealed part against the lip, as the vacuum does across
-    the lip's compliance."""
+def _add_lip(s: mujoco.MjSpec, length: float) -> None:
+    """The cup's lip: the ring of spheres at the TCP end of the cup (`length` from the flange). Contacts of the lip within
+    its compliance (`seal.LIP_COMPLIANCE`) are found but push nothing: there the adhesion pulls a sealed part against the
+    lip, as the vacuum does across the lip's compliance."""
     cup = s.body("suction_cup")
     ring = CUP_RADIUS - LIP_RADIUS
     for i in range(LIP_POINTS):
@@ -137,8 +138,8 @@ def _add_lip(s: mujoco.MjSpec, length: float, seal_gap: float) -> None:
             type=mujoco.mjtGeom.mjGEOM_SPHERE,
             size=[LIP_RADIUS, 0.0, 0.0],
             pos=[ring * math.cos(a), ring * math.sin(a), length - LIP_RADIUS],
-            margin=seal_gap,
-            gap=seal_gap,
+            margin=LIP_COMPLIANCE,
+            gap=LIP_COMPLIANCE,
             mass=0.0,
         )
 
@@ -172,7 +173,7 @@ def build_cell(spec: RobotSpec, cfg: MujocoCellConfig, part_size: float, cup: Cu
     adhesion = s.add_actuator(name="cup", target="suction_cup", trntype=mujoco.mjtTrn.mjTRN_BODY)
     adhesion.set_to_adhesion(gain=math.pi * CUP_RADIUS**2 * PA_PER_KPA)
     adhesion.ctrlrange = [0.0, 101.3]
-    _add_lip(s, float(spec.T_flange_tcp[2, 3]), cfg.seal_gap)
+    _add_lip(s, float(spec.T_flange_tcp[2, 3]))
     model = s.compile()
     part = model.body("part")
     lips = np.array([model.geom(f"lip{i}").id for i in range(LIP_POINTS)])

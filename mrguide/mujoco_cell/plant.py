@@ -5,11 +5,12 @@ it once per SYNC from its CAN thread, and each call runs the physics steps of on
 received CSP targets (interpolated linearly between SYNCs, as a CiA 402 drive interpolates). Every access takes
 one lock (the run's pose sources read the part from other threads).
 
-The vacuum at the cup: the generator's level follows a first-order lag toward the sealed level while the cup's
-lip rests whole on a face of the part (within `seal_gap`), toward the open-cup level otherwise, and decays with
-the valve closed (time constants and levels: the drivers' simulated generator, `FirstOrderParams`). The level
-drives the cup's adhesion actuator, so the part is held by F = Δp · A and nothing else: a lift that asks more
-of it tears the part off.
+The vacuum at the cup: the generator's level follows a first-order lag toward the level the cell's seal gives
+(`mrguide.seal`, the same as the twin's: the sealed level while the cup's lip rests whole on a face of the part,
+less what the lip leaks where it hangs past the face's edge, the open-cup level where it does not rest on one),
+and decays with the valve closed (time constants and levels: the drivers' simulated generator,
+`FirstOrderParams`). The level drives the cup's adhesion actuator, so the part is held by F = Δp · A and
+nothing else: a lift that asks more of it tears the part off.
 """
 
 from __future__ import annotations
@@ -20,15 +21,13 @@ import threading
 import mujoco
 import numpy as np
 
-from mrguide.cell_layout import CUP_RADIUS, CupConfig
+from mrguide import seal
+from mrguide.cell_layout import CupConfig
 from mrguide.drivers.mock.first_order_plant import FirstOrderParams
 from mrguide.mujoco_cell.config import MujocoCellConfig
 from mrguide.mujoco_cell.model import build_cell
 from mrguide.plant import CellPlant
 from mrguide.robot import RobotSpec
-
-#: The cup's axis must be within this of a face's normal for its lip to seal on that face (cos 10°).
-SEAL_MIN_COS = math.cos(math.radians(10.0))
 
 
 class MujocoPlant(CellPlant):
@@ -46,7 +45,7 @@ class MujocoPlant(CellPlant):
         self.vacuum = vacuum or FirstOrderParams()
         self.cell = build_cell(spec, self.cfg, part_size, cup or CupConfig())
         self.model, self.data = self.cell.model, mujoco.MjData(self.cell.model)
-        self.half = 0.5 * part_size
+        self.half = np.full(3, 0.5 * part_size)
         self.lock = threading.Lock()
         self.data.qpos[self.cell.arm_qpos] = spec.q_home
         mujoco.mj_forward(self.model, self.data)
@@ -145,7 +144,7 @@ class MujocoPlant(CellPlant):
         if self._blow_off:
             goal, tau = 0.0, p.blow_off_time_constant
         elif self._vacuum_on:
-            goal = (p.sealed_level_kpa if self.lip_sealed() else p.open_level_kpa) * (1.0 - self._leak)
+            goal = self.level_reached() * (1.0 - self._leak)
             tau = p.evacuation_time_constant
         else:
             goal, tau = 0.0, p.release_time_constant
@@ -160,16 +159,20 @@ class MujocoPlant(CellPlant):
                 return True
         return False
 
-    def lip_sealed(self) -> bool:
-        """The cup's lip rests whole on one face of the part: square to it, within `seal_gap`, not over its edge."""
+    def _lip(self) -> tuple[np.ndarray, np.ndarray]:
+        """The lip's centre and the cup's axis (out of the lip) in the part's frame."""
         c, d = self.cell, self.data
         rot = d.xmat[c.part_body].reshape(3, 3)  # columns: the part's axes in the world
-        axis = d.xmat[c.tcp_body].reshape(3, 3)[:, 2]  # the cup's axis, out of the lip
-        rel = rot.T @ (d.xpos[c.tcp_body] - d.xpos[c.part_body])  # the lip's centre in the part's frame
-        along = rot.T @ axis
-        k = int(np.argmax(np.abs(along)))  # the face the cup points at: its normal is ±axis k of the part
-        if abs(along[k]) < SEAL_MIN_COS or np.sign(along[k]) == np.sign(rel[k]):
-            return False  # tilted, or pointing away from the part
-        gap = abs(rel[k]) - self.half
-        across = np.delete(rel, k)
-        return bool(gap <= self.cfg.seal_gap and np.all(np.abs(across) + CUP_RADIUS <= self.half))
+        axis = d.xmat[c.tcp_body].reshape(3, 3)[:, 2]
+        return rot.T @ (d.xpos[c.tcp_body] - d.xpos[c.part_body]), rot.T @ axis
+
+    def level_reached(self) -> float:
+        """kPa below atmosphere the generator reaches with the cup where it is (`seal.level_reached`)."""
+        rel, axis = self._lip()
+        return seal.level_reached(rel, axis, self.half, self.vacuum.sealed_level_kpa, self.vacuum.open_level_kpa)
+
+    def lip_sealed(self) -> bool:
+        """The cup's lip rests whole on one face of the part: square to it, within the lip's compliance, not over its
+        edge."""
+        lip = seal.lip_on_face(*self._lip(), self.half)
+        return lip is not None and lip.rests and lip.open_area == 0.0

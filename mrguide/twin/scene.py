@@ -25,7 +25,7 @@ from mrguide.cell_layout import CUP_RADIUS, TABLE_CENTER, TABLE_HALF_EXTENTS
 from mrguide.robot import RobotSpec, urdf_with_tool
 from mrguide.twin.camera import Camera
 from mrguide.twin.config import RealityGap, TwinConfig
-from mrguide.twin.suction import SuctionCup, SuctionState
+from mrguide.twin.suction import GRAVITY, SuctionCup, SuctionState
 
 log = logging.getLogger(__name__)
 
@@ -115,7 +115,7 @@ class Scene:
         self.object_size = object_size
         self.client = pb.connect(pb.GUI if cfg.gui else pb.DIRECT)
         c = self.client
-        pb.setGravity(0, 0, -9.81, physicsClientId=c)
+        pb.setGravity(*GRAVITY, physicsClientId=c)
         pb.setTimeStep(cfg.control_period, physicsClientId=c)
         pb.setPhysicsEngineParameter(deterministicOverlappingPairs=1, physicsClientId=c)
         self.table = _add_table(c)
