@@ -66,6 +66,7 @@ class SuctionCup:
         self.on_break: Callable[[tuple[float, ...], tuple[float, ...]], None] | None = None
         self.state = SuctionState()
         self._cid: int | None = None
+        self._cup_body = int(pb.getJointInfo(robot, cup_link, physicsClientId=client)[16])  # the lip link's parent
 
     def set_vacuum(self, on: bool) -> None:
         """Vacuum on (grip) or off (release: the constraint goes at once)."""
@@ -159,14 +160,21 @@ class SuctionCup:
             childFrameOrientation=(0, 0, 0, 1),
             physicsClientId=self.client,
         )
-        pb.setCollisionFilterPair(self.robot, self.obj, self.cup_link, -1, 0, physicsClientId=self.client)
+        self._collide(False)
         self.state.attached = True
         self.state.rel_pos, self.state.rel_orn = tuple(obj_in_tcp_pos), tuple(obj_in_tcp_orn)
+
+    def _collide(self, on: bool) -> None:
+        """Contacts between the object and the cup (its lip link and the cup's body) on or off: a held object is
+        held by the constraint alone, so that no contact of the two outlives a snapshot (PyBullet's saved state has
+        no contact manifolds) and a restored episode replays exactly."""
+        for link in (self.cup_link, self._cup_body):
+            pb.setCollisionFilterPair(self.robot, self.obj, link, -1, int(on), physicsClientId=self.client)
 
     def _detach(self) -> None:
         if self._cid is not None:
             pb.removeConstraint(self._cid, physicsClientId=self.client)
-            pb.setCollisionFilterPair(self.robot, self.obj, self.cup_link, -1, 1, physicsClientId=self.client)
+            self._collide(True)
             self._cid = None
         self.state.attached = False
 
