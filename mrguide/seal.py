@@ -28,6 +28,7 @@ up to F, a shear along it up to μ (F − pull) (the vacuum presses the lip on t
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -41,6 +42,7 @@ LIP_COMPLIANCE = 0.001
 #: The cup's axis may tilt this far off the face's normal (rad): the lip's diameter then spans 2r·tan θ of height,
 #: which its compliance must take up: atan(1 mm / 40 mm) = 1.4°.
 MAX_TILT = math.atan(LIP_COMPLIANCE / (2.0 * CUP_RADIUS))
+COS_MAX_TILT = math.cos(MAX_TILT)
 #: The cup's area (m²): what the pressure difference acts on.
 CUP_AREA = math.pi * CUP_RADIUS**2
 #: m³/s, the generator's free suction flow: Schmalz's design guide sizes it at 0.5 m³/h for a cup up to Ø60 mm on a
@@ -63,7 +65,13 @@ class LipOnFace:
     """The cup against the face of the part it points at."""
 
     rests: bool  # square to the face and within the lip's compliance of it
-    open_area: float  # m², the lip's disc beyond the face's edges
+    centre: tuple[float, float]  # m, the lip's centre in the face's plane, from the face's centre
+    half: tuple[float, float]  # m, the face's half sizes
+
+    @property
+    def open_area(self) -> float:
+        """m², the lip's disc beyond the face's edges."""
+        return open_area(self.centre, self.half)
 
 
 def leak_level(open_area: float, sealed: float, open_level: float) -> float:
@@ -107,9 +115,14 @@ def open_area(centre: tuple[float, float], half: tuple[float, float], r: float =
     return max(0.0, math.pi * r * r - inside)
 
 
+def _face_axis(axis: Sequence[float]) -> int:
+    """The axis of a box whose faces the cup's `axis` (in the box's frame) points at: the one it is most along."""
+    return max(range(3), key=lambda n: abs(axis[n]))
+
+
 def face_normal(axis: np.ndarray) -> np.ndarray:
     """The outward normal of the face of a box the cup's `axis` (in the box's frame) points at."""
-    k = int(np.argmax(np.abs(axis)))
+    k = _face_axis(axis.tolist())
     normal = np.zeros(3)
     normal[k] = -math.copysign(1.0, float(axis[k]))
     return normal
@@ -120,13 +133,13 @@ def lip_on_face(rel: np.ndarray, axis: np.ndarray, half: np.ndarray) -> LipOnFac
 
     `rel` is the lip's centre and `axis` the cup's axis (out of the lip), both in the part's frame; `half` the part's
     half extents (a box about its origin)."""
-    k = int(np.argmax(np.abs(axis)))  # the face's normal is ±axis k of the part
-    if axis[k] * rel[k] >= 0.0:
+    r, a, h = rel.tolist(), axis.tolist(), half.tolist()
+    k = _face_axis(a)  # the face's normal is ±axis k of the part
+    if a[k] * r[k] >= 0.0:
         return None
     i, j = (n for n in range(3) if n != k)
-    gap = abs(float(rel[k])) - float(half[k])
-    rests = gap <= LIP_COMPLIANCE and abs(float(axis[k])) >= math.cos(MAX_TILT)
-    return LipOnFace(rests, open_area((float(rel[i]), float(rel[j])), (float(half[i]), float(half[j]))))
+    rests = abs(r[k]) - h[k] <= LIP_COMPLIANCE and abs(a[k]) >= COS_MAX_TILT
+    return LipOnFace(rests, (r[i], r[j]), (h[i], h[j]))
 
 
 def level_reached(rel: np.ndarray, axis: np.ndarray, half: np.ndarray, sealed: float, open_level: float) -> float:
