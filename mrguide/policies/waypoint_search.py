@@ -1,11 +1,11 @@
 """Where a person's waypoint does not complete its phase, the demonstration searches, as a cell program would.
 
 A person's marks carry a bias of their own (registration, depth): a pick mark 11 mm above the part's top or
-15 mm beside its centre never seals (the cup's lip must rest within 6 mm of the top and 13 mm of the centre per
-axis), and a waypoint more than ε = 2 cm from the task model's target never completes its phase. The cell says
-which: the vacuum generator's part signal completes the grasp, the part's pose the other phases. So a
-demonstration holds each waypoint for its phase's first dwell, then tries the points of a 3 × 3 grid around it
-(`Pattern`), nearest first, until the phase completes:
+15 mm beside its centre never seals (the cup's lip must rest whole on the top face, within 1 mm of it: 5 mm of
+the centre per axis on the 5 cm part; `mrguide.seal`), and a waypoint more than ε = 2 cm from the task model's
+target never completes its phase. The cell says which: the vacuum generator's part signal completes the grasp,
+the part's pose the other phases. So a demonstration holds each waypoint for its phase's first dwell, then tries
+the points of a 3 × 3 grid around it (`Pattern`), nearest first, until the phase completes:
 
 - approach: a lateral grid at the approach height;
 - grasp: each grid point first from `clearance` above, then pressed `depth` below the pick point (the workspace
@@ -47,8 +47,9 @@ class Pattern:
     grid: tuple[tuple[int, int, int], ...] = GRID
 
 
-#: The searches (ours). The grasp's pitch is below twice the cup's 13 mm lateral seal margin; the approach's and
-#: the transport's below √2 × the 2 cm phase tolerance ε, less for a waypoint also off in height.
+#: The searches (ours). The grasp's pitch was sized below twice the 13 mm lateral seal margin of the twin's cup
+#: before `mrguide.seal`, whose margin is 5 mm: this grid now seals only where a probe happens to land within it. The
+#: approach's and the transport's below √2 × the 2 cm phase tolerance ε, less for a waypoint also off in height.
 PATTERNS: dict[int, Pattern] = {
     Phase.APPROACH: Pattern(first_dwell=8, pitch=0.024, hover=0, press=2, grid=APPROACH_GRID),
     Phase.GRASP: Pattern(first_dwell=8, pitch=0.02, hover=1, press=2, depth=0.02, clearance=0.01),
