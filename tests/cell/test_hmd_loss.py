@@ -23,6 +23,7 @@ from mrguide.twin.scene import Scene
 from mrguide.twin.visual_arm import ArmDrawing
 
 REAL = Path(__file__).parents[2] / "configs" / "cells" / "real_cell.toml"
+HMD_ERRORS = ("tracking_noise_m", "tracking_noise_deg", "calibration_error_m", "calibration_error_deg")
 
 
 def _kill_hmd(wait: bool = True) -> int:
@@ -80,7 +81,11 @@ def test_a_dead_hmd_process_is_gone_even_while_is_alive_has_not_caught_up(monkey
 def test_hmd_dying_in_the_grasp_finishes_the_episode_on_the_last_pose_then_stops_the_run(tmp_path):
     """Before the grasp the part lies where it was last seen, so the last pose serves (up to
     `max_pose_misses_before_grasp` decisions, each counted); from the grasp on the carried part is tracked by the
-    TCP. The next episode cannot start without a pose: the run stops, naming the HMD process."""
+    TCP. The next episode cannot start without a pose: the run stops, naming the HMD process.
+
+    The HMD sees without the real cell's errors here: its death is what is tested, not its accuracy. With them the
+    last pose can lie beyond the cup's 5 mm seal margin (`mrguide.seal`), and whether the runtime's seal search then
+    finds the seal within the last pose's allowance depends on the draw."""
     cfg = CellConfig.load(REAL)
     ws = load_robot(cfg.robot).workspace
     killed = []
@@ -103,6 +108,7 @@ def test_hmd_dying_in_the_grasp_finishes_the_episode_on_the_last_pose_then_stops
         safety=SafetyConfig(stall_timeout=2.0),
         policy=expert_then_kill,
         use_hmd=True,
+        hmd_overrides=dict.fromkeys(HMD_ERRORS, 0.0),
     )
     assert killed == [1]
     assert out == ["success", "safety_stop"]  # the second episode could not start
