@@ -3,9 +3,9 @@ and without the runtime's break-away rule (docs/robot.md, the lift rules).
 
 Each variant runs `--seeds` × `--episodes` episodes of the policy through the whole stack against the cell of
 `--cell` (exact poses; a safety stop is fault-reset and the next episode runs). Every break is written to
-OUT/breaks.csv with the phase the episode was in, the constraint's force (N; z < 0 pulls the part, z > 0 presses
-it) and the cup's position in the part's frame (m; the top face is at z = half the part's height); the outcomes to
-OUT/break_outcomes.csv. Prints one line per variant.
+OUT/breaks.csv with the phase the episode was in, the load on the cup (N, m (a − g) of the hanging part in its frame;
+z < 0 pulls the part, z > 0 presses it) and the cup's position in the part's frame (m; the top face is at z = half
+the part's height); the outcomes to OUT/break_outcomes.csv. Prints one line per variant.
 
     python tools/break_probe.py --policy P [--seeds 3] [--episodes 20] [--out docs/results/compliance]
 """

@@ -30,6 +30,12 @@ from mrguide.twin.config import VacuumConfig
 GRAVITY = (0.0, 0.0, -9.81)
 
 
+def _axis(orn: tuple[float, ...]) -> np.ndarray:
+    """The third axis of the frame of quaternion `orn` (x, y, z, w): the cup's axis, out of the lip."""
+    m = pb.getMatrixFromQuaternion(orn)  # row-major: the axis is the third column
+    return np.array((m[2], m[5], m[8]))
+
+
 @dataclass
 class SuctionState:
     """Everything needed to restore the cup: vacuum command, level, and the attachment (if any)."""
@@ -58,7 +64,7 @@ class SuctionCup:
         self.cfg = cfg
         self.dt = dt
         self._level_gain = 1.0 - math.exp(-dt / cfg.time_constant)  # first-order lag over one period
-        #: N: the cup lets go above this constraint force whatever its level holds (a reality gap's weaker cup)
+        #: N: the cup lets go above this load whatever its level holds (a reality gap's weaker cup)
         self.break_force = math.inf
         self.leak = 0.0  # fault injection: fraction of the sealed vacuum lost through a leak
         #: Called at each break with the load on the cup (N, in the part's frame; along the sealed face's normal < 0
@@ -128,8 +134,7 @@ class SuctionCup:
     def _lip(self) -> tuple[np.ndarray, np.ndarray]:
         """The lip's centre and the cup's axis (out of the lip) in the object's frame."""
         rel_pos, rel_orn = self._tcp_in_object()
-        m = pb.getMatrixFromQuaternion(rel_orn)  # row-major: the axis is the third column
-        return np.array(rel_pos), np.array((m[2], m[5], m[8]))
+        return np.array(rel_pos), _axis(rel_orn)
 
     def _level_reached(self) -> float:
         """kPa below atmosphere the generator reaches with the cup where it is (`seal.level_reached`)."""
@@ -139,7 +144,7 @@ class SuctionCup:
     def _attach(self) -> None:
         # Constraint frame = the TCP frame; the object keeps its pose relative to it at the moment of sealing.
         rel_pos, rel_orn = self._tcp_in_object()
-        nx, ny, nz = seal.face_normal(self._lip()[1])
+        nx, ny, nz = seal.face_normal(_axis(rel_orn))
         self.state.normal = (float(nx), float(ny), float(nz))
         vx, vy, vz = pb.getBaseVelocity(self.obj, physicsClientId=self.client)[0]
         self.state.velocity = (vx, vy, vz)
