@@ -19,8 +19,8 @@ TABLE_HALF_EXTENTS = (0.55, 0.60, 0.02)
 class CupConfig:
     """The suction cup's mounting: rigid, or on a spring level-compensator that absorbs height error."""
 
-    #: m the cup may retract towards the flange; 0 = rigid (trained so far)
-    stroke: Annotated[float, Range(0.0, 0.05, " m")] = 0.0
+    #: m the cup may retract towards the flange; 0 = rigid
+    stroke: Annotated[float, Range(0.0, 0.05, " m")] = 0.012
     spring_rate: Annotated[float, Range(1.0, 1e6, " N/m")] = 1000.0
     preload: Annotated[float, Range(0.0, 1000.0, " N")] = 5.0  # N pushing the cup out at full extension
 

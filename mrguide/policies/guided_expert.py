@@ -217,7 +217,7 @@ class GuidedExpert:
             self.counts.reused += 1
         self._streak = (phase, steps)
         probe = self.demo.probe
-        target = self.demo.next_target(self._plan[kind][1])
+        target = self.demo.next_target(self._plan[kind][1], self.perceived(obs))
         if target is None:  # nothing around the waypoint completes the phase: the person marks again
             self.counts.remarks += 1
             if withdrawn := self.fusion.withdraw(kind):
@@ -227,7 +227,7 @@ class GuidedExpert:
             if not self._plan_mark(obs, kind, self._plan[kind][0], force=True):
                 return None
             self.demo.restart_phase()
-            target = self.demo.next_target(self._plan[kind][1])
+            target = self.demo.next_target(self._plan[kind][1], self.perceived(obs))
             assert target is not None
         elif self.demo.probe != probe:
             self.counts.probes += 1

@@ -89,8 +89,9 @@ class PickPlaceDemo:
     def probe(self) -> int:
         return self.search.probe if self.search is not None else 0
 
-    def next_target(self, point: np.ndarray) -> np.ndarray | None:
-        """The target (m) for this decision from this phase's fused point; None when its search found nothing."""
+    def next_target(self, point: np.ndarray, seen: np.ndarray) -> np.ndarray | None:
+        """The target (m) for this decision from this phase's fused point; None when its search found nothing.
+        `seen` is the observation as the cell perceives it: the grasp's search is laid about the part it shows."""
         kind = mark_phase(self.phase)
         if self.phase == Phase.LIFT and self.sealed is not None:
             point = self.sealed
@@ -99,7 +100,9 @@ class PickPlaceDemo:
         waypoint = self._waypoint = waypoint_from_mark(self.phase, point, self.task)
         if self.phase == Phase.RELEASE:
             waypoint = waypoint - [0.0, 0.0, RELEASE_DEPTH]
-        return self.search.next_target(waypoint) if self.search is not None else waypoint
+        if self.search is None:
+            return waypoint
+        return self.search.next_target(waypoint, np.asarray(seen[OBS_OBJECT], dtype=float))
 
     def opens_now(self, obs: np.ndarray, target: np.ndarray, opening: bool) -> bool:
         """Release: whether the vacuum opens at this decision — at the waypoint (`opening`, the annotation's rule) or

@@ -5,19 +5,22 @@ A person's marks carry a bias of their own (registration, depth): a pick mark 11
 the centre per axis on the 5 cm part; `mrguide.seal`), and a waypoint more than ε = 2 cm from the task model's
 target never completes its phase. The cell says which: the vacuum generator's part signal completes the grasp,
 the part's pose the other phases. So a demonstration holds each waypoint for its phase's first dwell, then tries
-the points of a 3 × 3 grid around it (`Pattern`), nearest first, until the phase completes:
+the points of a 3 × 3 grid (`Pattern`), nearest first, until the phase completes:
 
-- approach: a lateral grid at the approach height;
-- grasp: each grid point first from `clearance` above, then pressed `depth` below the pick point (the workspace
-  floor stops it), the way a suction cell's grasp searches for "vacuum OK";
-- transport: a lateral grid at the lift height.
+- approach: a lateral grid around the waypoint at the approach height;
+- grasp: a grid about where the cell sees the part's centre (its pose source, with that source's errors), each
+  point first from `clearance` above, then pressed `depth` below the pick point (the workspace floor stops it;
+  the cup's level-compensator takes up the rest), the way a suction cell's grasp searches for "vacuum OK" where
+  its camera saw the part. Its pitch, 6 mm, is below the 10 mm window per axis in which the 20 mm lip rests whole
+  on the 5 cm face, so a perception off by up to 8 mm per axis (5 mm + 1.5 pitches less the arm's lag) is covered;
+- transport: a lateral grid around the waypoint at the lift height.
 
 Lift and release have no search: the lift rises above where the cup sealed, and the release sets down under where
 the transport arrived (a part set down on the table before the vacuum opens is released where it stands; see
 `GuidedExpert`). Where a phase completed is a measurement of the person's bias, free of it: the guided expert
 moves the rest of the demonstration by it, and records where the grasp sealed and where the part was placed.
-A grid's pitch is below the width of what completes its phase, so a waypoint off by up to 1.5 pitches per axis
-lies within some probe's reach.
+The approach's and the transport's pitch is below the width of what completes their phase, so a waypoint off by up
+to 1.5 pitches per axis lies within some probe's reach.
 """
 
 from __future__ import annotations
@@ -45,14 +48,15 @@ class Pattern:
     depth: float = 0.0  # m
     clearance: float = 0.0  # m
     grid: tuple[tuple[int, int, int], ...] = GRID
+    #: the grid is laid about the part's centre as the cell sees it when the search begins, not about the waypoint
+    about_seen: bool = False
 
 
-#: The searches (ours). The grasp's pitch was sized below twice the 13 mm lateral seal margin of the twin's cup
-#: before `mrguide.seal`, whose margin is 5 mm: this grid now seals only where a probe happens to land within it. The
-#: approach's and the transport's below √2 × the 2 cm phase tolerance ε, less for a waypoint also off in height.
+#: The searches (ours): the approach's and the transport's pitch below √2 × the 2 cm phase tolerance ε (less for a
+#: waypoint also off in height), the grasp's below the lip's 10 mm window (module docstring).
 PATTERNS: dict[int, Pattern] = {
     Phase.APPROACH: Pattern(first_dwell=8, pitch=0.024, hover=0, press=2, grid=APPROACH_GRID),
-    Phase.GRASP: Pattern(first_dwell=8, pitch=0.02, hover=1, press=2, depth=0.02, clearance=0.01),
+    Phase.GRASP: Pattern(first_dwell=8, pitch=0.006, hover=1, press=2, depth=0.02, clearance=0.01, about_seen=True),
     Phase.TRANSPORT: Pattern(first_dwell=9, pitch=0.025, hover=0, press=2),
 }
 
@@ -64,6 +68,7 @@ class WaypointSearch:
         self.pattern = pattern
         self.steps = 0
         self.offset = np.zeros(3)  # the last target's offset from the waypoint (m)
+        self._centre = np.zeros(3)  # the grid's centre, from the waypoint (m): where the cell saw the part, if so laid
 
     @property
     def probe(self) -> int:
@@ -72,6 +77,13 @@ class WaypointSearch:
         if self.steps <= p.first_dwell:
             return 0
         return 1 + (self.steps - 1 - p.first_dwell) // (p.hover + p.press)
+
+    def _probe_offset(self, k: int, pressed: bool) -> np.ndarray:
+        """Probe k's target from the waypoint: pressed `depth` below it, or hovering `clearance` above."""
+        p = self.pattern
+        dx, dy, dz = p.grid[k]
+        height = dz * p.pitch + (-p.depth if pressed else p.clearance)
+        return self._centre + np.array([dx * p.pitch, dy * p.pitch, height])
 
     def pressed_offset(self) -> np.ndarray:
         """The offset from the waypoint of the last pressed target: the probe that completed the phase when it is found
@@ -85,20 +97,21 @@ class WaypointSearch:
             k -= 1
         if k < 0:
             return np.zeros(3)
-        dx, dy, dz = p.grid[min(k, len(p.grid) - 1)]
-        return np.array([dx * p.pitch, dy * p.pitch, dz * p.pitch - p.depth])
+        return self._probe_offset(min(k, len(p.grid) - 1), pressed=True)
 
-    def next_target(self, waypoint: np.ndarray) -> np.ndarray | None:
-        """The target (m) for this decision, or None once every probe was tried without completing the phase."""
+    def next_target(self, waypoint: np.ndarray, seen: np.ndarray | None = None) -> np.ndarray | None:
+        """The target (m) for this decision, or None once every probe was tried without completing the phase.
+        `seen` is the part's centre as the cell sees it now (m): a grid laid about it is laid at the first probe."""
         p, step = self.pattern, self.steps
+        waypoint = np.asarray(waypoint, dtype=float)
         self.steps += 1
         if step < p.first_dwell:
             self.offset = np.zeros(3)
-        else:
-            k, dwell = divmod(step - p.first_dwell, p.hover + p.press)
-            if k >= len(p.grid):
-                return None
-            dx, dy, dz = p.grid[k]
-            height = dz * p.pitch + (-p.depth if dwell >= p.hover else p.clearance)
-            self.offset = np.array([dx * p.pitch, dy * p.pitch, height])
-        return np.asarray(waypoint, dtype=float) + self.offset
+            return waypoint.copy()
+        k, dwell = divmod(step - p.first_dwell, p.hover + p.press)
+        if k >= len(p.grid):
+            return None
+        if step == p.first_dwell and p.about_seen and seen is not None:
+            self._centre = np.array([seen[0] - waypoint[0], seen[1] - waypoint[1], 0.0])
+        self.offset = self._probe_offset(k, pressed=dwell >= p.hover)
+        return waypoint + self.offset
