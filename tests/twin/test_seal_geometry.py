@@ -17,6 +17,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 import pytest
 
+from mrguide.cell.config import CellConfig
 from mrguide.cell.plants import PLANT_BUILDERS
 from mrguide.cell_layout import CUP_RADIUS
 from mrguide.drivers.config import VacuumNodeConfig
@@ -25,7 +26,6 @@ from mrguide.motion.trajectory import point_to_point
 from mrguide.plant import CellPlant
 from mrguide.robot import RobotSpec, load_robot
 from mrguide.seal import LIP_COMPLIANCE
-from mrguide.cell.config import CellConfig
 
 PERIOD = 0.004  # s, the bus's SYNC period: one plant step
 PART_XY = (0.50, -0.10)
