@@ -6,6 +6,7 @@ import numpy as np
 
 from mrguide.deploy.safety import Event, Supervisor
 from mrguide.drivers.cobot_state import VacuumState
+from mrguide.part_perception import StillPartFilter
 from mrguide.pose_source import ObjectPoseSource, PoseUnavailable
 from mrguide.task import Phase
 
@@ -16,6 +17,9 @@ class ObjectStartUnknown(RuntimeError):
 
 class ObjectTracker:
     """The object's position per decision, and where it came from (`source`: for the run log).
+
+    The source's poses are averaged while the part stands still (`StillPartFilter`, as the twin the policy trained
+    in averages its looks): each decision's pose is the mean of the poses since the part last moved.
 
     While the vacuum says the part is held (from the grasp on) it is under the cup, where the TCP is; just
     released, where the cup let it go. A source that lost sight of the part as the cup came down (its marker under
@@ -34,6 +38,7 @@ class ObjectTracker:
     ):
         self.pose, self.supervisor = pose, supervisor
         self.hang = np.array([0.0, 0.0, 0.5 * object_height])  # from the TCP down to the carried part's centre
+        self.filter = StillPartFilter()
         self.track_carried, self.max_misses, self.max_misses_before_grasp = (
             track_carried,
             max_misses,
@@ -46,6 +51,7 @@ class ObjectTracker:
         self._last: np.ndarray | None = None  # last pose the source gave in this episode
         self._misses = 0  # decisions in a row without a pose from the source
         self._carried: np.ndarray | None = None  # where the part hung under the cup, last seen
+        self.filter.reset()
         self.source = "source"  # where the last position came from
 
     def position(self, tcp: np.ndarray, vac: VacuumState, phase: int) -> np.ndarray | None:
@@ -64,8 +70,8 @@ class ObjectTracker:
             obj = self.pose.object_position()
         except PoseUnavailable as exc:
             return self._missing(exc, phase)
-        self._last, self._misses = obj, 0
-        return obj
+        self._last, self._misses = self.filter.update(obj), 0
+        return self._last
 
     def _missing(self, exc: PoseUnavailable, phase: int) -> np.ndarray | None:
         if self._last is None:

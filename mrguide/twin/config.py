@@ -7,6 +7,7 @@ from typing import Annotated
 
 from mrguide.cell_layout import CupConfig
 from mrguide.config import ConfigError, Range, check_ranges
+from mrguide.part_perception import PerceptionConfig
 from mrguide.twin.camera import CameraConfig
 
 
@@ -78,6 +79,7 @@ class TwinConfig:
     reality_gap: RealityGap = field(default_factory=RealityGap)
     vacuum: VacuumConfig = field(default_factory=VacuumConfig)
     cup: CupConfig = field(default_factory=CupConfig)
+    perception: PerceptionConfig = field(default_factory=PerceptionConfig)
     camera: CameraConfig = field(default_factory=CameraConfig)
     gui: bool = False
 

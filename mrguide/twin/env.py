@@ -8,6 +8,7 @@ joint servos for one decision period; the task model then gives the reward, phas
 
 from __future__ import annotations
 
+import copy
 import logging
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -17,6 +18,7 @@ import gymnasium as gym
 import numpy as np
 
 from mrguide.config import ConfigFile
+from mrguide.part_perception import PartPerception
 from mrguide.motion.decision import ActionError, DecisionState, DecisionStep
 from mrguide.robot import RobotConfig, RobotSpec, load_robot, robot_config
 from mrguide.task import ACT_DIM, OBS_DIM, OBS_GRIP, OBS_PROGRESS, Outcome, TaskConfig, oracle_action
@@ -55,6 +57,8 @@ class EnvSnapshot:
     decision: tuple[DecisionState, tuple[list[float], ...]]
     vacuum: bool
     obs: np.ndarray
+    state_obs: np.ndarray
+    perception: PartPerception
 
 
 def _sample(rng: np.random.Generator, region: Region) -> np.ndarray:
@@ -84,7 +88,10 @@ class PickPlaceEnv(gym.Env):
         low[OBS_PROGRESS] = 0.0
         self.observation_space = gym.spaces.Box(low, lim, (OBS_DIM,), np.float32)
         self.vacuum = False
-        self._obs = np.zeros(OBS_DIM, np.float32)
+        #: what the policy sees of the part (the pose source's errors, the runtime's rules: `part_perception`)
+        self.perception = PartPerception(self.twin_cfg.perception, 0.5 * self.task_cfg.object_height)
+        self._obs = np.zeros(OBS_DIM, np.float32)  # the observation, the part as perceived
+        self._state_obs = self._obs.copy()  # the same with the part where it is: the scripted expert's
         self._camera: Camera | None = None
 
     # -- gymnasium API ---------------------------------------------------------------------------
@@ -96,10 +103,12 @@ class PickPlaceEnv(gym.Env):
         obj = self._position(options.get("object"), self.twin_cfg.object_region, h)
         goal = self._position(options.get("goal"), self.twin_cfg.goal_region, h)
         self.scene.reseed(int(self.np_random.integers(2**63)))
+        if not self.twin_cfg.perception.exact:
+            self.perception.reset(int(self.np_random.integers(2**63)))
         self.scene.place(self.robot_spec.q_home, obj, goal)
         self.decision.reset(self.robot_spec.q_home)
         self.vacuum = False
-        self._obs = self._observe()
+        self._observe()
         return self._obs.copy(), {"phase": 0, "object": obj, "goal": goal}
 
     def _position(self, given: Any, region: Region, h: float) -> np.ndarray:
@@ -131,7 +140,9 @@ class PickPlaceEnv(gym.Env):
         obj = self.scene.object_position()
         res = decision.judge(tcp, g, part, obj, self.scene.goal)
         success = res.outcome is Outcome.SUCCESS
-        self._obs = decision.observe(tcp, g, obj, self.scene.goal, success)
+        self._state_obs = decision.observe(tcp, g, obj, self.scene.goal, success)
+        seen = self.perception.see(obj, tcp, part)
+        self._obs = decision.observe(tcp, g, seen, self.scene.goal, success)
         state = decision.state
         info = {
             "phase": state.phase,
@@ -180,24 +191,36 @@ class PickPlaceEnv(gym.Env):
         """Decisions of this episode whose IK failed (the arm held)."""
         return self.decision.state.ik_failures
 
-    def _observe(self) -> np.ndarray:
+    def _observe(self) -> None:
+        """The episode's first observation, and the state's."""
         tcp = self.decision.tcp(self.scene.joint_positions())
-        return self.decision.observe(tcp, 1 if self.vacuum else -1, self.scene.object_position(), self.scene.goal)
+        g, obj = 1 if self.vacuum else -1, self.scene.object_position()
+        self._state_obs = self.decision.observe(tcp, g, obj, self.scene.goal)
+        seen = self.perception.see(obj, tcp, False)
+        self._obs = self.decision.observe(tcp, g, seen, self.scene.goal)
 
     def expert_action(self) -> np.ndarray:
-        """The scripted expert's action for the current observation."""
-        return oracle_action(self._obs, self.task_cfg, self.workspace.to_normalized)
+        """The scripted expert's action: the task model's, on the twin's true state (the part where it is)."""
+        return oracle_action(self._state_obs, self.task_cfg, self.workspace.to_normalized)
 
     def snapshot(self) -> EnvSnapshot:
         """Capture the full state (physics, suction, trajectory, task, RNGs); `discard` it when done."""
-        return EnvSnapshot(self.scene.snapshot(), self.decision.snapshot(), self.vacuum, self._obs.copy())
+        return EnvSnapshot(
+            self.scene.snapshot(),
+            self.decision.snapshot(),
+            self.vacuum,
+            self._obs.copy(),
+            self._state_obs.copy(),
+            copy.deepcopy(self.perception),
+        )
 
     def restore(self, snap: EnvSnapshot) -> np.ndarray:
         """Return to a snapshot; the same actions from here reproduce the same observations."""
         self.scene.restore(snap.scene)
         self.decision.restore(snap.decision)
         self.vacuum = snap.vacuum
-        self._obs = snap.obs.copy()
+        self._obs, self._state_obs = snap.obs.copy(), snap.state_obs.copy()
+        self.perception = copy.deepcopy(snap.perception)
         return self._obs.copy()
 
     def discard(self, snap: EnvSnapshot) -> None:

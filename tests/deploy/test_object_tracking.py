@@ -66,3 +66,24 @@ def test_otherwise_the_last_pose_stands(track, gripped, phase):
     tracker.position(np.array([0.50, -0.15, 0.20]), _vacuum(False), Phase.APPROACH)
     got = tracker.position(np.array([0.65, -0.20, 0.05]), _vacuum(gripped), phase)
     assert np.allclose(got, [0.50, -0.15, 0.025]) and tracker.source == "last"
+
+
+class _Looks:
+    """A pose source giving the listed poses in turn."""
+
+    def __init__(self, looks: list[list[float]]):
+        self.looks = [np.array(p) for p in looks]
+
+    def object_position(self) -> np.ndarray:
+        return self.looks.pop(0)
+
+
+def test_the_poses_of_a_part_standing_still_are_averaged_and_a_moved_part_starts_afresh():
+    looks = [[0.50, -0.15, 0.025], [0.504, -0.15, 0.025], [0.502, -0.146, 0.025], [0.55, -0.15, 0.025]]
+    tracker = ObjectTracker(_Looks(looks), _Supervisor(), HEIGHT, True, 3, 30)  # type: ignore[arg-type]
+    seen = [tracker.position(np.array([0.5, 0.1, 0.3]), _vacuum(False), Phase.APPROACH) for _ in looks]
+    assert np.allclose(seen[2], [0.502, -0.148667, 0.025], atol=1e-6)  # the mean of three looks
+    assert np.allclose(seen[3], looks[3])  # 5 cm away: the part was moved, the mean starts from it
+    tracker.reset()  # the next part
+    tracker.pose = _Looks([[0.45, -0.1, 0.025]])
+    assert np.allclose(tracker.position(np.array([0.5, 0.1, 0.3]), _vacuum(False), Phase.APPROACH), [0.45, -0.1, 0.025])

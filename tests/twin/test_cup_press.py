@@ -10,7 +10,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from mrguide.task import OBS_OBJECT, annotation_action
+from mrguide.task import annotation_action
 from mrguide.twin.env import EnvConfig, PickPlaceEnv
 
 
@@ -21,12 +21,12 @@ def _shove_mm(stroke: float, offset: float) -> float:
     env = PickPlaceEnv(replace(cfg, twin=replace(cfg.twin, cup=replace(cfg.twin.cup, stroke=stroke))))
     try:
         obs, _ = env.reset(seed=0)
-        start = obs[OBS_OBJECT].copy()
-        above = start + [offset, 0.0, 0.075]
+        start = env.scene.object_position()
+        above = start + [offset, 0.0, 0.075]  # the true part: the obs sees it through the pose errors
         for target, grip, n in ((above, -1.0, 10), (above - [0, 0, 0.04], 1.0, 2), (above - [0, 0, 0.1], 1.0, 8)):
             for _ in range(n):
                 obs, *_ = env.step(annotation_action(obs, target, grip, env.task_cfg, env.workspace.to_normalized))
-        return 1e3 * float(np.linalg.norm(obs[OBS_OBJECT][:2] - start[:2]))
+        return 1e3 * float(np.linalg.norm(env.scene.object_position()[:2] - start[:2]))
     finally:
         env.close()
 
