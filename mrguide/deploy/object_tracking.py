@@ -39,6 +39,8 @@ class ObjectTracker:
         self.pose, self.supervisor = pose, supervisor
         self.hang = np.array([0.0, 0.0, 0.5 * object_height])  # from the TCP down to the carried part's centre
         self.filter = StillPartFilter()
+        #: m, subtracted from the source's poses: the registration bias the cell estimated (`bias_estimate`)
+        self.correction = np.zeros(3)
         self.track_carried, self.max_misses, self.max_misses_before_grasp = (
             track_carried,
             max_misses,
@@ -71,6 +73,11 @@ class ObjectTracker:
         except PoseUnavailable as exc:
             return self._missing(exc, phase)
         self._last, self._misses = self.filter.update(obj), 0
+        return self._last - self.correction
+
+    @property
+    def seen(self) -> np.ndarray | None:
+        """The source's mean pose of the part this episode, uncorrected (None before the first)."""
         return self._last
 
     def _missing(self, exc: PoseUnavailable, phase: int) -> np.ndarray | None:
@@ -88,4 +95,4 @@ class ObjectTracker:
             Event.POSE_UNAVAILABLE, f"{exc}; using the last pose ({self._misses} of at most {allowed})"
         )
         self.source = "last"
-        return self._last
+        return self._last - self.correction

@@ -15,11 +15,14 @@ import time
 from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import NoReturn
 
 import numpy as np
 
+from mrguide.cell_layout import CUP_RADIUS
 from mrguide.config import ConfigError
+from mrguide.deploy.bias_estimate import Registration
 from mrguide.deploy.following import FollowingMonitor
 from mrguide.deploy.lift_rule import LiftRule, hold_in_transit
 from mrguide.deploy.object_tracking import ObjectStartUnknown, ObjectTracker
@@ -35,7 +38,7 @@ from mrguide.motion.kinematics import IKError
 from mrguide.motion.trajectory import TrajectoryError
 from mrguide.pose_source import ObjectPoseSource
 from mrguide.robot import RobotSpec
-from mrguide.task import OBS_OBJECT, Outcome, TaskConfig
+from mrguide.task import OBS_OBJECT, Outcome, Phase, TaskConfig
 
 log = logging.getLogger(__name__)
 
@@ -103,14 +106,11 @@ class Runtime:
         self._t = 0
         self.lift = LiftRule(spec.workspace, decision_period, self.cfg.break_away_distance, self.cfg.break_away_speed)
         self.seal = SealSearch(spec.workspace, self.cfg.reseat_step, self.cfg.reseat_wait)
-        self.objects = ObjectTracker(
-            pose,
-            self.supervisor,
-            task.object_height,
-            self.cfg.track_carried_object,
-            self.cfg.max_pose_misses,
-            self.cfg.max_pose_misses_before_grasp,
-        )
+        misses = (self.cfg.max_pose_misses, self.cfg.max_pose_misses_before_grasp)
+        self.objects = ObjectTracker(pose, self.supervisor, task.object_height, self.cfg.track_carried_object, *misses)
+        window = 0.5 * task.object_height - CUP_RADIUS  # where the lip rests whole on the part's face, per axis
+        where = Path(self.cfg.bias_estimate_file) if self.cfg.bias_estimate_file else None
+        self.registration = Registration(window, type(pose).__name__, where)
 
     # -- lifecycle ----------------------------------------------------------------------------------
     def __enter__(self) -> Runtime:
@@ -228,6 +228,8 @@ class Runtime:
         self.log.write("episode_start", episode=index, goal=goal)
         self.decision.reset(self.cobot.setpoint)
         self.objects.reset()
+        self.objects.correction = self.registration.correction
+        self.registration.reset()
         self.lift.reset()
         self.seal.reset()
         self.watchdog.arm(True)
@@ -375,6 +377,10 @@ class Runtime:
         if reseat is not None:
             self.supervisor.report(Event.RESEAT, f"no seal at {vac.level_kpa:.0f} kPa: re-seat {self.seal.reseats}")
             notes["reseat"] = self.seal.reseats
+        grasping = self.decision.phase in (Phase.GRASP, Phase.LIFT)
+        if self.registration.after_decision(tcp, self.objects.seen, grasping, vac.part_gripped, reseat is not None):
+            self.objects.correction = self.registration.correction  # the cell's registration, improved by this press
+            notes["bias_estimate"] = self.objects.correction[:2]
         return executed, notes
 
     def _stream_decision(self, t: int, t_read: float, inference_ms: float, record: dict, report: EpisodeReport) -> None:

@@ -34,6 +34,9 @@ class RuntimeConfig:
     #: (`mrguide.seal`, in both engines).
     reseat_step: Annotated[float, Range(0.0, 0.02, " m")] = 0.005
     reseat_wait: Annotated[int, Range(1, 50)] = 1
+    #: Where the cell keeps its estimate of the pose source's registration bias (bias_estimate.py) across runs: a
+    #: JSON file read at the start and written after every press; "" keeps it for the run only.
+    bias_estimate_file: str = ""
 
     def __post_init__(self) -> None:
         check_ranges(self, "deploy.runtime")

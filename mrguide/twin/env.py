@@ -18,8 +18,8 @@ import gymnasium as gym
 import numpy as np
 
 from mrguide.config import ConfigFile
-from mrguide.part_perception import PartPerception
 from mrguide.motion.decision import ActionError, DecisionState, DecisionStep
+from mrguide.part_perception import PartPerception
 from mrguide.robot import RobotConfig, RobotSpec, load_robot, robot_config
 from mrguide.task import ACT_DIM, OBS_DIM, OBS_GRIP, OBS_PROGRESS, Outcome, TaskConfig, oracle_action
 from mrguide.twin.camera import Camera

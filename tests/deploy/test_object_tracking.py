@@ -87,3 +87,10 @@ def test_the_poses_of_a_part_standing_still_are_averaged_and_a_moved_part_starts
     tracker.reset()  # the next part
     tracker.pose = _Looks([[0.45, -0.1, 0.025]])
     assert np.allclose(tracker.position(np.array([0.5, 0.1, 0.3]), _vacuum(False), Phase.APPROACH), [0.45, -0.1, 0.025])
+
+
+def test_the_cells_registration_correction_is_subtracted_from_the_sources_poses():
+    tracker = ObjectTracker(_Looks([[0.50, -0.15, 0.025]]), _Supervisor(), HEIGHT, True, 3, 30)  # type: ignore[arg-type]
+    tracker.correction = np.array([0.004, -0.002, 0.0])
+    seen = tracker.position(np.array([0.5, 0.1, 0.3]), _vacuum(False), Phase.APPROACH)
+    assert np.allclose(seen, [0.496, -0.148, 0.025]) and np.allclose(tracker.seen, [0.50, -0.15, 0.025])

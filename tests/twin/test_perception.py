@@ -55,7 +55,9 @@ def test_the_policy_sees_the_resting_part_through_a_bias_per_episode_and_the_hel
             held = [(seen, true) for seen, true, h in steps if h]
             assert held, "the scripted expert grasps"
             tcp_based = [seen for seen, _ in held]
-            assert all(np.linalg.norm(s[:2] - t[:2]) < 0.006 for s, t in zip(tcp_based, [t for _, t in held], strict=True))
+            assert all(
+                np.linalg.norm(s[:2] - t[:2]) < 0.006 for s, t in zip(tcp_based, [t for _, t in held], strict=True)
+            )
         assert np.std([b[0] for b in biases]) > 5e-4  # each episode draws a bias of its own
     finally:
         env.close()

@@ -1,0 +1,134 @@
+"""The pose source's registration bias, estimated from the cell's own grasps.
+
+Every press of the cup says something about where the part really was: the lip seals only where it rests whole on
+the part's face, within `window` of the face's centre per axis (`mrguide.seal`: 5 mm for the 20 mm lip on the 5 cm
+part). A press at p that sealed says the part's centre lies within that window of p; one that did not, that it lies
+outside. The pose source saw the part at s = centre + b (its mean of the looks while the part stood still), so each
+press is a measurement of the bias b, blurred by what remains of the looks' error (`sigma`). `BiasEstimate` keeps
+the posterior of b on a 1 mm grid of ±`RANGE` per axis, starting flat, and its mean is what the runtime subtracts
+from the source's poses. The estimate is saved after each update and read back at the next start (`save`, `load`),
+so that the cell improves its registration with every part it picks, across runs.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+#: m: the bias range the grid covers per axis (ours: three times the HMD's 5 mm calibration error).
+RANGE = 0.015
+#: m: the grid's spacing.
+STEP = 0.001
+#: m: the standard deviation of the mean pose's remaining error and the arm's, blurring each press (ours: 5 mm per
+#: look averaged over a few looks, plus a millimetre of the arm).
+SIGMA = 0.0015
+
+
+def _erf(x: np.ndarray) -> np.ndarray:
+    return np.vectorize(math.erf, otypes=[float])(x)
+
+
+class BiasEstimate:
+    """The posterior of the source's xy bias b (seen = true + b), from presses that sealed or did not."""
+
+    def __init__(self, window: float, sigma: float = SIGMA) -> None:
+        self.window, self.sigma = window, sigma
+        axis = np.arange(-RANGE, RANGE + STEP / 2, STEP)
+        self._bx, self._by = np.meshgrid(axis, axis, indexing="ij")
+        self._log = np.zeros_like(self._bx)  # log posterior up to a constant, flat at first
+        self.presses = 0
+        self.seals = 0
+
+    def _inside(self, offset: float, b: np.ndarray) -> np.ndarray:
+        """P(|offset + b| < window) along one axis for each bias b on the grid, offset = press − seen."""
+        s = self.sigma * math.sqrt(2.0)
+        return 0.5 * (_erf((self.window - offset - b) / s) - _erf((-self.window - offset - b) / s))
+
+    def press(self, tcp: np.ndarray, seen: np.ndarray, sealed: bool) -> None:
+        """A press of the cup at `tcp` (m) on the part the source saw at `seen` (its raw mean, m): sealed or not."""
+        ox, oy = float(tcp[0] - seen[0]), float(tcp[1] - seen[1])
+        p = self._inside(ox, self._bx) * self._inside(oy, self._by)
+        self._log += np.log(np.clip(p if sealed else 1.0 - p, 1e-12, 1.0))
+        self._log -= self._log.max()
+        self.presses += 1
+        self.seals += int(sealed)
+
+    @property
+    def estimate(self) -> np.ndarray:
+        """The posterior mean of the bias (m, xy); zero before any press."""
+        w = np.exp(self._log)
+        w /= w.sum()
+        return np.array([(w * self._bx).sum(), (w * self._by).sum()])
+
+    @property
+    def spread(self) -> float:
+        """The posterior's standard deviation (m), the larger of the two axes'."""
+        w = np.exp(self._log)
+        w /= w.sum()
+        mean = self.estimate
+        return float(math.sqrt(max((w * (self._bx - mean[0]) ** 2).sum(), (w * (self._by - mean[1]) ** 2).sum())))
+
+    def save(self, path: Path, source: str) -> None:
+        """Write the posterior to `path` (JSON), naming the pose source it belongs to."""
+        state = {"source": source, "presses": self.presses, "seals": self.seals, "window": self.window}
+        state |= {"sigma": self.sigma, "log_posterior": np.round(self._log, 6).tolist()}
+        tmp = path.with_suffix(path.suffix + ".tmp")
+        tmp.write_text(json.dumps(state))
+        tmp.replace(path)
+
+    @classmethod
+    def load(cls, path: Path, source: str, window: float) -> BiasEstimate | None:
+        """The estimate saved at `path` for the same source and window; None if there is none. ValueError for a file
+        that is not one (named, with what is wrong)."""
+        if not path.exists():
+            return None
+        try:
+            state = json.loads(path.read_text())
+            log = np.asarray(state["log_posterior"], dtype=float)
+            same = state["source"] == source and math.isclose(float(state["window"]), window)
+            est = cls(window, float(state["sigma"]))
+            if log.shape != est._log.shape or not np.all(np.isfinite(log)):
+                raise ValueError(f"a posterior of shape {log.shape}, expected {est._log.shape}")
+            presses, seals = int(state["presses"]), int(state["seals"])
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            raise ValueError(f"{path}: not a bias estimate ({exc}); delete it to start afresh") from exc
+        if not same:
+            return None
+        est._log, est.presses, est.seals = log, presses, seals
+        return est
+
+
+class Registration:
+    """The runtime's use of the estimate: each decision, the presses it saw reported; the correction to subtract
+    from the pose source's poses returned. Saved to `path` (if any) after every press, read from it at the start."""
+
+    def __init__(self, window: float, source: str, path: Path | None = None) -> None:
+        self.source, self.path = source, path
+        loaded = BiasEstimate.load(path, source, window) if path is not None else None
+        self.estimate = loaded or BiasEstimate(window)
+        self._sealed = False  # this episode's seal was reported
+
+    def reset(self) -> None:
+        """A new episode."""
+        self._sealed = False
+
+    @property
+    def correction(self) -> np.ndarray:
+        """What to subtract from the source's poses (m, xyz: the bias's xy, no height)."""
+        return np.array([*self.estimate.estimate, 0.0])
+
+    def after_decision(
+        self, tcp: np.ndarray, seen: np.ndarray | None, grasping: bool, gripped: bool, reseat: bool
+    ) -> bool:
+        """Report this decision's press, if it made one: a re-seat (the cup pressed at `tcp` without a seal) or the
+        grasp's first seal; `seen` is the source's mean pose of the part (uncorrected). True if the estimate moved."""
+        if seen is None or not grasping or not (reseat or (gripped and not self._sealed)):
+            return False
+        self._sealed = self._sealed or gripped
+        self.estimate.press(tcp, seen, sealed=gripped and not reseat)
+        if self.path is not None:
+            self.estimate.save(self.path, self.source)
+        return True
