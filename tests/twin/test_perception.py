@@ -43,8 +43,11 @@ def test_exact_perception_sees_the_part_where_it_is():
         env.close()
 
 
+HMD = PerceptionConfig(bias=0.0015, noise=0.005)  # configs/runs/perception.toml
+
+
 def test_the_policy_sees_the_resting_part_through_a_bias_per_episode_and_the_held_part_under_the_cup():
-    env = _env(PerceptionConfig())
+    env = _env(HMD)
     try:
         biases = []
         for seed in range(6):
@@ -59,5 +62,22 @@ def test_the_policy_sees_the_resting_part_through_a_bias_per_episode_and_the_hel
                 np.linalg.norm(s[:2] - t[:2]) < 0.006 for s, t in zip(tcp_based, [t for _, t in held], strict=True)
             )
         assert np.std([b[0] for b in biases]) > 5e-4  # each episode draws a bias of its own
+    finally:
+        env.close()
+
+
+def test_a_restored_episode_sees_the_part_as_it_saw_it():
+    env = _env(HMD)
+    try:
+        env.reset(seed=4)
+        snap = env.snapshot()
+        actions, first = [], []
+        for _ in range(12):
+            actions.append(env.expert_action())
+            first.append(env.step(actions[-1])[0])
+        env.restore(snap)
+        again = [env.step(a)[0] for a in actions]
+        assert all(np.array_equal(x, y) for x, y in zip(first, again, strict=True))
+        env.discard(snap)
     finally:
         env.close()
