@@ -31,15 +31,17 @@ OCCLUSION_HEIGHT = 0.10
 
 
 class StillPartFilter:
-    """The mean of the looks since the part last moved."""
+    """The mean of the looks since the part last moved. A look equal to the one before is the same frame given again
+    (a source slower than the decisions: the cells' HMD renders 3-4 frames a second): it is not counted twice."""
 
     def __init__(self) -> None:
         self._sum = np.zeros(3)
         self._n = 0
+        self._previous: np.ndarray | None = None
 
     def reset(self) -> None:
         """A new part: nothing seen of it yet."""
-        self._sum, self._n = np.zeros(3), 0
+        self._sum, self._n, self._previous = np.zeros(3), 0, None
 
     @property
     def looks(self) -> int:
@@ -49,8 +51,12 @@ class StillPartFilter:
     def update(self, look: np.ndarray) -> np.ndarray:
         """Add one look (m); the mean of the looks since the part last moved."""
         look = np.asarray(look, dtype=float)
+        if self._previous is not None and np.array_equal(look, self._previous):
+            return self._sum / self._n
+        self._previous = look.copy()
         if self._n and np.linalg.norm(look - self._sum / self._n) > JUMP:
             self.reset()
+            self._previous = look.copy()
         self._sum = self._sum + look
         self._n += 1
         return self._sum / self._n

@@ -4,7 +4,8 @@ Every press of the cup says something about where the part really was: the lip s
 the part's face, within `window` of the face's centre per axis (`mrguide.seal`: 5 mm for the 20 mm lip on the 5 cm
 part). A press at p that sealed says the part's centre lies within that window of p; one that did not, that it lies
 outside. The pose source saw the part at s = centre + b (its mean of the looks while the part stood still), so each
-press is a measurement of the bias b, blurred by what remains of the looks' error (`sigma`). `BiasEstimate` keeps
+press is a measurement of the bias b, blurred by what remains of the looks' error: `LOOK_SIGMA` over the square
+root of the looks in the mean, and the arm's `ARM_SIGMA`. `BiasEstimate` keeps
 the posterior of b on a 1 mm grid of ±`RANGE` per axis, starting flat, and its mean is what the runtime subtracts
 from the source's poses. The estimate is saved after each update and read back at the next start (`save`, `load`),
 so that the cell improves its registration with every part it picks, across runs.
@@ -22,9 +23,16 @@ import numpy as np
 RANGE = 0.015
 #: m: the grid's spacing.
 STEP = 0.001
-#: m: the standard deviation of the mean pose's remaining error and the arm's, blurring each press (ours: 5 mm per
-#: look averaged over a few looks, plus a millimetre of the arm).
-SIGMA = 0.0015
+#: m: the standard deviation per axis of one look's error: the cells' HMD at the part (3 mm and 0.3° per frame; a
+#: camera's is smaller, so this errs soft).
+LOOK_SIGMA = 0.005
+#: m: the arm's error in where the cup presses against where it was commanded (ours).
+ARM_SIGMA = 0.0005
+
+
+def blur(looks: int) -> float:
+    """The standard deviation (m) of a press's offset from the source's mean of `looks` looks."""
+    return math.sqrt(LOOK_SIGMA**2 / max(looks, 1) + ARM_SIGMA**2)
 
 
 def _erf(x: np.ndarray) -> np.ndarray:
@@ -34,23 +42,25 @@ def _erf(x: np.ndarray) -> np.ndarray:
 class BiasEstimate:
     """The posterior of the source's xy bias b (seen = true + b), from presses that sealed or did not."""
 
-    def __init__(self, window: float, sigma: float = SIGMA) -> None:
-        self.window, self.sigma = window, sigma
+    def __init__(self, window: float) -> None:
+        self.window = window
         axis = np.arange(-RANGE, RANGE + STEP / 2, STEP)
         self._bx, self._by = np.meshgrid(axis, axis, indexing="ij")
         self._log = np.zeros_like(self._bx)  # log posterior up to a constant, flat at first
         self.presses = 0
         self.seals = 0
 
-    def _inside(self, offset: float, b: np.ndarray) -> np.ndarray:
-        """P(|offset + b| < window) along one axis for each bias b on the grid, offset = press − seen."""
-        s = self.sigma * math.sqrt(2.0)
+    def _inside(self, offset: float, b: np.ndarray, sigma: float) -> np.ndarray:
+        """P(|offset + b| < window) along one axis for each bias b on the grid, offset = press − seen, blurred by
+        `sigma`."""
+        s = sigma * math.sqrt(2.0)
         return 0.5 * (_erf((self.window - offset - b) / s) - _erf((-self.window - offset - b) / s))
 
-    def press(self, tcp: np.ndarray, seen: np.ndarray, sealed: bool) -> None:
-        """A press of the cup at `tcp` (m) on the part the source saw at `seen` (its raw mean, m): sealed or not."""
+    def press(self, tcp: np.ndarray, seen: np.ndarray, sealed: bool, sigma: float) -> None:
+        """A press of the cup at `tcp` (m) on the part the source saw at `seen` (its raw mean, m): sealed or not;
+        `sigma` (m) the press's blur (`blur`)."""
         ox, oy = float(tcp[0] - seen[0]), float(tcp[1] - seen[1])
-        p = self._inside(ox, self._bx) * self._inside(oy, self._by)
+        p = self._inside(ox, self._bx, sigma) * self._inside(oy, self._by, sigma)
         self._log += np.log(np.clip(p if sealed else 1.0 - p, 1e-12, 1.0))
         self._log -= self._log.max()
         self.presses += 1
@@ -74,7 +84,7 @@ class BiasEstimate:
     def save(self, path: Path, source: str) -> None:
         """Write the posterior to `path` (JSON), naming the pose source it belongs to."""
         state = {"source": source, "presses": self.presses, "seals": self.seals, "window": self.window}
-        state |= {"sigma": self.sigma, "log_posterior": np.round(self._log, 6).tolist()}
+        state["log_posterior"] = np.round(self._log, 6).tolist()
         tmp = path.with_suffix(path.suffix + ".tmp")
         tmp.write_text(json.dumps(state))
         tmp.replace(path)
@@ -89,7 +99,7 @@ class BiasEstimate:
             state = json.loads(path.read_text())
             log = np.asarray(state["log_posterior"], dtype=float)
             same = state["source"] == source and math.isclose(float(state["window"]), window)
-            est = cls(window, float(state["sigma"]))
+            est = cls(window)
             if log.shape != est._log.shape or not np.all(np.isfinite(log)):
                 raise ValueError(f"a posterior of shape {log.shape}, expected {est._log.shape}")
             presses, seals = int(state["presses"]), int(state["seals"])
@@ -121,14 +131,15 @@ class Registration:
         return np.array([*self.estimate.estimate, 0.0])
 
     def after_decision(
-        self, tcp: np.ndarray, seen: np.ndarray | None, grasping: bool, gripped: bool, reseat: bool
+        self, tcp: np.ndarray, seen: np.ndarray | None, looks: int, grasping: bool, gripped: bool, reseat: bool
     ) -> bool:
         """Report this decision's press, if it made one: a re-seat (the cup pressed at `tcp` without a seal) or the
-        grasp's first seal; `seen` is the source's mean pose of the part (uncorrected). True if the estimate moved."""
+        grasp's first seal; `seen` is the source's mean pose of the part (uncorrected) over `looks` looks. True if the
+        estimate moved."""
         if seen is None or not grasping or not (reseat or (gripped and not self._sealed)):
             return False
         self._sealed = self._sealed or gripped
-        self.estimate.press(tcp, seen, sealed=gripped and not reseat)
+        self.estimate.press(tcp, seen, gripped and not reseat, blur(looks))
         if self.path is not None:
             self.estimate.save(self.path, self.source)
         return True

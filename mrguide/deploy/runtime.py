@@ -378,7 +378,8 @@ class Runtime:
             self.supervisor.report(Event.RESEAT, f"no seal at {vac.level_kpa:.0f} kPa: re-seat {self.seal.reseats}")
             notes["reseat"] = self.seal.reseats
         grasping = self.decision.phase in (Phase.GRASP, Phase.LIFT)
-        if self.registration.after_decision(tcp, self.objects.seen, grasping, vac.part_gripped, reseat is not None):
+        seen, looks = self.objects.seen, self.objects.filter.looks
+        if self.registration.after_decision(tcp, seen, looks, grasping, vac.part_gripped, reseat is not None):
             self.objects.correction = self.registration.correction  # the cell's registration, improved by this press
             notes["bias_estimate"] = self.objects.correction[:2]
         return executed, notes

@@ -21,7 +21,7 @@ def _picks(est: BiasEstimate, bias: np.ndarray, n: int, rng: np.random.Generator
         for offset in [np.zeros(2), *search_offsets(0.005, part - first)]:
             press = first + offset
             sealed = bool(np.all(np.abs(press - part) < WINDOW))
-            est.press(press, seen, sealed)
+            est.press(press, seen, sealed, 0.0015)
             if sealed:
                 break
 
@@ -60,13 +60,13 @@ def test_the_runtime_reports_each_reseat_and_the_first_seal_of_an_episode(tmp_pa
     path = tmp_path / "bias.json"
     reg = Registration(WINDOW, "hmd", path)
     seen, tcp = np.array([0.5, -0.1, 0.025]), np.array([0.507, -0.1, 0.05])
-    assert not reg.after_decision(tcp, None, True, False, True)  # nothing seen yet: nothing to compare with
-    assert not reg.after_decision(tcp, seen, False, False, True)  # not grasping
-    assert reg.after_decision(tcp, seen, True, False, True)  # a re-seat: pressed 7 mm beside, no seal
-    assert reg.after_decision(tcp - [0.006, 0, 0], seen, True, True, False)  # sealed 1 mm beside the seen part
-    assert not reg.after_decision(tcp, seen, True, True, False)  # still held: the same seal
+    assert not reg.after_decision(tcp, None, 0, True, False, True)  # nothing seen yet: nothing to compare with
+    assert not reg.after_decision(tcp, seen, 5, False, False, True)  # not grasping
+    assert reg.after_decision(tcp, seen, 5, True, False, True)  # a re-seat: pressed 7 mm beside, no seal
+    assert reg.after_decision(tcp - [0.006, 0, 0], seen, 5, True, True, False)  # sealed 1 mm beside the seen part
+    assert not reg.after_decision(tcp, seen, 5, True, True, False)  # still held: the same seal
     assert reg.estimate.presses == 2 and reg.estimate.seals == 1 and path.exists()
     reg.reset()
-    assert reg.after_decision(tcp, seen, True, True, False)  # the next episode's seal
+    assert reg.after_decision(tcp, seen, 5, True, True, False)  # the next episode's seal
     assert Registration(WINDOW, "hmd", path).estimate.presses == 3  # read back at the next start
     assert reg.correction.shape == (3,) and reg.correction[2] == 0.0

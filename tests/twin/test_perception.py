@@ -33,6 +33,8 @@ def test_the_filter_averages_the_looks_and_starts_afresh_where_the_part_moved():
     assert np.allclose(f.update([0.0, 0.0, 0.0]), 0.0)
     assert np.allclose(f.update([0.004, 0.002, 0.0]), [0.002, 0.001, 0.0]) and f.looks == 2
     assert np.allclose(f.update([0.1, 0.0, 0.0]), [0.1, 0.0, 0.0]) and f.looks == 1
+    assert np.allclose(f.update([0.1, 0.0, 0.0]), [0.1, 0.0, 0.0]) and f.looks == 1  # the same frame again
+    assert np.allclose(f.update([0.104, 0.0, 0.0]), [0.102, 0.0, 0.0]) and f.looks == 2
 
 
 def test_exact_perception_sees_the_part_where_it_is():
