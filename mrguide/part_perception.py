@@ -7,9 +7,9 @@ knocked), and the average starts afresh from it. So the per-look error shrinks a
 the bias remains, which the cell estimates from its seals (`deploy.bias_estimate`).
 
 In the twin, `PartPerception` draws the looks through `PerceptionConfig`'s errors and applies the runtime's rules:
-the filter, the marker hidden under the arm (`occluded`: the last estimate stands), and the part held on the cup
-where the TCP is (the runtime's `ObjectTracker`). The policy observes what it gives; the reward and the phases
-read the twin's truth.
+the filter, the part's height that of a part on the table, the marker hidden under the arm (`occluded`: the last
+estimate stands), and the part held on the cup where the TCP is (the runtime's `ObjectTracker`). The policy
+observes what it gives; the reward and the phases read the twin's truth.
 """
 
 from __future__ import annotations
@@ -122,4 +122,5 @@ class PartPerception:
             return self._seen
         look = np.asarray(part, dtype=float) + self.bias + self.rng.normal(0.0, self.cfg.noise, 3)
         self._seen = self.filter.update(look)
+        self._seen[2] = part[2]  # on the table, as the runtime takes it (`ObjectTracker`)
         return self._seen

@@ -19,7 +19,8 @@ class ObjectTracker:
     """The object's position per decision, and where it came from (`source`: for the run log).
 
     The source's poses are averaged while the part stands still (`StillPartFilter`, as the twin the policy trained
-    in averages its looks): each decision's pose is the mean of the poses since the part last moved.
+    in averages its looks): each decision's pose is the mean of the poses since the part last moved, less the
+    registration bias the cell estimated (`correction`), at the height of a part on the table.
 
     While the vacuum says the part is held (from the grasp on) it is under the cup, where the TCP is; just
     released, where the cup let it go. A source that lost sight of the part as the cup came down (its marker under
@@ -73,7 +74,15 @@ class ObjectTracker:
         except PoseUnavailable as exc:
             return self._missing(exc, phase)
         self._last, self._misses = self.filter.update(obj), 0
-        return self._last - self.correction
+        return self._on_table(self._last)
+
+    def _on_table(self, seen: np.ndarray) -> np.ndarray:
+        """The part before the grasp: where the source saw it less the registration's correction, at the height of a
+        part standing on the table (z = 0 is its top), whatever height the source gave: the policy trained on parts on
+        the table, and an HMD's depth is its least certain axis."""
+        out = seen - self.correction
+        out[2] = self.hang[2]
+        return out
 
     @property
     def seen(self) -> np.ndarray | None:
@@ -95,4 +104,4 @@ class ObjectTracker:
             Event.POSE_UNAVAILABLE, f"{exc}; using the last pose ({self._misses} of at most {allowed})"
         )
         self.source = "last"
-        return self._last - self.correction
+        return self._on_table(self._last)
