@@ -91,12 +91,17 @@ def test_a_master_receiver_behind_its_queue_does_not_count_the_waiting_heartbeat
 def test_a_device_receiver_behind_its_queue_does_not_count_the_waiting_heartbeats_as_lost(make_rig):
     """The simulator's receive thread stops for twice the consumer time while its device clock and the master run
     on: the master's heartbeats wait in its queue. Judged on their arrival, the drives stay enabled. (The devices do
-    not answer SYNC meanwhile, as a stalled device would not: the master's feedback check is set to tolerate it.)"""
-    rig = make_rig(max_missed_feedback=1000)
+    not answer SYNC meanwhile, as a stalled device would not: the master's feedback check is set to tolerate it.)
+
+    The consumer time is twice the other tests' (450 ms): the simulated devices send their own heartbeats every
+    150 ms, and at 225 ms a busy machine's 76 ms late wake-up of a device's heartbeat sender, which this test does
+    not stall, failed it about one run in four."""
+    rig = make_rig(max_missed_feedback=1000, heartbeat_timeout_factor=2 * TEST_TIMING.heartbeat_timeout_factor)
+    timeout = rig.config.timing.heartbeat_timeout
     rig.cobot.enable()
     blocker = _Blocker()
     rig.sim._network.subscribe(0x203, blocker)  # node 3's RPDO from the master, every SYNC
     for _ in range(3):
-        blocker.seconds = 2 * TEST_TIMING.heartbeat_timeout
+        blocker.seconds = 2 * timeout
         time.sleep(blocker.seconds + 0.3)
         assert _enabled(rig), rig.cobot.status()
