@@ -101,7 +101,8 @@ class ConditionResult:
         return np.array([np.mean([o == "success" for o in v]) for v in self.outcomes.values()])
 
     def summary(self) -> dict:
-        """Pooled success rate with its 95 % Wilson interval, the spread over seeds, failures by cause."""
+        """Pooled success rate with its 95 % Wilson interval, the spread over seeds (the least and the median seed's
+        rate), failures by cause."""
         pooled = Counter(o for v in self.outcomes.values() for o in v)
         total = sum(pooled.values())
         lo, hi = wilson(pooled.get("success", 0), total)
@@ -114,6 +115,8 @@ class ConditionResult:
             "ci95_low": lo,
             "ci95_high": hi,
             "seed_std": float(rates.std(ddof=1)) if len(rates) > 1 else 0.0,
+            "seed_min": float(rates.min()) if len(rates) else 0.0,  # a seed is a calibration draw of the played cell
+            "seed_median": float(np.median(rates)) if len(rates) else 0.0,
             **{c: pooled.get(c, 0) for c in CAUSES},
         }
 
