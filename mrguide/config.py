@@ -232,6 +232,10 @@ class ConfigFile:
             )
         return cls(Path(path), whole)
 
+    def optional(self, cls: type[T], section: str) -> T | None:
+        """`[section]` read into dataclass `cls`; None when the section is absent (the caller picks defaults)."""
+        return self.section(cls, section) if section in self.tables else None
+
     def section(self, cls: type[T], section: str) -> T:
         """`[section]` read into dataclass `cls`; its defaults when the section is absent."""
         data = self.tables.get(section, {})
@@ -250,9 +254,7 @@ def load_section(cls: type[T], path: str | Path | None, section: str, known: tup
 
 def load_optional_section(cls: type[T], path: str | Path | None, section: str) -> T | None:
     """Like `load_section`, but None when the file or the section is absent (the caller picks defaults)."""
-    if path is None or section not in load_toml(path):
-        return None
-    return load_section(cls, path, section)
+    return ConfigFile.read(path).optional(cls, section)
 
 
 def replace_path(obj: T, path: str, value: Any, where: str = "override") -> T:

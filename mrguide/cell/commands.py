@@ -6,15 +6,17 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+from mrguide.config import ConfigFile
+
 
 class CellDryRun:
     """`deploy --dry-run` on the twin of `config` (its [twin] decision period, reality gap, camera rendering); the
     simulated cell runs in a process of its own, beside the deploy stack as a real cell's drives are."""
 
-    def __init__(self, config: str | None):
+    def __init__(self, config: ConfigFile):
         from mrguide.cell.config import CellConfig  # imports PyBullet: only once deploy's own checks have passed
 
-        self.env_cfg = CellConfig.load(config)
+        self.env_cfg = CellConfig.from_file(config)
         self.decision_period = self.env_cfg.twin.decision_period
 
     def camera(self, camera_cfg: Any, base: Path, object_height: float) -> Any:

@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 from tqdm import tqdm
 
 from mrguide.cli_args import add_set_argument, nonnegative_int, positive_int
+from mrguide.config import ConfigFile
 from mrguide.deploy.deploy_inputs import DeployInputs
 from mrguide.errors import InputError
 
@@ -51,8 +52,8 @@ class DryRunBackend(Protocol):
     ) -> Any: ...
 
 
-def add_deploy_command(sub: argparse._SubParsersAction, dry_run_factory: Callable[[str | None], DryRunBackend]) -> None:
-    """Register `mrguide deploy`; `dry_run_factory(config_path)` builds the twin's DryRunBackend."""
+def add_deploy_command(sub: argparse._SubParsersAction, dry_run_factory: Callable[[ConfigFile], DryRunBackend]) -> None:
+    """Register `mrguide deploy`; `dry_run_factory(config_file)` builds the simulated cell's DryRunBackend."""
     sp = sub.add_parser("deploy", help="run an exported policy on the cobot, or --dry-run it against the simulated bus")
     sp.add_argument("--policy", required=True, help="exported policy file (.npz) from `mrguide train`")
     sp.add_argument("--config", help="TOML config ([deploy], [safety], [robot], [task]; [twin] for dry runs)")
@@ -96,29 +97,26 @@ def cmd_deploy(args: argparse.Namespace) -> int:
 
     Every input (configs, bus description, policy, run log location) is checked before anything is
     connected or enabled; the run log's header is on disk before the first frame is sent."""
-    from mrguide.config import ConfigError, load_optional_section, load_section
+    from mrguide.config import ConfigError
     from mrguide.deploy.policy import ExportedPolicy, check_decision_period
     from mrguide.deploy.runlog import RunLog
     from mrguide.deploy.safety import SafetyConfig
     from mrguide.deploy.session import DeployConfig
-    from mrguide.robot import load_robot, load_robot_config
+    from mrguide.robot import load_robot, robot_config
     from mrguide.task import TaskConfig
 
-    dcfg, safety = _overridden(
-        load_section(DeployConfig, args.config, "deploy"),
-        load_optional_section(SafetyConfig, args.config, "safety"),
-        args.set,
-    )
+    file = ConfigFile.read(args.config)  # every section of the run from one parse
+    dcfg, safety = _overridden(file.section(DeployConfig, "deploy"), file.optional(SafetyConfig, "safety"), args.set)
     episodes = args.episodes if args.episodes is not None else dcfg.episodes
     seed = args.seed if args.seed is not None else dcfg.seed
-    spec = load_robot(load_robot_config(args.config))
-    task = load_section(TaskConfig, args.config, "task")
+    spec = load_robot(robot_config(file))
+    task = file.section(TaskConfig, "task")
     bus = _bus_config(args.config, dcfg.bus_config, spec)
     if args.dry_run and bus.bus.interface != "virtual":
         raise ConfigError(f"--dry-run needs the virtual CAN interface; the bus config names {bus.bus.interface!r}")
     policy = ExportedPolicy.load(args.policy, spec, task)
     if args.dry_run:
-        dry: DryRunBackend = args.dry_run_factory(args.config)
+        dry: DryRunBackend = args.dry_run_factory(file)
         check_decision_period(policy, args.policy, bus.timing.control_period, dry.decision_period)
     else:
         _check_real_bus(args, policy, bus)

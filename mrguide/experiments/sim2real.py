@@ -65,19 +65,20 @@ class RealCell:
 
 def load_real_cell(path: str | Path) -> RealCell:
     """[twin.reality_gap], [deploy] bus_config, [safety], [calibration.hmd] and [calibration_twin] of `path`, checked."""
-    from mrguide.calibration.config import load_calibration_config
-    from mrguide.config import load_optional_section, load_section
+    from mrguide.calibration.config import CalibrationConfig
+    from mrguide.config import ConfigFile
     from mrguide.deploy.session import DeployConfig
     from mrguide.drivers.config import load_cobot_bus_config
     from mrguide.twin.markers import TwinCalibrationConfig
 
     path = Path(path)
-    env = CellConfig.load(path)
-    dcfg = load_section(DeployConfig, path, "deploy")
+    file = ConfigFile.read(path)  # every section of the cell from one parse
+    env = CellConfig.from_file(file)
+    dcfg = file.section(DeployConfig, "deploy")
     bus = load_cobot_bus_config(path.parent / dcfg.bus_config if dcfg.bus_config else None, load_robot(env.robot))
-    safety = load_optional_section(SafetyConfig, path, "safety")
-    hmd = load_calibration_config(path).hmd
-    load_section(TwinCalibrationConfig, path, "calibration_twin")
+    safety = file.optional(SafetyConfig, "safety")
+    hmd = file.section(CalibrationConfig, "calibration").hmd
+    file.section(TwinCalibrationConfig, "calibration_twin")
     return RealCell(path, env, bus, safety, hmd)
 
 
