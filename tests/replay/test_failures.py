@@ -40,22 +40,11 @@ def test_the_grasp_offsets_of_the_slim_logs_agree_with_the_committed_table(tmp_p
         assert (row["outcome"], row["grasp_offset_mm"]) == (committed["outcome"], committed["grasp_offset_mm"])
 
 
-def test_the_main_jobs_mujoco_failures_are_what_its_logs_say(capsys, monkeypatch):
-    """The committed failures.txt was written from the full logs (paths as `.jsonl`); the slim logs keep every failed
-    episode's decisions, so their lines are the same, and each log's summary line too."""
-    runs = RUNS.parent / "main5k-deploy"
-    monkeypatch.chdir(RUNS.parents[2])
-    logs = sorted(str(p.relative_to(RUNS.parents[2])) for p in runs.glob("log-*.jsonl.gz"))
-    assert len(logs) == 12 and main(logs) == 0
-    assert capsys.readouterr().out.replace(".jsonl.gz", ".jsonl") == (runs / "failures.txt").read_text()
-
-
 def test_the_grasp_offsets_by_outcome_are_what_the_committed_tables_say(capsys):
     from mrguide.replay.grasp_offsets import main as offsets
 
     for run, groups in (
         ("lift-drops-200", ("mujoco_cell", "real_cell")),
-        ("main5k-deploy", ("mujoco_exact", "mujoco_hmd", "real_exact", "real_hmd")),
         ("sim2real", ("mujoco_exact", "mujoco_hmd", "real_exact", "real_hmd")),
     ):
         args = [str(RUNS.parent / run / "grasps.csv")] + [a for g in groups for a in ("--group", g)]
