@@ -73,14 +73,6 @@ class BiasEstimate:
         w /= w.sum()
         return np.array([(w * self._bx).sum(), (w * self._by).sum()])
 
-    @property
-    def spread(self) -> float:
-        """The posterior's standard deviation (m), the larger of the two axes'."""
-        w = np.exp(self._log)
-        w /= w.sum()
-        mean = self.estimate
-        return float(math.sqrt(max((w * (self._bx - mean[0]) ** 2).sum(), (w * (self._by - mean[1]) ** 2).sum())))
-
     def save(self, path: Path, source: str) -> None:
         """Write the posterior to `path` (JSON), naming the pose source it belongs to."""
         state = {"source": source, "presses": self.presses, "seals": self.seals, "window": self.window}

@@ -21,7 +21,7 @@ from mrguide.config import ConfigFile
 from mrguide.motion.decision import ActionError, DecisionState, DecisionStep
 from mrguide.part_perception import PartPerception
 from mrguide.robot import RobotConfig, RobotSpec, load_robot, robot_config
-from mrguide.task import ACT_DIM, OBS_DIM, OBS_GRIP, OBS_PROGRESS, Outcome, TaskConfig, oracle_action
+from mrguide.task import ACT_DIM, OBS_DIM, OBS_GRIP, OBS_OBJECT, OBS_PROGRESS, Outcome, TaskConfig, oracle_action
 from mrguide.twin.camera import Camera
 from mrguide.twin.config import Region, TwinConfig
 from mrguide.twin.scene import Scene, SceneSnapshot
@@ -141,8 +141,7 @@ class PickPlaceEnv(gym.Env):
         res = decision.judge(tcp, g, part, obj, self.scene.goal)
         success = res.outcome is Outcome.SUCCESS
         self._state_obs = decision.observe(tcp, g, obj, self.scene.goal, success)
-        seen = self.perception.see(obj, tcp, part)
-        self._obs = decision.observe(tcp, g, seen, self.scene.goal, success)
+        self._obs = self._perceived(self._state_obs, obj, tcp, part)
         state = decision.state
         info = {
             "phase": state.phase,
@@ -196,8 +195,15 @@ class PickPlaceEnv(gym.Env):
         tcp = self.decision.tcp(self.scene.joint_positions())
         g, obj = 1 if self.vacuum else -1, self.scene.object_position()
         self._state_obs = self.decision.observe(tcp, g, obj, self.scene.goal)
-        seen = self.perception.see(obj, tcp, False)
-        self._obs = self.decision.observe(tcp, g, seen, self.scene.goal)
+        self._obs = self._perceived(self._state_obs, obj, tcp, False)
+
+    def _perceived(self, state_obs: np.ndarray, obj: np.ndarray, tcp: np.ndarray, held: bool) -> np.ndarray:
+        """The observation with the part as the policy sees it: `state_obs` itself when it sees it exactly."""
+        if self.twin_cfg.perception.exact:
+            return state_obs
+        seen = state_obs.copy()
+        seen[OBS_OBJECT] = self.perception.see(obj, tcp, held)
+        return seen
 
     def expert_action(self) -> np.ndarray:
         """The scripted expert's action: the task model's, on the twin's true state (the part where it is)."""
