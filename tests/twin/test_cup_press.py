@@ -34,4 +34,7 @@ def _shove_mm(stroke: float, offset: float) -> float:
 @pytest.mark.parametrize("offset", [0.006, 0.01])
 def test_a_press_beside_the_seal_moves_the_part_on_a_rigid_cup_and_not_on_the_compensator(offset):
     rigid, compensated = _shove_mm(0.0, offset), _shove_mm(EnvConfig().twin.cup.stroke, offset)
+    print(
+        f"pressed {1e3 * offset:.0f} mm beside the centre: the part moved {rigid:.1f} mm (rigid), {compensated:.1f} mm"
+    )
     assert rigid > 3.0 and compensated < 1.0, (rigid, compensated)
