@@ -150,6 +150,9 @@ class HmdNoiseConfig:
     tracking_noise_deg: float = 0.0  # std per axis of the head-tracked camera rotation vector, per frame
     calibration_error_m: float = 0.0  # fixed offset (norm) added to T_base_hmd, random direction
     calibration_error_deg: float = 0.0  # fixed rotation (angle) added to T_base_hmd about `pivot`, random axis
+    #: s from a frame's capture until its estimate reaches the runtime (a simulated HMD's own render time counts in it)
+    latency_s: float = 0.0
+    frame_drop: float = 0.0  # probability that a frame gives no estimate (motion blur, glare, a marker lost)
     pivot: tuple[float, float, float] = (
         0.475,
         0.1,
@@ -163,6 +166,8 @@ class HmdNoiseConfig:
             ("tracking_noise_deg", 10.0, " deg"),
             ("calibration_error_m", 0.5, " m"),
             ("calibration_error_deg", 45.0, " deg"),
+            ("latency_s", 2.0, " s"),
+            ("frame_drop", 0.9, ""),
         ):
             check_number(f"calibration.hmd.{name}", getattr(self, name), 0.0, high, unit)
         check_ranges(self, "calibration.hmd")

@@ -18,6 +18,7 @@ import multiprocessing.connection
 import os
 import threading
 import time
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -202,7 +203,10 @@ class HmdStartError(RuntimeError):
 
 
 class HmdPoseStream(ObjectPoseSource):
-    """Latest object position from the HMD process; stale or missing estimates raise PoseUnavailable."""
+    """Latest object position from the HMD process; stale or missing estimates raise PoseUnavailable.
+
+    `[calibration.hmd]` `latency_s`: an estimate is given only that long after its scene was seen (the render's own
+    time counts in it); `frame_drop`: that share of the frames gives no estimate (drawn per frame, seeded)."""
 
     def __init__(
         self,
@@ -222,6 +226,11 @@ class HmdPoseStream(ObjectPoseSource):
         since its calibration renders for seconds and would take the CPU from the 4 ms loop."""
         self.plant = plant
         self.max_age = max_age
+        from mrguide.calibration.config import load_calibration_config
+
+        noise = replace(load_calibration_config(calibration_path).hmd, seed=noise_seed, **(hmd_overrides or {}))
+        self.latency, self._drop = noise.latency_s, noise.frame_drop
+        self._drops = np.random.default_rng([noise_seed, 402])  # which frames the HMD loses
         ctx = mp.get_context("spawn")
         self._conn, child = ctx.Pipe()
         self._proc = ctx.Process(
@@ -240,6 +249,7 @@ class HmdPoseStream(ObjectPoseSource):
         _start(self._proc, offscreen_gl=isinstance(arm, MujocoDrawing))
         self.calibration = self._wait_ready(start_timeout)
         self._latest: tuple[np.ndarray, float] | None = None
+        self._pending: deque[tuple[np.ndarray, float]] = deque()  # estimates made, not yet through the latency
         self._generation = 0
         self.frames = self.misses = 0
         self._lost: str | None = None  # why the HMD process can give no more estimates
@@ -294,10 +304,12 @@ class HmdPoseStream(ObjectPoseSource):
                     self._lost = f"the HMD process went away (exit code {self._proc.exitcode}; {type(exc).__name__})"
                 log.warning("%s: no more object poses from the HMD", self._lost)
                 return
+            if kind == "pose" and self._drop and self._drops.random() < self._drop:
+                kind = "dropped"
             with self._lock:
                 self.frames += 1
                 if kind == "pose" and gen == self._generation:
-                    self._latest = (np.asarray(value, dtype=float), t)
+                    self._pending.append((np.asarray(value, dtype=float), t))
                 elif kind != "pose":
                     self.misses += 1
             self._stop.wait(t + 1.0 / MAX_FRAME_RATE - time.monotonic())
@@ -307,6 +319,14 @@ class HmdPoseStream(ObjectPoseSource):
         with self._lock:
             self._generation += 1
             self._latest = None
+            self._pending.clear()
+
+    def _arrived(self) -> tuple[np.ndarray, float] | None:
+        """The newest estimate whose scene was seen at least `latency` s ago (call under the lock)."""
+        now = time.monotonic()
+        while self._pending and self._pending[0][1] + self.latency <= now:
+            self._latest = self._pending.popleft()
+        return self._latest
 
     def wait_fresh(self, timeout: float = 10.0) -> None:
         """Wait for an estimate made after the last `invalidate`; PoseUnavailable after `timeout` s, or at
@@ -314,7 +334,7 @@ class HmdPoseStream(ObjectPoseSource):
         end = time.monotonic() + timeout
         while time.monotonic() < end:
             with self._lock:
-                if self._latest is not None:
+                if self._arrived() is not None:
                     return
             self._raise_if_lost()
             time.sleep(0.02)
@@ -335,7 +355,7 @@ class HmdPoseStream(ObjectPoseSource):
         process is gone (at once: the deploy runtime then decides how long the last pose may serve)."""
         self._raise_if_lost()
         with self._lock:
-            latest = self._latest
+            latest = self._arrived()
         if latest is None:
             raise PoseUnavailable("the HMD has not seen the object marker yet")
         pos, t = latest

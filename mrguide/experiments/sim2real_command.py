@@ -29,7 +29,14 @@ GAP_PARAMS = (
 )
 #: Swept parameters that take whole numbers (control periods).
 INTEGER_PARAMS = ("actuator_latency",)
-HMD_PARAMS = ("tracking_noise_m", "tracking_noise_deg", "calibration_error_m", "calibration_error_deg")
+HMD_PARAMS = (
+    "tracking_noise_m",
+    "tracking_noise_deg",
+    "calibration_error_m",
+    "calibration_error_deg",
+    "latency_s",
+    "frame_drop",
+)
 
 
 def add_sim2real_command(sub: argparse._SubParsersAction) -> None:
