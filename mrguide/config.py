@@ -263,8 +263,12 @@ def replace_path(obj: T, path: str, value: Any, where: str = "override") -> T:
     Checked exactly as a value read from a file (types, finiteness, unknown keys, ranges).
     """
     data = to_dict(obj)
-    node, keys = data, path.split(".")
+    node, keys, cls = data, path.split("."), type(obj)
     for key in keys[:-1]:
+        table = _table_type(cls, key)
+        if node.get(key) is None and table is not None:  # an optional table left unset: from its defaults
+            node[key] = to_dict(table())
+        cls = table
         if not isinstance(node.get(key), dict):
             raise ConfigError(f"{where}: {path}: {key!r} is not a table of {type(obj).__name__}")
         node = node[key]
@@ -272,6 +276,15 @@ def replace_path(obj: T, path: str, value: Any, where: str = "override") -> T:
         raise ConfigError(f"{where}: {path}: no such key in {type(obj).__name__}")
     node[keys[-1]] = value
     return from_dict(type(obj), data, where)
+
+
+def _table_type(cls: Any, key: str) -> Any:
+    """The dataclass that field `key` of dataclass `cls` holds (`X | None` unwrapped), or None if it holds none."""
+    if not dataclasses.is_dataclass(cls):
+        return None
+    hint = typing.get_type_hints(cls).get(key)
+    present = [a for a in typing.get_args(hint) if a is not type(None)] or [hint]
+    return present[0] if len(present) == 1 and dataclasses.is_dataclass(present[0]) else None
 
 
 def to_dict(obj: Any) -> dict[str, Any]:

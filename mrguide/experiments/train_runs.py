@@ -52,10 +52,10 @@ def run_config(run: TrainRun, where: str = "experiment") -> RunConfig:
     from mrguide.policies.train_config import RunConfig
 
     cfg = RunConfig.load(run.config)
-    cfg = cfg.replace(
-        train=dataclasses.replace(cfg.train, total_steps=run.steps, seed=run.seed),
-        guidance=dataclasses.replace(cfg.guidance, enabled=run.guided),
-    )
+    guidance = dataclasses.replace(cfg.guidance, enabled=run.guided)
+    if run.client == "bot":  # the marks come over the wire: the person's source
+        guidance = dataclasses.replace(guidance, source="live")
+    cfg = cfg.replace(train=dataclasses.replace(cfg.train, total_steps=run.steps, seed=run.seed), guidance=guidance)
     return cfg.with_overrides(run.overrides, f"{where}: override")
 
 
@@ -139,7 +139,6 @@ def train(run: TrainRun, root: str, on_episode: Callable[[dict], None] | None = 
     if run.client == "bot":
         from mrguide.annotation.bot_session import BotSession
 
-        cfg = cfg.replace(guidance=dataclasses.replace(cfg.guidance, source="live"))
         stop = threading.Event()
         bot = BotSession(cfg.guidance.noise, run.seed, on_failure=stop.set)
         factory = bot.source_factory

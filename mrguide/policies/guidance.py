@@ -133,6 +133,12 @@ class PoseError:
         check_ranges(self, "guidance.pose")
 
 
+#: What a person's run (`source = "live"`) perceives the part through unless [guidance.pose] says otherwise: the HMD
+#: pipeline's assumed errors of configs/cells/real_cell.toml (3 mm tracking noise per look; its 5 mm calibration error
+#: as about 3 mm per axis), as configs/runs/person.toml sets them.
+LIVE_POSE = PoseError(sigma=0.003, bias_sigma=0.003)
+
+
 @dataclass(frozen=True)
 class GuidanceConfig:
     """Expert guidance ([guidance] in a TOML config)."""
@@ -159,7 +165,9 @@ class GuidanceConfig:
     #: "oracle", "annotator" (oracle + noise), "file", "live" (`--expert live`), or a registered source
     source: ExpertSourceName | str = "annotator"
     noise: AnnotatorNoise = field(default_factory=AnnotatorNoise)
-    pose: PoseError = field(default_factory=PoseError)
+    #: None: the source's own (`pose_error`): a person's (`live`) sees the part as the cell does, `LIVE_POSE`; the
+    #: simulated sources as observed
+    pose: PoseError | None = None
     #: m: a kind of mark (pick or place) is not asked again once the median of its marks is known to within this per
     #: axis (its standard error, from the marks' own spread; at least 3 marks), nor the pick once a grasp sealed
     #: (ours: a person's time goes where an answer carries information; mark_fusion.py).
@@ -183,6 +191,13 @@ class GuidanceConfig:
         if not 0.0 <= self.lam_min <= self.lam_max <= 1.0:
             raise ConfigError(f"guidance: need 0 <= lam_min <= lam_max <= 1, got {self.lam_min}, {self.lam_max}")
         check_ranges(self, "guidance")
+
+    @property
+    def pose_error(self) -> PoseError:
+        """How the expert path perceives the part: [guidance.pose] if set, else the source's own (`pose`)."""
+        if self.pose is not None:
+            return self.pose
+        return LIVE_POSE if self.source == "live" else PoseError()
 
 
 def _either(choices: Sequence[str]) -> str:

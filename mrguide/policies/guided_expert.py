@@ -77,6 +77,11 @@ class PerceivedPose:
         rng = np.random.default_rng([seed, POSE_SEED_OFFSET])
         self.bias = rng.normal(0.0, error.bias_sigma, 3) if error.bias_sigma > 0 else np.zeros(3)
 
+    @property
+    def exact(self) -> bool:
+        """The part seen where it is (no error set)."""
+        return self.error.sigma == 0 and self.error.bias_sigma == 0
+
     def __call__(self, obs: np.ndarray) -> np.ndarray:
         """`obs` with the part where the cell sees it (a float64 copy)."""
         seen = np.array(obs, dtype=np.float64)
@@ -266,8 +271,10 @@ class GuidedExpert:
         self.counts.measured += 1
 
     def _ask(self, obs: np.ndarray, previous: int | None) -> int | None:
-        """Ask the source (a re-mark of cache record `previous` if given); the new record's index, or None."""
-        ann = self.source.annotate(obs, self.cache.get(previous) if previous is not None else None)
+        """Ask the source (a re-mark of cache record `previous` if given); the new record's index, or None. The source
+        is shown the part where the cell sees it (a person's page draws it there); the record keeps `obs`."""
+        shown = obs if self.perceived.exact else self.perceived(obs)
+        ann = self.source.annotate(shown, self.cache.get(previous) if previous is not None else None)
         self.counts.asked += 1
         if ann is None:
             return None

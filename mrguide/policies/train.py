@@ -89,7 +89,7 @@ class Trainer:
             seed=cfg.seed,
             marks=guidance.marks,
             counts=self.counters,
-            pose_error=guidance.pose,
+            pose_error=guidance.pose_error,
             mark_precision=guidance.mark_precision,
         )
         self.trigger = ThresholdTrigger(guidance.r_threshold)
