@@ -127,7 +127,8 @@ def cells_description(cells: dict[str, RealCell], conditions: Iterable[str]) -> 
             h = cell.hmd
             text += (
                 f" HMD: tracking noise {h.tracking_noise_m * 1e3:.1f} mm / {h.tracking_noise_deg}° per frame, "
-                f"calibration error {h.calibration_error_m * 1e3:.1f} mm / {h.calibration_error_deg}°."
+                f"calibration error {h.calibration_error_m * 1e3:.1f} mm / {h.calibration_error_deg}°, "
+                f"latency {h.latency_s * 1e3:.0f} ms, {h.frame_drop:.0%} of frames lost."
             )
         paragraphs.append(text)
     return "\n\n".join(paragraphs)
