@@ -322,7 +322,7 @@ def test_an_outcome_is_written_as_its_value():
 
 
 def test_a_deploy_summary_counts_outcomes_by_value():
-    from mrguide.deploy.runtime import EpisodeReport
+    from mrguide.deploy.episode import EpisodeReport
     from mrguide.deploy.session import DeploySummary
     from mrguide.task import Outcome
 

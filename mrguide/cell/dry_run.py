@@ -20,9 +20,10 @@ from mrguide.cell.plants import build_plant
 from mrguide.cell.twin_plant import TwinObjectPose
 from mrguide.config import ConfigError
 from mrguide.deploy.cycles import CycleRun, CycleRunner, CycleSummary
+from mrguide.deploy.episode import EpisodeReport
 from mrguide.deploy.policy import ExportedPolicy, check_decision_period
 from mrguide.deploy.runlog import RunLog
-from mrguide.deploy.runtime import EpisodeReport, Runtime
+from mrguide.deploy.runtime import Runtime
 from mrguide.deploy.runtime_config import RuntimeConfig
 from mrguide.deploy.safety import SafetyConfig
 from mrguide.deploy.session import DeploySummary, run_session

@@ -27,9 +27,10 @@ from typing import Annotated, Protocol
 import numpy as np
 
 from mrguide.config import ConfigError, Range, check_number, check_ranges
+from mrguide.deploy.episode import EpisodeReport, RunStopped
 from mrguide.deploy.host_stats import FullCollections, HostCounters, miss_anatomy_text, peak_rss_mb, resident_mb
 from mrguide.deploy.interrupt import CycleInterrupt
-from mrguide.deploy.runtime import EpisodeReport, RunStopped, Runtime
+from mrguide.deploy.runtime import Runtime
 from mrguide.drivers.errors import DriverError
 from mrguide.pose_source import PoseUnavailable
 from mrguide.task import Outcome

@@ -14,7 +14,6 @@ import logging
 import time
 from collections import Counter
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import NoReturn
 
@@ -23,6 +22,8 @@ import numpy as np
 from mrguide.cell_layout import CUP_RADIUS
 from mrguide.config import ConfigError
 from mrguide.deploy.bias_estimate import Registration
+from mrguide.deploy.cell_learning import LearningActor
+from mrguide.deploy.episode import HOME_SETTLE_S, EpisodeReport, RunStopped
 from mrguide.deploy.following import FollowingMonitor
 from mrguide.deploy.lift_rule import LiftRule, hold_in_transit
 from mrguide.deploy.object_tracking import ObjectStartUnknown, ObjectTracker
@@ -43,34 +44,14 @@ from mrguide.task import OBS_OBJECT, Outcome, Phase, TaskConfig
 log = logging.getLogger(__name__)
 
 
-class RunStopped(RuntimeError):
-    """The run cannot go on (quick stop after a fault, a stall or an interrupt).
-
-    `report` is the report of the episode it stopped, if it stopped one (outcome `Outcome.SAFETY_STOP`)."""
-
-    report: EpisodeReport | None = None
-
-
-#: How long the arm may take to arrive home after its last setpoint was home (s): servo lag, settling.
-HOME_SETTLE_S = 1.0
-
-
-@dataclass
-class EpisodeReport:
-    index: int
-    outcome: Outcome
-    decisions: int
-    events: dict[str, int]
-    latency_ms: list[float] = field(default_factory=list)
-    inference_ms: list[float] = field(default_factory=list)
-    wall_s: float = 0.0
-
-
 class Runtime:
     """Runs episodes of an exported policy on a connected, enabled cobot (any `CobotInterface`).
 
     `policy` maps an observation to an action: an `ExportedPolicy`, or any such callable (a scripted expert).
-    ConfigError unless `decision_period` is a whole number of the cobot's control periods."""
+    ConfigError unless `decision_period` is a whole number of the cobot's control periods. With `learning` set,
+    it is the actor of on-cell learning (`cell_learning`): its decisions become transitions."""
+
+    learning: LearningActor | None = None
 
     def __init__(
         self,
@@ -232,6 +213,8 @@ class Runtime:
         self.registration.reset()
         self.lift.reset()
         self.seal.reset()
+        if self.learning is not None:
+            self.log.write("policy_version", episode=index, version=self.learning.episode_start())
         self.watchdog.arm(True)
         try:
             outcome = self._decisions(goal, index, report)
@@ -293,11 +276,16 @@ class Runtime:
                         Event.VACUUM_LOST, f"part lost in phase {res.phase} (vacuum {vac.level_kpa:.0f} kPa)"
                     )
                 if res.outcome is not None:
+                    if self.learning is not None:
+                        terminal = self.decision.observe(tcp, g, obj, goal, res.outcome is Outcome.SUCCESS)
+                        self.learning.tap.judged(terminal, reward, res.outcome)
                     self.log.write(
                         "decision", t=t, tcp=tcp, g=g, phase=res.phase, reward=reward, outcome=res.outcome.value
                     )
                     return res.outcome
             obs = self.decision.observe(tcp, g, obj, goal)
+            if self.learning is not None:
+                self.learning.tap.judged(obs, reward, None)
             if (ended := self._decide(t, t_read, js, vac, tcp, obs, index, reward, report)) is not None:
                 return ended
         raise AssertionError("the task model ends every episode at its horizon")  # pragma: no cover
@@ -319,6 +307,8 @@ class Runtime:
         action = self.policy(obs)
         inference_ms = (time.perf_counter() - t_inf) * 1e3
         executed, notes = self._cell_rules(action, tcp, obs, vac)
+        if self.learning is not None:
+            self.learning.tap.acted(obs, executed)
         record = {
             "episode": index,
             "t": t,

@@ -13,7 +13,8 @@ import numpy as np
 from mrguide.config import ConfigError, Range, check_number, check_ranges
 from mrguide.deploy.camera import CameraSourceConfig
 from mrguide.deploy.cycles import CycleConfig
-from mrguide.deploy.runtime import EpisodeReport, RunStopped, Runtime
+from mrguide.deploy.episode import EpisodeReport, RunStopped
+from mrguide.deploy.runtime import Runtime
 from mrguide.deploy.runtime_config import RuntimeConfig
 from mrguide.drivers.errors import DriverError
 from mrguide.pose_source import ObjectPoseSource, PoseUnavailable

@@ -24,9 +24,9 @@ from mrguide.cell.dry_run import SimulatedCell, dry_run, episode_layouts
 from mrguide.cell.hmd_stream import HmdPoseStream, HmdStartError, MujocoDrawing
 from mrguide.cell.twin_plant import TwinObjectPose
 from mrguide.config import to_dict
+from mrguide.deploy.episode import EpisodeReport
 from mrguide.deploy.policy import ExportedPolicy, check_arm, check_decision_period
 from mrguide.deploy.runlog import RunLog
-from mrguide.deploy.runtime import EpisodeReport
 from mrguide.deploy.safety import SafetyConfig
 from mrguide.deploy.session import DeploySummary
 from mrguide.drivers.config import CobotBusConfig

@@ -15,9 +15,9 @@ import pytest
 from mrguide.config import ConfigError
 from mrguide.deploy.cycle_commands import cycles_done
 from mrguide.deploy.cycles import CycleConfig, CycleRunner
+from mrguide.deploy.episode import EpisodeReport, RunStopped
 from mrguide.deploy.interrupt import CycleInterrupt
 from mrguide.deploy.runlog import RunLog, RunLogError, read_log
-from mrguide.deploy.runtime import EpisodeReport, RunStopped
 from mrguide.drivers.cobot_state import DriverStats
 from mrguide.pose_source import PoseUnavailable
 from mrguide.task import Outcome, TaskConfig

@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 
 from mrguide.config import ConfigError
+from mrguide.deploy.episode import RunStopped
 from mrguide.deploy.runlog import RunLog, read_log
-from mrguide.deploy.runtime import RunStopped, Runtime
+from mrguide.deploy.runtime import Runtime
 from mrguide.deploy.runtime_config import RuntimeConfig
 from mrguide.deploy.session import FixedObjectPose
 from mrguide.drivers.cobot_state import DriverStats, JointState, VacuumState

@@ -1,0 +1,136 @@
+"""On-cell learning's actor side: the runtime's decisions as transitions for a learner, and the learner's newer
+policies taken in between episodes. numpy only: the learner lives in `policies`, the command joining them above both.
+
+**A transition is what the cell sensed.** The observation is the one the runtime built (the TCP from the drives'
+feedback, g from the vacuum command, the part from the pose source, filtered and corrected as the runtime uses it),
+the action the one the cell carried out (the policy's after the cell's rules — lift rules, hold in transit, seal
+search — clipped to the action box as the decision step clamps it), the reward and the outcome the task model's,
+judged on the next decision's sensed state. No simulator's state enters: in a dry run only the scorer reads it.
+An episode the supervisor ended (pose lost, aborted, a safety stop) leaves its last action without a transition:
+nothing the task did ended it, and what followed was not the policy's.
+
+**A newer policy is a policy file.** The learner's weights reach the runtime as a policy file of a new version,
+loaded by `ExportedPolicy.load` with every check a file on the robot gets (format, arm, shapes, finite actions over
+the workspace), between episodes only: an episode runs on one policy. A file that fails a check is logged and
+skipped; the runtime goes on with the policy it has.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from mrguide.deploy.policy import ExportedPolicy, PolicyFileError
+from mrguide.robot import RobotSpec
+from mrguide.task import Outcome, TaskConfig
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class Transition:
+    """One decision of the cell: s, a (as carried out), r, s', whether the task ended there, a person's (ζ = 1)."""
+
+    obs: np.ndarray
+    action: np.ndarray
+    reward: float
+    next_obs: np.ndarray
+    done: bool
+    expert: bool = False
+
+
+class TransitionTap:
+    """Pairs each decision's action with the next decision's judgement and hands the transition to `sink`.
+
+    The runtime calls `acted` when it has decided (the action as it will be carried out) and `judged` with the
+    next decision's sensed observation, reward and outcome (None while the episode goes on); `reset` at the start
+    of an episode drops an action left unjudged."""
+
+    def __init__(self, sink: Callable[[Transition], None]):
+        self.sink = sink
+        self.expert = False  # the actions are a person's (an intervention): stored as expert data
+        self._pending: tuple[np.ndarray, np.ndarray, bool] | None = None
+
+    def reset(self) -> None:
+        self._pending = None
+
+    def acted(self, obs: np.ndarray, action: np.ndarray) -> None:
+        a = np.asarray(action, dtype=np.float32)
+        if a.shape != (4,) or not np.all(np.isfinite(a)):  # refused by the decision step: nothing carried out
+            self._pending = None
+            return
+        self._pending = (np.array(obs, dtype=np.float32), np.clip(a, -1.0, 1.0), self.expert)
+
+    def judged(self, obs: np.ndarray, reward: float | None, outcome: Outcome | None) -> None:
+        pending, self._pending = self._pending, None
+        if pending is None or reward is None:
+            return
+        done = outcome is not None and outcome.terminated
+        self.sink(Transition(pending[0], pending[1], float(reward), np.array(obs, dtype=np.float32), done, pending[2]))
+
+
+class PolicyVersions:
+    """The policy the runtime acts with, and the newest version a learner has offered (a policy file).
+
+    Callable as a policy. `offer` may come from any thread; `take_newest`, between episodes, loads the newest
+    offered file (checked as `ExportedPolicy.load` checks a file for the robot) and acts with it from then on."""
+
+    def __init__(self, policy: ExportedPolicy, robot: RobotSpec, task: TaskConfig, on_change: Callable | None = None):
+        self.policy, self.robot, self.task = policy, robot, task
+        self.version = 0
+        self.on_change = on_change  # called with (version, path, error or None) when a version is taken or refused
+        self._offered: tuple[int, Path] | None = None
+        self._lock = threading.Lock()
+
+    def __call__(self, obs: np.ndarray) -> np.ndarray:
+        return self.policy(obs)
+
+    @property
+    def decision_period(self) -> float:
+        return self.policy.decision_period
+
+    def offer(self, version: int, path: str | Path) -> None:
+        """A learner's newer policy file; ignored unless newer than what was offered before."""
+        with self._lock:
+            if self._offered is None or version > self._offered[0]:
+                self._offered = (version, Path(path))
+
+    def take_newest(self) -> int:
+        """Act with the newest offered version from now on (if newer than the current one); the version acted with."""
+        with self._lock:
+            offered, self._offered = self._offered, None
+        if offered is None or offered[0] <= self.version:
+            return self.version
+        version, path = offered
+        try:
+            policy = ExportedPolicy.load(path, self.robot, self.task)
+            if policy.decision_period != self.policy.decision_period:
+                raise PolicyFileError(f"{path}: decision period {policy.decision_period} s, the runtime's differs")
+        except (PolicyFileError, OSError) as exc:
+            log.warning("policy version %d refused, acting on with version %d: %s", version, self.version, exc)
+            if self.on_change:
+                self.on_change(version, path, str(exc))
+            return self.version
+        self.policy, self.version = policy, version
+        if self.on_change:
+            self.on_change(version, path, None)
+        return version
+
+
+@dataclass
+class LearningActor:
+    """What the runtime calls while it learns on the cell: a new episode (the newest policy taken in, an unjudged
+    action dropped), each decision's action, each judgement."""
+
+    versions: PolicyVersions
+    tap: TransitionTap
+
+    def episode_start(self) -> int:
+        """The policy version this episode acts with."""
+        self.tap.reset()
+        return self.versions.take_newest()

@@ -1,0 +1,97 @@
+"""On-cell learning's actor side: the runtime's decisions become transitions of what the cell sensed, and a newer
+policy file is taken in between episodes only after the checks a file for the robot gets."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mrguide.deploy.cell_learning import LearningActor, PolicyVersions, Transition, TransitionTap
+from mrguide.deploy.policy import ExportedPolicy
+from mrguide.deploy.runlog import RunLog, read_log
+from mrguide.deploy.runtime import Runtime
+from mrguide.deploy.runtime_config import RuntimeConfig
+from mrguide.deploy.session import FixedObjectPose
+from mrguide.robot import load_robot
+from mrguide.task import OBS_DIM, Outcome, TaskConfig
+from tests.deploy.test_runtime_interface import IdealCobot
+
+
+def _policy_file(path, seed: int, task: TaskConfig, period: float = 0.1):
+    from mrguide.policies.ddpg import DDPG, DDPGConfig
+    from mrguide.policies.export import export_actor
+    from mrguide.policies.networks import obs_scaling
+
+    spec = load_robot()
+    agent = DDPG(*obs_scaling(spec.workspace), 4, DDPGConfig(), seed=seed)
+    return export_actor(agent.actor, path, spec, task, period)
+
+
+def test_the_tap_pairs_each_action_with_the_next_judgement():
+    got: list[Transition] = []
+    tap = TransitionTap(got.append)
+    s = [np.full(OBS_DIM, float(i)) for i in range(4)]
+    tap.judged(s[0], None, None)  # the first decision judges nothing
+    tap.acted(s[0], np.array([0.2, 2.0, -3.0, 1.0]))
+    tap.judged(s[1], -1.5, None)
+    tap.acted(s[1], np.array([np.nan, 0.0, 0.0, 1.0]))  # refused by the decision step: nothing carried out
+    tap.judged(s[2], -1.0, None)
+    tap.acted(s[2], np.zeros(4))
+    tap.judged(s[3], 10.0, Outcome.SUCCESS)
+    tap.acted(s[3], np.zeros(4))
+    tap.reset()  # a new episode: the unjudged action is dropped
+    tap.judged(s[0], -1.0, None)
+    assert [(t.obs[0], t.next_obs[0], t.reward, t.done) for t in got] == [
+        (0.0, 1.0, -1.5, False),
+        (2.0, 3.0, 10.0, True),
+    ]
+    assert np.array_equal(got[0].action, np.array([0.2, 1.0, -1.0, 1.0], np.float32))  # clipped to the action box
+    tap.expert = True
+    tap.acted(s[0], np.zeros(4))
+    tap.judged(s[1], -1.0, Outcome.NO_GRASP)  # the horizon: truncated, not ended
+    assert got[-1].expert and not got[-1].done
+
+
+def test_a_newer_policy_is_taken_in_only_when_it_passes_the_checks(tmp_path):
+    spec, task = load_robot(), TaskConfig(horizon=8)
+    first = ExportedPolicy.load(_policy_file(tmp_path / "v0.npz", 0, task), spec, task)
+    changes = []
+    versions = PolicyVersions(first, spec, task, on_change=lambda *a: changes.append(a))
+    obs = np.array([0.5, 0.0, 0.3, -1.0, 0.0, 0.5, -0.1, 0.025, 0.4, 0.2, 0.025])
+    versions.offer(2, _policy_file(tmp_path / "v2.npz", 2, task))
+    versions.offer(1, _policy_file(tmp_path / "v1.npz", 1, task))  # older than what was offered: ignored
+    assert versions(obs).tolist() == first(obs).tolist()  # not before the next episode
+    assert versions.take_newest() == 2 and changes[-1][2] is None
+    assert versions(obs).tolist() != first(obs).tolist()
+    broken = tmp_path / "v3.npz"
+    broken.write_bytes(b"not a policy")
+    versions.offer(3, broken)
+    assert versions.take_newest() == 2 and "v3.npz" in changes[-1][2]  # refused, said, the old one acts on
+    versions.offer(4, _policy_file(tmp_path / "v4.npz", 4, task, period=0.2))
+    assert versions.take_newest() == 2 and "decision period" in changes[-1][2]
+
+
+def test_the_runtime_as_actor_hands_over_every_decision_it_carried_out(tmp_path):
+    spec, task = load_robot(), TaskConfig(horizon=8)
+    policy = ExportedPolicy.load(_policy_file(tmp_path / "p.npz", 0, task), spec, task)
+    got: list[Transition] = []
+    cobot = IdealCobot(spec.q_home)
+    with (
+        RunLog(tmp_path / "log.jsonl", {"test": "learning"}) as log,
+        Runtime(cobot, policy, FixedObjectPose((0.5, -0.075, 0.025)), spec, task, log, 0.1, RuntimeConfig()) as rt,
+    ):
+        versions = PolicyVersions(policy, spec, task)
+        rt.policy, rt.learning = versions, LearningActor(versions, TransitionTap(got.append))
+        versions.offer(1, _policy_file(tmp_path / "p1.npz", 1, task))
+        report = rt.run_episode(np.array([0.5, 0.21, 0.025]), 0)
+    assert report.outcome is Outcome.NO_GRASP  # the cup never seals on this cobot
+    records = read_log(tmp_path / "log.jsonl")
+    assert [r["version"] for r in records if r["kind"] == "policy_version"] == [1]
+    decisions = [r for r in records if r["kind"] == "decision"]
+    acted = [r for r in decisions if "action" in r]
+    assert len(got) == len(acted) == task.horizon
+    for i, t in enumerate(got):
+        assert np.allclose(t.obs, acted[i]["obs"], atol=1e-6)
+        assert t.reward == pytest.approx(decisions[i + 1]["reward"])
+    assert np.allclose(got[0].next_obs, acted[1]["obs"], atol=1e-6)
+    assert not any(t.done for t in got)  # the horizon truncates: the learner bootstraps past it
