@@ -17,6 +17,7 @@ class CellDryRun:
         from mrguide.cell.config import CellConfig  # imports PyBullet: only once deploy's own checks have passed
 
         self.env_cfg = CellConfig.from_file(config)
+        self.path = config.path
         self.decision_period = self.env_cfg.twin.decision_period
 
     def camera(self, camera_cfg: Any, base: Path, object_height: float) -> Any:
@@ -25,6 +26,11 @@ class CellDryRun:
         from mrguide.twin.visual_arm import ArmDrawing
 
         return TwinCameraPoses(camera_cfg, base, object_height, ArmDrawing.of(load_robot(self.env_cfg.robot)))
+
+    def hmd(self, seed: int) -> Any:
+        from mrguide.cell.hmd_feed import HmdFeed
+
+        return HmdFeed(self.env_cfg, self.path, seed)
 
     def run_cycles(self, inputs: Any, run: Any) -> Any:
         """`deploy --dry-run --cycles`: production cycles against the simulated cell, parts fed by the twin."""

@@ -29,11 +29,13 @@ ALLOW_VIRTUAL_REAL_BUS = False
 
 
 class DryRunBackend(Protocol):
-    """What `deploy --dry-run` needs from the twin: its decision period, twin-rendered camera poses, the run."""
+    """What `deploy --dry-run` needs from the twin: its decision period, twin-rendered camera or HMD poses, the run."""
 
     decision_period: float
 
     def camera(self, camera_cfg: Any, base: Path, object_height: float) -> Any: ...
+
+    def hmd(self, seed: int) -> Any: ...
 
     def run_cycles(self, inputs: DeployInputs, run: Any) -> Any: ...
 
@@ -123,12 +125,12 @@ def cmd_deploy(args: argparse.Namespace) -> int:
     log_path, where = _log_path(args, dcfg)
     start = _first_cycle(args, log_path)
     header = _run_header(args, dcfg, bus, policy, episodes, seed) | {"cycles": args.cycles, "first_cycle": start[0]}
-    camera = _camera(args, dcfg, task, dry if args.dry_run else None)
+    camera = _pose_feed(args, dcfg, task, seed, dry if args.dry_run else None)
     try:
         with RunLog(log_path, header, where) as run_log:
             inputs = DeployInputs(args.policy, policy, bus, spec, task, safety, dcfg, camera, run_log)
             summary = _run(args, inputs, dry if args.dry_run else None, episodes, seed, start)
-            camera_stats = _log_camera(camera, run_log)
+            camera_stats = _log_pose_feed(camera, run_log, dcfg.pose_source)
     finally:
         if camera:
             camera.close()
@@ -252,9 +254,16 @@ def _log_path(args: argparse.Namespace, dcfg) -> tuple[Path, str]:
     )
 
 
-def _camera(args: argparse.Namespace, dcfg, task, dry: DryRunBackend | None):
-    """With `pose_source = "camera"`: the camera source (a dry run: the twin-rendered one), opened before the run
-    log so that bad files or a camera that does not open are refused first; otherwise None."""
+def _pose_feed(args: argparse.Namespace, dcfg, task, seed: int, dry: DryRunBackend | None):
+    """With `pose_source = "camera"`: the camera source (a dry run: the twin-rendered one); "hmd": the dry run's
+    simulated headset, calibrated, its errors drawn from `seed`. Opened before the run log so that bad files or a
+    camera that does not open are refused first; otherwise None."""
+    if dcfg.pose_source == "hmd":
+        from mrguide.config import ConfigError
+
+        if dry is None:
+            raise ConfigError('deploy.pose_source = "hmd" runs only with --dry-run (the cell\'s simulated headset)')
+        return dry.hmd(seed)
     if dcfg.pose_source != "camera":
         return None
     base = Path(args.config).parent if args.config else Path.cwd()
@@ -265,11 +274,11 @@ def _camera(args: argparse.Namespace, dcfg, task, dry: DryRunBackend | None):
     return open_camera_source(dcfg.camera, base)
 
 
-def _log_camera(camera, run_log):
-    """The camera's statistics, also written to the run log (None without a camera)."""
-    stats = camera.stats() if camera else None
+def _log_pose_feed(feed, run_log, kind: str):
+    """The camera's or the headset's statistics, also written to the run log as `kind` (None without either)."""
+    stats = feed.stats() if feed else None
     if stats:
-        run_log.write("camera", **stats.as_dict())
+        run_log.write(kind, **stats.as_dict())
     return stats
 
 

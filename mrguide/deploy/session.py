@@ -26,7 +26,7 @@ log = logging.getLogger(__name__)
 MAX_EPISODES = 100_000
 #: Farthest a goal or object may be from the robot base on any axis (m): beyond the reach of any cobot.
 MAX_REACH_M = 5.0
-POSE_SOURCES = ("fixed", "camera")
+POSE_SOURCES = ("fixed", "camera", "hmd")
 
 
 @dataclass(frozen=True)
@@ -41,8 +41,9 @@ class DeployConfig:
     object_position: tuple[float, float, float] = (0.50, -0.075, 0.025)
     #: Goals (object centre, m), used in turn.
     goals: tuple[tuple[float, float, float], ...] = ((0.50, 0.21, 0.025),)
-    #: Where the object pose comes from: "fixed" (`object_position`) or "camera" (`[deploy.camera]`; in a dry
-    #: run the camera's frames are rendered by the twin).
+    #: Where the object pose comes from: "fixed" (`object_position`), "camera" (`[deploy.camera]`; in a dry
+    #: run the camera's frames are rendered by the twin) or, in a dry run only, "hmd" (the simulated headset of the
+    #: cell's `[calibration.hmd]`, as sim2real's HMD conditions: no headset streams poses to a real cell yet).
     pose_source: str = "fixed"
     camera: CameraSourceConfig = field(default_factory=CameraSourceConfig)
     #: Home tolerance, carried-object tracking, missing poses ([deploy.runtime]).
