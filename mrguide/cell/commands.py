@@ -36,7 +36,7 @@ class CellDryRun:
         """`deploy --dry-run --cycles`: production cycles against the simulated cell, parts fed by the twin."""
         from mrguide.cell.dry_run import dry_run_cycles
 
-        camera = inputs.camera
+        camera, learning = inputs.camera, inputs.learning
         return dry_run_cycles(
             inputs.policy_path,
             self.env_cfg,
@@ -45,10 +45,11 @@ class CellDryRun:
             inputs.run_log,
             inputs.safety,
             pose_factory=camera,
-            policy=inputs.policy,
+            policy=learning.versions if learning else inputs.policy,
             on_placed=camera.refresh if camera else None,
             runtime_cfg=inputs.dcfg.runtime,
             own_process=True,
+            learning=learning,
         )
 
     def run(

@@ -19,6 +19,7 @@ from mrguide.cell.config import CellConfig
 from mrguide.cell.plants import build_plant
 from mrguide.cell.twin_plant import TwinObjectPose
 from mrguide.config import ConfigError
+from mrguide.deploy.cell_learning import LearningActor
 from mrguide.deploy.cycles import CycleRun, CycleRunner, CycleSummary
 from mrguide.deploy.episode import EpisodeReport
 from mrguide.deploy.policy import ExportedPolicy, check_decision_period
@@ -235,15 +236,18 @@ def dry_run_cycles(
     on_placed: Callable[[], None] | None = None,
     runtime_cfg: RuntimeConfig | None = None,
     own_process: bool = False,
+    learning: LearningActor | None = None,
 ) -> CycleSummary:
     """Production cycles `run.start` .. of a policy through the whole stack against the simulated cell, parts fed
-    by a `TwinFeeder` of seed `run.seed` (the arguments otherwise as `dry_run`'s)."""
+    by a `TwinFeeder` of seed `run.seed` (the arguments otherwise as `dry_run`'s); with `learning`, the runtime is
+    the actor of on-cell learning (`policy` its `versions`)."""
     spec = load_robot(env_cfg.robot)
     policy = _checked_policy(policy_path, policy, spec, env_cfg, bus_cfg)
     with (
         simulated_cell(env_cfg, bus_cfg, run.seed, own_process) as cell,
         _cell_runtime(cell, env_cfg, spec, policy, run_log, pose_factory, safety, runtime_cfg) as runtime,
     ):
+        runtime.learning = learning
         feeder = TwinFeeder(cell, env_cfg, run.seed, on_placed)
         runner = CycleRunner(runtime, feeder, feeder.goal, run.config, run.after_cycle)
         return runner.run(run.start, run.count, run.interrupt, run.first_attempt)

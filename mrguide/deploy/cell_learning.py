@@ -80,15 +80,30 @@ class PolicyVersions:
     Callable as a policy. `offer` may come from any thread; `take_newest`, between episodes, loads the newest
     offered file (checked as `ExportedPolicy.load` checks a file for the robot) and acts with it from then on."""
 
-    def __init__(self, policy: ExportedPolicy, robot: RobotSpec, task: TaskConfig, on_change: Callable | None = None):
+    def __init__(
+        self,
+        policy: ExportedPolicy,
+        robot: RobotSpec,
+        task: TaskConfig,
+        exploration: float = 0.0,
+        seed: int = 0,
+        on_change: Callable | None = None,
+    ):
+        """`exploration`: std of the Gaussian noise added to every action (normalized units, clipped to the box), as
+        the learner explores in training; the cell's rules and limits apply to the noisy action as to any."""
         self.policy, self.robot, self.task = policy, robot, task
+        self.exploration, self.rng = exploration, np.random.default_rng(seed)
         self.version = 0
         self.on_change = on_change  # called with (version, path, error or None) when a version is taken or refused
         self._offered: tuple[int, Path] | None = None
         self._lock = threading.Lock()
 
     def __call__(self, obs: np.ndarray) -> np.ndarray:
-        return self.policy(obs)
+        action = self.policy(obs)
+        if self.exploration > 0:
+            noise = self.rng.normal(0.0, self.exploration, action.shape)
+            action = np.clip(action + noise, -1.0, 1.0).astype(action.dtype)
+        return action
 
     @property
     def decision_period(self) -> float:

@@ -90,9 +90,11 @@ def _robot_cycles(run: CycleRun, inputs: DeployInputs) -> CycleSummary:
     with settled_heap(), Cobot(i.bus, i.spec) as cobot:
         cobot.enable()
         pose = i.camera or FixedObjectPose(i.dcfg.object_position)
+        policy = i.learning.versions if i.learning else i.policy
         with Runtime(
-            cobot, i.policy, pose, i.spec, i.task, i.run_log, i.policy.decision_period, i.dcfg.runtime, i.safety
+            cobot, policy, pose, i.spec, i.task, i.run_log, i.policy.decision_period, i.dcfg.runtime, i.safety
         ) as rt:
+            rt.learning = i.learning
             feeder = RobotFeeder(i.camera, i.dcfg)
             runner = CycleRunner(rt, feeder, lambda c: np.array(goals[c % len(goals)]), run.config, run.after_cycle)
             return runner.run(run.start, run.count, run.interrupt, run.first_attempt)

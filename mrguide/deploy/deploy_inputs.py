@@ -24,3 +24,4 @@ class DeployInputs:
     dcfg: DeployConfig
     camera: Any  # the camera pose source, or None
     run_log: Any  # RunLog
+    learning: Any = None  # on-cell learning's actor side (cell_learning.LearningActor), or None

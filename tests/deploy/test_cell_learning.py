@@ -95,3 +95,14 @@ def test_the_runtime_as_actor_hands_over_every_decision_it_carried_out(tmp_path)
         assert t.reward == pytest.approx(decisions[i + 1]["reward"])
     assert np.allclose(got[0].next_obs, acted[1]["obs"], atol=1e-6)
     assert not any(t.done for t in got)  # the horizon truncates: the learner bootstraps past it
+
+
+def test_exploration_adds_seeded_noise_inside_the_action_box(tmp_path):
+    spec, task = load_robot(), TaskConfig(horizon=8)
+    policy = ExportedPolicy.load(_policy_file(tmp_path / "p.npz", 0, task), spec, task)
+    obs = np.array([0.5, 0.0, 0.3, -1.0, 0.0, 0.5, -0.1, 0.025, 0.4, 0.2, 0.025])
+    a, b = (PolicyVersions(policy, spec, task, exploration=0.5, seed=3) for _ in range(2))
+    noisy = np.array([a(obs) for _ in range(50)])
+    assert np.array_equal(noisy, np.array([b(obs) for _ in range(50)]))  # seeded
+    assert np.all(np.abs(noisy) <= 1.0) and np.std(noisy[:, 0]) > 0.1
+    assert np.array_equal(PolicyVersions(policy, spec, task)(obs), policy(obs))  # none by default
