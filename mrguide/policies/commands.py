@@ -116,6 +116,7 @@ def _refuse(message: str) -> int:
 
 def cmd_train(args: argparse.Namespace, live: LivePlugin | None = None) -> int:
     """Train (or resume), show progress, export the policy; Ctrl-C checkpoints and exits 130."""
+    from mrguide.policies.learner_process import LearnerProcessError
     from mrguide.policies.tensorboard_log import summary_writer_class
     from mrguide.policies.train import Trainer
     from mrguide.policies.train_config import RunConfig
@@ -142,14 +143,31 @@ def cmd_train(args: argparse.Namespace, live: LivePlugin | None = None) -> int:
         )
     try:
         tr = Trainer(run, out, session.source_factory if session else None)
-    except BaseException:
+    except BaseException as exc:
         if session:
             session.close()
         bar.close()
+        if isinstance(exc, LearnerProcessError):
+            return _learner_lost(exc, out)
         raise
     if session:
         bar.write(f"annotation page: {session.url}")
-    return _train_and_export(args, tr, tc, gc, out, bar, session)
+    try:
+        return _train_and_export(args, tr, tc, gc, out, bar, session)
+    except LearnerProcessError as exc:
+        return _learner_lost(exc, out)
+
+
+def _learner_lost(exc: Exception, out: Path) -> int:
+    """The learner's process ended, failed or hung (train.learner_process): say so and what resumes, exit 1."""
+    checkpoint = out / "checkpoint.pt"
+    resume = (
+        f"`mrguide train --out {out} --resume` continues from its last checkpoint"
+        if checkpoint.exists()
+        else "no checkpoint was written"
+    )
+    print(f"mrguide train: {exc}; {resume}", file=sys.stderr)
+    return 1
 
 
 def _train_and_export(

@@ -15,7 +15,7 @@ actor, the critic pair) are in `networks`; the update's arithmetic, one compiled
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Annotated
+from typing import Annotated, ClassVar
 
 import numpy as np
 import torch
@@ -52,6 +52,9 @@ class DDPGConfig:
 
 class DDPG:
     """Actor-critic with target networks; `update` takes one minibatch."""
+
+    #: What `act` reads: the online actor (exploring) and the target actor (evaluated).
+    acting_modules: ClassVar[tuple[str, ...]] = ("actor", "actor_target")
 
     def __init__(self, obs_offset: np.ndarray, obs_scale: np.ndarray, act_dim: int, cfg: DDPGConfig, seed: int = 0):
         self.cfg = cfg

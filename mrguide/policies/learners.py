@@ -11,7 +11,7 @@ section. To add a learner: write the class and its config in one module and regi
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import Any, ClassVar, Protocol
 
 import numpy as np
 
@@ -27,6 +27,8 @@ class Learner(Protocol):
 
     #: Updates made so far (the trainer's mean update time divides by it).
     updates: int
+    #: The attributes (torch modules) `act` reads: the weights a learner in its own process publishes to the actor.
+    acting_modules: ClassVar[tuple[str, ...]]
 
     @property
     def policy_actor(self) -> Actor:

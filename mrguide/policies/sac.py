@@ -14,7 +14,7 @@ The policy is a tanh-Gaussian over the actor's MLP output y, through the same an
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Annotated
+from typing import Annotated, ClassVar
 
 import numpy as np
 import torch
@@ -86,6 +86,8 @@ class SAC:
 
     CRITIC_STATS = ("critic_loss", "q_mean", "q_max")
     ACTOR_STATS = ("actor_loss", "temperature", "entropy")
+    #: What `act` reads: the Gaussian actor, its deterministic base included.
+    acting_modules: ClassVar[tuple[str, ...]] = ("actor",)
 
     def __init__(self, obs_offset: np.ndarray, obs_scale: np.ndarray, act_dim: int, cfg: SACConfig, seed: int = 0):
         self.cfg = cfg

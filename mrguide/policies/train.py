@@ -6,10 +6,12 @@ runs with exploration noise; if its running reward drops below R_th (Eq. 12) whi
 open, the episode is cut, its start state restored in the twin and the expert demonstrates it; the
 demonstration's steps are stored with ζ = 1 phase by phase as it completes them. Every env step (agent or
 expert) counts as a training step and is followed by the learner's update (DDPG: one, on a minibatch
-mixed by λ_t, Eq. 9, 11).
+mixed by λ_t, Eq. 9, 11): in this thread (`learning.LocalLearning`), or, with `train.learner_process`, in the
+learner's own process while the env loop goes on with the latest weights it has (`learner_process`).
 
 Files in the run directory: `metrics.csv` (one row per agent or expert episode), `eval.csv` (one row per
-evaluation), `annotations.jsonl`, `checkpoint.pt`; with a `TensorBoardLog` attached (`mrguide train
+evaluation), `annotations.jsonl`, `checkpoint.pt`, with a learner process `learner.csv` (its weights' version and
+lag at every agent episode's end); with a `TensorBoardLog` attached (`mrguide train
 --tensorboard`), the same figures as TensorBoard event files in `tensorboard/`.
 """
 
@@ -31,9 +33,12 @@ from mrguide import __version__
 from mrguide.policies.annotations import AnnotationCache
 from mrguide.policies.checkpoint import CheckpointError, read_checkpoint, with_defaults, write_checkpoint
 from mrguide.policies.experts import ExpertSource
-from mrguide.policies.guidance import REFERENCE_POSES, ThresholdTrigger, expert_ratio
+from mrguide.policies.guidance import REFERENCE_POSES, ThresholdTrigger
 from mrguide.policies.guided_expert import GuidedExpert, make_expert_source
-from mrguide.policies.learners import Learner, make_learner
+from mrguide.policies.learner_process import LearnerProcess
+from mrguide.policies.learner_server import LearnerSetup
+from mrguide.policies.learners import LEARNERS, Learner, make_learner
+from mrguide.policies.learning import Learning, LocalLearning, lam_at
 from mrguide.policies.networks import obs_scaling
 from mrguide.policies.replay_buffer import TaggedReplay
 from mrguide.policies.train_config import RunConfig, TrainConfig, arm_record
@@ -71,7 +76,6 @@ class Trainer:
         self.env = PickPlaceEnv(run.env)
         scaling = obs_scaling(self.env.workspace)
         self.agent: Learner = make_learner(cfg.learner, run.learner, *scaling, ACT_DIM, cfg.seed)
-        self.replay = TaggedReplay(cfg.buffer_size, OBS_DIM, ACT_DIM)
         self.rng = np.random.default_rng(cfg.seed)
         self.source = source_factory(self.env) if source_factory else make_expert_source(guidance, self.env, cfg.seed)
         reference = REFERENCE_POSES[guidance.reference](self.env.task_cfg)
@@ -95,13 +99,22 @@ class Trainer:
         self.trigger = ThresholdTrigger(guidance.r_threshold)
         self.stop_requested = threading.Event()  # set (e.g. on Ctrl-C) to stop at the next step
         self._segment: list[Transition] = []  # the demonstration's steps held until their phase completes
-        self._ratio_sum, self._ratio_n = 0.0, 0
-        self._stat_sum: dict[str, float] = {}  # update statistics summed since the last metrics row
-        self._stat_n: dict[str, int] = {}
         self.sinks: list[MetricSink] = []  # also receive every metrics row and evaluation
         self._next_checkpoint = cfg.checkpoint_every
         self.last_eval: dict = {}
-        self._t0 = time.perf_counter()
+        self._t0 = time.perf_counter()  # a learner process's start-up counts in the wall time
+        self.learning: Learning = (
+            LearnerProcess(LearnerSetup(LEARNERS[cfg.learner].cls, run, *scaling), self.agent, self.counters, self.out)
+            if cfg.learner_process
+            else LocalLearning(self.agent, cfg, self.lam, self.rng, self.counters, OBS_DIM, ACT_DIM)
+        )
+
+    @property
+    def replay(self) -> TaggedReplay:
+        """The tagged replay buffer, where the updates run in this process (AttributeError otherwise)."""
+        if not isinstance(self.learning, LocalLearning):
+            raise AttributeError("the replay buffer is in the learner's process")
+        return self.learning.replay
 
     # -- the loop --------------------------------------------------------------------------------
     def run(self, progress: Callable[[dict], None] | None = None, stop_at: int | None = None) -> None:
@@ -119,6 +132,7 @@ class Trainer:
             self._log(row)
             if progress:
                 progress(row)
+            self.learning.episode_end(self.counters.step)  # LearnerProcessError if its learner is lost
             if self.stop_requested.is_set():
                 break  # the caller checkpoints the state as it is
             if self.counters.step >= self.counters.next_eval:
@@ -136,11 +150,7 @@ class Trainer:
         return self.guidance.enabled and self.counters.step < self.guidance.intake_steps
 
     def lam(self) -> float:
-        return (
-            expert_ratio(self.counters.step, self.cfg.total_steps, self.guidance.lam_max, self.guidance.lam_min)
-            if self.guidance.enabled
-            else 0.0
-        )
+        return lam_at(self.counters.step, self.cfg, self.guidance)
 
     def _env_step(self, action: np.ndarray, zeta: int | None, obs: np.ndarray, stored: np.ndarray | None = None):
         """Execute `action`; store the transition with `stored` as its action (default: the executed one), tagged
@@ -152,23 +162,14 @@ class Trainer:
         if zeta is None:
             self._segment.append(transition)
         else:
-            self.replay.add(*transition, zeta)
+            self.learning.add(*transition, zeta)
         self.counters.step += 1
-        if len(self.replay) >= self.cfg.learning_starts:
-            t = time.perf_counter()
-            stats, ratio = self.agent.learn(self.replay, self.lam(), self.cfg.batch_size, self.rng)
-            self.counters.update_s += time.perf_counter() - t
-            self.counters.last_ratio = ratio
-            self._ratio_sum += ratio
-            self._ratio_n += 1
-            for k, v in stats.items():
-                self._stat_sum[k] = self._stat_sum.get(k, 0.0) + v
-                self._stat_n[k] = self._stat_n.get(k, 0) + 1
+        self.learning.stepped(self.counters.step)
         return next_obs, r, term, trunc, info
 
     def _flush_segment(self, zeta: int) -> None:
         for obs, act, rew, next_obs, done in self._segment:
-            self.replay.add(obs, act, rew, next_obs, done, zeta)
+            self.learning.add(obs, act, rew, next_obs, done, zeta)
         self._segment = []
 
     def _agent_episode(self, end: int) -> dict:
@@ -256,10 +257,7 @@ class Trainer:
         self, kind: str, ret: float, success: bool, outcome, length: int, triggered: bool, intervened: bool = False
     ) -> dict:
         """A metrics row; `expert_ratio` and the UPDATE_FIELDS are means over the updates since the last row."""
-        ratio = self._ratio_sum / self._ratio_n if self._ratio_n else self.counters.last_ratio
-        self._ratio_sum, self._ratio_n = 0.0, 0
-        means = {k: float(f"{self._stat_sum[k] / n:.6g}") for k, n in self._stat_n.items()}
-        self._stat_sum, self._stat_n = {}, {}
+        ratio, means = self.learning.stats.take(self.counters.last_ratio)
         return {
             "step": self.counters.step,
             "episode": self.counters.episode,
@@ -323,9 +321,7 @@ class Trainer:
         state = {
             "version": __version__,
             "config": self._fingerprint(),
-            "agent": self.agent.state_dict(),
-            "agent_pool": self.replay.agent.state(),
-            "expert_pool": self.replay.expert.state(),
+            **self.learning.state(),  # the learner's networks and optimizers, both pools
             "rng": self.rng.bit_generator.state,
             "torch_rng": torch.get_rng_state(),
             "annotator_rng": None if source_rng is None else source_rng.bit_generator.state,
@@ -351,9 +347,7 @@ class Trainer:
                 f"{path}: written with a different configuration (sections differ: {', '.join(diff)})"
             )
         try:
-            self.agent.load_state_dict(state["agent"])
-            self.replay.agent.load(state["agent_pool"])
-            self.replay.expert.load(state["expert_pool"])
+            self.learning.load(state)
             self.rng.bit_generator.state = state["rng"]
             torch.set_rng_state(state["torch_rng"])
             if state["annotator_rng"] is not None:
@@ -379,4 +373,7 @@ class Trainer:
             log.info("reloaded %d annotations from %s", n, path)
 
     def close(self) -> None:
-        self.env.close()
+        try:
+            self.learning.close()
+        finally:
+            self.env.close()

@@ -34,6 +34,11 @@ class TrainConfig:
     eval_episodes: Annotated[int, Range(1, 10**5)] = 10
     checkpoint_every: Annotated[int, Range(1, 10**9)] = 2_000  # steps; checkpoints are written at the next episode end
     torch_threads: Annotated[int, Range(1, 1024)] = 1
+    #: Run the learner's updates in a process of their own (`policies/learner_process.py`): the env loop acts with the
+    #: latest weights it has received and never waits for an update. false: updates alternate with steps in one thread.
+    learner_process: bool = False
+    #: With learner_process: the learner publishes the actor's weights every this many `learn` calls.
+    publish_every: Annotated[int, Range(1, 10**6)] = 10
 
     def __post_init__(self) -> None:
         check_ranges(self, "train")

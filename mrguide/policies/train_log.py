@@ -33,6 +33,10 @@ METRIC_FIELDS = (
     "intervened",
 )  # new columns go at the end
 EVAL_FIELDS = ("step", "success_rate", "mean_return")
+#: learner.csv (a run with a learner process), one row per agent episode: the actor's step, the version of the weights
+#: it acts with and the actor's step those weights were learned up to (lag_steps: the difference), the learner's
+#: updates as last published, and whether the learner's process was alive.
+LEARNER_FIELDS = ("step", "weights_version", "weights_step", "lag_steps", "learner_updates", "alive")
 
 
 class MetricSink(Protocol):
@@ -71,8 +75,9 @@ def replace_csv(path: Path, fields: tuple[str, ...], rows: list[dict]) -> None:
 
 
 def truncate_logs(out: Path, step: int) -> None:
-    """Drop the rows of metrics.csv and eval.csv in `out` written after `step` (a resumed run writes them again)."""
-    for name, fields in (("metrics.csv", METRIC_FIELDS), ("eval.csv", EVAL_FIELDS)):
+    """Drop the rows of metrics.csv, eval.csv and learner.csv in `out` written after `step` (a resumed run writes them
+    again)."""
+    for name, fields in (("metrics.csv", METRIC_FIELDS), ("eval.csv", EVAL_FIELDS), ("learner.csv", LEARNER_FIELDS)):
         path = out / name
         if not path.exists():
             continue
