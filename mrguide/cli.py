@@ -7,6 +7,7 @@ import logging
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 from mrguide.cli_args import ArgumentParser, nonnegative_int, positive_int
 from mrguide.drivers.errors import DriverError
@@ -72,6 +73,13 @@ def cmd_main(args: argparse.Namespace) -> int:
     return rc or rc2
 
 
+def _cell_learner(*args: Any) -> Any:
+    """`deploy --learn`'s learner (torch: imported only when asked for)."""
+    from mrguide.policies.cell_learner import CellLearner
+
+    return CellLearner(*args)
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = ArgumentParser(prog="mrguide", description=__doc__)
     p.add_argument("-v", "--verbose", action="store_true", help="debug logging")
@@ -93,7 +101,7 @@ def build_parser() -> argparse.ArgumentParser:
     from mrguide.twin.commands import add_expert_command, run_twin_calibration
 
     add_expert_command(sub)
-    add_deploy_command(sub, CellDryRun)
+    add_deploy_command(sub, CellDryRun, _cell_learner)
     from mrguide.deploy.cycle_report import add_cycles_command
 
     add_cycles_command(sub)

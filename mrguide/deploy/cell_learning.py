@@ -22,14 +22,29 @@ import threading
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Annotated
 
 import numpy as np
 
+from mrguide.config import Range, check_ranges
 from mrguide.deploy.policy import ExportedPolicy, PolicyFileError
 from mrguide.robot import RobotSpec
 from mrguide.task import Outcome, TaskConfig
 
 log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class LearningConfig:
+    """[deploy.learning]: how the cell explores while it learns (`mrguide deploy --cycles N --learn RUN_DIR`)."""
+
+    #: std of the Gaussian noise on every action while learning on the cell (normalized units: 0.02 is about 5 mm
+    #: of the shipped workspace box). Training explores with 0.1; on a cell that much jitters the cup centimetres
+    #: over the part while it presses (a dry run's drives then fault on following error), so a tenth of it, up to 0.1.
+    exploration: Annotated[float, Range(0.0, 0.1)] = 0.02
+
+    def __post_init__(self) -> None:
+        check_ranges(self, "deploy.learning")
 
 
 @dataclass(frozen=True)
@@ -139,13 +154,18 @@ class PolicyVersions:
 
 @dataclass
 class LearningActor:
-    """What the runtime calls while it learns on the cell: a new episode (the newest policy taken in, an unjudged
-    action dropped), each decision's action, each judgement."""
+    """What the runtime calls while it learns on the cell: a new episode (the transitions so far handed on by
+    `between`, the newest policy taken in, an unjudged action dropped), each decision's action, each judgement."""
 
     versions: PolicyVersions
     tap: TransitionTap
+    #: called between episodes, before the newest policy is taken: the learner's side sends what the tap gathered
+    #: and offers the versions it has (nothing runs on the cell meanwhile: the arm stands, the watchdog is off)
+    between: Callable[[], None] | None = None
 
     def episode_start(self) -> int:
         """The policy version this episode acts with."""
         self.tap.reset()
+        if self.between is not None:
+            self.between()
         return self.versions.take_newest()

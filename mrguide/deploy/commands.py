@@ -54,8 +54,23 @@ class DryRunBackend(Protocol):
     ) -> Any: ...
 
 
-def add_deploy_command(sub: argparse._SubParsersAction, dry_run_factory: Callable[[ConfigFile], DryRunBackend]) -> None:
-    """Register `mrguide deploy`; `dry_run_factory(config_file)` builds the simulated cell's DryRunBackend."""
+class CellLearning(Protocol):
+    """What `deploy --learn` needs from on-cell learning's learner side: the runtime's actor, its state, an end."""
+
+    actor: Any  # cell_learning.LearningActor
+
+    def status(self) -> dict[str, Any]: ...
+
+    def close(self) -> None: ...
+
+
+def add_deploy_command(
+    sub: argparse._SubParsersAction,
+    dry_run_factory: Callable[[ConfigFile], DryRunBackend],
+    learning_factory: Callable[..., CellLearning],
+) -> None:
+    """Register `mrguide deploy`; `dry_run_factory(config_file)` builds the simulated cell's DryRunBackend,
+    `learning_factory(run_dir, policy, robot, task, exploration, seed, resume)` the learner of `--learn`."""
     sp = sub.add_parser("deploy", help="run an exported policy on the cobot, or --dry-run it against the simulated bus")
     sp.add_argument("--policy", required=True, help="exported policy file (.npz) from `mrguide train`")
     sp.add_argument("--config", help="TOML config ([deploy], [safety], [robot], [task]; [twin] for dry runs)")
@@ -75,13 +90,19 @@ def add_deploy_command(sub: argparse._SubParsersAction, dry_run_factory: Callabl
     )
     sp.add_argument("--seed", type=nonnegative_int, help="dry run: object/goal layouts; default: [deploy] seed")
     sp.add_argument("--log", help="run log path (JSONL); default under [deploy] log_dir")
+    sp.add_argument(
+        "--learn",
+        metavar="RUN_DIR",
+        help="with --cycles: learn on the cell, the learner of the training run in RUN_DIR (its checkpoint) beside "
+        "the runtime; versions, learner.csv and its state in RUN_DIR/on-cell (--resume goes on from it)",
+    )
     add_set_argument(
         sp,
         "set a [deploy] or [safety] key for this run, after --config (e.g. --set deploy.cycles.max_retries=1 "
         "--set safety.stall_timeout=0.3); repeatable",
     )
     sp.add_argument("--quiet", action="store_true")
-    sp.set_defaults(func=cmd_deploy, dry_run_factory=dry_run_factory)
+    sp.set_defaults(func=cmd_deploy, dry_run_factory=dry_run_factory, learning_factory=learning_factory)
 
 
 def _bus_config(config_path: str | None, bus_config: str, robot):
@@ -125,16 +146,24 @@ def cmd_deploy(args: argparse.Namespace) -> int:
     log_path, where = _log_path(args, dcfg)
     start = _first_cycle(args, log_path)
     header = _run_header(args, dcfg, bus, policy, episodes, seed) | {"cycles": args.cycles, "first_cycle": start[0]}
+    learner = _cell_learner(args, dcfg, policy, spec, task, seed)
     camera = _pose_feed(args, dcfg, task, seed, dry if args.dry_run else None)
     try:
         with RunLog(log_path, header, where) as run_log:
-            inputs = DeployInputs(args.policy, policy, bus, spec, task, safety, dcfg, camera, run_log)
+            actor = learner.actor if learner else None
+            inputs = DeployInputs(args.policy, policy, bus, spec, task, safety, dcfg, camera, run_log, actor)
             summary = _run(args, inputs, dry if args.dry_run else None, episodes, seed, start)
             camera_stats = _log_pose_feed(camera, run_log, dcfg.pose_source)
+            if learner:
+                run_log.write("learning", **learner.status())
     finally:
         if camera:
             camera.close()
+        if learner:
+            learner.close()
     print(summary.text() + (f"\n{camera_stats.text()}" if camera_stats else ""))
+    if learner:
+        print(f"on-cell learning: {learner.status()}")
     print(f"run log: {log_path}")
     return 0 if summary.stopped is None else 1
 
@@ -157,6 +186,15 @@ def _overridden(dcfg: DeployConfig, safety: Any, overrides: list[tuple[str, Any]
         else:
             raise ConfigError(f"--set {key}: deploy sets keys of {' and '.join(SET_SECTIONS)}, not [{section}]")
     return dcfg, safety
+
+
+def _cell_learner(args: argparse.Namespace, dcfg, policy, spec, task, seed: int) -> CellLearning | None:
+    """With --learn: the training run's learner, started beside the runtime (InputError without --cycles)."""
+    if not args.learn:
+        return None
+    if args.cycles is None:
+        raise InputError("--learn needs --cycles: the cell learns over production cycles")
+    return args.learning_factory(Path(args.learn), policy, spec, task, dcfg.learning.exploration, seed, args.resume)
 
 
 def _first_cycle(args: argparse.Namespace, log_path: Path) -> tuple[int, int]:
@@ -195,7 +233,7 @@ def _run(
     first = start[0] if args.cycles else 0  # a resumed run's bar counts the log's cycles
     with tqdm(total=total, initial=first, desc=desc, unit=unit, disable=args.quiet) as bar:
         if args.cycles:
-            return run_cycles(cycle_run(args, inputs.dcfg, seed, start, bar), dry, inputs)
+            return run_cycles(cycle_run(args, inputs.dcfg, seed, start, bar, inputs.learning), dry, inputs)
 
         def tick(report) -> None:
             bar.update(1)

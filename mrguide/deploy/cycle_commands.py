@@ -59,12 +59,16 @@ class RobotFeeder:
         input(f"cycle {cycle}: remove the part the alarm left behind and press Enter ")
 
 
-def cycle_run(args: argparse.Namespace, dcfg: DeployConfig, seed: int, start: tuple[int, int], bar: Any) -> CycleRun:
-    """What `--cycles` asks for, from `start` (cycle, attempt); the progress bar ticks once per cycle."""
+def cycle_run(
+    args: argparse.Namespace, dcfg: DeployConfig, seed: int, start: tuple[int, int], bar: Any, learning: Any = None
+) -> CycleRun:
+    """What `--cycles` asks for, from `start` (cycle, attempt); the progress bar ticks once per cycle (with
+    `learning`, the on-cell learner's actor, it names the policy version acted with)."""
 
     def tick(report: CycleReport) -> None:
         bar.update(1)
-        bar.set_postfix(placed=report.placed, attempts=len(report.outcomes), s=f"{report.cycle_s:.1f}")
+        version = {"policy": f"v{learning.versions.version}"} if learning is not None else {}
+        bar.set_postfix(placed=report.placed, attempts=len(report.outcomes), s=f"{report.cycle_s:.1f}", **version)
 
     return CycleRun(start[0], args.cycles - start[0], seed, dcfg.cycles, tick, first_attempt=start[1])
 

@@ -12,6 +12,7 @@ import numpy as np
 
 from mrguide.config import ConfigError, Range, check_number, check_ranges
 from mrguide.deploy.camera import CameraSourceConfig
+from mrguide.deploy.cell_learning import LearningConfig
 from mrguide.deploy.cycles import CycleConfig
 from mrguide.deploy.episode import EpisodeReport, RunStopped
 from mrguide.deploy.runtime import Runtime
@@ -50,6 +51,8 @@ class DeployConfig:
     runtime: RuntimeConfig = field(default_factory=RuntimeConfig)
     #: Production cycles (`deploy --cycles`): retries, alarms, the pick region ([deploy.cycles]).
     cycles: CycleConfig = field(default_factory=CycleConfig)
+    #: Learning on the cell (`deploy --cycles N --learn RUN_DIR`): its exploration ([deploy.learning]).
+    learning: LearningConfig = field(default_factory=LearningConfig)
 
     def __post_init__(self) -> None:
         if self.pose_source not in POSE_SOURCES:
