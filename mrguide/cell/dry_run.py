@@ -20,7 +20,7 @@ from mrguide.cell.plants import build_plant
 from mrguide.cell.twin_plant import TwinObjectPose
 from mrguide.config import ConfigError
 from mrguide.deploy.cell_learning import LearningActor
-from mrguide.deploy.cycles import CycleRun, CycleRunner, CycleSummary
+from mrguide.deploy.cycles import CycleReport, CycleRun, CycleRunner, CycleSummary
 from mrguide.deploy.episode import EpisodeReport
 from mrguide.deploy.policy import ExportedPolicy, check_decision_period
 from mrguide.deploy.runlog import RunLog
@@ -35,6 +35,7 @@ from mrguide.drivers.realtime import settled_heap
 from mrguide.plant import FedCell
 from mrguide.pose_source import ObjectPoseSource
 from mrguide.robot import RobotSpec, load_robot
+from mrguide.task import TaskConfig, placed_at_goal
 from mrguide.twin.env import EnvConfig
 from mrguide.twin.scene import Scene
 
@@ -249,5 +250,26 @@ def dry_run_cycles(
     ):
         runtime.learning = learning
         feeder = TwinFeeder(cell, env_cfg, run.seed, on_placed)
-        runner = CycleRunner(runtime, feeder, feeder.goal, run.config, run.after_cycle)
+        scored = _scored(run.after_cycle, cell, feeder, env_cfg.task, run_log)
+        runner = CycleRunner(runtime, feeder, feeder.goal, run.config, scored)
         return runner.run(run.start, run.count, run.interrupt, run.first_attempt)
+
+
+def _scored(
+    after_cycle: Callable[[CycleReport], None] | None,
+    cell: SimulatedCell,
+    feeder: TwinFeeder,
+    task: TaskConfig,
+    run_log: RunLog,
+) -> Callable[[CycleReport], None]:
+    """`after_cycle`, first writing the dry run's score of the cycle to the run log (`scored`): whether the part
+    truly lies at its goal, read from the simulated cell's state — which nothing the runtime or a learner reads."""
+
+    def after(report: CycleReport) -> None:
+        part = cell.plant.object_position()
+        at_goal = report.placed and placed_at_goal(task, part, feeder.goal(report.cycle))
+        run_log.write("scored", cycle=report.cycle, at_goal=bool(at_goal), part=part)
+        if after_cycle:
+            after_cycle(report)
+
+    return after

@@ -41,6 +41,7 @@ def test_a_dry_run_learns_on_the_cell_and_a_second_session_must_resume(run_dir, 
     assert main([*args, "--cycles", "2", "--learn", str(run_dir)]) == 0
     records = read_log(log)
     assert len([r for r in records if r["kind"] == "policy_version"]) == 2  # one per episode
+    assert [r["cycle"] for r in records if r["kind"] == "scored"] == [0, 1]  # the dry run's truth, per cycle
     (learning,) = [r for r in records if r["kind"] == "learning"]
     assert learning["lost"] is None
     assert (run_dir / ON_CELL / STATE).exists() and (run_dir / ON_CELL / "learner.csv").exists()
