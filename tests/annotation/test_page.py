@@ -60,6 +60,7 @@ def _shows_the_request(page, s, req, spec) -> np.ndarray:
     assert page.text("st-lambda") == "0.775"
     assert page.text("st-success") == "35 %"
     assert page.text("st-asked") == "212 / 1930"
+    assert page.text("st-robot") == "5.2 min, 80 resets, 9 probes"  # the session's cost beside the marks
     # No headset in plain headless Chromium: the XR button says so instead of failing later.
     assert page.page.is_disabled("#xr-button")
     assert "headset" in page.text("xr-message").lower() or "webxr" in page.text("xr-message").lower()
@@ -121,6 +122,9 @@ def test_page_shows_request_drag_keys_and_submit(browser, page_served, spec, tmp
         remarks=3,
         skipped=1,
         fallbacks=0,
+        probes=9,
+        robot_s=312.0,
+        resets=80,
         **{"lambda": 0.775},
     )
     page = browser.open(server.url)

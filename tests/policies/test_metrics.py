@@ -174,3 +174,19 @@ def test_an_interrupted_truncation_leaves_the_log_as_it_was(tmp_path, monkeypatc
     finally:
         again.close()
     assert read(path) == kept  # the truncation, done
+
+
+def test_rows_count_the_sessions_cost_beside_the_marks(tmp_path):
+    """probes, robot seconds (every decision for the twin's decision period) and part resets (each agent episode,
+    each demonstration put back to its start), as the counters have them when the row is written."""
+    tr = make(tmp_path, "cost")
+    try:
+        tr.run(stop_at=300)
+        rows = read(tmp_path / "cost" / "metrics.csv")
+        last = rows[-1]
+        assert float(last["robot_s"]) == pytest.approx(tr.counters.step * 0.1, abs=0.05)
+        assert int(last["resets"]) == tr.counters.episode + tr.counters.interventions > tr.counters.episode
+        assert int(last["probes"]) == tr.counters.probes
+        assert [float(r["robot_s"]) for r in rows] == sorted(float(r["robot_s"]) for r in rows)
+    finally:
+        tr.close()

@@ -371,6 +371,7 @@ async function main() {
     $('st-remarks').textContent = fmt(s.remarks);
     $('st-interventions').textContent = s.interventions === undefined ? '–' : `${s.interventions} (${fmt(s.person_interventions)})`;
     $('st-skipped').textContent = `${fmt(s.skipped)} / ${fmt(s.fallbacks)}`;
+    $('st-robot').textContent = s.robot_s === undefined ? '–' : `${(s.robot_s / 60).toFixed(1)} min, ${fmt(s.resets)} resets, ${fmt(s.probes)} probes`;
     $('st-waiting').textContent = s.waiting ? 'yes — for an annotation' : s.waiting === false ? 'no' : '–';
     $('st-clients').textContent = fmt(s.clients);
     const refused = s.refused ? Object.values(s.refused).reduce((a, b) => a + b, 0) : undefined;
