@@ -255,6 +255,10 @@ def dry_run_cycles(
         return runner.run(run.start, run.count, run.interrupt, run.first_attempt)
 
 
+#: m: a scored part lies on the table when its centre is this close to its resting height (not carried off by the cup).
+REST_TOLERANCE = 0.01
+
+
 def _scored(
     after_cycle: Callable[[CycleReport], None] | None,
     cell: SimulatedCell,
@@ -263,11 +267,13 @@ def _scored(
     run_log: RunLog,
 ) -> Callable[[CycleReport], None]:
     """`after_cycle`, first writing the dry run's score of the cycle to the run log (`scored`): whether the part
-    truly lies at its goal, read from the simulated cell's state — which nothing the runtime or a learner reads."""
+    truly lies at its goal, resting on the table (within `REST_TOLERANCE` of its height there), read from the
+    simulated cell's state — which nothing the runtime or a learner reads."""
 
     def after(report: CycleReport) -> None:
         part = cell.plant.object_position()
-        at_goal = report.placed and placed_at_goal(task, part, feeder.goal(report.cycle))
+        resting = abs(part[2] - 0.5 * task.object_height) <= REST_TOLERANCE
+        at_goal = report.placed and resting and placed_at_goal(task, part, feeder.goal(report.cycle))
         run_log.write("scored", cycle=report.cycle, at_goal=bool(at_goal), part=part)
         if after_cycle:
             after_cycle(report)

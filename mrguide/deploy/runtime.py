@@ -346,7 +346,8 @@ class Runtime:
         else:
             self.supervisor.ik_result(True)
             record["q_target"] = cmd.q_target
-        self.cobot.set_vacuum(cmd.vacuum, blow_off=self.seal.blow_off and not cmd.vacuum)
+        # every release with a blow-off pulse (one decision): a cup whose valve only closes stays evacuated for a second
+        self.cobot.set_vacuum(cmd.vacuum, blow_off=not cmd.vacuum and (vac.vacuum_on or self.seal.blow_off))
         self._stream_decision(t, t_read, inference_ms, record, report)
         return None
 

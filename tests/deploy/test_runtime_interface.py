@@ -190,3 +190,28 @@ def test_a_decision_period_within_rounding_of_the_control_period_runs(tmp_path):
             0.004 * (1 - 5e-10),
         )
     assert rt.cycles == 1
+
+
+def test_every_release_blows_off_for_one_decision(tmp_path):
+    """A cup whose valve only closes stays evacuated for a second (the MuJoCo cell carried parts off on the depart
+    move): the decision that turns the vacuum off sends a blow-off pulse, the next one ends it."""
+    spec, task = load_robot(), TaskConfig(horizon=8)
+    cobot = IdealCobot(spec.q_home)
+    calls = []
+    set_vacuum = cobot.set_vacuum
+    cobot.set_vacuum = lambda on, blow_off=False: calls.append((bool(on), bool(blow_off))) or set_vacuum(on, blow_off)
+    step = iter(range(100))
+
+    def policy(obs):
+        a = oracle_action(obs, task, spec.workspace.to_normalized)
+        a[3] = 1.0 if next(step) in (2, 3) else -1.0  # vacuum on for two decisions, then off
+        return a
+
+    with (
+        RunLog(tmp_path / "log.jsonl", {"test": "blow-off"}) as log,
+        Runtime(cobot, policy, FixedObjectPose((0.5, -0.075, 0.025)), spec, task, log, 0.1, RuntimeConfig()) as rt,
+    ):
+        rt.run_episode(np.array([0.5, 0.21, 0.025]), 0)
+    decisions = calls[: task.horizon]
+    assert decisions[:5] == [(False, False), (False, False), (True, False), (True, False), (False, True)]
+    assert decisions[5:] == [(False, False)] * (len(decisions) - 5)
