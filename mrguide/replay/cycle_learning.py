@@ -33,7 +33,7 @@ class Cycle:
     at_goal: bool
     attempts: int
     minutes: float  # the cell's wall clock at the cycle's end, from the log's first cycle
-    version: int  # the policy version of the cycle's first attempt (0: the file given)
+    version: int  # the policy version of the cycle's first attempt (0: the file given; no attempt: the last before)
 
 
 def cycles(path: Path) -> list[Cycle]:
@@ -54,7 +54,7 @@ def cycles(path: Path) -> list[Cycle]:
     out, clock, episode = [], 0.0, 0
     for r in ends:
         clock += float(r["cycle_s"])
-        version = versions[episode] if episode < len(versions) else 0
+        version = versions[min(episode, len(versions) - 1)] if versions else 0  # a cycle with no attempt: the last
         out.append(Cycle(r["cycle"], scored.get(r["cycle"], False), len(r["outcomes"]), clock / 60.0, version))
         episode += len(r["outcomes"])
     return out

@@ -38,3 +38,8 @@ def test_a_log_without_scores_is_refused(tmp_path, capsys):
         log.write("cycle_end", cycle=0, placed=True, outcomes=["success"], cycle_s=5.0)
     assert main([str(tmp_path / "robot.jsonl"), "--out", str(tmp_path / "out")]) == 1
     assert "no scored cycles" in capsys.readouterr().err
+
+
+def test_a_cycle_without_an_attempt_keeps_the_version_acted_with_last(tmp_path):
+    _log(tmp_path / "alarm.jsonl", [(True, 1), (True, 2), (False, 0)])  # the last cycle's part never came
+    assert [r.version for r in cycles(tmp_path / "alarm.jsonl")] == [0, 1, 2]
