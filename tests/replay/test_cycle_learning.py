@@ -15,7 +15,7 @@ def _log(path, results: list[tuple[bool, int]]) -> None:
             for _ in range(attempts):
                 log.write("policy_version", episode=episode, version=episode)
                 episode += 1
-            outcomes = ["timeout"] * (attempts - 1) + ["success" if at_goal else "timeout"]
+            outcomes = (["timeout"] * (attempts - 1) + ["success" if at_goal else "timeout"])[:attempts]
             log.write("cycle_end", cycle=cycle, placed=at_goal, outcomes=outcomes, cycle_s=6.0)
             log.write("scored", cycle=cycle, at_goal=at_goal, part=[0.5, 0.2, 0.025])
 
