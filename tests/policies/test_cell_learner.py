@@ -40,7 +40,7 @@ def trained(tmp_path_factory):
 
 def _learner(run_dir, task, resume=False) -> CellLearner:
     spec = load_robot()
-    return CellLearner(run_dir, ExportedPolicy.load(run_dir / "policy.npz", spec, task), spec, task, 0.02, 0, resume)
+    return CellLearner(run_dir, ExportedPolicy.load(run_dir / "policy.npz", spec, task), spec, task, 0.0, 0, resume)
 
 
 def _episode(learner: CellLearner, rng: np.random.Generator, decisions: int = 20) -> None:
