@@ -43,3 +43,12 @@ def test_a_log_without_scores_is_refused(tmp_path, capsys):
 def test_a_cycle_without_an_attempt_keeps_the_version_acted_with_last(tmp_path):
     _log(tmp_path / "alarm.jsonl", [(True, 1), (True, 2), (False, 0)])  # the last cycle's part never came
     assert [r.version for r in cycles(tmp_path / "alarm.jsonl")] == [0, 1, 2]
+
+
+def test_the_committed_on_cell_table_is_what_its_logs_say(tmp_path):
+    from pathlib import Path
+
+    results = Path(__file__).parents[2] / "docs" / "results" / "on-cell"
+    logs = [str(results / f"{name}-seed0.jsonl.gz") for name in ("frozen", "learn-e0", "learn-e002")]
+    assert main([*logs, "--out", str(tmp_path)]) == 0
+    assert (tmp_path / "learning.md").read_text() == (results / "learning.md").read_text()

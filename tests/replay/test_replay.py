@@ -122,3 +122,14 @@ def test_a_slim_copy_keeps_the_first_success_and_replays_what_it_holds(dry_log, 
     labels = {p.split("/")[1] for p in _rows(rrd)[1] if p.endswith("/tcp")}
     assert labels == {load_run(slim)[0].label}
     run_cli(["replay", f"{slim}:1", "--save", tmp_path / "x.rrd"]).assert_refused("holds no decisions")
+
+
+def test_a_copy_without_decisions_keeps_every_other_record(dry_log, tmp_path):
+    """`runlog_slim --no-decisions`: a long run's cycles and episodes without its decisions (the on-cell results)."""
+    from mrguide.deploy.runlog_slim import main as slim_main
+
+    log = tmp_path / "copy.jsonl"
+    log.write_bytes(dry_log.read_bytes())
+    assert slim_main(["--no-decisions", str(log)]) == 0
+    full, kept = read_log(dry_log), read_log(tmp_path / "copy.jsonl.gz")
+    assert kept == [r for r in full if r["kind"] != "decision"] and len(kept) < len(full)
