@@ -89,6 +89,28 @@ def test_a_split_run_trains_and_writes_the_usual_metrics(tmp_path):
     assert [int(e["step"]) for e in evals] == [600]
 
 
+def test_the_periodic_evaluations_are_made_beside_the_actor_the_final_one_by_it(tmp_path):
+    tr = make(tmp_path, "evals", eval_every=200)  # no checkpoint before the end: the results come when they come
+    evaluated_here: list[int] = []
+    evaluate = tr.evaluate
+
+    def by_the_actor() -> dict:
+        evaluated_here.append(tr.counters.step)
+        return evaluate()
+
+    tr.evaluate = by_the_actor  # type: ignore[method-assign]
+    try:
+        tr.run()
+    finally:
+        tr.close()
+    _, rows = read_csv(tmp_path / "evals" / "eval.csv")
+    steps = [int(r["step"]) for r in rows]
+    # every periodic evaluation arrived, in order (the final one waited for them); only the final one by the actor
+    assert len(steps) == tr.counters.evaluations >= 3 and steps == sorted(steps) and steps[-1] == 600
+    assert evaluated_here == [600] and all(0.0 <= float(r["success_rate"]) <= 1.0 for r in rows)
+    assert tr.last_eval["step"] == 600
+
+
 def test_the_sac_peer_learns_in_a_learner_process_too(tmp_path):
     tr = make(tmp_path, "sac", learner="sac", total_steps=300)
     initial = acting_weights(tr.agent)
