@@ -142,10 +142,10 @@ class Trainer:
             if self.stop_requested.is_set():
                 break  # the caller checkpoints the state as it is
             if self.counters.step >= self.counters.next_eval:
-                if self.counters.step < end:
+                if self.counters.step < stop:
                     self._evaluate_beside()
                 else:
-                    self.evaluate()
+                    self.evaluate()  # at the stop, by the actor: that of the policy exported
                 self.counters.next_eval += self.cfg.eval_every
             if self.counters.step >= end and self.last_eval.get("step") != self.counters.step:
                 self.evaluate()  # the final policy is always evaluated, by the actor: the exported one
