@@ -68,6 +68,22 @@ def pin_process(pid: int, core: int) -> None:
         os.sched_setaffinity(int(tid), {core})
 
 
+def train_run(run: RunConfig, cores: list[int]) -> tuple[TimedTrainer, float]:
+    """The run, in a scratch directory; (its trainer, the seconds it took to start: a learner process's included, put
+    on the second of `cores`)."""
+    with tempfile.TemporaryDirectory() as out:
+        t = time.perf_counter()
+        tr = TimedTrainer(run, out)
+        start = time.perf_counter() - t
+        try:
+            if isinstance(tr.learning, LearnerProcess) and tr.learning.process.pid and len(cores) > 1:
+                pin_process(tr.learning.process.pid, cores[1])
+            tr.run()
+        finally:
+            tr.close()
+    return tr, start
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--steps", type=int, default=20_000)
@@ -89,16 +105,7 @@ def main() -> None:
     )
     run = run.replace(train=train)
     tc, ec = run.train, run.env
-    with tempfile.TemporaryDirectory() as out:
-        t = time.perf_counter()
-        tr = TimedTrainer(run, out)
-        start = time.perf_counter() - t  # a learner process's start included
-        try:
-            if isinstance(tr.learning, LearnerProcess) and tr.learning.process.pid and len(cores) > 1:
-                pin_process(tr.learning.process.pid, cores[1])
-            tr.run()
-        finally:
-            tr.close()
+    tr, start = train_run(run, cores)
     wall = tr.wall_s()
     twin = twin_alone(ec, tr.counters.step)
     res = {
@@ -126,7 +133,7 @@ def main() -> None:
     print(f"{'guided training steps':<40} {tr.counters.step}")
     print(f"{'TorchInductor cache at the start':<40} {res['compile_cache']} ({cache})")
     print(f"{'steps/s (env + update)':<40} {res['steps_per_s']:.1f}")
-    print(f"{'learner updates (learn calls: DDPG)':<40} {tr.agent.updates}")
+    print(f"{'learner updates':<40} {tr.agent.updates}")
     hidden = "x".join(map(str, run.learner.hidden))
     print(f"{f'update (batch {tc.batch_size}, {hidden} MLPs)':<40} {res['update_ms']:.2f} ms")
     print(f"{'wall time, scaled to 20k steps':<40} {res['wall_s_20k']:.0f} s")
