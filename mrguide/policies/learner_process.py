@@ -8,7 +8,9 @@ call for every environment step made once the buffer holds `learning_starts` tra
 makes them, each with λ_t of its step (Eq. 11), and makes them as fast as it can, never ahead of the data. Every
 `publish_every` calls it publishes the weights `act` reads (the learner's `acting_modules`) with a version number,
 the actor's step they are learned up to and the update statistics since its last publication; the actor acts with
-the latest it has received, taken in after each of its steps.
+the latest it has received, taken in after each of its steps. The run's periodic evaluations are made there too,
+on the learner's core, with the weights learned so far (in an env of its own, from the same start states); the final
+one, of the policy that is exported, by the actor.
 
 Before the actor's first step the learner makes one update on random data and undoes it, so that TorchInductor's
 build of the update (seconds) is not a lag the actor starts with; the trainer's wall time includes that start.
@@ -28,6 +30,7 @@ from __future__ import annotations
 import logging
 import multiprocessing
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -86,9 +89,16 @@ class LearnerProcess:
     #: The learner process's entry point (a test puts a slow or failing learner here).
     target = staticmethod(serve)
 
-    def __init__(self, setup: LearnerSetup, agent: Learner, counters: TrainerCounters, out: Path):
+    def __init__(
+        self,
+        setup: LearnerSetup,
+        agent: Learner,
+        counters: TrainerCounters,
+        out: Path,
+        on_evaluation: Callable[[dict], Any],
+    ):
         """Start the learner's process and wait until it is ready; `agent` is the actor's copy of the learner, which
-        acts with the weights the learner publishes."""
+        acts with the weights the learner publishes; `on_evaluation` records an evaluation's result as it comes."""
         ctx = multiprocessing.get_context("spawn")
         inbox_reader, inbox_writer = ctx.Pipe(duplex=False)
         outbox_reader, outbox_writer = ctx.Pipe(duplex=False)
@@ -100,6 +110,8 @@ class LearnerProcess:
         outbox_writer.close()
         self._inbox, self._outbox = Sender(inbox_writer, "mrguide-learner-feed"), outbox_reader
         self.agent, self.counters, self.log_path = agent, counters, out / "learner.csv"
+        self.on_evaluation = on_evaluation
+        self._evaluating = 0  # evaluations asked for, not answered yet
         self.stats = UpdateStats()
         self.version = self.weights_step = self._sent_step = 0
         self._rows: list[tuple] = []
@@ -135,6 +147,8 @@ class LearnerProcess:
                 message = self._outbox.recv()
                 if isinstance(message, Publication):
                     self._take(message)
+                elif message.kind == "evaluated":
+                    self._evaluated(message)
                 elif message.kind == "failed":
                     self._lose(f"the learner process failed: {message.error}")
         except (EOFError, OSError):
@@ -182,6 +196,24 @@ class LearnerProcess:
             say = "is behind: the actor goes on with" if self._behind else "caught up: the actor acts with"
             log.warning("the learner %s weights learned up to step %d at step %d", say, self.weights_step, step)
 
+    def evaluate(self, step: int, seeds: list[int]) -> None:
+        """Ask the learner's process to evaluate its policy from the start states `seeds` (the actor's evaluation at
+        its step `step`), on its own core; the result goes to `on_evaluation` when it comes, before any later
+        checkpoint's state."""
+        if self._lost is None:
+            self._inbox.put(Message("evaluate", state={"step": step, "seeds": seeds}))
+            self._evaluating += 1
+
+    def _evaluated(self, message: Message) -> None:
+        self._evaluating -= 1
+        assert message.state is not None
+        self.on_evaluation(message.state)
+
+    def settle(self) -> None:
+        """Wait for the evaluations asked for and not answered yet (their rows come before a later one's)."""
+        while self._evaluating and self._lost is None:
+            self._await("evaluated", "evaluating")
+
     def state(self) -> dict:
         """The learner's state, once it has taken in every transition stored so far (waits for its answer)."""
         self._send(self.counters.step)
@@ -223,9 +255,12 @@ class LearnerProcess:
                 raise LearnerProcessError(f"{self._ended()} while {doing}") from None
             if isinstance(message, Publication):
                 self._take(message)
-            elif message.kind == "failed":
+                continue
+            if message.kind == "evaluated":
+                self._evaluated(message)
+            if message.kind == "failed":
                 raise LearnerProcessError(f"the learner process failed while {doing}: {message.error}")
-            elif message.kind == kind:
+            if message.kind == kind:
                 return message
         raise LearnerProcessError(f"the learner process did not answer within {timeout:.0f} s while {doing}")
 

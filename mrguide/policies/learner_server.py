@@ -21,10 +21,11 @@ import numpy as np
 import torch
 
 from mrguide.policies.learners import Learner
-from mrguide.policies.learning import UpdateStats, lam_at
+from mrguide.policies.learning import UpdateStats, evaluate_policy, lam_at
 from mrguide.policies.replay_buffer import TaggedReplay
 from mrguide.policies.train_config import RunConfig
 from mrguide.task import ACT_DIM, OBS_DIM
+from mrguide.twin.env import PickPlaceEnv
 
 CLOSE_TIMEOUT = 30.0  # s for a process or thread to end when asked to (the actor kills the learner's after it)
 POLL_S = 0.2  # s between the checks of a wait
@@ -69,8 +70,8 @@ class Publication:
 
 @dataclass(frozen=True)
 class Message:
-    """A request to the learner ("state", "load" with `state`, "stop") or its answer ("ready", "state", "loaded",
-    "failed" with `error`)."""
+    """A request to the learner ("state", "load" with `state`, "evaluate" with {step, seeds}, "stop") or its answer
+    ("ready", "state", "loaded", "evaluated" with {step, success_rate, mean_return}, "failed" with `error`)."""
 
     kind: str
     state: dict | None = None
@@ -118,8 +119,9 @@ class LearnerServer:
     """The learner's process: the replay buffer, the learner, the updates it owes, its publications."""
 
     def __init__(self, setup: LearnerSetup, inbox: Connection, outbox: Sender):
-        run = setup.run
+        self.run = run = setup.run
         self.train, self.guidance = run.train, run.guidance
+        self.env: PickPlaceEnv | None = None  # for the evaluations the actor asks for
         torch.set_num_threads(self.train.torch_threads)
         self.agent: Learner = setup.cls(setup.obs_offset, setup.obs_scale, ACT_DIM, run.learner, seed=self.train.seed)
         self.replay = TaggedReplay(self.train.buffer_size, OBS_DIM, ACT_DIM)
@@ -133,6 +135,13 @@ class LearnerServer:
         """Warm up, say so, then take in messages and make the updates owed until told to stop."""
         self._warm_up()
         self.outbox.put(Message("ready"))
+        try:
+            self._serve()
+        finally:
+            if self.env is not None:
+                self.env.close()
+
+    def _serve(self) -> None:
         while True:
             while self.owed == 0 or self.inbox.poll():
                 if not self.inbox.poll(POLL_S):
@@ -191,12 +200,23 @@ class LearnerServer:
     def _answer(self, request: Message) -> Message:
         if request.kind == "state":
             return Message("state", state=self.state())
+        if request.kind == "evaluate":
+            assert request.state is not None
+            return Message("evaluated", state=self._evaluate(request.state["step"], request.state["seeds"]))
         assert request.kind == "load" and request.state is not None, request.kind
         try:
             self.load(request.state)
         except (KeyError, TypeError, RuntimeError, ValueError) as exc:
             return Message("loaded", error=f"{type(exc).__name__}: {exc}")
         return Message("loaded")
+
+    def _evaluate(self, step: int, seeds: list[int]) -> dict:
+        """The actor's evaluation at its step `step`, made here with the weights learned so far (in an env of this
+        process's own, built at the first request: a learner fed by another actor never builds one)."""
+        if self.env is None:
+            self.env = PickPlaceEnv(self.run.env)
+        success_rate, mean_return = evaluate_policy(self.env, self.agent.act, seeds)
+        return {"step": step, "success_rate": success_rate, "mean_return": mean_return}
 
     def state(self) -> dict:
         """What a checkpoint saves of the learner (copies: the sender pickles them later)."""

@@ -38,7 +38,7 @@ from mrguide.policies.guided_expert import GuidedExpert, make_expert_source
 from mrguide.policies.learner_process import LearnerProcess
 from mrguide.policies.learner_server import LearnerSetup
 from mrguide.policies.learners import LEARNERS, Learner, make_learner
-from mrguide.policies.learning import Learning, LocalLearning, lam_at
+from mrguide.policies.learning import Learning, LocalLearning, evaluate_policy, lam_at
 from mrguide.policies.networks import obs_scaling
 from mrguide.policies.replay_buffer import TaggedReplay
 from mrguide.policies.train_config import RunConfig, TrainConfig, arm_record
@@ -104,7 +104,13 @@ class Trainer:
         self.last_eval: dict = {}
         self._t0 = time.perf_counter()  # a learner process's start-up counts in the wall time
         self.learning: Learning = (
-            LearnerProcess(LearnerSetup(LEARNERS[cfg.learner].cls, run, *scaling), self.agent, self.counters, self.out)
+            LearnerProcess(
+                LearnerSetup(LEARNERS[cfg.learner].cls, run, *scaling),
+                self.agent,
+                self.counters,
+                self.out,
+                self.record_evaluation,
+            )
             if cfg.learner_process
             else LocalLearning(self.agent, cfg, self.lam, self.rng, self.counters, OBS_DIM, ACT_DIM)
         )
@@ -136,10 +142,13 @@ class Trainer:
             if self.stop_requested.is_set():
                 break  # the caller checkpoints the state as it is
             if self.counters.step >= self.counters.next_eval:
-                self.evaluate()
+                if self.counters.step < stop:
+                    self._evaluate_beside()
+                else:
+                    self.evaluate()  # at the stop, by the actor: that of the policy exported
                 self.counters.next_eval += self.cfg.eval_every
             if self.counters.step >= end and self.last_eval.get("step") != self.counters.step:
-                self.evaluate()  # the final policy is always evaluated
+                self.evaluate()  # the final policy is always evaluated, by the actor: the exported one
             if self.counters.step >= self._next_checkpoint or self.counters.step >= stop:
                 self.save_checkpoint()
                 self._next_checkpoint = (
@@ -297,24 +306,32 @@ class Trainer:
         training stream, so a window of two evaluations covers 2n distinct start states and the same
         seed's evaluations are comparable across variants and runs.
         """
-        successes, returns = 0, []
+        if isinstance(self.learning, LearnerProcess):
+            self.learning.settle()  # the evaluations asked of it first
+        success_rate, mean_return = evaluate_policy(self.env, self.agent.act, self._eval_seeds())
+        return self.record_evaluation(
+            {"step": self.counters.step, "success_rate": success_rate, "mean_return": mean_return}
+        )
+
+    def _eval_seeds(self) -> list[int]:
         n = self.cfg.eval_episodes
-        for k in range(n):
-            obs, _ = self.env.reset(seed=EVAL_SEED_BASE + self.counters.evaluations * n + k)
-            ret = 0.0
-            while True:
-                obs, r, term, trunc, info = self.env.step(self.agent.act(obs))
-                ret += r
-                if term or trunc:
-                    break
-            successes += int(info["is_success"])
-            returns.append(ret)
         self.counters.evaluations += 1
-        res = {"step": self.counters.step, "success_rate": successes / n, "mean_return": float(np.mean(returns))}
+        return [EVAL_SEED_BASE + (self.counters.evaluations - 1) * n + k for k in range(n)]
+
+    def _evaluate_beside(self) -> None:
+        """A periodic evaluation: by the learner's process, beside the actor, where it has one (its result is recorded
+        when it comes); by the actor otherwise."""
+        if isinstance(self.learning, LearnerProcess):
+            self.learning.evaluate(self.counters.step, self._eval_seeds())
+        else:
+            self.evaluate()
+
+    def record_evaluation(self, res: dict) -> dict:
+        """An evaluation's result ({step, success_rate, mean_return}) to eval.csv, the sinks and the log."""
         append_csv(self.out / "eval.csv", EVAL_FIELDS, res)
         for sink in self.sinks:
             sink.evaluation(res)
-        log.info("eval at step %d: success %.0f%%", self.counters.step, 100 * res["success_rate"])
+        log.info("eval at step %d: success %.0f%%", res["step"], 100 * res["success_rate"])
         self.last_eval = res
         return res
 

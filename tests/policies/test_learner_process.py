@@ -18,6 +18,7 @@ import torch
 from mrguide.policies.checkpoint import CheckpointError, read_checkpoint
 from mrguide.policies.learner_process import LearnerProcess, LearnerProcessError
 from mrguide.policies.learner_server import acting_weights
+from mrguide.policies.sac import SACConfig
 from mrguide.policies.train import Trainer
 from mrguide.policies.train_log import LEARNER_FIELDS, METRIC_FIELDS
 from tests.policies import learner_faults
@@ -33,7 +34,7 @@ def make(tmp_path, name, guided=True, split=True, **train) -> Trainer:
     tc = dataclasses.replace(tc, **{**short, **train}, learner_process=split, publish_every=1)
     dc = dataclasses.replace(dc, hidden=(32, 32))
     gc = dataclasses.replace(gc, intake_steps=400, enabled=guided)
-    return Trainer(run_config(tc, dc, gc, ec), tmp_path / name)
+    return Trainer(run_config(tc, dc, gc, ec, sac=SACConfig(hidden=(32, 32), n_critics=4)), tmp_path / name)
 
 
 def learner(tr: Trainer) -> LearnerProcess:
@@ -86,6 +87,43 @@ def test_a_split_run_trains_and_writes_the_usual_metrics(tmp_path):
     assert versions == sorted(versions) and versions[-1] >= 1
     _, evals = read_csv(tmp_path / "split" / "eval.csv")
     assert [int(e["step"]) for e in evals] == [600]
+
+
+def test_the_periodic_evaluations_are_made_beside_the_actor_the_final_one_by_it(tmp_path):
+    tr = make(tmp_path, "evals", eval_every=200)  # no checkpoint before the end: the results come when they come
+    evaluated_here: list[int] = []
+    evaluate = tr.evaluate
+
+    def by_the_actor() -> dict:
+        evaluated_here.append(tr.counters.step)
+        return evaluate()
+
+    tr.evaluate = by_the_actor  # type: ignore[method-assign]
+    try:
+        tr.run()
+    finally:
+        tr.close()
+    _, rows = read_csv(tmp_path / "evals" / "eval.csv")
+    steps = [int(r["step"]) for r in rows]
+    # every periodic evaluation arrived, in order (the final one waited for them); only the final one by the actor
+    assert len(steps) == tr.counters.evaluations >= 3 and steps == sorted(steps) and steps[-1] == 600
+    assert evaluated_here == [600] and all(0.0 <= float(r["success_rate"]) <= 1.0 for r in rows)
+    assert tr.last_eval["step"] == 600
+
+
+def test_the_sac_peer_learns_in_a_learner_process_too(tmp_path):
+    tr = make(tmp_path, "sac", learner="sac", total_steps=300)
+    initial = acting_weights(tr.agent)
+    try:
+        tr.run()
+        wait_until(tr, lambda: learner(tr).version >= 1)
+        moved = acting_weights(tr.agent)
+        assert set(moved) == set(initial) and any(k.startswith("actor.log_std.") for k in moved)
+        assert any(not np.array_equal(initial[k], moved[k]) for k in initial)
+        state = read_checkpoint(tmp_path / "sac" / "checkpoint.pt")
+        assert "temperature_opt" in state["agent"] and state["learner"]["seen_step"] == tr.counters.step
+    finally:
+        tr.close()
 
 
 def test_a_learner_killed_mid_run_leaves_the_actor_its_weights_and_ends_the_run(tmp_path, caplog):
