@@ -62,6 +62,10 @@ def _training_run(run_dir: Path) -> tuple[RunConfig, dict]:
     return run, state
 
 
+def _no_evaluation(result: dict) -> None:
+    """The cell asks its learner for no evaluation in the twin: the cell's cycles are its evaluation."""
+
+
 class CellLearner:
     """The learner of the training run in `run_dir`, learning from the cell `actor` acts on (`close` when done)."""
 
@@ -86,7 +90,7 @@ class CellLearner:
         agent = make_learner(run.train.learner, run.learner, offset, scale, ACT_DIM, run.train.seed)
         self.counters = TrainerCounters(step=state["counters"]["step"])
         setup = LearnerSetup(type(agent), run, offset, scale)
-        self.learner = LearnerProcess(setup, agent, self.counters, self.out)
+        self.learner = LearnerProcess(setup, agent, self.counters, self.out, on_evaluation=_no_evaluation)
         self.lost: str | None = None
         self.episodes = 0
         saved = self.out / STATE
