@@ -273,7 +273,7 @@ class GuidedExpert:
     def _ask(self, obs: np.ndarray, previous: int | None) -> int | None:
         """Ask the source (a re-mark of cache record `previous` if given); the new record's index, or None. The source
         is shown the part where the cell sees it (a person's page draws it there); the record keeps `obs`."""
-        shown = obs if self.perceived.exact else self.perceived(obs)
+        shown = obs if self.perceived.exact else self.perceived(obs).astype(np.asarray(obs).dtype)  # an observation
         ann = self.source.annotate(shown, self.cache.get(previous) if previous is not None else None)
         self.counts.asked += 1
         if ann is None:

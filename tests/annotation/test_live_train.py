@@ -21,6 +21,7 @@ from mrguide.annotation.bot import AnnotationBot, BotOptions
 from mrguide.annotation.live import LiveOptions, LiveSession
 from mrguide.policies.annotations import anchor_key
 from mrguide.policies.experts import AnnotatorNoise
+from mrguide.policies.guidance import LIVE_POSE
 from mrguide.policies.train import Trainer
 from tests.annotation.conftest import Client
 from tests.run_configs import run_config, sections
@@ -34,7 +35,8 @@ def trainer(out: Path, source: str = "annotator", factory=None) -> Trainer:
         tc, total_steps=600, learning_starts=64, batch_size=32, eval_every=10_000, checkpoint_every=10_000
     )
     dc = dataclasses.replace(dc, hidden=(32, 32))
-    gc = dataclasses.replace(gc, intake_steps=400, source=source, noise=AnnotatorNoise(sigma=SIGMA))
+    # the pose as a person's run perceives it by default, set for both sides alike (the in-process default is exact)
+    gc = dataclasses.replace(gc, intake_steps=400, source=source, noise=AnnotatorNoise(sigma=SIGMA), pose=LIVE_POSE)
     return Trainer(run_config(tc, dc, gc, ec), out, factory)
 
 
@@ -208,7 +210,7 @@ def test_a_persons_marks_over_the_wire_in_pick_place_equal_the_in_process_person
             tc, total_steps=600, learning_starts=64, batch_size=32, eval_every=10_000, checkpoint_every=10_000
         )
         dc = dataclasses.replace(dc, hidden=(32, 32))
-        gc = dataclasses.replace(gc, intake_steps=400, source=source, noise=PERSON, marks="pick_place")
+        gc = dataclasses.replace(gc, intake_steps=400, source=source, noise=PERSON, marks="pick_place", pose=LIVE_POSE)
         return Trainer(run_config(tc, dc, gc, ec), out, factory)
 
     local = person_trainer(tmp_path / "local", "annotator")

@@ -170,7 +170,12 @@ def test_camera_check_on_a_folder_prints_the_rate_and_writes_the_overlay(tmp_pat
 
 BAD = [
     # (id, [deploy] lines, [deploy.camera] lines, words in the one stderr line)
-    ("pose_source hmd", 'pose_source = "hmd"', "", ["[deploy]", "deploy.pose_source = 'hmd'", "fixed, camera"]),
+    (
+        "pose_source lidar",
+        'pose_source = "lidar"',
+        "",
+        ["[deploy]", "deploy.pose_source = 'lidar'", "fixed, camera, hmd"],
+    ),
     ("max age 0", 'pose_source = "camera"', "max_pose_age_s = 0", ["deploy.camera.max_pose_age_s = 0"]),
     ("max age nan", 'pose_source = "camera"', "max_pose_age_s = nan", ["camera.max_pose_age_s = nan"]),
     ("source true", 'pose_source = "camera"', "source = true", ["deploy.camera.source = True"]),
