@@ -28,13 +28,15 @@ class HmdStats:
 
 
 class HmdFeed:
-    """The simulated headset of the cell of `cfg` (its `[calibration.hmd]` in `path`), calibrated at once (seconds of
-    rendering, before the cell's control loop starts); its errors drawn from `seed`. Serves one cell."""
+    """The simulated headset of the cell of `cfg` (its `[calibration.hmd]` in `path`, `overrides` set over it), drawn
+    by the cell's engine, calibrated at once (seconds of rendering, before the cell's control loop starts); its errors
+    drawn from `seed`. Serves one cell."""
 
-    def __init__(self, cfg: CellConfig, path: Path | None, seed: int):
+    def __init__(self, cfg: CellConfig, path: Path | None, seed: int, overrides: dict | None = None):
         spec = load_robot(cfg.robot)
         drawing = MujocoDrawing(spec, cfg.twin.cup) if cfg.plant.engine == "mujoco" else ArmDrawing.of(spec)
-        self.stream = HmdPoseStream(None, path, cfg.task.object_height, drawing, noise_seed=seed)
+        height = cfg.task.object_height
+        self.stream = HmdPoseStream(None, path, height, drawing, noise_seed=seed, hmd_overrides=overrides)
 
     def __call__(self, cell) -> HmdPoseStream:
         return self.stream.attach(cell.plant)

@@ -122,10 +122,6 @@ class PolicyVersions:
             action = np.clip(action + noise, -1.0, 1.0).astype(action.dtype)
         return action
 
-    @property
-    def decision_period(self) -> float:
-        return self.policy.decision_period
-
     def offer(self, version: int, path: str | Path) -> None:
         """A learner's newer policy file; ignored unless newer than what was offered before."""
         with self._lock:

@@ -21,7 +21,8 @@ import numpy as np
 
 from mrguide.cell.config import CellConfig
 from mrguide.cell.dry_run import SimulatedCell, dry_run, episode_layouts
-from mrguide.cell.hmd_stream import HmdPoseStream, HmdStartError, MujocoDrawing
+from mrguide.cell.hmd_feed import HmdFeed
+from mrguide.cell.hmd_stream import HmdPoseStream, HmdStartError
 from mrguide.cell.twin_plant import TwinObjectPose
 from mrguide.config import to_dict
 from mrguide.deploy.episode import EpisodeReport
@@ -35,7 +36,6 @@ from mrguide.experiments.stats import wilson
 from mrguide.robot import load_robot
 from mrguide.task import Outcome, TaskConfig, placed_at_goal
 from mrguide.twin.env import EnvConfig, PickPlaceEnv
-from mrguide.twin.visual_arm import ArmDrawing
 
 log = logging.getLogger(__name__)
 
@@ -223,10 +223,7 @@ def _hmd_streams(
     # the HMD process calibrates (seconds of rendering) before the simulated cell's control loop starts
     if not use_hmd:
         return []
-    spec = load_robot(real_cfg.robot)
-    drawing = MujocoDrawing(spec, real_cfg.twin.cup) if real_cfg.plant.engine == "mujoco" else ArmDrawing.of(spec)
-    height = real_cfg.task.object_height
-    return [HmdPoseStream(None, hmd_config, height, drawing, noise_seed=seed, hmd_overrides=hmd_overrides)]
+    return [HmdFeed(real_cfg, hmd_config, seed, hmd_overrides).stream]
 
 
 @dataclass

@@ -126,8 +126,8 @@ class CellLearner:
             return
         for t in rows:
             self.learner.add(t.obs, t.action, t.reward, t.next_obs, t.done, int(t.expert))
-            self.counters.step += 1
-            self.learner.stepped(self.counters.step)
+        self.counters.step += len(rows)
+        self.learner.stepped(self.counters.step)  # the episode in one chunk: it owes one update per decision
         try:
             self.learner.episode_end(self.counters.step)
         except LearnerProcessError as exc:

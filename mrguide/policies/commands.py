@@ -278,7 +278,7 @@ def _run(tr, stop_after: int | None, bar: tqdm, session: LiveSessionLike | None)
             "skipped": tr.counters.skipped,
             "interventions": tr.counters.interventions,
             "person_interventions": tr.counters.person_interventions,
-            **tr.session_cost(),
+            **tr.counters.session_cost(tr.env.twin_cfg.decision_period),
         }
 
     def progress(row: dict) -> None:

@@ -285,14 +285,8 @@ class Trainer:
             "wall_s": round(self.wall_s(), 2),
             **{k: means.get(k, "") for k in UPDATE_FIELDS},
             "intervened": int(intervened),
-            **self.session_cost(),
+            **self.counters.session_cost(self.env.twin_cfg.decision_period),
         }
-
-    def session_cost(self) -> dict[str, float]:
-        """What the run has cost the cell beside the marks (train_log's METRIC_FIELDS): probes, robot s, resets."""
-        robot_s = self.counters.step * self.env.twin_cfg.decision_period
-        resets = self.counters.episode + self.counters.interventions
-        return {"probes": self.counters.probes, "robot_s": round(robot_s, 1), "resets": resets}
 
     def _log(self, row: dict) -> None:
         append_csv(self.out / "metrics.csv", METRIC_FIELDS, row)

@@ -27,6 +27,12 @@ class TrainerCounters(ExpertCounts):
     wall_s: float = 0.0  # training wall time before this process (s); a checkpoint records it up to its writing
     update_s: float = 0.0  # wall time spent in updates, minibatch sampling included (s)
 
+    def session_cost(self, decision_period: float) -> dict[str, float]:
+        """What the run has cost the cell beside the marks (train_log's METRIC_FIELDS): probes, the robot's seconds
+        (every decision for `decision_period` s), part resets (each agent episode, each demonstration put back)."""
+        robot_s = round(self.step * decision_period, 1)
+        return {"probes": self.probes, "robot_s": robot_s, "resets": self.episode + self.interventions}
+
     def restore(self, saved: dict[str, Any]) -> None:
         """Set every counter from a checkpoint's `counters`, in place (the expert holds this object). Each must be
         there, with its type, and nothing else (KeyError or a dacite error otherwise)."""
