@@ -40,7 +40,7 @@ class LearningConfig:
 
     #: std of the Gaussian noise on every action while learning on the cell (normalized units: 0.02 is about 5 mm
     #: of the shipped workspace box), up to 0.1. None by default, measured: 0.1 (training's) jittered the cup
-    #: centimetres over the part while it pressed and a drive faulted on following error in the second cycle; 0.02
+    #: centimetres over the part while it pressed and a drive faulted on following error within four cycles; 0.02
     #: kept the TCP from resting, so the seal search never started, and 5 mm is the seal's whole window: 17 of 33
     #: parts placed against 92 of 100 frozen (docs/results: learning on the cell). The learner's updates explore.
     exploration: Annotated[float, Range(0.0, 0.1)] = 0.0
