@@ -6,6 +6,7 @@ import argparse
 import logging
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -16,7 +17,13 @@ from mrguide.install_profiles import missing_profile_message
 
 
 def cmd_main(args: argparse.Namespace) -> int:
-    """The Quick-start main job: train a guided policy briefly (or reuse it) → dry-run deploy → sim-to-real."""
+    """The Quick-start main job: train a guided policy briefly (or reuse it) → dry-run deploy → sim-to-real.
+
+    Each step is its command's function, run as `mrguide <step>` would run it (its refusals and exit codes under its
+    own name); a failed training ends the job, a failed dry run still leaves the sim-to-real step to run."""
+    from mrguide.deploy.commands import cmd_deploy
+    from mrguide.experiments.sim2real_command import cmd_sim2real
+    from mrguide.policies.commands import cmd_train
     from mrguide.shipped_configs import shipped_config
 
     t0 = time.perf_counter()
@@ -30,47 +37,74 @@ def cmd_main(args: argparse.Namespace) -> int:
             f"[1/3] training a guided DDPG policy in the twin (simulated MR annotator): the first {args.train_steps} "
             "steps of the 20k-step schedule"
         )
-        rc = main(
-            ["train", "--stop-after", str(args.train_steps), "--seed", str(args.seed), "--out", str(out / "train")]
-            + (["--quiet"] if args.quiet else [])
-        )
+        rc = run_command("mrguide train", cmd_train, _train_step(args, out / "train"))
         if rc:
             return rc
     print("\n[2/3] dry run: deploying it over the virtual CAN bus to simulated drives on a twin with reality gap")
-    rc = main(
-        [
-            "deploy",
-            "--policy",
-            str(policy),
-            "--config",
-            real_config,
-            "--dry-run",
-            "--episodes",
-            str(args.deploy_episodes),
-            "--log",
-            str(out / "deploy.jsonl"),
-        ]
-        + (["--quiet"] if args.quiet else [])
-    )
+    rc = run_command("mrguide deploy", cmd_deploy, _deploy_step(args, policy, real_config, out / "deploy.jsonl"))
     print(f"\n[3/3] sim-to-real evaluation: {args.seeds} seeds x {args.episodes} episodes per condition")
-    rc2 = main(
-        [
-            "sim2real",
-            "--policy",
-            str(policy),
-            "--real-config",
-            real_config,
-            "--seeds",
-            str(args.seeds),
-            "--episodes",
-            str(args.episodes),
-            "--out",
-            str(out / "sim2real"),
-        ]
-        + (["--quiet"] if args.quiet else [])
-    )
+    rc2 = run_command("mrguide sim2real", cmd_sim2real, _sim2real_step(args, policy, real_config, out / "sim2real"))
     print(f"main job finished in {time.perf_counter() - t0:.0f} s")
     return rc or rc2
+
+
+def _train_step(args: argparse.Namespace, out: Path) -> argparse.Namespace:
+    """The main job's `mrguide train` arguments: the default config, `--stop-after` the main job's steps."""
+    return argparse.Namespace(
+        config=None,
+        out=str(out),
+        steps=None,
+        seed=args.seed,
+        stop_after=args.train_steps,
+        set=[],
+        no_guidance=False,
+        expert=None,
+        resume=False,
+        quiet=args.quiet,
+        tensorboard=False,
+        record=None,
+    )
+
+
+def _deploy_step(args: argparse.Namespace, policy: Path, real_config: str, log: Path) -> argparse.Namespace:
+    """The main job's `mrguide deploy --dry-run` arguments: the policy in the 'real' cell, its episodes, its log."""
+    from mrguide.cell.commands import CellDryRun
+
+    return argparse.Namespace(
+        policy=str(policy),
+        config=real_config,
+        dry_run=True,
+        enable_drives=False,
+        episodes=args.deploy_episodes,
+        cycles=None,
+        resume=False,
+        seed=None,
+        log=str(log),
+        learn=None,
+        set=[],
+        quiet=args.quiet,
+        dry_run_factory=CellDryRun,
+        learning_factory=_cell_learner,
+    )
+
+
+def _sim2real_step(args: argparse.Namespace, policy: Path, real_config: str, out: Path) -> argparse.Namespace:
+    """The main job's `mrguide sim2real` arguments: the paper's conditions, its seeds and episodes."""
+    from mrguide.experiments.sim2real_command import PAPER_CONDITIONS
+
+    return argparse.Namespace(
+        policy=str(policy),
+        config=None,
+        real_config=real_config,
+        mujoco_config=None,
+        seeds=args.seeds,
+        episodes=args.episodes,
+        conditions=list(PAPER_CONDITIONS),
+        sweep=[],
+        set=[],
+        out=str(out),
+        quiet=args.quiet,
+    )
 
 
 def _cell_learner(*args: Any) -> Any:
@@ -135,13 +169,17 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run one command. Bad input, or a package of the command's install profile missing: one line on stderr,
-    exit 2; driver faults: exit 1; Ctrl-C: exit 130."""
+    """Run one command (`run_command`)."""
     args = build_parser().parse_args(argv)
     logging.basicConfig(
         level=logging.DEBUG if args.verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s"
     )
-    name = f"mrguide {getattr(args, 'command_name', args.command)}"
+    return run_command(f"mrguide {getattr(args, 'command_name', args.command)}", args.func, args)
+
+
+def run_command(name: str, func: Callable[[argparse.Namespace], int], args: argparse.Namespace) -> int:
+    """`func(args)`, the command `name`. Bad input, or a package of the command's install profile missing: one line
+    on stderr, exit 2; driver faults: exit 1; Ctrl-C: exit 130."""
 
     def fail(message: str, code: int) -> int:
         # one line, whatever the message quotes (a TOML key or a file name may hold a line break)
@@ -149,7 +187,7 @@ def main(argv: list[str] | None = None) -> int:
         return code
 
     try:
-        return int(args.func(args))
+        return int(func(args))
     except InputError as exc:
         return fail(str(exc), 2)
     except ModuleNotFoundError as exc:  # e.g. `mrguide train` on a robot PC: which extra to install

@@ -3,20 +3,34 @@ and the viewer screenshot tool photographs a recording."""
 
 from __future__ import annotations
 
+import contextlib
+import io
 import subprocess
 import sys
 from pathlib import Path
+
+import pytest
 
 from mrguide.replay import lift_drops
 
 ROOT = Path(__file__).parents[2]
 
 
-def test_the_lift_drop_numbers_recompute_from_the_committed_logs(tmp_path, monkeypatch, capsys):
-    monkeypatch.setattr(sys, "argv", ["lift_drops", str(ROOT / lift_drops.RUN), str(tmp_path)])
-    assert lift_drops.main() == 0
-    assert capsys.readouterr().out == (ROOT / "docs/results/replay/drops.txt").read_text()
-    assert (tmp_path / "drops.rrd").stat().st_size > 0 and (tmp_path / "lifts.png").stat().st_size > 0
+@pytest.fixture(scope="module")
+def drops(tmp_path_factory) -> tuple[Path, str]:
+    """`lift_drops` run once on the committed logs: (its output directory, what it printed)."""
+    out = tmp_path_factory.mktemp("drops")
+    printed = io.StringIO()
+    with pytest.MonkeyPatch.context() as mp, contextlib.redirect_stdout(printed):
+        mp.setattr(sys, "argv", ["lift_drops", str(ROOT / lift_drops.RUN), str(out)])
+        assert lift_drops.main() == 0
+    return out, printed.getvalue()
+
+
+def test_the_lift_drop_numbers_recompute_from_the_committed_logs(drops):
+    out, printed = drops
+    assert printed == (ROOT / "docs/results/replay/drops.txt").read_text()
+    assert (out / "drops.rrd").stat().st_size > 0 and (out / "lifts.png").stat().st_size > 0
 
 
 def test_an_empty_run_directory_is_refused(tmp_path, monkeypatch, capsys):
@@ -25,14 +39,8 @@ def test_an_empty_run_directory_is_refused(tmp_path, monkeypatch, capsys):
     assert "no seed*/sim2real/log-*.jsonl.gz" in capsys.readouterr().err
 
 
-def test_the_screenshot_tool_photographs_a_recording(tmp_path):
-    rrd = tmp_path / "drops.rrd"
-    subprocess.run(
-        [sys.executable, "-m", "mrguide.replay.lift_drops", str(ROOT / lift_drops.RUN), str(tmp_path)],
-        check=True,
-        capture_output=True,
-        cwd=ROOT,
-    )
+def test_the_screenshot_tool_photographs_a_recording(drops, tmp_path):
+    rrd = drops[0] / "drops.rrd"
     png = tmp_path / "shot.png"
     subprocess.run(
         [
