@@ -92,9 +92,6 @@ class TwinPlant(CellPlant):
 class TwinObjectPose(ObjectPoseSource):
     """Exact object position from the environment model (sim-to-real conditions 1 and 2)."""
 
-    #: No registration error: the runtime does not probe it (`[deploy.runtime] registration_probes`).
-    exact = True
-
     def __init__(self, plant: CellView):
         self.plant = plant
 

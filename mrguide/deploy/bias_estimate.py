@@ -6,7 +6,7 @@ part). A press at p that sealed says the part's centre lies within that window o
 outside. The pose source saw the part at s = centre + b (its mean of the looks while the part stood still), so each
 press is a measurement of the bias b, blurred by what remains of the looks' error: `LOOK_SIGMA` over the square
 root of the looks in the mean, and the arm's `ARM_SIGMA`. `BiasEstimate` keeps
-the posterior of b on a 1 mm grid of ±`RANGE` per axis, starting from a normal prior (`PRIOR_SIGMA`), and its mean is what the runtime subtracts
+the posterior of b on a 1 mm grid of ±`RANGE` per axis, starting flat, and its mean is what the runtime subtracts
 from the source's poses. The estimate is saved after each update and read back at the next start (`save`, `load`),
 so that the cell improves its registration with every part it picks, across runs.
 """
@@ -28,9 +28,6 @@ STEP = 0.001
 LOOK_SIGMA = 0.005
 #: m: the arm's error in where the cup presses against where it was commanded (ours).
 ARM_SIGMA = 0.0005
-#: m: the prior's standard deviation per axis: a registration as good as the cells' HMD's stated 5 mm calibration
-#: error (ours). It decides where a seal search presses first; the presses soon outweigh it.
-PRIOR_SIGMA = 0.005
 
 
 def blur(looks: int) -> float:
@@ -49,13 +46,13 @@ class BiasEstimate:
         self.window = window
         axis = np.arange(-RANGE, RANGE + STEP / 2, STEP)
         self._bx, self._by = np.meshgrid(axis, axis, indexing="ij")
-        self._log = -(self._bx**2 + self._by**2) / (2 * PRIOR_SIGMA**2)  # log posterior up to a constant
+        self._log = np.zeros_like(self._bx)  # log posterior up to a constant, flat at first
         self.presses = 0
         self.seals = 0
 
-    def _inside(self, offset: float | np.ndarray, b: np.ndarray, sigma: float) -> np.ndarray:
-        """P(|offset + b| < window) along one axis for each bias b on the grid (broadcast with `offset`), offset =
-        press − seen, blurred by `sigma`."""
+    def _inside(self, offset: float, b: np.ndarray, sigma: float) -> np.ndarray:
+        """P(|offset + b| < window) along one axis for each bias b on the grid, offset = press − seen, blurred by
+        `sigma`."""
         s = sigma * math.sqrt(2.0)
         return 0.5 * (_erf((self.window - offset - b) / s) - _erf((-self.window - offset - b) / s))
 
@@ -68,39 +65,6 @@ class BiasEstimate:
         self._log -= self._log.max()
         self.presses += 1
         self.seals += int(sealed)
-
-    def seal_probability(self, ox: np.ndarray, oy: np.ndarray, sigma: float) -> np.ndarray:
-        """P(a press seals) under the posterior for the presses at the offsets (m, press − seen) ox × oy (a grid,
-        len(ox) × len(oy)), blurred by `sigma`."""
-        w = np.exp(self._log)
-        w /= w.sum()
-        grid = self._bx[:, 0]  # the bias values, the same on both axes
-        ix = self._inside(ox[:, None], grid[None, :], sigma)
-        iy = self._inside(oy[:, None], grid[None, :], sigma)
-        return ix @ w @ iy.T
-
-    def next_press(self, tried: np.ndarray, least: float, sigma: float, informative: bool) -> np.ndarray:
-        """The offset (m, press − seen) on a 1 mm grid for the next press, at least `least` from every offset in
-        `tried` (k × 2): where a press most likely seals, or, `informative`, where its outcome tells the most (a seal
-        as likely as none); among equals the one nearest the estimate's centre."""
-        reach = RANGE + self.window
-        axis = np.arange(-reach, reach + STEP / 2, STEP)
-        cand = np.stack(np.meshgrid(axis, axis, indexing="ij"), axis=-1)
-        p = self.seal_probability(axis, axis, sigma)
-        score = -np.abs(p - 0.5) if informative else p
-        score = score - 1e-6 * np.linalg.norm(cand + self.estimate, axis=2)
-        for t in np.asarray(tried, dtype=float).reshape(-1, 2):
-            score[np.linalg.norm(cand - t, axis=2) < least - 1e-9] = -np.inf
-        i, j = np.unravel_index(int(np.argmax(score)), score.shape)
-        return cand[i, j]
-
-    @property
-    def spread(self) -> np.ndarray:
-        """The posterior's standard deviation per axis (m, xy)."""
-        w = np.exp(self._log)
-        w /= w.sum()
-        mean = self.estimate
-        return np.sqrt([(w * (self._bx - mean[0]) ** 2).sum(), (w * (self._by - mean[1]) ** 2).sum()])
 
     @property
     def estimate(self) -> np.ndarray:
@@ -153,14 +117,6 @@ class Registration:
         """A new episode."""
         self._sealed = False
 
-    def next_press(self, tried: np.ndarray, least: float, looks: int, informative: bool) -> np.ndarray:
-        """The seal search's next point (`BiasEstimate.next_press`), the presses blurred by `looks` looks."""
-        return self.estimate.next_press(tried, least, blur(looks), informative)
-
-    def uncertain(self, spread: float) -> bool:
-        """The estimate's standard deviation on some axis is over `spread` (m)."""
-        return bool(np.max(self.estimate.spread) > spread)
-
     @property
     def correction(self) -> np.ndarray:
         """What to subtract from the source's poses (m, xyz: the bias's xy, no height)."""
@@ -169,13 +125,13 @@ class Registration:
     def after_decision(
         self, tcp: np.ndarray, seen: np.ndarray | None, looks: int, grasping: bool, gripped: bool, reseat: bool
     ) -> bool:
-        """Report this decision's press, if it made one: a re-seat (the cup pressed at `tcp` and, `gripped`, sealed:
-        a probe, or not) or a seal kept; `seen` is the source's mean pose of the part (uncorrected) over `looks` looks.
-        True if the estimate moved."""
+        """Report this decision's press, if it made one: a re-seat (the cup pressed at `tcp` without a seal) or the
+        grasp's first seal; `seen` is the source's mean pose of the part (uncorrected) over `looks` looks. True if the
+        estimate moved."""
         if seen is None or not grasping or not (reseat or (gripped and not self._sealed)):
             return False
-        self._sealed = gripped and not reseat
-        self.estimate.press(tcp, seen, gripped, blur(looks))
+        self._sealed = self._sealed or gripped
+        self.estimate.press(tcp, seen, gripped and not reseat, blur(looks))
         if self.path is not None:
             self.estimate.save(self.path, self.source)
         return True

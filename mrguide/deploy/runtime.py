@@ -30,7 +30,7 @@ from mrguide.deploy.object_tracking import ObjectStartUnknown, ObjectTracker
 from mrguide.deploy.runlog import RunLog
 from mrguide.deploy.runtime_config import RuntimeConfig
 from mrguide.deploy.safety import Event, Reaction, SafetyConfig, Supervisor, Watchdog
-from mrguide.deploy.seal_search import cell_search
+from mrguide.deploy.seal_search import SealSearch
 from mrguide.drivers.cobot_state import JointState, VacuumState
 from mrguide.drivers.errors import DriverError
 from mrguide.drivers.interface import CobotInterface
@@ -86,13 +86,12 @@ class Runtime:
         self._episode_events: Counter[str] = Counter()
         self._t = 0
         self.lift = LiftRule(spec.workspace, decision_period, self.cfg.break_away_distance, self.cfg.break_away_speed)
+        self.seal = SealSearch(spec.workspace, self.cfg.reseat_step, self.cfg.reseat_wait)
         misses = (self.cfg.max_pose_misses, self.cfg.max_pose_misses_before_grasp)
         self.objects = ObjectTracker(pose, self.supervisor, task.object_height, self.cfg.track_carried_object, *misses)
         window = 0.5 * task.object_height - CUP_RADIUS  # where the lip rests whole on the part's face, per axis
         where = Path(self.cfg.bias_estimate_file) if self.cfg.bias_estimate_file else None
         self.registration = Registration(window, type(pose).__name__, where)
-        exact = bool(getattr(pose, "exact", False))  # a simulated cell's truth: no registration to probe
-        self.seal = cell_search(self.cfg, spec.workspace, self.registration, lambda: self.objects.filter.looks, exact)
 
     # -- lifecycle ----------------------------------------------------------------------------------
     def __enter__(self) -> Runtime:
@@ -256,8 +255,7 @@ class Runtime:
         for t in range(self.task.horizon + 1):
             self._t = t
             t_read = time.perf_counter()
-            js = self.cobot.joint_state()
-            vac = self.seal.sensed(self.cobot.vacuum_state(), self.decision.phase)  # a probe's seal is not a grasp
+            js, vac = self.cobot.joint_state(), self.cobot.vacuum_state()
             tcp = self.decision.tcp(js.positions)
             g = 1 if vac.vacuum_on else -1
             try:
@@ -366,19 +364,13 @@ class Runtime:
         if held is not None:
             self.supervisor.report(Event(held), f"release refused in phase {self.decision.phase}: the part is held")
             notes["hold_rule"] = held
-        seen, looks = self.objects.seen, self.objects.filter.looks
-        where = obs[OBS_OBJECT] if seen is None else seen
-        executed, reseat = self.seal.apply(executed, tcp, where, self.decision.phase, vac)
+        executed, reseat = self.seal.apply(executed, tcp, obs[OBS_OBJECT], self.decision.phase, vac)
         if reseat is not None:
-            why = (
-                "sealed, the registration uncertain"
-                if self.seal.sealed_press
-                else f"no seal at {vac.level_kpa:.0f} kPa"
-            )
-            self.supervisor.report(Event.RESEAT, f"{why}: re-seat {self.seal.reseats}")
+            self.supervisor.report(Event.RESEAT, f"no seal at {vac.level_kpa:.0f} kPa: re-seat {self.seal.reseats}")
             notes["reseat"] = self.seal.reseats
         grasping = self.decision.phase in (Phase.GRASP, Phase.LIFT)
-        if self.registration.after_decision(tcp, seen, looks, grasping, self.seal.sealed_press, reseat is not None):
+        seen, looks = self.objects.seen, self.objects.filter.looks
+        if self.registration.after_decision(tcp, seen, looks, grasping, vac.part_gripped, reseat is not None):
             self.objects.correction = self.registration.correction  # the cell's registration, improved by this press
             notes["bias_estimate"] = self.objects.correction[:2]
         return executed, notes

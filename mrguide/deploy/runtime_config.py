@@ -29,17 +29,11 @@ class RuntimeConfig:
     break_away_distance: Annotated[float, Range(0.0, 0.1, " m")] = 0.015
     break_away_speed: Annotated[float, Range(0.005, 1.0, " m/s")] = 0.1
     #: The seal search (seal_search.py): a cup pressed without "vacuum OK" for `reseat_wait` decisions is re-seated
-    #: where the registration's posterior says a seal is most likely, at least `reseat_step` from every press of the
-    #: search that did not seal (m, in [0, 0.02]; 0 = off, probes too). 5 mm: the window the cup's 2 cm-radius lip
-    #: leaves on the 5 cm part (`mrguide.seal`, in both engines).
+    #: at the next point of a hexagonal pattern `reseat_step` apart (m, in [0, 0.02]; 0 = off). 5 mm: every point
+    #: within 2.9 mm of one of the pattern's, inside the 5 mm the cup's 2 cm-radius lip leaves on the 5 cm part
+    #: (`mrguide.seal`, in both engines).
     reseat_step: Annotated[float, Range(0.0, 0.02, " m")] = 0.005
     reseat_wait: Annotated[int, Range(1, 50)] = 1
-    #: Probes of the registration (seal_search.py): while the estimate's spread on an axis is over
-    #: `registration_spread` (m), a seal is let go and the cup presses where the outcome tells the most, at most
-    #: `registration_probes` times an episode (0 = off); then where a seal is most likely. A simulated cell's exact
-    #: poses need none.
-    registration_probes: Annotated[int, Range(0, 10)] = 3
-    registration_spread: Annotated[float, Range(0.0005, 0.01, " m")] = 0.0015
     #: Where the cell keeps its estimate of the pose source's registration bias (bias_estimate.py) across runs: a
     #: JSON file read at the start and written after every press; "" keeps it for the run only.
     bias_estimate_file: str = ""
