@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -162,6 +163,12 @@ PARTS: dict[str, Part] = {
         ),
     )
 }
+
+
+def part_drawing(part: Part) -> dict[str, Any]:
+    """What the annotation page draws of `part` (JSON): its name, height and boxes; nothing the judge reads."""
+    boxes = [{"centre": list(b.centre), "half": list(b.half)} for b in part.boxes]
+    return {"name": part.name, "height": part.height, "boxes": boxes}
 
 
 def part_named(name: str, where: str = "task.part") -> Part:
