@@ -66,9 +66,12 @@ def _ranged_fields(cls: type) -> tuple[tuple[str, Range, bool], ...]:
 def check_ranges(obj: object, section: str) -> None:
     """Refuse the first field of dataclass instance `obj` outside its declared `Range`, naming it `section.field`.
 
-    For `__post_init__`, so that a config built in code is checked as one read from a file."""
+    For `__post_init__`, so that a config built in code is checked as one read from a file. A field declared
+    `X | None` may be None (an override left unset)."""
     for name, r, integer in _ranged_fields(type(obj)):
-        check_number(f"{section}.{name}", getattr(obj, name), r.low, r.high, r.unit, integer)
+        value = getattr(obj, name)
+        if value is not None:
+            check_number(f"{section}.{name}", value, r.low, r.high, r.unit, integer)
 
 
 def from_dict(cls: type[T], data: dict[str, Any], where: str = "config") -> T:

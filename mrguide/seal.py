@@ -8,6 +8,10 @@ a seal rule of its own. Levels are in kPa below atmosphere (positive); lengths i
 `LIP_COMPLIANCE` of it (a lip further off leaves a ring-shaped gap 2πr·h open all round: 10 µm of it is already
 more than the generator can evacuate, below). Pressed further in, the lip is compressed, and it still rests.
 
+**The face is the part's material nearest the lip** (`mrguide.parts`: a part is a few boxes): the highest of the box
+faces under the lip's disc, with every face at that height; the disc over a hole, past an edge, over lower material
+or against higher material is not on it.
+
 **Where the lip hangs past the face's edge it leaks.** The lip's disc (radius `CUP_RADIUS`) beyond the face is an
 opening to the atmosphere (a sagging lip can only narrow it, so its area errs strict), an orifice in parallel with
 the generator. The generator is an ejector of linear characteristic, suction flow Q(p) = Q₀ (1 − p / p_sealed); the
@@ -34,6 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from mrguide.cell_layout import CUP_RADIUS
+from mrguide.parts import Box
 
 #: m the lip may stand off a face and still rest on it: a flat cup's lip (a Ø40 mm flat cup, the class the cell's
 #: 20 mm lip is) deforms by about a millimetre; assumed, the order of such a lip's travel. A bellows cup would allow
@@ -56,22 +61,20 @@ GAS_CONSTANT, TEMPERATURE, GAMMA = 287.0, 293.0, 1.4
 CHOKED = math.sqrt(GAMMA) * (2.0 / (GAMMA + 1.0)) ** ((GAMMA + 1.0) / (2.0 * (GAMMA - 1.0)))
 #: m², the opening whose choked flow equals the generator's free flow: there the level reaches nothing.
 LEAK_AREA = FREE_FLOW / (DISCHARGE_COEFFICIENT * math.sqrt(GAS_CONSTANT * TEMPERATURE) * CHOKED)
+#: m: faces of two boxes this close in height are one face (the plate's frame is four boxes).
+COPLANAR = 1e-9
+#: m²: an open area below this is the rounding of several faces' sum, not an opening (a millionth of `LEAK_AREA`).
+AREA_ROUNDING = 1e-12
 #: Friction of the lip on the part: Schmalz's reference value for dry, smooth workpieces (μ = 0.5).
 LIP_FRICTION = 0.5
 
 
 @dataclass(frozen=True)
 class LipOnFace:
-    """The cup against the face of the part it points at."""
+    """The cup against the part's material it points at."""
 
     rests: bool  # square to the face and within the lip's compliance of it
-    centre: tuple[float, float]  # m, the lip's centre in the face's plane, from the face's centre
-    half: tuple[float, float]  # m, the face's half sizes
-
-    @property
-    def open_area(self) -> float:
-        """m², the lip's disc beyond the face's edges."""
-        return open_area(self.centre, self.half)
+    open_area: float  # m², the lip's disc not on the face: past its edges, over a hole, over higher material
 
 
 def leak_level(open_area: float, sealed: float, open_level: float) -> float:
@@ -128,24 +131,40 @@ def face_normal(axis: np.ndarray) -> np.ndarray:
     return normal
 
 
-def lip_on_face(rel: np.ndarray, axis: np.ndarray, half: np.ndarray) -> LipOnFace | None:
-    """The lip against the face the cup points at, or None if it points away from the part.
+def lip_on_face(rel: np.ndarray, axis: np.ndarray, boxes: Sequence[Box]) -> LipOnFace | None:
+    """The lip against the part's faces it points at, or None if it points away or no material lies under its disc.
 
-    `rel` is the lip's centre and `axis` the cup's axis (out of the lip), both in the part's frame; `half` the part's
-    half extents (a box about its origin)."""
-    r, a, h = rel.tolist(), axis.tolist(), half.tolist()
-    k = _face_axis(a)  # the face's normal is ±axis k of the part
-    if a[k] * r[k] >= 0.0:
-        return None
+    `rel` is the lip's centre and `axis` the cup's axis (out of the lip), both in the part's frame; `boxes` the part's
+    material. Of the boxes' faces facing the cup under the lip's disc, the highest (nearest the lip) is what it rests
+    on, and the disc seals only on faces at that height: over lower material, a hole or past the edges it is open."""
+    r, a = rel.tolist(), axis.tolist()
+    k = _face_axis(a)  # the faces' normal is ±axis k of the part
+    out = -math.copysign(1.0, a[k])
     i, j = (n for n in range(3) if n != k)
-    rests = abs(r[k]) - h[k] <= LIP_COMPLIANCE and abs(a[k]) >= COS_MAX_TILT
-    return LipOnFace(rests, (r[i], r[j]), (h[i], h[j]))
+    lip = out * r[k]  # the lip's height along the faces' outward normal
+    if all(lip <= out * b.centre[k] - b.half[k] for b in boxes):
+        return None  # the cup points away from the part: the lip lies behind all of it
+    faces = []  # (height, in-plane centre, in-plane half) of each face under the lip's disc
+    for b in boxes:
+        centre, half = (r[i] - b.centre[i], r[j] - b.centre[j]), (b.half[i], b.half[j])
+        if max(abs(centre[0]) - half[0], 0.0) ** 2 + max(abs(centre[1]) - half[1], 0.0) ** 2 < CUP_RADIUS**2:
+            faces.append((out * b.centre[k] + b.half[k], centre, half))
+    if not faces:
+        return None
+    top = max(f[0] for f in faces)
+    level = [f for f in faces if top - f[0] <= COPLANAR]
+    area = open_area(level[0][1], level[0][2])
+    if len(level) > 1:  # the other faces cover some of what lies past the first; their sum rounds
+        area -= sum(CUP_AREA - open_area(c, h) for _, c, h in level[1:])
+        area = area if area > AREA_ROUNDING else 0.0
+    rests = lip - top <= LIP_COMPLIANCE and abs(a[k]) >= COS_MAX_TILT
+    return LipOnFace(rests, area)
 
 
-def level_reached(rel: np.ndarray, axis: np.ndarray, half: np.ndarray, sealed: float, open_level: float) -> float:
+def level_reached(rel: np.ndarray, axis: np.ndarray, boxes: Sequence[Box], sealed: float, open_level: float) -> float:
     """The level the generator reaches with the cup at this pose (`lip_on_face`'s arguments): the leak's level where
     the lip rests on a face, the open cup's elsewhere."""
-    lip = lip_on_face(rel, axis, half)
+    lip = lip_on_face(rel, axis, boxes)
     if lip is None or not lip.rests:
         return open_level
     return leak_level(lip.open_area, sealed, open_level)

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from mrguide.config import ConfigError
+from mrguide.parts import part_named
 
 
 class Phase(enum.IntEnum):
@@ -87,7 +88,8 @@ class TaskConfig:
     epsilon: float = 0.02  # ε, phase tolerance radius (m) (Eq. 5; value ours)
     r_success: float = 20.0  # R_success (Eq. 6; value ours)
     r_fail: float = 10.0  # R_fail (Eq. 6; value ours)
-    object_height: float = 0.05  # edge of the cube-shaped object (m)
+    #: the part picked and placed: a name in the part library (`mrguide.parts.PARTS`)
+    part: str = "block"
     approach_height: float = 0.08  # pre-grasp height of the TCP above the object top (m)
     lift_height: float = 0.15  # TCP height of the lift and transport targets (m)
     place_tolerance: float = 0.03  # success radius of the placed object around the goal, xy (m)
@@ -95,7 +97,8 @@ class TaskConfig:
     table_height: float = 0.0  # z of the surface the object rests on (m); a free object below it fell off
 
     def __post_init__(self) -> None:
-        for name in ("alpha", "eta", "step_penalty", "epsilon", "object_height", "place_tolerance"):
+        part_named(self.part)
+        for name in ("alpha", "eta", "step_penalty", "epsilon", "place_tolerance"):
             if not getattr(self, name) > 0:
                 raise ConfigError(f"task.{name} must be > 0 (paper: α, η, λ, ε > 0), got {getattr(self, name)}")
         for name in ("r_success", "r_fail", "approach_height", "lift_height"):
@@ -103,6 +106,11 @@ class TaskConfig:
                 raise ConfigError(f"task.{name} must be >= 0, got {getattr(self, name)}")
         if isinstance(self.horizon, bool) or not isinstance(self.horizon, int) or not 1 <= self.horizon <= 10_000:
             raise ConfigError(f"task.horizon must be an integer in [1, 10000], got {self.horizon!r}")
+
+    @property
+    def object_height(self) -> float:
+        """m from the part's bottom to its top (its origin stands at half of it above the table)."""
+        return part_named(self.part).height
 
     @property
     def bonuses(self) -> tuple[float, ...]:

@@ -59,7 +59,9 @@ def test_defaults_lie_in_their_ranges_and_outside_values_are_refused(cls: type) 
     default = DEFAULTS[cls]
     for name, r, integer in _ranged_fields(cls):
         value = getattr(default, name)
-        assert r.low <= value <= r.high, f"{cls.__qualname__}.{name} = {value} outside [{r.low}, {r.high}]"
+        assert value is None or r.low <= value <= r.high, (
+            f"{cls.__qualname__}.{name} = {value} outside [{r.low}, {r.high}]"
+        )
         assert isinstance(value, int) or not integer
         step = 1 if integer else max(1.0, abs(r.high))
         for bad in (r.high + step, r.low - step, 0.5 if integer and r.low <= 0.5 <= r.high else None):

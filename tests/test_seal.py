@@ -11,6 +11,7 @@ import pytest
 
 from mrguide import seal
 from mrguide.cell_layout import CUP_RADIUS
+from mrguide.parts import PARTS, Box
 
 HALF = (0.025, 0.025)  # the 5 cm part's top face
 SEALED, OPEN = 75.0, 8.0  # kPa, the drivers' simulated generator
@@ -78,18 +79,18 @@ def test_a_few_percent_of_the_lip_open_lose_most_of_the_vacuum():
 
 def test_the_seal_ends_a_fraction_of_a_millimetre_past_the_geometric_limit():
     limit = HALF[0] - CUP_RADIUS
-    rel, axis, half = np.array([limit, 0.0, HALF[0]]), np.array([0.0, 0.0, -1.0]), np.full(3, HALF[0])
-    assert seal.level_reached(rel, axis, half, SEALED, OPEN) == SEALED
+    rel, axis, block = np.array([limit, 0.0, HALF[0]]), np.array([0.0, 0.0, -1.0]), PARTS["block"].boxes
+    assert seal.level_reached(rel, axis, block, SEALED, OPEN) == SEALED
     past = rel + [0.0003, 0.0, 0.0]
-    assert seal.level_reached(past, axis, half, SEALED, OPEN) < 35.0
+    assert seal.level_reached(past, axis, block, SEALED, OPEN) < 35.0
 
 
 def test_the_lip_rests_within_its_compliance_square_to_the_face():
-    half, centred = np.full(3, 0.025), np.array([0.0, 0.0, 0.025])
+    block, centred = PARTS["block"].boxes, np.array([0.0, 0.0, 0.025])
     down = np.array([0.0, 0.0, -1.0])
 
     def rests(rel: np.ndarray, axis: np.ndarray) -> bool | None:
-        lip = seal.lip_on_face(rel, axis, half)
+        lip = seal.lip_on_face(rel, axis, block)
         return None if lip is None else lip.rests
 
     assert rests(centred + [0, 0, 0.0009], down)
@@ -115,3 +116,35 @@ def test_the_level_holds_its_force_off_the_face_and_friction_along_it():
     assert not seal.holds(weight, seal.LIP_FRICTION * (force - weight) * 1.01, 35.0)
     assert seal.holds(-100.0, 60.0, 35.0)  # pressed onto the face: friction carries more
     assert not seal.holds(weight, 0.0, 0.0)
+
+
+def _level_over(part: str, xy: tuple[float, float], height: float) -> float:
+    """The level with the cup pointing down, its lip `height` above the part's origin at `xy` of its frame."""
+    rel, down = np.array([*xy, height]), np.array([0.0, 0.0, -1.0])
+    return seal.level_reached(rel, down, PARTS[part].boxes, SEALED, OPEN)
+
+
+def test_faces_of_several_boxes_at_one_height_seal_as_one():
+    two = (Box((-0.02, 0.0, 0.0), (0.02, 0.03, 0.01)), Box((0.02, 0.0, 0.0), (0.02, 0.03, 0.01)))
+    lip = seal.lip_on_face(np.array([0.0, 0.0, 0.01]), np.array([0.0, 0.0, -1.0]), two)
+    assert lip is not None and lip.rests and lip.open_area == 0.0  # across the seam
+    lip = seal.lip_on_face(np.array([0.025, 0.0, 0.01]), np.array([0.0, 0.0, -1.0]), two)
+    assert lip is not None and lip.open_area == pytest.approx(seal.open_area((0.025, 0.0), (0.04, 0.03)), rel=1e-9)
+
+
+def test_the_plate_seals_on_its_frame_not_over_its_hole():
+    top = 0.005
+    assert _level_over("hole_plate", (0.0, 0.0), top) == OPEN  # the lip's disc over the hole
+    assert _level_over("hole_plate", (0.0, -0.0425), top) == SEALED  # on the frame, across no edge
+    assert _level_over("hole_plate", (0.0, -0.0351), top) == SEALED  # the lip 0.1 mm off the hole
+    assert _level_over("hole_plate", (0.0, -0.0347), top) < 35.0  # 0.3 mm over it
+    assert _level_over("hole_plate", (-0.035, -0.035), top) == SEALED  # across the seam of two boxes
+
+
+def test_the_bracket_seals_on_its_base_clear_of_the_wall_and_never_on_the_wall():
+    base, wall = -0.02, 0.03
+    assert _level_over("l_bracket", (0.005, 0.0), base) == SEALED
+    assert _level_over("l_bracket", (-0.0199, 0.0), base) == SEALED  # the lip 0.1 mm off the wall
+    assert _level_over("l_bracket", (-0.0201, 0.0), base) == OPEN  # the wall rises through the lip's disc
+    assert _level_over("l_bracket", (-0.045, 0.0), wall) == OPEN  # the wall's top: 1 cm wide
+    assert _level_over("l_bracket", (-0.03, 0.0), wall) == OPEN  # over the inside corner, resting on the wall

@@ -21,6 +21,7 @@ from mrguide.annotation.server import AnnotationServer
 from mrguide.calibration.calibration_file import load_calibration
 from mrguide.calibration.errors import CalibrationError
 from mrguide.config import ConfigError
+from mrguide.parts import part_drawing, part_named
 from mrguide.policies.annotations import Annotation
 from mrguide.policies.experts import OracleExpert
 from mrguide.robot import RobotSpec
@@ -207,6 +208,7 @@ def hello_fields(
             "workspace": {"lo": spec.workspace.lo.tolist(), "hi": spec.workspace.hi.tolist()},
         },
         "task": asdict(task),
+        "part": part_drawing(part_named(task.part)),
         "registration": registration,
         "on_timeout": on_timeout,
     }

@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING
 from mrguide.cell.config import PLANT_ENGINES, CellConfig
 from mrguide.cell.twin_plant import TwinPlant
 from mrguide.drivers.config import CobotBusConfig
+from mrguide.parts import part_named
 from mrguide.plant import CellPlant
 from mrguide.registries import register
 from mrguide.robot import RobotSpec
@@ -21,14 +22,14 @@ if TYPE_CHECKING:
 
 
 def _pybullet_plant(cell: CellConfig, twin_cfg: TwinConfig, spec: RobotSpec, seed: int) -> tuple[TwinPlant, Scene]:
-    scene = Scene(spec, twin_cfg, cell.task.object_height, seed=seed)
+    scene = Scene(spec, twin_cfg, part_named(cell.task.part), seed=seed)
     return TwinPlant(scene), scene
 
 
 def _mujoco_plant(cell: CellConfig, twin_cfg: TwinConfig, spec: RobotSpec, seed: int) -> tuple[MujocoPlant, None]:
     from mrguide.mujoco_cell.plant import MujocoPlant  # the `mujoco` extra: only for a cell that asks for it
 
-    return MujocoPlant(spec, cell.plant.mujoco, cell.task.object_height, cup=twin_cfg.cup), None
+    return MujocoPlant(spec, cell.plant.mujoco, part_named(cell.task.part), cup=twin_cfg.cup), None
 
 
 #: (env config, twin config, arm, seed) → the plant behind the simulated drives, and the twin's scene if it has one.

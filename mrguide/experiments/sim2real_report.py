@@ -138,7 +138,13 @@ def _gap_sentence(real_cfg: CellConfig) -> str:
     g, cup = real_cfg.twin.reality_gap, real_cfg.twin.cup
     mounting = f"cup on a {cup.stroke * 1e3:.0f} mm level-compensator" if cup.stroke > 0 else "rigid cup"
     return (
-        f"Reality gap of the 'real' twin: object {g.object_mass} kg, friction {g.object_friction}, suction break "
+        f"Reality gap of the 'real' twin: object {_or_parts(g.object_mass, ' kg')}, friction "
+        f"{_or_parts(g.object_friction)}, suction break "
         f"force {g.suction_break_force} N, actuator latency {g.actuator_latency} cycles, lag {g.actuator_lag * 1e3:.0f} ms, "
         f"joint noise {g.joint_noise} rad, vacuum noise {g.vacuum_noise} kPa, {mounting}."
     )
+
+
+def _or_parts(value: float | None, unit: str = "") -> str:
+    """A reality gap's override of the part's `value`, or the part library's."""
+    return "the part's" if value is None else f"{value}{unit}"

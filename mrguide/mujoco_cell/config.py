@@ -23,8 +23,9 @@ class MujocoCellConfig:
     #: link inertia at home. Assumed: the order of an industrial servo's position loop (10-30 Hz).
     servo_bandwidth_hz: Annotated[float, Range(0.5, 200.0, " Hz")] = 15.0
     servo_damping_ratio: Annotated[float, Range(0.1, 5.0)] = 1.0
-    #: The part: a solid 5 cm cube of ABS (density 1.04 g/cm³ → 0.13 kg).
-    part_mass: Annotated[float, Range(1e-3, 10.0, " kg")] = 0.13
+    #: The part's mass in this cell; None: the part library's (`mrguide.parts`). The cell's config sets the block's
+    #: as a solid 5 cm cube of ABS (density 1.04 g/cm³ → 0.13 kg).
+    part_mass: Annotated[float | None, Range(1e-3, 10.0, " kg")] = None
 
     def __post_init__(self) -> None:
         check_ranges(self, "plant.mujoco")

@@ -27,6 +27,7 @@ import numpy as np
 
 from mrguide.cell_layout import CUP_RADIUS, TABLE_CENTER, TABLE_HALF_EXTENTS, CupConfig
 from mrguide.mujoco_cell.config import MujocoCellConfig
+from mrguide.parts import Part
 from mrguide.robot import RobotSpec, urdf_with_tool
 from mrguide.seal import LIP_COMPLIANCE
 
@@ -62,7 +63,7 @@ class CellModel:
     lip_geoms: np.ndarray  # the cup's lip ring: what touches a part
     tcp_body: int
     part_body: int
-    part_geom: int
+    part_geoms: np.ndarray  # the part's boxes
     part_qpos: int  # the part's free joint: position (3) and quaternion w, x, y, z (4)
     part_dof: int
 
@@ -116,13 +117,21 @@ def add_table(s: mujoco.MjSpec) -> None:
     )
 
 
-def _add_cell(s: mujoco.MjSpec, part_size: float, part_mass: float) -> None:
-    """The table and the part, a free cube."""
+def _add_cell(s: mujoco.MjSpec, part: Part, mass: float) -> None:
+    """The table and the part, a free body of its boxes (geoms `part0`, `part1`, ...), its `mass` spread over them by
+    their volumes."""
     add_table(s)
-    h = 0.5 * part_size
-    part = s.worldbody.add_body(name="part", pos=[*PART_START, h])
-    part.add_freejoint(name="part_free")
-    part.add_geom(name="part", type=mujoco.mjtGeom.mjGEOM_BOX, size=[h, h, h], mass=part_mass, rgba=[0.85, 0.1, 0.1, 1])
+    body = s.worldbody.add_body(name="part", pos=[*PART_START, 0.5 * part.height])
+    body.add_freejoint(name="part_free")
+    for i, box in enumerate(part.boxes):
+        body.add_geom(
+            name=f"part{i}",
+            type=mujoco.mjtGeom.mjGEOM_BOX,
+            size=list(box.half),
+            pos=list(box.centre),
+            mass=mass * box.volume / part.volume,
+            rgba=[0.85, 0.1, 0.1, 1],
+        )
 
 
 def _add_lip(s: mujoco.MjSpec, length: float) -> None:
@@ -159,11 +168,11 @@ def _servo_gains(s: mujoco.MjSpec, spec: RobotSpec, cfg: MujocoCellConfig) -> tu
     return inertia * omega**2, 2.0 * cfg.servo_damping_ratio * inertia * omega
 
 
-def build_cell(spec: RobotSpec, cfg: MujocoCellConfig, part_size: float, cup: CupConfig) -> CellModel:
-    """Compile the cell for the arm `spec` with a cube part of edge `part_size` (m) and the cup mounted as `cup`
-    says (rigid, or on a spring level-compensator)."""
+def build_cell(spec: RobotSpec, cfg: MujocoCellConfig, part: Part, cup: CupConfig) -> CellModel:
+    """Compile the cell for the arm `spec` with `part` (of the cell's mass, or the library's) and the cup mounted as
+    `cup` says (rigid, or on a spring level-compensator)."""
     s = arm_spec(spec, cfg, cup)
-    _add_cell(s, part_size, cfg.part_mass)
+    _add_cell(s, part, part.mass if cfg.part_mass is None else cfg.part_mass)
     kp, kv = _servo_gains(s, spec, cfg)
     for name, p, v in zip(spec.joint_names, kp, kv, strict=True):
         pos = s.add_actuator(name=f"{name}_position", target=name, trntype=mujoco.mjtTrn.mjTRN_JOINT)
@@ -175,7 +184,7 @@ def build_cell(spec: RobotSpec, cfg: MujocoCellConfig, part_size: float, cup: Cu
     adhesion.ctrlrange = [0.0, 101.3]
     _add_lip(s, float(spec.T_flange_tcp[2, 3]))
     model = s.compile()
-    part = model.body("part")
+    part_body = model.body("part")
     lips = np.array([model.geom(f"lip{i}").id for i in range(LIP_POINTS)])
     model.geom_solref[:] = (CONTACT_TIMECONST_STEPS * cfg.timestep, 1.0)  # critically damped, stiff (above)
     for g in range(model.ngeom):  # the cup's cylinder: mass and shape, no contact (the lip touches)
@@ -191,8 +200,8 @@ def build_cell(spec: RobotSpec, cfg: MujocoCellConfig, part_size: float, cup: Cu
         cup_actuator=model.actuator("cup").id,
         lip_geoms=lips,
         tcp_body=model.body("tcp").id,
-        part_body=part.id,
-        part_geom=model.geom("part").id,
+        part_body=part_body.id,
+        part_geoms=np.array([model.geom(f"part{i}").id for i in range(len(part.boxes))]),
         part_qpos=int(model.joint("part_free").qposadr[0]),
         part_dof=int(model.joint("part_free").dofadr[0]),
     )

@@ -26,26 +26,27 @@ from mrguide.cell_layout import CupConfig
 from mrguide.drivers.mock.first_order_plant import FirstOrderParams
 from mrguide.mujoco_cell.config import MujocoCellConfig
 from mrguide.mujoco_cell.model import build_cell
+from mrguide.parts import PARTS, Part
 from mrguide.plant import CellPlant
 from mrguide.robot import RobotSpec
 
 
 class MujocoPlant(CellPlant):
-    """The MuJoCo cell: arm, table, one cube part and a suction cup, advanced one SYNC period at a time."""
+    """The MuJoCo cell: arm, table, one part (`mrguide.parts`) and a suction cup, advanced one SYNC period at a time."""
 
     def __init__(
         self,
         spec: RobotSpec,
         cfg: MujocoCellConfig | None = None,
-        part_size: float = 0.05,
+        part: Part = PARTS["block"],
         vacuum: FirstOrderParams | None = None,
         cup: CupConfig | None = None,
     ):
         self.spec, self.cfg = spec, cfg or MujocoCellConfig()
         self.vacuum = vacuum or FirstOrderParams()
-        self.cell = build_cell(spec, self.cfg, part_size, cup or CupConfig())
+        self.cell = build_cell(spec, self.cfg, part, cup or CupConfig())
         self.model, self.data = self.cell.model, mujoco.MjData(self.cell.model)
-        self.half = np.full(3, 0.5 * part_size)
+        self.boxes = part.boxes
         self.lock = threading.Lock()
         self.data.qpos[self.cell.arm_qpos] = spec.q_home
         mujoco.mj_forward(self.model, self.data)
@@ -152,10 +153,10 @@ class MujocoPlant(CellPlant):
 
     def _cup_touches_part(self) -> bool:
         c, d = self.cell, self.data
-        lips = set(c.lip_geoms.tolist())
+        lips, part = set(c.lip_geoms.tolist()), set(c.part_geoms.tolist())
         for i in range(d.ncon):
             a, b = int(d.contact.geom1[i]), int(d.contact.geom2[i])
-            if (a == c.part_geom and b in lips) or (b == c.part_geom and a in lips):
+            if (a in part and b in lips) or (b in part and a in lips):
                 return True
         return False
 
@@ -169,10 +170,10 @@ class MujocoPlant(CellPlant):
     def level_reached(self) -> float:
         """kPa below atmosphere the generator reaches with the cup where it is (`seal.level_reached`)."""
         rel, axis = self._lip()
-        return seal.level_reached(rel, axis, self.half, self.vacuum.sealed_level_kpa, self.vacuum.open_level_kpa)
+        return seal.level_reached(rel, axis, self.boxes, self.vacuum.sealed_level_kpa, self.vacuum.open_level_kpa)
 
     def lip_sealed(self) -> bool:
-        """The cup's lip rests whole on one face of the part: square to it, within the lip's compliance, not over its
-        edge."""
-        lip = seal.lip_on_face(*self._lip(), self.half)
+        """The cup's lip rests whole on a face of the part: square to it, within the lip's compliance, not over an edge
+        or a hole."""
+        lip = seal.lip_on_face(*self._lip(), self.boxes)
         return lip is not None and lip.rests and lip.open_area == 0.0

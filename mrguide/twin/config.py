@@ -19,8 +19,10 @@ class RealityGap:
     the real robot loads other values, e.g. from `configs/cells/real_cell.toml`.
     """
 
-    object_mass: Annotated[float, Range(1e-3, 10.0, " kg")] = 0.20
-    object_friction: Annotated[float, Range(0.01, 2.0)] = 0.8  # lateral friction coefficient
+    #: the part's mass in this cell; None: the part library's (`mrguide.parts`; the block's 0.20 kg)
+    object_mass: Annotated[float | None, Range(1e-3, 10.0, " kg")] = None
+    #: the part's lateral friction coefficient in this cell; None: the part library's (the block's 0.8)
+    object_friction: Annotated[float | None, Range(0.01, 2.0)] = None
     #: N: the cup lets go above this constraint force, whatever its vacuum holds (`mrguide.seal`: Δp · A off the face,
     #: friction along it): a cup weaker than that, as a worn lip is. The training twin's 1000 N is none (Δp · A is at
     #: most 127 N for the 2 cm lip at a perfect vacuum); a 'real' cell sets its own.

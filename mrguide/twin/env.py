@@ -20,6 +20,7 @@ import numpy as np
 from mrguide.config import ConfigFile
 from mrguide.motion.decision import ActionError, DecisionState, DecisionStep
 from mrguide.part_perception import PartPerception
+from mrguide.parts import part_named
 from mrguide.robot import RobotConfig, RobotSpec, load_robot, robot_config
 from mrguide.task import ACT_DIM, OBS_DIM, OBS_GRIP, OBS_OBJECT, OBS_PROGRESS, Outcome, TaskConfig, oracle_action
 from mrguide.twin.camera import Camera
@@ -78,7 +79,7 @@ class PickPlaceEnv(gym.Env):
         self.twin_cfg = self.config.twin
         self.workspace = self.robot_spec.workspace
         self.render_mode = render_mode
-        self.scene = Scene(self.robot_spec, self.twin_cfg, self.task_cfg.object_height)
+        self.scene = Scene(self.robot_spec, self.twin_cfg, part_named(self.task_cfg.part))
         self.decision = DecisionStep(self.robot_spec, self.task_cfg, self.twin_cfg.control_period)
         self.kin, self.streamer = self.decision.kin, self.decision.streamer
         self.action_space = gym.spaces.Box(-1.0, 1.0, (ACT_DIM,), np.float32)

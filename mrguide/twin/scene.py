@@ -1,4 +1,4 @@
-"""The PyBullet cell: table, UR5 with suction cup, one cube, a goal marker, and a camera.
+"""The PyBullet cell: table, UR5 with suction cup, one part (`mrguide.parts`), a goal marker, and a camera.
 
 The arm is loaded from example-robot-data's URDF with a cup link (and a `tcp` link at its lip) added
 on the fly into a cached copy; the package's own file is never changed or copied into the repo. The
@@ -22,6 +22,7 @@ import numpy as np
 import pybullet as pb
 
 from mrguide.cell_layout import CUP_RADIUS, TABLE_CENTER, TABLE_HALF_EXTENTS
+from mrguide.parts import PARTS, Part
 from mrguide.robot import RobotSpec, urdf_with_tool
 from mrguide.twin.camera import Camera
 from mrguide.twin.config import RealityGap, TwinConfig
@@ -69,17 +70,35 @@ def _link_and_joint_ids(robot: int, client: int) -> tuple[dict[str, int], dict[s
     return links, joints
 
 
-def _add_object(client: int, half: float, gap: RealityGap) -> int:
-    """The cube (edge 2 × `half`), with the gap's mass and friction, at its default start; its body id."""
-    obj_col = pb.createCollisionShape(pb.GEOM_BOX, halfExtents=(half, half, half), physicsClientId=client)
-    obj_vis = pb.createVisualShape(
-        pb.GEOM_BOX, halfExtents=(half, half, half), rgbaColor=(0.85, 0.1, 0.1, 1), physicsClientId=client
-    )
-    body = pb.createMultiBody(gap.object_mass, obj_col, obj_vis, (0.5, -0.1, half), physicsClientId=client)
+def _add_part(client: int, part: Part, gap: RealityGap) -> int:
+    """The part from its boxes (one box shape, or a compound of several about its centre of mass: PyBullet's body
+    frame), with its mass and friction or the gap's, at its default start; its body id."""
+    com = np.asarray(part.centre_of_mass)
+    colour = (0.85, 0.1, 0.1, 1)
+    if len(part.boxes) == 1:  # a lone box about the origin: Bullet's box shape (a compound of one collides apart)
+        half = part.boxes[0].half
+        col = pb.createCollisionShape(pb.GEOM_BOX, halfExtents=half, physicsClientId=client)
+        vis = pb.createVisualShape(pb.GEOM_BOX, halfExtents=half, rgbaColor=colour, physicsClientId=client)
+    else:
+        halves = [b.half for b in part.boxes]
+        frames = [(np.asarray(b.centre) - com).tolist() for b in part.boxes]
+        col = pb.createCollisionShapeArray(
+            [pb.GEOM_BOX] * len(halves), halfExtents=halves, collisionFramePositions=frames, physicsClientId=client
+        )
+        vis = pb.createVisualShapeArray(
+            [pb.GEOM_BOX] * len(halves),
+            halfExtents=halves,
+            visualFramePositions=frames,
+            rgbaColors=[colour] * len(halves),
+            physicsClientId=client,
+        )
+    mass = part.mass if gap.object_mass is None else gap.object_mass
+    start = (0.5 + com[0], -0.1 + com[1], 0.5 * part.height + com[2])
+    body = pb.createMultiBody(mass, col, vis, start, physicsClientId=client)
     pb.changeDynamics(
         body,
         -1,
-        lateralFriction=gap.object_friction,
+        lateralFriction=part.friction if gap.object_friction is None else gap.object_friction,
         activationState=pb.ACTIVATION_STATE_DISABLE_SLEEPING,
         physicsClientId=client,
     )
@@ -109,10 +128,11 @@ class SceneSnapshot:
 class Scene:
     """One PyBullet world with the cell in it."""
 
-    def __init__(self, spec: RobotSpec, cfg: TwinConfig, object_size: float = 0.05, seed: int | None = None):
-        """Connect to PyBullet (its GUI if `cfg.gui`) and build the cell: arm at home, object and goal placed."""
-        self.spec, self.cfg = spec, cfg
-        self.object_size = object_size
+    def __init__(self, spec: RobotSpec, cfg: TwinConfig, part: Part = PARTS["block"], seed: int | None = None):
+        """Connect to PyBullet (its GUI if `cfg.gui`) and build the cell: arm at home, the part and goal placed."""
+        self.spec, self.cfg, self.part = spec, cfg, part
+        #: the part's centre of mass in its frame: PyBullet's body frame, which `object_pose` turns into the part's
+        self.com = np.asarray(part.centre_of_mass)
         self.client = pb.connect(pb.GUI if cfg.gui else pb.DIRECT)
         c = self.client
         pb.setGravity(*GRAVITY, physicsClientId=c)
@@ -136,13 +156,11 @@ class Scene:
             "positionGains": [0.6] * spec.dof,
             "velocityGains": [1.0] * spec.dof,
         }
-        h = object_size / 2
+        h = 0.5 * part.height
         gap = cfg.reality_gap
-        self.object = _add_object(c, h, gap)
+        self.object = _add_part(c, part, gap)
         self.goal_marker = _add_goal_marker(c)
-        self.suction = SuctionCup(
-            c, self.robot, self.tcp_link, self.object, object_size, cfg.vacuum, cfg.control_period
-        )
+        self.suction = SuctionCup(c, self.robot, self.tcp_link, self.object, part, cfg.vacuum, cfg.control_period)
         self.suction.break_force = gap.suction_break_force
         self.rng = np.random.default_rng(seed)
         self._applied = spec.q_home.copy()
@@ -178,7 +196,7 @@ class Scene:
         # restoreState leaves behind, so a seeded episode does not depend on the previous one.
         pb.resetBasePositionAndOrientation(self.object, (0, 0, -10), (0, 0, 0, 1), physicsClientId=c)
         pb.performCollisionDetection(physicsClientId=c)
-        pb.resetBasePositionAndOrientation(self.object, obj.tolist(), (0, 0, 0, 1), physicsClientId=c)
+        pb.resetBasePositionAndOrientation(self.object, (obj + self.com).tolist(), (0, 0, 0, 1), physicsClientId=c)
         pb.resetBaseVelocity(self.object, (0, 0, 0), (0, 0, 0), physicsClientId=c)
         pb.resetBasePositionAndOrientation(self.goal_marker, (goal[0], goal[1], 0.001), (0, 0, 0, 1), physicsClientId=c)
         self.goal = np.asarray(goal, float).copy()
@@ -252,11 +270,14 @@ class Scene:
         return self.suction.state.level + (float(self.rng.normal(0.0, sigma)) if sigma > 0 else 0.0)
 
     def object_position(self) -> np.ndarray:
-        return np.array(pb.getBasePositionAndOrientation(self.object, physicsClientId=self.client)[0])
+        """The part's origin (m, base frame)."""
+        return self.object_pose()[0]
 
     def object_pose(self) -> tuple[np.ndarray, np.ndarray]:
+        """The part's origin (m) and its quaternion (x, y, z, w), base frame."""
         pos, orn = pb.getBasePositionAndOrientation(self.object, physicsClientId=self.client)
-        return np.array(pos), np.array(orn)
+        rot = np.array(pb.getMatrixFromQuaternion(orn)).reshape(3, 3)
+        return np.array(pos) - rot @ self.com, np.array(orn)
 
     def tcp_pose_pybullet(self) -> tuple[np.ndarray, np.ndarray]:
         """TCP position and quaternion (x, y, z, w) as PyBullet computes them (for cross-checks)."""

@@ -24,6 +24,7 @@ import numpy as np
 import pybullet as pb
 
 from mrguide import seal
+from mrguide.parts import Part
 from mrguide.twin.config import VacuumConfig
 
 #: m/s², the twin's gravity (the scene sets it).
@@ -55,11 +56,13 @@ class SuctionState:
 
 
 class SuctionCup:
-    """The vacuum cup on link `cup_link` of `robot`, gripping the cube `obj` of edge `obj_size`."""
+    """The vacuum cup on link `cup_link` of `robot`, gripping the body `obj` of `part` (PyBullet's body frame at the
+    part's centre of mass)."""
 
-    def __init__(self, client: int, robot: int, cup_link: int, obj: int, obj_size: float, cfg: VacuumConfig, dt: float):
+    def __init__(self, client: int, robot: int, cup_link: int, obj: int, part: Part, cfg: VacuumConfig, dt: float):
         self.client, self.robot, self.cup_link, self.obj = client, robot, cup_link, obj
-        self.half = np.full(3, 0.5 * obj_size)
+        self.boxes = part.boxes
+        self.com = np.asarray(part.centre_of_mass)
         self.mass = float(pb.getDynamicsInfo(obj, -1, physicsClientId=client)[0])
         self.cfg = cfg
         self.dt = dt
@@ -123,7 +126,7 @@ class SuctionCup:
         return any(c[2] != self.robot for c in contacts)
 
     def _tcp_in_object(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
-        """Cup pose in the object frame (position, quaternion x y z w); called every period while the vacuum is on."""
+        """Cup pose in the body's frame (position, quaternion x y z w); called every period while the vacuum is on."""
         tcp_pos, tcp_orn = pb.getLinkState(
             self.robot, self.cup_link, computeForwardKinematics=True, physicsClientId=self.client
         )[4:6]
@@ -132,14 +135,14 @@ class SuctionCup:
         return pb.multiplyTransforms(inv_pos, inv_orn, tcp_pos, tcp_orn)
 
     def _lip(self) -> tuple[np.ndarray, np.ndarray]:
-        """The lip's centre and the cup's axis (out of the lip) in the object's frame."""
+        """The lip's centre and the cup's axis (out of the lip) in the part's frame."""
         rel_pos, rel_orn = self._tcp_in_object()
-        return np.array(rel_pos), _axis(rel_orn)
+        return np.array(rel_pos) + self.com, _axis(rel_orn)
 
     def _level_reached(self) -> float:
         """kPa below atmosphere the generator reaches with the cup where it is (`seal.level_reached`)."""
         rel, axis = self._lip()
-        return seal.level_reached(rel, axis, self.half, -self.cfg.level_sealed, -self.cfg.level_open)
+        return seal.level_reached(rel, axis, self.boxes, -self.cfg.level_sealed, -self.cfg.level_open)
 
     def _attach(self) -> None:
         # Constraint frame = the TCP frame; the object keeps its pose relative to it at the moment of sealing.

@@ -6,7 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mrguide.annotation.broker import LiveAnswer
+from mrguide.annotation.broker import AnnotationBroker, LiveAnswer
+from mrguide.annotation.live import hello_fields
+from mrguide.annotation.server import AnnotationServer
 from mrguide.task import TaskConfig
 from tests.annotation.conftest import ask_in_thread, make_request, wait_until
 from tests.annotation.test_page import GOAL, OBJ, QUAT
@@ -109,3 +111,27 @@ def test_a_click_on_a_gizmo_arrow_places_through_it(browser, page_served):
         fut.result(10)
     finally:
         page.close()
+
+
+def test_the_page_draws_the_selected_part_and_snaps_to_its_top(browser, spec):
+    """The hello names the L-bracket: the page draws its two boxes, and a click on its base snaps the pick mark to the
+    part's origin at its top (6 cm, the wall's), not the block's."""
+    task = TaskConfig(part="l_bracket")
+    broker = AnnotationBroker(spec.workspace, hello_fields(spec, task))
+    server = AnnotationServer(broker, spec, port=0)
+    server.start()
+    page = browser.open(server.url)
+    try:
+        fut = ask_in_thread(broker, make_request(1, obj=OBJ, goal=GOAL, quat=QUAT))
+        page.wait_request()
+        drawn = page.page.evaluate("() => window.mrguide.part()")
+        assert drawn["boxes"] == pytest.approx([0.1, 0.01]) and drawn["height"] == pytest.approx(0.06)
+        _click(page, OBJ + [0.02, 0.0, -0.02])  # on the base, beside the wall
+        s = page.wait_state("s.placedOn === 'object'")
+        assert s["target"] == pytest.approx([OBJ[0], OBJ[1], 0.06], abs=1e-4)
+        page.click_submit()
+        assert fut.result(10).target == pytest.approx([OBJ[0], OBJ[1], 0.06], abs=1e-4)
+    finally:
+        page.close()
+        broker.close()
+        server.stop()

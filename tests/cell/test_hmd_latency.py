@@ -7,6 +7,7 @@ from pathlib import Path
 from mrguide.cell.config import CellConfig
 from mrguide.cell.hmd_stream import HmdPoseStream
 from mrguide.cell.twin_plant import TwinPlant
+from mrguide.parts import part_named
 from mrguide.robot import load_robot
 from mrguide.twin.scene import Scene
 from mrguide.twin.visual_arm import ArmDrawing
@@ -17,7 +18,7 @@ LATE_AND_LOSSY = {"latency_s": 0.4, "frame_drop": 0.5}
 
 def test_estimates_arrive_after_the_latency_and_dropped_frames_give_none():
     cfg = CellConfig.load(REAL)
-    scene = Scene(load_robot(cfg.robot), cfg.twin, cfg.task.object_height)
+    scene = Scene(load_robot(cfg.robot), cfg.twin, part_named(cfg.task.part))
     drawing = ArmDrawing.of(scene.spec)
     stream = HmdPoseStream(TwinPlant(scene), REAL, cfg.task.object_height, drawing, hmd_overrides=LATE_AND_LOSSY)
     try:

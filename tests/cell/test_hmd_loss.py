@@ -16,6 +16,7 @@ from mrguide.deploy.runtime_config import RuntimeConfig
 from mrguide.deploy.safety import SafetyConfig
 from mrguide.drivers.config import BusConfig, CobotBusConfig
 from mrguide.experiments import sim2real as s2r
+from mrguide.parts import part_named
 from mrguide.pose_source import PoseUnavailable
 from mrguide.robot import load_robot
 from mrguide.task import oracle_action, phase_from_progress
@@ -41,7 +42,7 @@ def _kill_hmd(wait: bool = True) -> int:
 
 def test_dead_hmd_process_is_unavailable_at_once():
     cfg = CellConfig.load(REAL)
-    scene = Scene(load_robot(cfg.robot), cfg.twin, cfg.task.object_height)
+    scene = Scene(load_robot(cfg.robot), cfg.twin, part_named(cfg.task.part))
     stream = HmdPoseStream(TwinPlant(scene), REAL, cfg.task.object_height, ArmDrawing.of(scene.spec))
     try:
         stream.wait_fresh()
@@ -63,7 +64,7 @@ def test_a_dead_hmd_process_is_gone_even_while_is_alive_has_not_caught_up(monkey
     """A child reaped by another thread can read as alive for a moment (its exit code not yet stored): the
     stream judges by the process's sentinel, so the last pose is refused at once all the same."""
     cfg = CellConfig.load(REAL)
-    scene = Scene(load_robot(cfg.robot), cfg.twin, cfg.task.object_height)
+    scene = Scene(load_robot(cfg.robot), cfg.twin, part_named(cfg.task.part))
     stream = HmdPoseStream(TwinPlant(scene), REAL, cfg.task.object_height, ArmDrawing.of(scene.spec))
     try:
         stream.wait_fresh()

@@ -22,6 +22,7 @@ from mrguide.cell.hmd_stream import (
 )
 from mrguide.config import ConfigError, load_section
 from mrguide.motion.kinematics import Kinematics
+from mrguide.parts import part_named
 from mrguide.pose_source import PoseUnavailable
 from mrguide.robot import load_robot
 from mrguide.twin.camera import Intrinsics
@@ -113,7 +114,7 @@ def test_the_hmd_process_streams_the_mujoco_cells_part():
 
     env = CellConfig.load(MUJOCO_CELL)
     spec = load_robot(env.robot)
-    plant = MujocoPlant(spec, env.plant.mujoco, env.task.object_height, cup=env.twin.cup)
+    plant = MujocoPlant(spec, env.plant.mujoco, part_named(env.task.part), cup=env.twin.cup)
     part = np.array([0.45, 0.02, 0.025])
     plant.place_objects(part, np.array([0.55, 0.2, 0.025]))
     drawing = MujocoDrawing(spec, env.twin.cup)

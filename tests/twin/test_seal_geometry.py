@@ -55,18 +55,22 @@ def _move(plant: CellPlant, spec: RobotSpec, kin: Kinematics, target: np.ndarray
     return cup
 
 
-def lower_cup(plant: CellPlant, spec: RobotSpec, kin: Kinematics, offset: float, half: float) -> Row:
-    """Lower the cup with the vacuum on onto a part whose centre lies `offset` (m, along x) beside the cup's axis; the
+def lower_cup(
+    plant: CellPlant, spec: RobotSpec, kin: Kinematics, offset: float, half: float, face: float | None = None
+) -> Row:
+    """Lower the cup with the vacuum on onto a part whose origin stands `half` (m) above the table and lies `offset`
+    (m, along x) beside the cup's axis, onto the part's face `face` (m above its origin; default its top, `half`); the
     vacuum is left on."""
+    face = half if face is None else face
     part = np.array([*PART_XY, half])
     plant.place_objects(part, part + [0.0, 0.3, 0.0])
-    _move(plant, spec, kin, part + [offset, 0.0, half + HOVER])
+    _move(plant, spec, kin, part + [offset, 0.0, face + HOVER])
     hover = kin.tcp_position(plant.joint_positions())
     part = np.array([hover[0] - offset, hover[1], half])  # where the cup really hovers, less the offset
     plant.place_objects(part, part + [0.0, 0.3, 0.0])
     plant.set_vacuum(True, False)
-    path = _move(plant, spec, kin, np.array([hover[0], hover[1], 2.0 * half - PRESS]))
-    rest = next(c for c in path if c[2] <= half + LIP_COMPLIANCE)
+    path = _move(plant, spec, kin, np.array([hover[0], hover[1], half + face - PRESS]))
+    rest = next(c for c in path if c[2] <= face + LIP_COMPLIANCE)
     level = plant.vacuum_level_kpa()
     return Row(1e3 * float(rest[0]), level, level >= GRIP)
 

@@ -20,6 +20,7 @@
 //   window.mrguide.dropConnection()      close the socket as a network failure would (reconnects)
 //   window.mrguide.redraw()              draw the view again (it draws on demand)
 //   window.mrguide.shown()               {phase_index, object, goal, object_height} of the outstanding request
+//   window.mrguide.part()                {boxes (each one's x size, m), height} of the part as drawn
 //   window.mrguide.autoSubmit(on)        answer every new request as soon as it is shown, with the start
 //                                        target and the suggested vacuum (benchmarks: no polling delay)
 //   window.mrguide.xrDevice              IWER's XRDevice when ?xr= is given (tests drive it)
@@ -446,6 +447,8 @@ async function main() {
     // what the outstanding request shows: the part, the goal, the phase (for a scripted person)
     shown: () => (S.request ? { phase_index: S.request.phase_index, object: S.request.state.object.position,
       goal: S.request.state.goal, object_height: view.objectHeight } : null),
+    // the part as drawn: its boxes' sizes (m) and its height
+    part: () => ({ boxes: view.object.children.map((b) => b.geometry.parameters.width), height: view.objectHeight }),
     gizmoHandle: (axis) => view.gizmoHandle(axis),
     screenOf: (p) => view.screenOf(p),
     viewAxes: () => view.viewAxes(),

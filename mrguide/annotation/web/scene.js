@@ -38,7 +38,6 @@ export class TwinView extends EventTarget {
     this.container = container;
     this.frames = 0;
     this.workspace = { lo: [0.3, -0.2, 0.045], hi: [0.65, 0.4, 0.35] };
-    this.objectHeight = 0.05;
     this.robot = null;
     this.robotState = { loading: false, loaded: false, error: null, meshErrors: 0 };
     this.jointNames = [];
@@ -130,9 +129,10 @@ export class TwinView extends EventTarget {
   _buildMarkers() {
     const std = (color, extra = {}) => new THREE.MeshStandardMaterial({ color, roughness: 0.55, metalness: 0.05, ...extra });
 
-    this.object = new THREE.Mesh(new THREE.BoxGeometry(1, 1, 1), std(COLORS.object));
+    this.object = new THREE.Group(); // the part: its boxes (`setPart`), about its origin
     this.object.name = 'object';
     this.object.visible = false;
+    this.objectMaterial = std(COLORS.object);
     this.root.add(this.object);
 
     this.goal = new THREE.Group();
@@ -147,6 +147,7 @@ export class TwinView extends EventTarget {
       new THREE.MeshBasicMaterial({ transparent: true, opacity: 0, depthWrite: false, side: THREE.DoubleSide }));
     this.goalDisc.name = 'goal-disc';
     this.goal.add(ring, this.goalGhost, this.goalDisc);
+    this.setPart([{ centre: [0, 0, 0], half: [0.025, 0.025, 0.025] }]); // the block, until the hello names the part
     this.goal.visible = false;
     this.root.add(this.goal);
 
@@ -181,11 +182,29 @@ export class TwinView extends EventTarget {
     }
   }
 
+  /** Draw the part as its boxes ({centre, half} in its frame, m: the part library's); its outline at the goal. */
+  setPart(boxes) {
+    this.object.clear();
+    const lo = [Infinity, Infinity, Infinity];
+    const hi = [-Infinity, -Infinity, -Infinity];
+    for (const { centre, half } of boxes) {
+      const box = new THREE.Mesh(new THREE.BoxGeometry(2 * half[0], 2 * half[1], 2 * half[2]), this.objectMaterial);
+      box.position.copy(v3(centre));
+      this.object.add(box);
+      for (let i = 0; i < 3; i++) {
+        lo[i] = Math.min(lo[i], centre[i] - half[i]);
+        hi[i] = Math.max(hi[i], centre[i] + half[i]);
+      }
+    }
+    this.objectHeight = hi[2] - lo[2];
+    this.goalGhost.scale.set(hi[0] - lo[0], hi[1] - lo[1], this.objectHeight);
+  }
+
   // -- configuration from the server's hello -----------------------------------------------------
   configure(hello) {
     const robot = hello.robot || {};
     if (robot.workspace) this.workspace = { lo: robot.workspace.lo.slice(), hi: robot.workspace.hi.slice() };
-    if (hello.task && hello.task.object_height) this.objectHeight = hello.task.object_height;
+    if (hello.part) this.setPart(hello.part.boxes);
     this.jointNames = robot.joint_names || [];
     const lo = v3(this.workspace.lo);
     const hi = v3(this.workspace.hi);
@@ -195,9 +214,6 @@ export class TwinView extends EventTarget {
     this.workspaceBox.position.copy(mid);
     this.workspaceFloor.scale.set(size.x, size.y, 1);
     this.workspaceFloor.position.set(mid.x, mid.y, 0.0005);
-    const h = this.objectHeight;
-    this.object.scale.set(h, h, h);
-    this.goalGhost.scale.set(h, h, h);
     if (robot.urdf_url && !this.robotState.loading && !this.robotState.loaded) this.loadRobot(robot.urdf_url);
     this.resetCamera();
     this.requestRender();
@@ -374,12 +390,12 @@ export class TwinView extends EventTarget {
   pickRay(ray, phase, task = {}) {
     this.scene.updateMatrixWorld(true);
     const surfaces = [this.object, this.goalDisc, this.tableGroup[0]].filter((o) => o.visible || o === this.goalDisc);
-    const hit = ray.intersectObjects(surfaces, false)[0];
+    const hit = ray.intersectObjects(surfaces, true)[0];
     if (!hit) return null;
     const top = this.objectHeight; // a part standing on the table (z = 0)
     const z = phase === 0 ? top + (task.approach_height ?? 0.08)
       : phase === 2 || phase === 3 ? (task.lift_height ?? 0.15) : top;
-    if (hit.object === this.object) return { on: 'object', point: [this.object.position.x, this.object.position.y, z] };
+    if (hit.object.parent === this.object) return { on: 'object', point: [this.object.position.x, this.object.position.y, z] };
     if (hit.object === this.goalDisc) return { on: 'goal', point: [this.goal.position.x, this.goal.position.y, z] };
     const p = this.root.worldToLocal(hit.point.clone());
     return { on: 'table', point: [p.x, p.y, z] };
