@@ -135,7 +135,9 @@ def build_parser() -> argparse.ArgumentParser:
     from mrguide.twin.commands import add_expert_command, run_twin_calibration
 
     add_expert_command(sub)
-    add_deploy_command(sub, CellDryRun, _cell_learner)
+    from mrguide.annotation.commands import CellAnnotatePlugin
+
+    add_deploy_command(sub, CellDryRun, _cell_learner, CellAnnotatePlugin())
     from mrguide.deploy.cycle_report import add_cycles_command
 
     add_cycles_command(sub)

@@ -37,6 +37,7 @@ class BotOptions:
     delay_s: float = 0.0  # think time before each answer
     max_answers: int | None = None  # stop after this many answers
     insecure: bool = False  # accept a self-signed certificate (wss:// on a LAN)
+    intervene: bool = False  # step in once on connecting (the trainer or the learning cell asks for marks next)
     connect_timeout_s: float = 10.0
 
 
@@ -45,6 +46,7 @@ class BotReport:
     answers: int = 0
     refused: int = 0
     latencies_s: list[float] = field(default_factory=list)
+    intervened: bool = False  # the server accepted the bot's `intervene`
 
 
 def ws_url(page_url: str) -> str:
@@ -108,10 +110,14 @@ class AnnotationBot:
             kind = data.get("type")
             if kind == "hello":
                 self._configure(data)
+                if self.options.intervene and not data.get("request"):
+                    await ws.send_json({"type": "intervene"})
                 if data.get("request"):
                     await self._answer(ws, data["request"])
             elif kind == "request":
                 await self._answer(ws, data)
+            elif kind == "ack" and data.get("for") == "intervene" and data.get("accepted"):
+                self.report.intervened = True
             elif kind == "ack" and not data.get("accepted"):
                 self.report.refused += 1
                 log.warning("server refused our %s: %s", data.get("for"), data.get("reason"))

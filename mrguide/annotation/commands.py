@@ -1,12 +1,14 @@
-"""`mrguide train --expert live` options and `mrguide annotate bot`."""
+"""`mrguide train --expert live` options, `mrguide deploy --learn`'s `--annotate`, and `mrguide annotate bot`."""
 
 from __future__ import annotations
 
 import argparse
 import sys
 from collections.abc import Callable
+from typing import Any
 
 from mrguide.cli_args import nonnegative_float, nonnegative_int, positive_float, positive_int
+from mrguide.errors import InputError
 
 
 class LiveTrainPlugin:
@@ -66,6 +68,59 @@ class LiveTrainPlugin:
         return LiveSession(options, on_waiting)
 
 
+def host_port(text: str) -> tuple[str, int]:
+    """`[HOST:]PORT` (an IPv6 host in brackets) → (host, port); the host defaults to 127.0.0.1."""
+    host, sep, port = text.rpartition(":")
+    host = host.strip("[]") if sep else "127.0.0.1"
+    try:
+        number = int(port)
+    except ValueError:
+        number = -1
+    if not host or not 0 <= number <= 65535:
+        raise argparse.ArgumentTypeError(
+            f"expected [HOST:]PORT with a port in 0..65535 (0: any free port), got {text!r}"
+        )
+    return host, number
+
+
+class CellAnnotatePlugin:
+    """The annotation page of `mrguide deploy --learn` (deploy.commands.AnnotationPlugin): a person steps in."""
+
+    def add_arguments(self, parser: argparse.ArgumentParser) -> None:
+        g = parser.add_argument_group("a person stepping in while the cell learns (--learn)")
+        g.add_argument(
+            "--annotate",
+            type=host_port,
+            metavar="[HOST:]PORT",
+            help="serve the annotation page (default host 127.0.0.1; 0.0.0.0: every interface): Intervene takes over "
+            "the next episode, played by the expert of the person's pick and place marks and stored as expert data",
+        )
+        g.add_argument("--cert", help="TLS certificate (PEM) for https/wss, as for `mrguide train --expert live`")
+        g.add_argument("--key", help="TLS private key (PEM)")
+        g.add_argument("--token", help="access token in the page URL (default: a new random token)")
+        g.add_argument(
+            "--annotation-timeout",
+            type=positive_float,
+            default=30.0,
+            metavar="S",
+            help="seconds the arm waits at an episode's start for each mark; then the policy plays the episode",
+        )
+
+    def open(self, args: argparse.Namespace, learner: Any, seed: int) -> Any:
+        """The page and broker of `--annotate` for `learner` (a CellLearner), or None without it; InputError when
+        the cell does not learn."""
+        if args.annotate is None:
+            return None
+        if learner is None:
+            raise InputError("--annotate needs --learn RUN_DIR: a person's intervention is expert data for a learner")
+        from mrguide.annotation.cell_interventions import CellInterventions
+        from mrguide.annotation.live import LiveOptions
+
+        host, port = args.annotate
+        options = LiveOptions(host, port, args.cert, args.key, args.token, "skip", args.annotation_timeout)
+        return CellInterventions(options, learner.spec, learner.task, learner.guidance, learner.out, seed)
+
+
 def add_annotate_command(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("annotate", help="live annotation clients")
     asub = p.add_subparsers(dest="annotate_command", required=True)
@@ -86,6 +141,11 @@ def add_annotate_command(sub: argparse._SubParsersAction) -> None:
     b.add_argument("--delay", type=nonnegative_float, default=0.0, metavar="S", help="think time before each answer, s")
     b.add_argument("--count", type=positive_int, help="stop after this many answers")
     b.add_argument("--insecure", action="store_true", help="accept a self-signed TLS certificate")
+    b.add_argument(
+        "--intervene",
+        action="store_true",
+        help="step in once on connecting, as the page's Intervene button (the next episode is demonstrated)",
+    )
     b.set_defaults(func=cmd_annotate_bot)
 
 
@@ -100,7 +160,9 @@ def cmd_annotate_bot(args: argparse.Namespace) -> int:
     if args.noise is not None:
         noise = dataclasses.replace(noise, sigma=args.noise)
     try:
-        bot = AnnotationBot(BotOptions(args.url, noise, args.seed, args.delay, args.count, args.insecure))
+        bot = AnnotationBot(
+            BotOptions(args.url, noise, args.seed, args.delay, args.count, args.insecure, args.intervene)
+        )
         print(f"annotation bot: connecting to {bot.url.split('?')[0]}", file=sys.stderr)
         report = bot.run()
     except BotError as exc:

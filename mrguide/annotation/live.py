@@ -68,24 +68,35 @@ class LiveCounts:
     timeouts: int = 0
 
 
-class LiveExpert:
-    """Expert source that asks through the broker (ExpertSource protocol of mrguide.policies.experts)."""
+#: The scene a request shows beside the observation: the arm's joints (rad) and the part's orientation (xyzw).
+Scene = Callable[[], tuple[np.ndarray, np.ndarray]]
 
-    def __init__(self, broker: AnnotationBroker, env: PickPlaceEnv, on_timeout: str, timeout_s: float):
-        self.broker, self.env = broker, env
+
+def twin_scene(env: PickPlaceEnv) -> Scene:
+    """The twin's exact joints and the part's orientation, as a request shows them in training."""
+    return lambda: (env.scene.joint_positions(noisy=False), env.scene.object_pose()[1])
+
+
+class LiveExpert:
+    """Expert source that asks through the broker (ExpertSource protocol of mrguide.policies.experts); `scene` gives
+    what a request shows beside the observation (the twin's in training, the cell's as the runtime senses it)."""
+
+    def __init__(self, broker: AnnotationBroker, scene: Scene, task: TaskConfig, on_timeout: str, timeout_s: float):
+        self.broker, self.scene = broker, scene
         self.on_timeout = on_timeout
         self.timeout_s = None if on_timeout == "wait" else timeout_s
-        self.oracle = OracleExpert(env.task_cfg)
+        self.oracle = OracleExpert(task)
         self.counts = LiveCounts()
+        self.unanswered: str | None = None  # why the last request ended without an answer ("timeout", "skipped", ...)
         self._unacknowledged: dict[str, LiveAnswer] = {}  # answers given out, acknowledged once recorded
 
     def annotate(self, obs: np.ndarray, previous: Annotation | None = None) -> Annotation | None:
         """Ask the person for the current phase's waypoint; None when the demonstration is to be dropped."""
         obs = np.asarray(obs)
-        _, orientation = self.env.scene.object_pose()
+        joints, orientation = self.scene()
         req = AnnotationRequest(
             phase=phase_from_progress(obs[OBS_PROGRESS]),
-            joints=self.env.scene.joint_positions(noisy=False),
+            joints=joints,
             tcp=obs[OBS_TCP],
             vacuum_on=bool(obs[OBS_GRIP] > 0),
             object_position=obs[OBS_OBJECT],
@@ -118,6 +129,7 @@ class LiveExpert:
                 return Annotation(
                     exact.target, exact.grip, "oracle", {"request": res.request_id, "fallback": "timeout"}
                 )
+        self.unanswered = res.reason
         if res.reason in ("timeout", "skipped"):
             self.counts.skipped += 1
         log.info("annotation request %s ended without an answer: %s", res.request_id, res.reason)
@@ -154,7 +166,7 @@ class LiveSession:
         self.broker.on_waiting = self.on_waiting
         self.server = AnnotationServer(self.broker, spec, o.host, o.port, o.cert, o.key, o.token)
         self.server.start()
-        self.expert = LiveExpert(self.broker, env, o.on_timeout, o.timeout_s)
+        self.expert = LiveExpert(self.broker, twin_scene(env), env.task_cfg, o.on_timeout, o.timeout_s)
         return self.expert
 
     @property

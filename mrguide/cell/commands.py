@@ -45,7 +45,7 @@ class CellDryRun:
             inputs.run_log,
             inputs.safety,
             pose_factory=camera,
-            policy=learning.versions if learning else inputs.policy,
+            policy=learning or inputs.policy,
             on_placed=camera.refresh if camera else None,
             runtime_cfg=inputs.dcfg.runtime,
             own_process=True,

@@ -241,7 +241,7 @@ def dry_run_cycles(
 ) -> CycleSummary:
     """Production cycles `run.start` .. of a policy through the whole stack against the simulated cell, parts fed
     by a `TwinFeeder` of seed `run.seed` (the arguments otherwise as `dry_run`'s); with `learning`, the runtime is
-    the actor of on-cell learning (`policy` its `versions`)."""
+    the actor of on-cell learning (`policy` the actor itself)."""
     spec = load_robot(env_cfg.robot)
     policy = _checked_policy(policy_path, policy, spec, env_cfg, bus_cfg)
     with (

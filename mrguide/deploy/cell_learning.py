@@ -13,25 +13,40 @@ nothing the task did ended it, and what followed was not the policy's.
 loaded by `ExportedPolicy.load` with every check a file on the robot gets (format, arm, shapes, finite actions over
 the workspace), between episodes only: an episode runs on one policy. A file that fails a check is logged and
 skipped; the runtime goes on with the policy it has.
+
+**A person may step in** (`interventions`): at the start of an episode, the episode is played by the expert their
+marks build and its transitions are expert data (`deploy.interventions`).
 """
 
 from __future__ import annotations
 
 import logging
 import threading
+from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated
 
 import numpy as np
 
 from mrguide.config import Range, check_ranges
+from mrguide.deploy.interventions import (
+    CellStart,
+    Demonstration,
+    InterventionCounts,
+    Interventions,
+    Write,
+    take_intervention,
+)
 from mrguide.deploy.policy import ExportedPolicy, PolicyFileError
 from mrguide.robot import RobotSpec
 from mrguide.task import Outcome, TaskConfig
 
 log = logging.getLogger(__name__)
+
+#: The success rate the annotation page shows is over this many cycles.
+RECENT_CYCLES = 20
 
 
 @dataclass(frozen=True)
@@ -153,17 +168,53 @@ class PolicyVersions:
 @dataclass
 class LearningActor:
     """What the runtime calls while it learns on the cell: a new episode (the transitions so far handed on by
-    `between`, the newest policy taken in, an unjudged action dropped), each decision's action, each judgement."""
+    `between`, the newest policy taken in, an unjudged action dropped, a person's intervention taken up), each
+    decision's action (`__call__`: the runtime's policy), each judgement (`tap`)."""
 
     versions: PolicyVersions
     tap: TransitionTap
     #: called between episodes, before the newest policy is taken: the learner's side sends what the tap gathered
     #: and offers the versions it has (nothing runs on the cell meanwhile: the arm stands, the watchdog is off)
     between: Callable[[], None] | None = None
+    #: a person stepping in from the annotation page (`deploy --annotate`), taken up at an episode's start
+    interventions: Interventions | None = None
+    counts: InterventionCounts = field(default_factory=InterventionCounts)
+    _expert: Demonstration | None = field(default=None, init=False)
+    _placed: deque[bool] = field(default_factory=lambda: deque(maxlen=RECENT_CYCLES), init=False)
 
-    def episode_start(self) -> int:
-        """The policy version this episode acts with."""
+    def __call__(self, obs: np.ndarray) -> np.ndarray:
+        """The action for `obs`: the person's expert's in an episode they took over, else the policy's."""
+        if self._expert is not None:
+            action = self._expert.act(obs)
+            if action is not None:
+                return action
+            log.warning("the intervention's expert has no action: the policy plays the rest of the episode")
+            self._expert, self.tap.expert = None, False
+        return self.versions(obs)
+
+    def episode_start(self, episode: int, write: Write, sense: Callable[[], CellStart]) -> int:
+        """The policy version this episode acts with (written to the run log as `policy_version`); a person who asked
+        to step in is asked for marks now, the arm at rest and holding no part (`interventions`)."""
         self.tap.reset()
         if self.between is not None:
             self.between()
-        return self.versions.take_newest()
+        version = self.versions.take_newest()
+        write("policy_version", episode=episode, version=version)
+        self._expert = None
+        if self.interventions is not None:
+            self._expert = take_intervention(self.interventions, self.counts, episode, sense, write)
+        self.tap.expert = self._expert is not None
+        return version
+
+    def cycle_done(self, cycle: int, placed: bool) -> None:
+        """A cycle ended: the page's status (the cycle, the version, success over the last RECENT_CYCLES cycles)."""
+        self._placed.append(placed)
+        if self.interventions is not None:
+            self.interventions.publish(
+                cycle=cycle,
+                version=self.versions.version,
+                success_rate=sum(self._placed) / len(self._placed),
+                interventions=self.counts.played,
+                person_interventions=self.counts.played,
+                skipped=self.counts.fell_back,
+            )

@@ -64,13 +64,25 @@ class CellLearning(Protocol):
     def close(self) -> None: ...
 
 
+class AnnotationPlugin(Protocol):
+    """The annotation page beside a learning cell (`--annotate`): its options, and the session they open."""
+
+    def add_arguments(self, parser: argparse.ArgumentParser) -> None: ...
+
+    def open(self, args: argparse.Namespace, learner: CellLearning | None, seed: int) -> Any:
+        """The `interventions.Interventions` of the page (with `url` and `close()`), or None if not asked for."""
+        ...
+
+
 def add_deploy_command(
     sub: argparse._SubParsersAction,
     dry_run_factory: Callable[[ConfigFile], DryRunBackend],
     learning_factory: Callable[..., CellLearning],
+    annotation: AnnotationPlugin,
 ) -> None:
     """Register `mrguide deploy`; `dry_run_factory(config_file)` builds the simulated cell's DryRunBackend,
-    `learning_factory(run_dir, policy, robot, task, exploration, seed, resume)` the learner of `--learn`."""
+    `learning_factory(run_dir, policy, robot, task, exploration, seed, resume)` the learner of `--learn`, `annotation`
+    the page through which a person steps in while it learns."""
     sp = sub.add_parser("deploy", help="run an exported policy on the cobot, or --dry-run it against the simulated bus")
     sp.add_argument("--policy", required=True, help="exported policy file (.npz) from `mrguide train`")
     sp.add_argument("--config", help="TOML config ([deploy], [safety], [robot], [task]; [twin] for dry runs)")
@@ -101,8 +113,11 @@ def add_deploy_command(
         "set a [deploy] or [safety] key for this run, after --config (e.g. --set deploy.cycles.max_retries=1 "
         "--set safety.stall_timeout=0.3); repeatable",
     )
+    annotation.add_arguments(sp)
     sp.add_argument("--quiet", action="store_true")
-    sp.set_defaults(func=cmd_deploy, dry_run_factory=dry_run_factory, learning_factory=learning_factory)
+    sp.set_defaults(
+        func=cmd_deploy, dry_run_factory=dry_run_factory, learning_factory=learning_factory, annotation=annotation
+    )
 
 
 def _bus_config(config_path: str | None, bus_config: str, robot):
@@ -147,8 +162,10 @@ def cmd_deploy(args: argparse.Namespace) -> int:
     start = _first_cycle(args, log_path)
     header = _run_header(args, dcfg, bus, policy, episodes, seed) | {"cycles": args.cycles, "first_cycle": start[0]}
     learner = _cell_learner(args, dcfg, policy, spec, task, seed)
-    camera = _pose_feed(args, dcfg, task, seed, dry if args.dry_run else None)
+    camera = page = None
     try:
+        page = _annotation_page(args, learner, seed)
+        camera = _pose_feed(args, dcfg, task, seed, dry if args.dry_run else None)
         with RunLog(log_path, header, where) as run_log:
             actor = learner.actor if learner else None
             inputs = DeployInputs(args.policy, policy, bus, spec, task, safety, dcfg, camera, run_log, actor)
@@ -157,10 +174,9 @@ def cmd_deploy(args: argparse.Namespace) -> int:
             if learner:
                 run_log.write("learning", **learner.status())
     finally:
-        if camera:
-            camera.close()
-        if learner:
-            learner.close()
+        for opened in (camera, page, learner):
+            if opened:
+                opened.close()
     print(summary.text() + (f"\n{camera_stats.text()}" if camera_stats else ""))
     if learner:
         print(f"on-cell learning: {learner.status()}")
@@ -195,6 +211,16 @@ def _cell_learner(args: argparse.Namespace, dcfg, policy, spec, task, seed: int)
     if args.cycles is None:
         raise InputError("--learn needs --cycles: the cell learns over production cycles")
     return args.learning_factory(Path(args.learn), policy, spec, task, dcfg.learning.exploration, seed, args.resume)
+
+
+def _annotation_page(args: argparse.Namespace, learner: CellLearning | None, seed: int) -> Any:
+    """With --annotate: the page through which a person steps in, its URL printed, the learner's actor taking its
+    interventions; otherwise None."""
+    page = args.annotation.open(args, learner, seed)
+    if page is not None and learner is not None:
+        learner.actor.interventions = page
+        print(f"annotation page: {page.url}", flush=True)
+    return page
 
 
 def _first_cycle(args: argparse.Namespace, log_path: Path) -> tuple[int, int]:

@@ -63,12 +63,16 @@ def cycle_run(
     args: argparse.Namespace, dcfg: DeployConfig, seed: int, start: tuple[int, int], bar: Any, learning: Any = None
 ) -> CycleRun:
     """What `--cycles` asks for, from `start` (cycle, attempt); the progress bar ticks once per cycle (with
-    `learning`, the on-cell learner's actor, it names the policy version acted with)."""
+    `learning`, the on-cell learner's actor, it names the policy version acted with and the interventions played, and
+    the annotation page's status follows)."""
 
     def tick(report: CycleReport) -> None:
         bar.update(1)
-        version = {"policy": f"v{learning.versions.version}"} if learning is not None else {}
-        bar.set_postfix(placed=report.placed, attempts=len(report.outcomes), s=f"{report.cycle_s:.1f}", **version)
+        learned = {}
+        if learning is not None:
+            learning.cycle_done(report.cycle, report.placed)
+            learned = {"policy": f"v{learning.versions.version}", "interventions": learning.counts.played}
+        bar.set_postfix(placed=report.placed, attempts=len(report.outcomes), s=f"{report.cycle_s:.1f}", **learned)
 
     return CycleRun(start[0], args.cycles - start[0], seed, dcfg.cycles, tick, first_attempt=start[1])
 
@@ -94,7 +98,7 @@ def _robot_cycles(run: CycleRun, inputs: DeployInputs) -> CycleSummary:
     with settled_heap(), Cobot(i.bus, i.spec) as cobot:
         cobot.enable()
         pose = i.camera or FixedObjectPose(i.dcfg.object_position)
-        policy = i.learning.versions if i.learning else i.policy
+        policy = i.learning or i.policy
         with Runtime(
             cobot, policy, pose, i.spec, i.task, i.run_log, i.policy.decision_period, i.dcfg.runtime, i.safety
         ) as rt:

@@ -76,6 +76,11 @@ class ObjectTracker:
         self._last, self._misses = self.filter.update(obj), 0
         return self._on_table(self._last)
 
+    def first_look(self) -> np.ndarray:
+        """Where an episode's first decision will see the part (a look of the source, corrected, on the table),
+        without counting the look; PoseUnavailable if the source has none."""
+        return self._on_table(np.asarray(self.pose.object_position(), dtype=float))
+
     def _on_table(self, seen: np.ndarray) -> np.ndarray:
         """The part before the grasp: where the source saw it less the registration's correction, at the height of a
         part standing on the table (z = 0 is its top), whatever height the source gave: the policy trained on parts on

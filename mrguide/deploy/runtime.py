@@ -25,6 +25,7 @@ from mrguide.deploy.bias_estimate import Registration
 from mrguide.deploy.cell_learning import LearningActor
 from mrguide.deploy.episode import HOME_SETTLE_S, EpisodeReport, RunStopped
 from mrguide.deploy.following import FollowingMonitor
+from mrguide.deploy.interventions import sense_start
 from mrguide.deploy.lift_rule import LiftRule, hold_in_transit
 from mrguide.deploy.object_tracking import ObjectStartUnknown, ObjectTracker
 from mrguide.deploy.runlog import RunLog
@@ -213,8 +214,10 @@ class Runtime:
         self.registration.reset()
         self.lift.reset()
         self.seal.reset()
-        if self.learning is not None:
-            self.log.write("policy_version", episode=index, version=self.learning.episode_start())
+        if self.learning is not None:  # between episodes: new weights, a person stepping in (interventions.py)
+            self.learning.episode_start(
+                index, self.log.write, lambda: sense_start(self.cobot, self.decision, self.objects, goal)
+            )
         self.watchdog.arm(True)
         try:
             outcome = self._decisions(goal, index, report)

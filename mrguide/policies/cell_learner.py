@@ -84,6 +84,7 @@ class CellLearner:
         if self.out.exists() and not resume:
             raise InputError(f"{self.out} exists: --resume to go on learning from it, or remove it")
         run, state = _training_run(run_dir)
+        self.guidance = run.guidance  # how a person's marks become an expert (`deploy --annotate`)
         self.spec, self.task, self.decision_period = spec, task, policy.decision_period
         self.out.mkdir(parents=True, exist_ok=True)
         offset, scale = obs_scaling(spec.workspace)
@@ -151,8 +152,10 @@ class CellLearner:
         return export_actor(self.learner.agent.policy_actor, path, self.spec, self.task, self.decision_period, extra)
 
     def status(self) -> dict[str, Any]:
-        """For the progress line and the run log: the version acted with, the learner's updates, whether it is lost."""
-        return {"version": self.version, "updates": self.learner.agent.updates, "lost": self.lost}
+        """For the progress line and the run log: the version acted with, the learner's updates, whether it is lost,
+        the interventions (episodes a person's expert played, and those asked for that the policy played)."""
+        counts = self.actor.counts.as_dict()
+        return {"version": self.version, "updates": self.learner.agent.updates, "lost": self.lost, **counts}
 
     def save(self) -> None:
         """The learner's state, atomically (`--resume` goes on from it); nothing if the learner is lost."""

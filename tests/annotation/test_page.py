@@ -140,6 +140,11 @@ def test_page_shows_request_drag_keys_and_submit(browser, page_served, spec, tmp
         if os.environ.get("MRGUIDE_UPDATE_SCREENSHOT") == "1":
             shutil.copyfile(shot, REPO / "docs" / "annotation-page.png")
 
+        assert page.text("st-cycle") == "–"  # training: no cycle; a learning cell's status names its cycle
+        broker.publish_status(cycle=4, version=2)
+        page.wait_state("s.status.cycle === 4")
+        assert page.text("st-cycle") == "4 · v2"
+
         page.click_submit()
         answer = fut.result(timeout=15)
         assert isinstance(answer, LiveAnswer)

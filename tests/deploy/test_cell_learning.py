@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from mrguide.deploy.cell_learning import LearningActor, PolicyVersions, Transition, TransitionTap
+from mrguide.deploy.interventions import CellStart
 from mrguide.deploy.policy import ExportedPolicy
 from mrguide.deploy.runlog import RunLog, read_log
 from mrguide.deploy.runtime import Runtime
@@ -106,3 +107,75 @@ def test_exploration_adds_seeded_noise_inside_the_action_box(tmp_path):
     assert np.array_equal(noisy, np.array([b(obs) for _ in range(50)]))  # seeded
     assert np.all(np.abs(noisy) <= 1.0) and np.std(noisy[:, 0]) > 0.1
     assert np.array_equal(PolicyVersions(policy, spec, task)(obs), policy(obs))  # none by default
+
+
+class _Person:
+    """Interventions that a test scripts: who steps in, and the expert (or the reason for none) their marks give."""
+
+    def __init__(self, expert, reason: str | None = None):
+        self.expert, self.reason = expert, reason
+        self.asked: list[CellStart] = []
+        self.who: str | None = "c1"
+        self.status: list[dict] = []
+
+    def requested(self):
+        who, self.who = self.who, None
+        return who
+
+    def demonstration(self, episode, start):
+        self.asked.append(start)
+        return self.expert, {"marks": [], "reason": self.reason}
+
+    def publish(self, **status):
+        self.status.append(status)
+
+
+class _Hover:
+    """A demonstration that holds the TCP over the part (the vacuum off)."""
+
+    def __init__(self, spec):
+        self.action = np.r_[spec.workspace.to_normalized(np.array([0.5, -0.075, 0.12])), -1.0].astype(np.float32)
+
+    def act(self, obs):
+        return self.action
+
+
+def _learning_episode(tmp_path, person, name: str):
+    """One learning episode on the ideal cobot with `person` stepping in: (transitions, run log records, actor)."""
+    spec, task = load_robot(), TaskConfig(horizon=8)
+    policy = ExportedPolicy.load(_policy_file(tmp_path / "p.npz", 0, task), spec, task)
+    got: list[Transition] = []
+    with (
+        RunLog(tmp_path / name, {"test": "interventions"}) as log,
+        Runtime(IdealCobot(spec.q_home), policy, FixedObjectPose((0.5, -0.075, 0.025)), spec, task, log, 0.1) as rt,
+    ):
+        actor = LearningActor(PolicyVersions(policy, spec, task), TransitionTap(got.append), interventions=person)
+        rt.policy, rt.learning = actor, actor
+        rt.run_episode(np.array([0.5, 0.21, 0.025]), 0)
+        actor.cycle_done(0, False)
+    return got, read_log(tmp_path / name), actor
+
+
+def test_an_intervention_is_taken_at_the_episode_start_and_its_decisions_are_expert_data(tmp_path):
+    spec = load_robot()
+    hover = _Hover(spec)
+    person = _Person(hover)
+    got, records, actor = _learning_episode(tmp_path, person, "expert.jsonl")
+    (start,) = person.asked  # asked once, before the first decision, with the cell as the runtime senses it
+    first = next(r for r in records if r["kind"] == "decision")
+    assert np.allclose(start.obs, first["obs"], atol=1e-6) and np.allclose(start.joints, spec.q_home)
+    acted = [r for r in records if r["kind"] == "decision" and "action" in r]
+    assert all(np.allclose(r["action"], hover.action) for r in acted)  # the expert played every decision
+    assert len(got) == len(acted) and all(t.expert for t in got)
+    (record,) = [r for r in records if r["kind"] == "intervention"]
+    assert record["episode"] == 0 and record["client_id"] == "c1" and record["played_by"] == "expert"
+    assert actor.counts.as_dict() == {"interventions": 1, "interventions_asked": 1, "interventions_fell_back": 0}
+    assert person.status[-1]["interventions"] == 1 and person.status[-1]["cycle"] == 0
+
+
+def test_an_intervention_nobody_marks_leaves_the_episode_to_the_policy(tmp_path):
+    got, records, actor = _learning_episode(tmp_path, _Person(None, reason="timeout"), "policy.jsonl")
+    assert got and not any(t.expert for t in got)
+    (record,) = [r for r in records if r["kind"] == "intervention"]
+    assert record["played_by"] == "policy" and record["reason"] == "timeout"
+    assert actor.counts.as_dict() == {"interventions": 0, "interventions_asked": 1, "interventions_fell_back": 1}

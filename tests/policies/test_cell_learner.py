@@ -51,7 +51,11 @@ def _episode(learner: CellLearner, rng: np.random.Generator, decisions: int = 20
         tap.acted(obs, rng.uniform(-1.0, 1.0, 4))
         obs = obs + rng.normal(0.0, 0.01, OBS_DIM)
         tap.judged(obs, -1.0, Outcome.NO_GRASP if i == decisions - 1 else None)
-    learner.actor.episode_start()
+    learner.actor.episode_start(0, lambda kind, **fields: None, _no_sensing)
+
+
+def _no_sensing():
+    raise AssertionError("nobody intervenes: the cell is not sensed for marks")
 
 
 def _until_a_version(learner: CellLearner, rng, deadline_s: float = 300.0) -> None:

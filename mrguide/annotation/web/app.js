@@ -365,6 +365,7 @@ async function main() {
     const s = S.status;
     const fmt = (v, d = 0) => (v === undefined || v === null ? '–' : typeof v === 'number' ? v.toFixed(d) : String(v));
     $('st-step').textContent = s.step === undefined ? '–' : `${s.step}${s.total_steps ? ` / ${s.total_steps}` : ''}`;
+    $('st-cycle').textContent = s.cycle === undefined ? '–' : `${s.cycle} · v${fmt(s.version)}`;
     $('st-episode').textContent = fmt(s.episode);
     $('st-lambda').textContent = fmt(s.lambda, 3);
     $('st-success').textContent = s.success_rate === undefined ? '–' : `${(100 * s.success_rate).toFixed(0)} %`;
