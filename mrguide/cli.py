@@ -48,63 +48,29 @@ def cmd_main(args: argparse.Namespace) -> int:
     return rc or rc2
 
 
+def _step_args(argv: list[str], **values: Any) -> argparse.Namespace:
+    """A step's arguments: what `mrguide <argv>` parses to (every other option at its default), `values` over it."""
+    args = build_parser().parse_args(argv)
+    for name, value in values.items():
+        setattr(args, name, value)
+    return args
+
+
 def _train_step(args: argparse.Namespace, out: Path) -> argparse.Namespace:
     """The main job's `mrguide train` arguments: the default config, `--stop-after` the main job's steps."""
-    return argparse.Namespace(
-        config=None,
-        out=str(out),
-        steps=None,
-        seed=args.seed,
-        stop_after=args.train_steps,
-        set=[],
-        no_guidance=False,
-        expert=None,
-        resume=False,
-        quiet=args.quiet,
-        tensorboard=False,
-        record=None,
-    )
+    return _step_args(["train"], out=str(out), seed=args.seed, stop_after=args.train_steps, quiet=args.quiet)
 
 
 def _deploy_step(args: argparse.Namespace, policy: Path, real_config: str, log: Path) -> argparse.Namespace:
     """The main job's `mrguide deploy --dry-run` arguments: the policy in the 'real' cell, its episodes, its log."""
-    from mrguide.cell.commands import CellDryRun
-
-    return argparse.Namespace(
-        policy=str(policy),
-        config=real_config,
-        dry_run=True,
-        enable_drives=False,
-        episodes=args.deploy_episodes,
-        cycles=None,
-        resume=False,
-        seed=None,
-        log=str(log),
-        learn=None,
-        set=[],
-        quiet=args.quiet,
-        dry_run_factory=CellDryRun,
-        learning_factory=_cell_learner,
-    )
+    values = {"config": real_config, "episodes": args.deploy_episodes, "log": str(log), "quiet": args.quiet}
+    return _step_args(["deploy", "--policy", str(policy), "--dry-run"], **values)
 
 
 def _sim2real_step(args: argparse.Namespace, policy: Path, real_config: str, out: Path) -> argparse.Namespace:
     """The main job's `mrguide sim2real` arguments: the paper's conditions, its seeds and episodes."""
-    from mrguide.experiments.sim2real_command import PAPER_CONDITIONS
-
-    return argparse.Namespace(
-        policy=str(policy),
-        config=None,
-        real_config=real_config,
-        mujoco_config=None,
-        seeds=args.seeds,
-        episodes=args.episodes,
-        conditions=list(PAPER_CONDITIONS),
-        sweep=[],
-        set=[],
-        out=str(out),
-        quiet=args.quiet,
-    )
+    values = {"real_config": real_config, "seeds": args.seeds, "episodes": args.episodes, "quiet": args.quiet}
+    return _step_args(["sim2real", "--policy", str(policy), "--out", str(out)], **values)
 
 
 def _cell_learner(*args: Any) -> Any:

@@ -42,22 +42,14 @@ def steps(monkeypatch):
     return calls, results
 
 
-def _parsed(argv: list[str]) -> argparse.Namespace:
-    """What `mrguide <argv>` parses to for one step's command (the live-annotation options of `train` left out:
-    the main job trains with the simulated annotator), without the dispatch entries."""
-    from mrguide.cell.commands import CellDryRun
-    from mrguide.deploy.commands import add_deploy_command
-    from mrguide.experiments.sim2real_command import add_sim2real_command
-    from mrguide.policies.commands import add_train_command
+def _options(args: argparse.Namespace) -> dict:
+    """A step's options: its arguments but the objects the parser hands the command (its function, its plugins)."""
+    return {k: v for k, v in vars(args).items() if v is None or isinstance(v, str | int | float | list)}
 
-    parser = argparse.ArgumentParser()
-    sub = parser.add_subparsers(dest="command")
-    add_train_command(sub)
-    add_deploy_command(sub, CellDryRun, cli._cell_learner)
-    add_sim2real_command(sub)
-    args = vars(parser.parse_args(argv))
-    del args["command"], args["func"]
-    return argparse.Namespace(**args)
+
+def _parsed(argv: list[str]) -> dict:
+    """The options `mrguide <argv>` parses to for one step's command."""
+    return _options(cli.build_parser().parse_args(argv))
 
 
 def test_main_job_runs_each_step_once_in_order_with_its_command_line(tmp_path, run_cli, steps):
@@ -76,7 +68,7 @@ def test_main_job_runs_each_step_once_in_order_with_its_command_line(tmp_path, r
     expected[2][1].extend(["--out", str(out / "sim2real"), "--quiet"])
     assert [step for step, _ in calls] == [step for step, _ in expected]
     for (step, args), (_, step_argv) in zip(calls, expected, strict=True):
-        assert args == _parsed(step_argv), step
+        assert _options(args) == _parsed(step_argv), step
 
 
 def test_main_job_reuses_a_trained_policy_and_passes_its_real_cell_on(tmp_path, run_cli, steps):
