@@ -23,6 +23,7 @@ import numpy as np
 
 from mrguide.config import ConfigError, to_dict
 from mrguide.errors import InputError
+from mrguide.parts import part_named
 from mrguide.robot import RobotSpec, Workspace
 from mrguide.task import (
     ACT_DIM,
@@ -158,7 +159,7 @@ class ExportedPolicy:
                 )
             check_arm(path, meta, robot)
         if task is not None:
-            theirs, ours = meta["task"], to_dict(task)
+            theirs, ours = _task_fields(meta["task"]), to_dict(task)
             diff = sorted(k for k in set(theirs) | set(ours) if theirs.get(k) != ours.get(k))
             if diff:
                 raise PolicyFileError(f"{path}: task parameters differ from the configuration: {', '.join(diff)}")
@@ -290,6 +291,17 @@ def _layer_array(path: Path, arrays: dict[str, np.ndarray], name: str) -> np.nda
     if a.dtype.kind not in "iuf":
         raise PolicyFileError(f"{path}: layer array {name} holds {a.dtype} values, expected real numbers")
     return a.astype(np.float64)
+
+
+def _task_fields(theirs: dict) -> dict:
+    """A policy file's task parameters as today's `TaskConfig` names them: a file from before the part library names
+    its part by its edge (`object_height`), and every part then was the block."""
+    if "part" in theirs or "object_height" not in theirs:
+        return theirs
+    fields = {k: v for k, v in theirs.items() if k != "object_height"}
+    block = part_named("block")
+    fields["part"] = block.name if theirs["object_height"] == block.height else f"a {theirs['object_height']} m cube"
+    return fields
 
 
 def _trained_workspace(path: Path, meta: dict[str, Any]) -> Workspace:

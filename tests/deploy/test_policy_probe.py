@@ -79,3 +79,23 @@ def test_deploy_refuses_it_before_enabling_the_drives(tmp_path, monkeypatch, cap
     assert main(["deploy", "--policy", str(path), "--dry-run", "--episodes", "1", "--quiet"]) == 2
     assert "non-finite" in capsys.readouterr().err
     assert enabled == []
+
+
+@pytest.mark.parametrize("edge, loads", [(0.05, True), (0.06, False)])
+def test_a_policy_from_before_the_part_library_names_its_block_by_its_edge(tmp_path, edge, loads):
+    """Files exported before `task.part` carry `object_height`; the block's 5 cm edge is today's "block"."""
+    rng = np.random.default_rng(0)
+    layers = [(rng.normal(size=(16, OBS_DIM)), rng.normal(size=16)), (rng.normal(size=(4, 16)), rng.normal(size=4))]
+    path = _write_policy(tmp_path / "old.npz", layers)
+    with np.load(path) as f:
+        arrays = dict(f)
+    meta = json.loads(str(arrays["metadata"]))
+    del meta["task"]["part"]
+    meta["task"]["object_height"] = edge
+    arrays["metadata"] = np.array(json.dumps(meta))
+    np.savez(path, **arrays)
+    if loads:
+        assert ExportedPolicy.load(path, load_robot(), TaskConfig()) is not None
+    else:
+        with pytest.raises(PolicyFileError, match="task parameters differ from the configuration: part"):
+            ExportedPolicy.load(path, load_robot(), TaskConfig())
