@@ -122,6 +122,9 @@ def build_parser() -> argparse.ArgumentParser:
     from mrguide.experiments.sim2real_command import add_sim2real_command
 
     add_sim2real_command(sub)
+    from mrguide.experiments.part_grasps import add_grasps_command
+
+    add_grasps_command(sub)
 
     from mrguide.annotation.commands import LiveTrainPlugin, add_annotate_command
 

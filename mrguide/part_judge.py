@@ -38,6 +38,30 @@ def grasp_acceptable(part: Part, grasp: np.ndarray) -> bool:
     return inside and all(window.distance(xy) >= CUP_RADIUS for window in part.judge_only.keep_out)
 
 
+def intended_grasp(part: Part, pitch: float = 0.0025) -> np.ndarray | None:
+    """Where a person who knows the part grips it (m, in the part's frame, on its top face there): None where the
+    centre of its top is acceptable (the centre prior serves them), else the acceptable point of a `pitch` grid
+    deepest inside its grasp regions and clear of its keep-out windows, the nearest to the centre among equals."""
+    if grasp_acceptable(part, np.zeros(2)) and part.surface_height(np.zeros(2)) is not None:
+        return None
+    best: tuple[float, float, np.ndarray] | None = None
+    for region in part.judge_only.grasp:
+        xs = np.arange(region.low[0], region.high[0] + 1e-9, pitch)
+        ys = np.arange(region.low[1], region.high[1] + 1e-9, pitch)
+        for xy in (np.array([x, y]) for x in xs for y in ys):
+            if not grasp_acceptable(part, xy) or part.surface_height(xy) is None:
+                continue
+            depth = min(xy[0] - region.low[0], region.high[0] - xy[0], xy[1] - region.low[1], region.high[1] - xy[1])
+            clear = min((w.distance(xy) - CUP_RADIUS for w in part.judge_only.keep_out), default=np.inf)
+            key = (-round(min(depth, clear), 6), float(np.hypot(*xy)), xy)
+            if best is None or key[:2] < best[:2]:
+                best = key
+    if best is None:
+        raise ValueError(f"{part.name}: no acceptable grasp on a {pitch} m grid")
+    xy = np.round(best[2], 6)
+    return np.array([xy[0], xy[1], part.surface_height(xy)])
+
+
 def _yaw_and_tilt(quaternion: np.ndarray) -> tuple[float, float]:
     """The yaw (rad, of the x axis about z) and the tilt (rad, of the z axis off vertical) of quaternion x, y, z, w."""
     x, y, z, w = np.asarray(quaternion, dtype=float) / np.linalg.norm(quaternion)

@@ -6,8 +6,8 @@ reads (`PartJudging`: the acceptable grasp region, the keep-out windows and the 
 path, the task's targets and the page read `boxes`, `height`, `mass`, `friction` and `marker`, never `judge_only`
 (`part_judge` is its one reader; `tests/test_parts.py` checks it).
 
-A grasp frame taught by a person (a pose in the part's frame) is a field a part may gain beside `boxes`; nothing here
-assumes that a part is gripped at its centre. Adding a part: one `Part` in `PARTS` and its rows in the tests that
+Nothing here says where a part is gripped: a person teaches it (`TaskConfig.grasp`, from the marks); a part nobody
+taught falls back to the centre prior (`task.centre_prior`). Adding a part: one `Part` in `PARTS` and its rows in the tests that
 tabulate every part (docs/twin.md#the-part-library).
 """
 
@@ -81,6 +81,22 @@ class Part:
     def height(self) -> float:
         """m from the part's bottom to its top: its origin stands at half of it above the table."""
         return max(b.centre[2] + b.half[2] for b in self.boxes) - min(b.centre[2] - b.half[2] for b in self.boxes)
+
+    @property
+    def bounds(self) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+        """m, the low and high corners of the part's bounding box in its frame."""
+        low = np.min([np.subtract(b.centre, b.half) for b in self.boxes], axis=0)
+        high = np.max([np.add(b.centre, b.half) for b in self.boxes], axis=0)
+        return (tuple(float(v) for v in low), tuple(float(v) for v in high))  # type: ignore[return-value]
+
+    def surface_height(self, xy: np.ndarray) -> float | None:
+        """m, in the part's frame, of the highest top face at `xy` seen from above; None where no box is (a hole)."""
+        tops = [
+            b.centre[2] + b.half[2]
+            for b in self.boxes
+            if abs(xy[0] - b.centre[0]) <= b.half[0] and abs(xy[1] - b.centre[1]) <= b.half[1]
+        ]
+        return max(tops) if tops else None
 
     @property
     def volume(self) -> float:

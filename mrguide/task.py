@@ -17,12 +17,13 @@ Interpretation notes (the paper leaves these open):
 from __future__ import annotations
 
 import enum
+import functools
 from dataclasses import dataclass
 
 import numpy as np
 
 from mrguide.config import ConfigError
-from mrguide.parts import part_named
+from mrguide.parts import Part, part_named
 
 
 class Phase(enum.IntEnum):
@@ -95,9 +96,15 @@ class TaskConfig:
     place_tolerance: float = 0.03  # success radius of the placed object around the goal, xy (m)
     horizon: int = 60  # T, decisions per episode
     table_height: float = 0.0  # z of the surface the object rests on (m); a free object below it fell off
+    #: m, the grasp a person taught: where the cup's axis meets the part, in the part's frame (x, y, z); None: the
+    #: centre prior (`centre_prior`), what a part without teaching falls back to. A guided run sets it from the
+    #: person's marks (`GuidedExpert.taught_grasp`), and the exported policy carries it to the runtime.
+    grasp: tuple[float, float, float] | None = None
 
     def __post_init__(self) -> None:
-        part_named(self.part)
+        part = part_named(self.part)
+        if self.grasp is not None:
+            _check_grasp(self.grasp, part)
         for name in ("alpha", "eta", "step_penalty", "epsilon", "place_tolerance"):
             if not getattr(self, name) > 0:
                 raise ConfigError(f"task.{name} must be > 0 (paper: α, η, λ, ε > 0), got {getattr(self, name)}")
@@ -113,26 +120,56 @@ class TaskConfig:
         return part_named(self.part).height
 
     @property
+    def grasp_offset(self) -> np.ndarray:
+        """m from the part's origin to where the cup grips it: the taught grasp, else the centre prior."""
+        return np.asarray(self.grasp, dtype=float) if self.grasp is not None else centre_prior(self.part)
+
+    @property
     def bonuses(self) -> tuple[float, ...]:
         """Phase bonuses b_κ = κ + 1 (paper, Eq. 5)."""
         return tuple(float(k + 1) for k in range(N_PHASES))
 
 
+@functools.cache
+def _centre_prior(part: str) -> tuple[float, float, float]:
+    p = part_named(part)
+    z = p.surface_height(np.zeros(2))
+    return (0.0, 0.0, 0.5 * p.height if z is None else z)
+
+
+def centre_prior(part: str) -> np.ndarray:
+    """The centre prior: a part nobody taught is gripped at the middle of its top, on the face there seen from above
+    (m, in the part's frame; over a hole, at the part's top: no cup seals there, and the part needs teaching)."""
+    return np.array(_centre_prior(part))
+
+
+def _check_grasp(grasp: tuple[float, float, float], part: Part) -> None:
+    """ConfigError unless `grasp` is three finite numbers within the part's bounding box."""
+    g = np.asarray(grasp, dtype=float)
+    if g.shape != (3,) or not np.all(np.isfinite(g)):
+        raise ConfigError(f"task.grasp must be three finite numbers (m, in the part's frame), got {grasp!r}")
+    low, high = part.bounds
+    if np.any(g < np.asarray(low) - 1e-9) or np.any(g > np.asarray(high) + 1e-9):
+        raise ConfigError(f"task.grasp = {list(grasp)} lies outside the {part.name}'s bounding box {low} .. {high}")
+
+
 def phase_target(phase: int, obj: np.ndarray, goal: np.ndarray, cfg: TaskConfig) -> np.ndarray:
-    """TCP target p^tar_κ of a phase (Eq. 4): pre-grasp, object top, lift, above goal, place pose."""
-    obj = np.asarray(obj, dtype=float)
-    goal = np.asarray(goal, dtype=float)
-    top = obj[2] + 0.5 * cfg.object_height
+    """TCP target p^tar_κ of a phase (Eq. 4): pre-grasp, the grasp, lift, above goal, place pose. They follow the
+    grasp (`TaskConfig.grasp_offset`): the cup meets the part there, and holds it there until the part stands at
+    the goal; with the centre prior, the object's top centre."""
+    grip = cfg.grasp_offset
+    at = np.asarray(obj, dtype=float) + grip
+    placed = np.asarray(goal, dtype=float) + grip
     if phase == Phase.APPROACH:
-        return np.array([obj[0], obj[1], top + cfg.approach_height])
+        return at + np.array([0.0, 0.0, cfg.approach_height])
     if phase == Phase.GRASP:
-        return np.array([obj[0], obj[1], top])
+        return at
     if phase == Phase.LIFT:
-        return np.array([obj[0], obj[1], cfg.lift_height])
+        return np.array([at[0], at[1], cfg.lift_height])
     if phase == Phase.TRANSPORT:
-        return np.array([goal[0], goal[1], cfg.lift_height])
+        return np.array([placed[0], placed[1], cfg.lift_height])
     if phase == Phase.RELEASE:
-        return np.array([goal[0], goal[1], goal[2] + 0.5 * cfg.object_height])
+        return placed
     raise ValueError(f"phase must be in 0..{N_PHASES - 1}, got {phase}")
 
 

@@ -8,8 +8,9 @@ from pathlib import Path
 
 CONFIGS = Path(__file__).resolve().parents[1] / "configs"
 
-#: Training run configs: tests/policies/test_shipped_train_configs.py, tests/test_config_sections.py.
-RUN_CONFIGS = sorted((CONFIGS / "runs").glob("*.toml"))
+#: Training run configs (configs/runs, and configs/parts: the cell with another part): tests/policies/
+#: test_shipped_train_configs.py, tests/test_config_sections.py.
+RUN_CONFIGS = sorted((CONFIGS / "runs").glob("*.toml")) + sorted((CONFIGS / "parts").glob("*.toml"))
 #: Cells for deploy and sim-to-real: tests/test_config_sections.py, and the files they name in
 #: tests/test_shipped_configs.py.
 CELL_CONFIGS = sorted((CONFIGS / "cells").glob("*.toml"))

@@ -87,10 +87,13 @@ def _reads_of_judge(path: Path) -> list[int]:
 
 
 def test_only_the_judge_reads_what_the_learner_must_not_see():
+    """The judge reads the hidden record, and the evaluation that calls it; the simulated person asks the judge once
+    where to grip (a person knows the part), and only the simulated annotator asks the simulated person."""
     readers = {str(p.relative_to(PACKAGE)): _reads_of_judge(p) for p in PACKAGE.rglob("*.py")}
-    assert {p: lines for p, lines in readers.items() if lines} == {
-        "part_judge.py": _reads_of_judge(PACKAGE / "part_judge.py")
-    }
+    knowing = ("experiments/part_grasps.py", "part_judge.py", "simulated_person.py")
+    assert {p: lines for p, lines in readers.items() if lines} == {k: _reads_of_judge(PACKAGE / k) for k in knowing}
     assert _reads_of_judge(PACKAGE / "part_judge.py")  # the judge does read it: the scan sees a reader
+    asking = [str(p.relative_to(PACKAGE)) for p in PACKAGE.rglob("*.py") if "import person_grasp" in p.read_text()]
+    assert asking == ["policies/experts.py"]
     web = PACKAGE / "annotation" / "web"
     assert not [p for p in web.glob("*.js") if "judge_only" in p.read_text() or "keep_out" in p.read_text()]

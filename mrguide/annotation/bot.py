@@ -144,9 +144,13 @@ class AnnotationBot:
         ann = self._annotator.annotate(obs_from_request(req))
         if self.options.delay_s:
             await asyncio.sleep(self.options.delay_s)
-        await ws.send_json(
-            {"type": "answer", "id": req["id"], "target": [float(v) for v in ann.target], "vacuum": bool(ann.grip > 0)}
-        )
+        answer = {
+            "type": "answer",
+            "id": req["id"],
+            "target": [float(v) for v in ann.target],
+            "vacuum": bool(ann.grip > 0),
+        }
+        await ws.send_json(answer | ({"here": True} if ann.here else {}))  # a part it knows: it teaches the grasp
         self.report.answers += 1
         self.report.latencies_s.append(time.perf_counter() - t0)
 

@@ -55,6 +55,7 @@ class LiveAnswer:
     client_id: str
     client: str
     latency_s: float
+    here: bool = False  # "not there — here": the person teaches the point
 
 
 @dataclass(frozen=True)
@@ -329,7 +330,7 @@ class AnnotationBroker:
             )
         if target is not None:
             p.result = LiveAnswer(
-                p.request_id, target[0], target[1], client_id, client.kind, time.monotonic() - p.created
+                p.request_id, target[0], target[1], client_id, client.kind, time.monotonic() - p.created, target[2]
             )
             self.stats.answered += 1
         elif kind == "skip":

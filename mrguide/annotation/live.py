@@ -120,6 +120,7 @@ class LiveExpert:
                     "request": res.request_id,
                     "latency_s": round(res.latency_s, 4),
                 },
+                res.here,
             )
         if res.reason == "timeout":
             self.counts.timeouts += 1

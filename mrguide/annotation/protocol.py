@@ -23,7 +23,8 @@ CLIENT_TYPES = ("hello", "claim", "answer", "skip", "ping", "intervene")
 #: What is asked in each phase, in words a person at the page or in the headset understands.
 PROMPTS: tuple[str, ...] = (
     "Mark the pre-grasp point: where the cup should hover above the object before it goes down. Vacuum off.",
-    "Mark where the cup should touch the object: the centre of its top face. Vacuum on.",
+    "Mark where the cup should touch the object: the centre of its top face, or press Exactly here (H) and click"
+    " the point where it must grip. Vacuum on.",
     "Mark where the cup should lift the object to. Vacuum on.",
     "Mark where to carry the object: the point above the goal. Vacuum on.",
     "Mark where the object should be set down on the goal; the vacuum releases there. Vacuum off.",
@@ -49,6 +50,7 @@ REFUSALS = (
     "not_finite",
     "outside_workspace",
     "bad_vacuum",
+    "bad_here",
     "internal",
 )
 #: The most digits a number may have (a longer one is refused before Python turns it into an int).
@@ -160,8 +162,9 @@ def parse_hello(msg: dict[str, Any]) -> tuple[str, str]:
     return kind[:40], name[:80]
 
 
-def parse_answer(msg: dict[str, Any], workspace: Workspace) -> tuple[np.ndarray, bool]:
-    """(target in m, vacuum on) of an `answer`: three finite numbers inside the workspace box, a bool."""
+def parse_answer(msg: dict[str, Any], workspace: Workspace) -> tuple[np.ndarray, bool, bool]:
+    """(target in m, vacuum on, here) of an `answer`: three finite numbers inside the workspace box, a bool, and an
+    optional bool (default false): "not there — here", the person teaches the point (`MarkFusion.teach`)."""
     target = msg.get("target")
     if not isinstance(target, list) or len(target) != 3:
         raise ProtocolError("bad_target", "'target' must be a list of 3 numbers [x, y, z] in metres")
@@ -173,6 +176,9 @@ def parse_answer(msg: dict[str, Any], workspace: Workspace) -> tuple[np.ndarray,
     vacuum = msg.get("vacuum")
     if not isinstance(vacuum, bool):
         raise ProtocolError("bad_vacuum", "'vacuum' must be true or false")
+    here = msg.get("here", False)
+    if not isinstance(here, bool):
+        raise ProtocolError("bad_here", "'here' must be true or false (or absent)")
     p = np.array(target, dtype=float)
     for i, axis in enumerate("xyz"):
         if p[i] < workspace.lo[i]:
@@ -183,4 +189,4 @@ def parse_answer(msg: dict[str, Any], workspace: Workspace) -> tuple[np.ndarray,
             raise ProtocolError(
                 "outside_workspace", f"target outside the workspace box: {axis} = {p[i]:.4f} > {workspace.hi[i]:.4f}"
             )
-    return p, vacuum
+    return p, vacuum, here

@@ -185,7 +185,7 @@ def _cell_runtime(
         policy,
         pose,
         spec,
-        env_cfg.task,
+        policy.with_grasp(env_cfg.task) if isinstance(policy, ExportedPolicy) else env_cfg.task,
         run_log,
         env_cfg.twin.decision_period,
         runtime_cfg,

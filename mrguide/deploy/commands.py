@@ -153,6 +153,7 @@ def cmd_deploy(args: argparse.Namespace) -> int:
     if args.dry_run and bus.bus.interface != "virtual":
         raise ConfigError(f"--dry-run needs the virtual CAN interface; the bus config names {bus.bus.interface!r}")
     policy = ExportedPolicy.load(args.policy, spec, task)
+    task = policy.with_grasp(task)
     if args.dry_run:
         dry: DryRunBackend = args.dry_run_factory(file)
         check_decision_period(policy, args.policy, bus.timing.control_period, dry.decision_period)

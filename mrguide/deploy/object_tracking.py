@@ -8,7 +8,7 @@ from mrguide.deploy.safety import Event, Supervisor
 from mrguide.drivers.cobot_state import VacuumState
 from mrguide.part_perception import StillPartFilter
 from mrguide.pose_source import ObjectPoseSource, PoseUnavailable
-from mrguide.task import Phase
+from mrguide.task import Phase, TaskConfig
 
 
 class ObjectStartUnknown(RuntimeError):
@@ -32,13 +32,14 @@ class ObjectTracker:
         self,
         pose: ObjectPoseSource,
         supervisor: Supervisor,
-        object_height: float,
+        task: TaskConfig,
         track_carried: bool,
         max_misses: int,
         max_misses_before_grasp: int,
     ):
         self.pose, self.supervisor = pose, supervisor
-        self.hang = np.array([0.0, 0.0, 0.5 * object_height])  # from the TCP down to the carried part's centre
+        self.hang = task.grasp_offset  # from the part's centre to the TCP gripping it (the taught grasp, or the top)
+        self.rest_z = 0.5 * task.object_height  # the centre of a part standing on the table
         self.filter = StillPartFilter()
         #: m, subtracted from the source's poses: the registration bias the cell estimated (`bias_estimate`)
         self.correction = np.zeros(3)
@@ -86,7 +87,7 @@ class ObjectTracker:
         part standing on the table (z = 0 is its top), whatever height the source gave: the policy trained on parts on
         the table, and an HMD's depth is its least certain axis."""
         out = seen - self.correction
-        out[2] = self.hang[2]
+        out[2] = self.rest_z
         return out
 
     @property

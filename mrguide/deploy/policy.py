@@ -15,7 +15,7 @@ import json
 import logging
 import zipfile
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -106,6 +106,11 @@ class ExportedPolicy:
         """The decision period (s) the policy was trained with: the runtime must act at the same rate."""
         return float(self.metadata["decision_period"])
 
+    def with_grasp(self, task: TaskConfig) -> TaskConfig:
+        """`task` with the grasp a person taught the policy (`TaskConfig.grasp`), where `task` sets none."""
+        grasp = self.metadata.get("task", {}).get("grasp")
+        return replace(task, grasp=tuple(grasp)) if task.grasp is None and grasp is not None else task
+
     def __call__(self, obs: np.ndarray) -> np.ndarray:
         return self.batch(np.asarray(obs, dtype=np.float64)[None])[0]
 
@@ -160,6 +165,8 @@ class ExportedPolicy:
             check_arm(path, meta, robot)
         if task is not None:
             theirs, ours = _task_fields(meta["task"]), to_dict(task)
+            if task.grasp is None:  # the grasp a person taught the policy stands where the configuration sets none
+                ours["grasp"] = theirs.get("grasp")
             diff = sorted(k for k in set(theirs) | set(ours) if theirs.get(k) != ours.get(k))
             if diff:
                 raise PolicyFileError(f"{path}: task parameters differ from the configuration: {', '.join(diff)}")

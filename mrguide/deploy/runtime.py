@@ -89,7 +89,7 @@ class Runtime:
         self.lift = LiftRule(spec.workspace, decision_period, self.cfg.break_away_distance, self.cfg.break_away_speed)
         self.seal = SealSearch(spec.workspace, self.cfg.reseat_step, self.cfg.reseat_wait)
         misses = (self.cfg.max_pose_misses, self.cfg.max_pose_misses_before_grasp)
-        self.objects = ObjectTracker(pose, self.supervisor, task.object_height, self.cfg.track_carried_object, *misses)
+        self.objects = ObjectTracker(pose, self.supervisor, task, self.cfg.track_carried_object, *misses)
         window = 0.5 * task.object_height - CUP_RADIUS  # where the lip rests whole on the part's face, per axis
         where = Path(self.cfg.bias_estimate_file) if self.cfg.bias_estimate_file else None
         self.registration = Registration(window, type(pose).__name__, where)

@@ -15,7 +15,15 @@ from pathlib import Path
 from typing import Any
 
 #: The modules of mrguide.experiments that register experiments, in the order `mrguide experiment --help` lists them.
-EXPERIMENT_MODULES = ("learning_curves", "noise_robustness", "generalization", "person", "peers", "sim2real_runs")
+EXPERIMENT_MODULES = (
+    "learning_curves",
+    "noise_robustness",
+    "generalization",
+    "person",
+    "parts",
+    "peers",
+    "sim2real_runs",
+)
 
 
 @dataclass(frozen=True)

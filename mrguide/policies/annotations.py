@@ -37,13 +37,15 @@ class Annotation:
     """An expert waypoint in the robot base frame: TCP target (m), gripper command (+1 on / -1 off), provenance.
 
     `source` says who produced it ("oracle", "simulated", "file", "live"); `info` holds what else the
-    run log keeps with it (client, request id, latency).
+    run log keeps with it (client, request id, latency). `here`: the person said "not there — here", teaching
+    where the part is gripped or set down (`MarkFusion.teach`), not marking it under the centre prior.
     """
 
     target: np.ndarray
     grip: float
     source: str = "oracle"
     info: dict[str, Any] = field(default_factory=dict)
+    here: bool = False
 
     def __post_init__(self) -> None:
         t = np.asarray(self.target, dtype=float)
@@ -116,6 +118,7 @@ class AnnotationCache:
                 "target": np.asarray(annotation.target, float).tolist(),
                 "grip": float(annotation.grip),
                 "source": annotation.source,
+                **({"here": True} if annotation.here else {}),
                 **annotation.info,
                 "supersedes": supersedes,
             }
@@ -200,6 +203,9 @@ def _parse_record(line: bytes, count: int) -> tuple[np.ndarray, Annotation, int 
     supersedes = rec.get("supersedes")
     if supersedes is not None and (not isinstance(supersedes, int) or not 0 <= supersedes < count):
         raise AnnotationError(f"'supersedes' must name an earlier record (0..{count - 1}), got {supersedes!r}")
+    here = rec.get("here", False)
+    if not isinstance(here, bool):
+        raise AnnotationError(f"'here' must be true or false, got {here!r}")
     source = rec.get("source", "file")
-    info = {k: v for k, v in rec.items() if k not in ("id", "obs", "target", "grip", "source", "supersedes")}
-    return obs, Annotation(target, rec["grip"], str(source), info), supersedes
+    info = {k: v for k, v in rec.items() if k not in ("id", "obs", "target", "grip", "source", "supersedes", "here")}
+    return obs, Annotation(target, rec["grip"], str(source), info, here), supersedes

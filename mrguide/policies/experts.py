@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Annotated, Protocol
 
@@ -11,7 +11,8 @@ import numpy as np
 from mrguide.config import ConfigError, Range, check_number, check_ranges
 from mrguide.policies.annotations import Annotation, AnnotationCache, AnnotationError
 from mrguide.robot import Workspace
-from mrguide.task import TaskConfig, oracle_target
+from mrguide.simulated_person import person_grasp
+from mrguide.task import OBS_PROGRESS, PICK_PHASE, TaskConfig, oracle_target, phase_from_progress
 
 #: The simulated annotator of training seed s draws its noise from RNG seed s + this.
 ANNOTATOR_SEED_OFFSET = 7919
@@ -65,6 +66,9 @@ class AnnotatorNoise:
     viewpoint: tuple[float, float, float] = DEFAULT_VIEWPOINT  # m, the person's eyes, robot base frame
     outlier_rate: Annotated[float, Range(0.0, 1.0)] = 0.0  # fraction of annotations that are gross mistakes (slips)
     outlier_scale: float = 0.15  # m, std per axis of an outlier's error
+    #: A part not gripped at its middle: the person marks where they grip it and teaches it ("not there — here");
+    #: false: they mark it, read under the centre prior, as before a person could teach (the comparison)
+    teaches: bool = True
     #: Which person of this model marks: 0 the first draw of the bias and of the marks' errors for a training seed,
     #: another number an independent one (a second panel of people)
     draw: Annotated[int, Range(0, 2**32 - 1)] = 0
@@ -90,7 +94,9 @@ class SimulatedAnnotator:
     """
 
     def __init__(self, task: TaskConfig, noise: AnnotatorNoise, workspace: Workspace, seed: int | None = None):
-        self.oracle = OracleExpert(task)
+        grasp = person_grasp(task.part)  # a part not gripped at its middle: the person knows where, and teaches it
+        self.teaches = grasp is not None and noise.teaches
+        self.oracle = OracleExpert(replace(task, grasp=grasp) if grasp is not None else task)
         self.noise = noise
         self.workspace = workspace
         self.rng = np.random.default_rng(seed if not noise.draw or seed is None else [seed, noise.draw])
@@ -100,7 +106,9 @@ class SimulatedAnnotator:
 
     def annotate(self, obs: np.ndarray, previous: Annotation | None = None) -> Annotation:
         exact = self.oracle.annotate(obs)
-        return Annotation(self.workspace.clamp(exact.target + self.error(exact.target))[0], exact.grip, "simulated")
+        marked = self.workspace.clamp(exact.target + self.error(exact.target))[0]
+        here = self.teaches and phase_from_progress(obs[OBS_PROGRESS]) == PICK_PHASE
+        return Annotation(marked, exact.grip, "simulated", here=here)
 
     def error(self, point: np.ndarray) -> np.ndarray:
         """One mark's error (m) at `point`: the run's bias plus fresh isotropic, line-of-sight and slip terms."""
@@ -134,4 +142,4 @@ class FileExpert:
                 f"{self.path}: no recorded annotation within {self._cache.tolerance} m of this observation"
             )
         ann = hit.annotation
-        return Annotation(ann.target, ann.grip, "file", {"replayed_from": ann.source})
+        return Annotation(ann.target, ann.grip, "file", {"replayed_from": ann.source}, ann.here)

@@ -69,6 +69,8 @@ def bounded_projection(mr: np.ndarray, reference: np.ndarray, delta: float) -> n
 class ReferencePose(Protocol):
     """a^e of Eq. 13: the pose an annotation is bounded around."""
 
+    task: TaskConfig  # the task whose phase targets it starts from (a taught grasp replaces it)
+
     def reference(self, obs: np.ndarray) -> np.ndarray: ...
 
     def observe(self, obs: np.ndarray, annotation: Annotation) -> None: ...

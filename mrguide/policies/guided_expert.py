@@ -10,13 +10,14 @@ from __future__ import annotations
 import logging
 import zlib
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import NamedTuple
 
 import numpy as np
 
 from mrguide.config import ConfigError
-from mrguide.policies.annotations import AnnotationCache
+from mrguide.parts import part_named
+from mrguide.policies.annotations import Annotation, AnnotationCache
 from mrguide.policies.choices import EXPERT_SOURCES, MarksMode
 from mrguide.policies.experts import ANNOTATOR_SEED_OFFSET, ExpertSource, FileExpert, OracleExpert, SimulatedAnnotator
 from mrguide.policies.guidance import GuidanceConfig, PoseError, ReferencePose, bounded_projection
@@ -139,6 +140,7 @@ class GuidedExpert:
         self.perceived = PerceivedPose(pose_error or PoseError(), seed)
         self.mark_precision = mark_precision
         self.demo = PickPlaceDemo(task)
+        self._person = False  # a person stepped in for this demonstration: every mark is asked of them
         self._streak = (
             -1,
             0,
@@ -146,10 +148,37 @@ class GuidedExpert:
         #: pick_place: mark phase → (cache index or None, fused mark in m, the perceived anchor it was fused at)
         self._plan: dict[int, tuple[int | None, np.ndarray, np.ndarray]] = {}
 
-    def begin_demonstration(self) -> None:
+    def begin_demonstration(self, person: bool = False) -> None:
+        """A new demonstration; `person`: a person stepped in for it, and is asked every mark, settled or not (they
+        stepped in to say something: a correction, "not there — here", is an answer with `here`)."""
+        self._person = person
         self._streak = (-1, 0)
         self._plan = {}
-        self.demo = PickPlaceDemo(self.task)
+        self.demo = PickPlaceDemo(self.task, self.fusion.intent(PICK_PHASE))
+
+    def retasked(self) -> TaskConfig | None:
+        """The task with the grasp taught so far (`taught_grasp`) when it changed since the last look, else None. The
+        expert, its reference and its demonstration follow it; the caller hands it to the env, whose reward does."""
+        grasp = self.taught_grasp()
+        if grasp == self.task.grasp:
+            return None
+        self.task = self.demo.task = self.reference.task = replace(self.task, grasp=grasp)
+        return self.task
+
+    def taught_grasp(self) -> tuple[float, float, float] | None:
+        """Where the cup grips the part (m, in the part's frame as the cell sees it) as a person taught it and the
+        cell's seals refined it, for the task's targets (`TaskConfig.grasp`); None under the centre prior. Its height
+        is the part's top face there (`Part.surface_height`), where the person's mark or the cup's press does not
+        tell it; over no face, the estimate's own."""
+        if self.fusion.intent(PICK_PHASE) is None:
+            return None
+        est = self.fusion.estimate(PICK_PHASE)
+        assert est is not None
+        part = part_named(self.task.part)
+        z = part.surface_height(est[:2])
+        low, high = part.bounds
+        grasp = np.clip([est[0], est[1], est[2] if z is None else z], low, high)
+        return (float(grasp[0]), float(grasp[1]), float(grasp[2]))
 
     def end_demonstration(self, success: bool) -> None:
         """A successful demonstration measures the place (pick_place marks): the height at which its descent set the
@@ -158,7 +187,7 @@ class GuidedExpert:
         succeed — up to ε beside the goal, where every wobble of the policy that clones it fails."""
         if success and self.demo.released is not None and PLACE_PHASE in self._plan:
             goal = self._plan[PLACE_PHASE][2]
-            self._measured(PLACE_PHASE, np.r_[goal[:2], self.demo.released[2]])
+            self._measured(PLACE_PHASE, np.r_[goal[:2] + self.task.grasp_offset[:2], self.demo.released[2]])
 
     def annotation_in_use(self, obs: np.ndarray) -> int | None:
         """The annotation cache record the last `action(obs)` followed (its index in annotations.jsonl), or None."""
@@ -248,7 +277,7 @@ class GuidedExpert:
         if hit is not None:
             self.counts.reused += 1
             index = hit.index
-        elif not force and previous is None and self.fusion.settled(kind, self.mark_precision):
+        elif not force and previous is None and not self._person and self.fusion.settled(kind, self.mark_precision):
             self.counts.reused += 1
             index = None
         else:
@@ -284,22 +313,30 @@ class GuidedExpert:
             recorded(ann)
         seen = self.perceived(obs)
         if self.marks == "pick_place":
-            kind = phase_from_progress(obs[OBS_PROGRESS])
-            self.fusion.add(kind, anchor(kind, seen), ann.target)
+            self._fuse(phase_from_progress(obs[OBS_PROGRESS]), seen, ann)
         self.reference.observe(seen, ann)
         return index
+
+    def _fuse(self, kind: int, seen: np.ndarray, ann: Annotation) -> None:
+        """Fuse a pick or place mark made with the part and goal at `seen`: taught where the person said "here"."""
+        if ann.here:
+            self.fusion.teach(kind, anchor(kind, seen), ann.target)
+            if kind == PICK_PHASE:
+                self.demo.intent = self.fusion.intent(PICK_PHASE)[:2]  # type: ignore[index]
+        else:
+            self.fusion.add(kind, anchor(kind, seen), ann.target)
 
     def reload(self) -> None:
         """Rebuild the fused marks and the reference from the cache (after it was loaded on resume), in the order the
         marks were made."""
         measured, self.fusion = self.fusion.measured, MarkFusion()
-        self.fusion.measured = measured  # not in the annotation file: the checkpoint restores them (Trainer)
         for obs, ann in self.cache.history():
             seen = self.perceived(obs)
             kind = phase_from_progress(obs[OBS_PROGRESS])
             if self.marks == "pick_place" and kind in KINDS:
-                self.fusion.add(kind, anchor(kind, seen), ann.target)
+                self._fuse(kind, seen, ann)
             self.reference.observe(seen, ann)
+        self.fusion.measured = measured  # not in the annotation file: the checkpoint restores them (Trainer)
 
 
 #: (guidance, env, training seed) → an expert source.

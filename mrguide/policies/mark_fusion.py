@@ -16,6 +16,12 @@ is known to within `precision` per axis (its standard error, from the marks' own
 kind tells the learner nothing new: `settled` says so, and the person is not asked. A measurement can be wrong — a
 part the cup dragged along before it sealed is measured against where it lay before — and a demonstration whose
 search finds nothing around it says so: `withdraw` drops it, and the marks decide again.
+
+A mark is read under the centre prior: the person meant the middle of the part, and the cell's measurements find it
+(a seal is measured over the part's centre). A person who says "not there — here" (an answer with `here`: `teach`)
+teaches where the part is gripped or set down: the taught point is the person's intent, it outranks every
+measurement made before it, and a later measurement refines it only within `INTENT_RADIUS` of it; it never moves it
+where the person did not point.
 """
 
 from __future__ import annotations
@@ -27,6 +33,9 @@ from mrguide.task import OBS_GOAL, OBS_OBJECT, PICK_PHASE, PLACE_PHASE
 KINDS = (PICK_PHASE, PLACE_PHASE)
 #: Marks of a kind before its median may count as settled, however tight they are.
 MIN_MARKS = 3
+#: m: a measurement refines a taught point only this close to it, laterally: one pitch of the grasp's search grid
+#: either side of its centre (`waypoint_search`), as far as a search about the taught point reaches.
+INTENT_RADIUS = 0.0085
 #: Standard error of a median per standard deviation per √n (normal errors: √(π/2)), and the normal-consistent
 #: MAD scale: SE ≈ 1.2533 · 1.4826 · MAD / √n.
 _MEDIAN_SE, _MAD_SIGMA = 1.2533, 1.4826
@@ -46,17 +55,33 @@ class MarkFusion:
         #: Offsets of what the cell measured: the grasp targets that sealed (from the part), the set-down points of
         #: successful placements (from the goal).
         self.measured: dict[int, list[np.ndarray]] = {k: [] for k in KINDS}
+        #: Offsets a person taught ("not there — here"), in the order given.
+        self.taught: dict[int, list[np.ndarray]] = {k: [] for k in KINDS}
+
+    def intent(self, kind: int) -> np.ndarray | None:
+        """The taught offset of `kind` (the median of what the person taught), or None: the centre prior."""
+        return np.median(np.array(self.taught[kind]), axis=0) if self.taught[kind] else None
 
     def estimate(self, kind: int) -> np.ndarray | None:
-        """The fused offset of `kind` (coordinate-wise median of the measurements once there are any, else of the
-        marks), or None before its first mark."""
+        """The fused offset of `kind`, or None before its first mark. Taught: the median of the measurements within
+        INTENT_RADIUS of the intent, else the intent. Otherwise: the median of the measurements once there are any,
+        else of the marks."""
+        intent = self.intent(kind)
+        if intent is not None:
+            near = [m for m in self.measured[kind] if np.linalg.norm(m[:2] - intent[:2]) <= INTENT_RADIUS]
+            return np.median(np.array(near), axis=0) if near else intent
         offs = self.measured[kind] or self.offsets[kind]
         return np.median(np.array(offs), axis=0) if offs else None
 
+    def teach(self, kind: int, at: np.ndarray, target: np.ndarray) -> None:
+        """A person taught `kind` at `target` with its anchor at `at`: the measurements made so far are dropped."""
+        self.taught[kind].append(np.asarray(target, dtype=float) - np.asarray(at, dtype=float))
+        self.measured[kind] = []
+
     def settled(self, kind: int, precision: float) -> bool:
-        """Whether another mark of `kind` would tell nothing new: once the cell measured it; or once MIN_MARKS marks
-        put the median's standard error within `precision` (m) on every axis."""
-        if self.measured[kind]:
+        """Whether another mark of `kind` would tell nothing new: once a person taught it or the cell measured it; or once
+        MIN_MARKS marks put the median's standard error within `precision` (m) on every axis."""
+        if self.measured[kind] or self.taught[kind]:
             return True
         offs = np.array(self.offsets[kind])
         if len(offs) < MIN_MARKS:

@@ -9,9 +9,11 @@ table), as a cell program sets a part down: a place mark above or below where th
 where it stands.
 
 What a demonstration measured goes back to the fusion (`MarkFusion.add_measurement`): where the grasp sealed and
-where the part was set down, each relative to its perceived anchor. A grasp that sealed more than `CENTRED` beside
-the part's centre — as the cell sees the part hanging from the cup through the lift — is measured over that centre:
-a seal near the edge of the cup's reach holds in one demonstration and drops the part at the policy's next wobble.
+where the part was set down, each relative to its perceived anchor. The grasp is meant at the person's intent: where
+a person taught it (`MarkFusion.intent`), else the centre prior, the part's centre. A grasp that sealed more than
+`CENTRED` beside the intent — as the cell sees the part hanging from the cup through the lift — is measured at the
+intent: a seal near the edge of the cup's reach holds in one demonstration and drops the part at the policy's next
+wobble, and a seal the search found away from where the person pointed is not where they want the part gripped.
 """
 
 from __future__ import annotations
@@ -33,8 +35,10 @@ CENTRED = 0.006
 class PickPlaceDemo:
     """The phase, the search and the corrections of the demonstration in progress."""
 
-    def __init__(self, task: TaskConfig) -> None:
+    def __init__(self, task: TaskConfig, intent: np.ndarray | None = None) -> None:
+        """`intent`: m, x and y from the part's centre where the cup should meet it (None: the centre prior)."""
         self.task = task
+        self.intent = np.zeros(2) if intent is None else np.asarray(intent, dtype=float)[:2]
         self.phase: int = Phase.APPROACH
         self.started = False  # the demonstration has made its first decision
         self.search: WaypointSearch | None = None
@@ -52,7 +56,7 @@ class PickPlaceDemo:
         itself when it sealed as it was (no reason to move it); else laterally the probe that sealed (the commanded
         point: a measured one fed back as the next target would let the arm's lag accumulate), in height where the
         cup rests on the part now, its lip on the part's top. It is returned once the part was held through the lift
-        (a grasp at the seal's edge drops it), over the part's centre if the lift saw it hang off (`carried`)."""
+        (a grasp at the seal's edge drops it), at the intent if the lift saw it hang off it (`carried`)."""
         sealed = None
         tcp = np.asarray(obs[OBS_TCP], dtype=float)
         if phase == Phase.TRANSPORT and self.phase == Phase.LIFT and self.sealed is not None:
@@ -75,9 +79,9 @@ class PickPlaceDemo:
             self._carried.append(np.asarray(seen[OBS_OBJECT][:2], dtype=float) - np.asarray(seen[OBS_TCP][:2]))
 
     def _centred(self, sealed: np.ndarray) -> np.ndarray:
-        """`sealed` moved laterally onto the part's centre as seen through the lift, if the part hung more than
-        CENTRED off the cup's axis; else as it sealed."""
-        off = np.mean(self._carried, axis=0) if self._carried else np.zeros(2)
+        """`sealed` moved laterally onto the intent as seen through the lift (the part's centre `intent` from the
+        cup's axis), if the part hung more than CENTRED off it; else as it sealed."""
+        off = np.mean(self._carried, axis=0) + self.intent if self._carried else np.zeros(2)
         return sealed + np.r_[off, 0.0] if np.linalg.norm(off) > CENTRED else sealed
 
     def restart_phase(self) -> None:
@@ -91,7 +95,8 @@ class PickPlaceDemo:
 
     def next_target(self, point: np.ndarray, seen: np.ndarray) -> np.ndarray | None:
         """The target (m) for this decision from this phase's fused point; None when its search found nothing.
-        `seen` is the observation as the cell perceives it: the grasp's search is laid about the part it shows."""
+        `seen` is the observation as the cell perceives it: the grasp's search is laid about the intent on the part
+        it shows."""
         kind = mark_phase(self.phase)
         if self.phase == Phase.LIFT and self.sealed is not None:
             point = self.sealed
@@ -102,7 +107,7 @@ class PickPlaceDemo:
             waypoint = waypoint - [0.0, 0.0, RELEASE_DEPTH]
         if self.search is None:
             return waypoint
-        return self.search.next_target(waypoint, np.asarray(seen[OBS_OBJECT], dtype=float))
+        return self.search.next_target(waypoint, np.asarray(seen[OBS_OBJECT], dtype=float) + np.r_[self.intent, 0.0])
 
     def opens_now(self, obs: np.ndarray, target: np.ndarray, opening: bool) -> bool:
         """Release: whether the vacuum opens at this decision — at the waypoint (`opening`, the annotation's rule) or

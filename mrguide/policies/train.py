@@ -151,9 +151,8 @@ class Trainer:
                 self.evaluate()  # the final policy is always evaluated, by the actor: the exported one
             if self.counters.step >= self._next_checkpoint or self.counters.step >= stop:
                 self.save_checkpoint()
-                self._next_checkpoint = (
-                    self.counters.step // self.cfg.checkpoint_every + 1
-                ) * self.cfg.checkpoint_every
+                every = self.cfg.checkpoint_every
+                self._next_checkpoint = (self.counters.step // every + 1) * every
 
     def _intake_open(self) -> bool:
         return self.guidance.enabled and self.counters.step < self.guidance.intake_steps
@@ -208,7 +207,7 @@ class Trainer:
                 self.counters.person_interventions += int(stepped_in)
                 if start is not None:
                     obs = self.env.restore(start)
-                self._expert_episode(obs, end)
+                self._expert_episode(obs, end, stepped_in)
         finally:
             if start is not None:
                 self.env.discard(start)
@@ -218,7 +217,7 @@ class Trainer:
             "agent", ret, success, info["outcome"] if not triggered else "guided", length, triggered, stepped_in
         )
 
-    def _expert_episode(self, obs: np.ndarray, end: int) -> None:
+    def _expert_episode(self, obs: np.ndarray, end: int, person: bool = False) -> None:
         """The expert demonstrates from `obs` (ζ = 1); a waypoint nobody annotates ends the demonstration there.
 
         A demonstration's steps are held per phase and stored as expert data (ζ = 1) once the phase is completed;
@@ -227,10 +226,12 @@ class Trainer:
         complete the phase with is no demonstration of it)."""
         ret, length = 0.0, 0
         info: dict[str, Any] = {"outcome": None, "is_success": False}
-        self.expert.begin_demonstration()
+        self.expert.begin_demonstration(person)
         attempt = self._attempt()
         while self.counters.step < end and not self.stop_requested.is_set():
             step = self.expert.action(obs)
+            if (task := self.expert.retasked()) is not None:  # a person taught the grasp: the reward follows it
+                self.env.teach(task)
             if step is None:
                 self.counters.skipped += int(not self.stop_requested.is_set())
                 info = {"outcome": "skipped", "is_success": False}
@@ -388,6 +389,8 @@ class Trainer:
         if path.exists():
             n = self.cache.load(path, repair=True)
             self.expert.reload()
+            if (task := self.expert.retasked()) is not None:
+                self.env.teach(task)
             log.info("reloaded %d annotations from %s", n, path)
 
     def close(self) -> None:

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import copy
 import logging
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, ClassVar
 
@@ -171,6 +171,12 @@ class PickPlaceEnv(gym.Env):
         self.scene.close()
 
     # -- beyond gymnasium ------------------------------------------------------------------------
+    def teach(self, task: TaskConfig) -> None:
+        """Judge from now on by `task`: the same task with a grasp a person taught (`TaskConfig.grasp`)."""
+        if replace(task, grasp=self.task_cfg.grasp) != self.task_cfg:
+            raise ValueError("a taught task may differ from the env's only in its grasp")
+        self.task_cfg = self.decision.task = task
+
     @property
     def phase(self) -> int:
         """Current task phase (0..4)."""

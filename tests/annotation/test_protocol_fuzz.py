@@ -51,7 +51,7 @@ def test_parser_refuses_with_protocol_error_only(text):
     try:
         msg = parse_message(text)
         if msg["type"] == "answer":
-            target, vacuum = parse_answer(msg, load_robot().workspace)
+            target, vacuum, _ = parse_answer(msg, load_robot().workspace)
             assert all(lo <= v <= hi for v, lo, hi in zip(target, load_robot().workspace.lo, load_robot().workspace.hi))
             assert isinstance(vacuum, bool)
         elif msg["type"] == "hello":

@@ -9,7 +9,7 @@ import pytest
 from mrguide.deploy.object_tracking import ObjectTracker
 from mrguide.drivers.cobot_state import VacuumState
 from mrguide.pose_source import PoseUnavailable
-from mrguide.task import Phase
+from mrguide.task import Phase, TaskConfig
 
 HEIGHT = 0.05
 
@@ -41,7 +41,7 @@ def _vacuum(gripped: bool) -> VacuumState:
 
 def _tracker(track: bool = True) -> tuple[ObjectTracker, _Supervisor]:
     sup = _Supervisor()
-    return ObjectTracker(_Source([0.50, -0.15, 0.025]), sup, HEIGHT, track, 3, 30), sup  # type: ignore[arg-type]
+    return ObjectTracker(_Source([0.50, -0.15, 0.025]), sup, TaskConfig(), track, 3, 30), sup  # type: ignore[arg-type]
 
 
 def test_a_seal_in_the_grasp_puts_the_part_under_the_cup_not_where_it_was_last_seen():
@@ -80,7 +80,7 @@ class _Looks:
 
 def test_the_poses_of_a_part_standing_still_are_averaged_and_a_moved_part_starts_afresh():
     looks = [[0.50, -0.15, 0.025], [0.504, -0.15, 0.025], [0.502, -0.146, 0.025], [0.55, -0.15, 0.025]]
-    tracker = ObjectTracker(_Looks(looks), _Supervisor(), HEIGHT, True, 3, 30)  # type: ignore[arg-type]
+    tracker = ObjectTracker(_Looks(looks), _Supervisor(), TaskConfig(), True, 3, 30)  # type: ignore[arg-type]
     seen = [tracker.position(np.array([0.5, 0.1, 0.3]), _vacuum(False), Phase.APPROACH) for _ in looks]
     assert np.allclose(seen[2], [0.502, -0.148667, 0.025], atol=1e-6)  # the mean of three looks
     assert np.allclose(seen[3], looks[3])  # 5 cm away: the part was moved, the mean starts from it
@@ -90,7 +90,7 @@ def test_the_poses_of_a_part_standing_still_are_averaged_and_a_moved_part_starts
 
 
 def test_the_cells_registration_correction_is_subtracted_from_the_sources_poses():
-    tracker = ObjectTracker(_Looks([[0.50, -0.15, 0.025]]), _Supervisor(), HEIGHT, True, 3, 30)  # type: ignore[arg-type]
+    tracker = ObjectTracker(_Looks([[0.50, -0.15, 0.025]]), _Supervisor(), TaskConfig(), True, 3, 30)  # type: ignore[arg-type]
     tracker.correction = np.array([0.004, -0.002, 0.0])
     seen = tracker.position(np.array([0.5, 0.1, 0.3]), _vacuum(False), Phase.APPROACH)
     assert np.allclose(seen, [0.496, -0.148, 0.025]) and np.allclose(tracker.seen, [0.50, -0.15, 0.025])

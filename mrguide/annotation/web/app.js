@@ -12,6 +12,7 @@
 //                                         lastAck, claimedBy, closed, status, robot, frames, xr, ...}
 //   window.mrguide.setTarget([x,y,z])    move the target (robot frame, m; clamped, rounded to 0.1 mm)
 //   window.mrguide.setVacuum(bool)       set the vacuum command
+//   window.mrguide.setHere(bool)         "exactly here": the answer teaches the point (protocol `here`)
 //   window.mrguide.submit() / skip()     as the buttons (false when there is nothing to answer)
 //   window.mrguide.intervene()           as the Intervene button (false while a request is shown)
 //   window.mrguide.gizmoHandle(axis)     page coordinates {x, y} of the gizmo's X/Y/Z arrow, for a mouse drag
@@ -52,6 +53,7 @@ const S = {
   start: null, // where the target started for this request
   target: null,
   vacuum: false,
+  here: false, // the answer teaches its point: "not there — here"
   claimedBy: null,
   claimSent: false,
   submitted: null, // {id, target, vacuum}
@@ -78,7 +80,7 @@ async function main() {
   const view = new TwinView($('viewport'));
   const xr = new XRView(view, {
     onSelectPoint: (p, on) => { S.placedOn = on; setTarget(p, true); submit('headset'); },
-    pickRay: (ray) => (S.request ? view.pickRay(ray, S.request.phase_index, (S.hello && S.hello.task) || {}) : null),
+    pickRay: (ray) => (S.request ? view.pickRay(ray, S.request.phase_index, (S.hello && S.hello.task) || {}, S.here) : null),
     onSqueeze: () => (S.request ? setVacuum(!S.vacuum, true) : intervene()),
     onPresenting: (on) => {
       conn.send(helloMessage());
@@ -138,6 +140,7 @@ async function main() {
       S.submitted = null;
       S.closed = null;
       S.vacuum = !!req.suggested_vacuum;
+      S.here = false;
       const start = req.remark && req.previous_target ? req.previous_target : req.state.tcp;
       view.showRequest(req);
       S.start = view.setTarget(start);
@@ -197,12 +200,21 @@ async function main() {
     return S.vacuum;
   }
 
+  function setHere(on) {
+    if (!S.request) return S.here;
+    claim();
+    S.here = !!on;
+    render();
+    return S.here;
+  }
+
   function submit() {
     if (!canAnswer()) {
       render();
       return false;
     }
     const msg = { type: 'answer', id: S.request.id, target: S.target.slice(), vacuum: S.vacuum };
+    if (S.here) msg.here = true; // "not there — here": the point is taught, not read as the part's centre
     if (!conn.send(msg)) return false;
     S.submitted = { id: msg.id, target: msg.target, vacuum: msg.vacuum };
     render();
@@ -241,7 +253,7 @@ async function main() {
   canvas.addEventListener('pointerup', (e) => {
     if (!press || !S.request || Math.hypot(e.clientX - press.x, e.clientY - press.y) > 5) return;
     press = null;
-    const picked = view.pick(e.clientX, e.clientY, S.request.phase_index, (S.hello && S.hello.task) || {});
+    const picked = view.pick(e.clientX, e.clientY, S.request.phase_index, (S.hello && S.hello.task) || {}, S.here);
     if (picked) {
       S.placedOn = picked.on;
       setTarget(picked.point);
@@ -261,6 +273,7 @@ async function main() {
   $('skip').addEventListener('click', () => skip());
   $('intervene').addEventListener('click', () => intervene());
   $('vacuum').addEventListener('click', () => setVacuum(!S.vacuum));
+  $('here').addEventListener('click', () => setHere(!S.here));
   document.addEventListener('keydown', (e) => {
     if (e.target && ['INPUT', 'TEXTAREA', 'SELECT'].includes(e.target.tagName)) return;
     if (e.ctrlKey || e.metaKey || e.altKey) return;
@@ -272,6 +285,7 @@ async function main() {
       case 's': case 'S': skip(); break;
       case 'i': case 'I': intervene(); break;
       case 'v': case 'V': setVacuum(!S.vacuum); break;
+      case 'h': case 'H': setHere(!S.here); break;
       case 'c': case 'C': view.resetCamera(); break;
       case 'Home': if (S.start) setTarget(S.start); break;
       case 'ArrowRight': nudge(axes.right[0], axes.right[1] * step); break;
@@ -355,6 +369,10 @@ async function main() {
     vac.setAttribute('aria-pressed', String(S.vacuum));
     vac.classList.toggle('on', S.vacuum);
     vac.innerHTML = `Vacuum <b>${S.vacuum ? 'ON' : 'OFF'}</b> <kbd>V</kbd>`;
+    const here = $('here');
+    here.disabled = !req;
+    here.setAttribute('aria-pressed', String(S.here));
+    here.classList.toggle('on', S.here);
     $('submit').disabled = !canAnswer();
     $('skip').disabled = !canAnswer();
     $('intervene').disabled = !canIntervene();
@@ -427,6 +445,7 @@ async function main() {
       prompt: S.request ? S.request.prompt : null,
       target: S.request ? S.target.slice() : null,
       vacuum: S.vacuum,
+      here: S.here,
       claimedBy: S.claimedBy,
       submitted: S.submitted,
       lastAck: S.lastAck,
@@ -442,6 +461,7 @@ async function main() {
     }),
     setTarget: (p) => setTarget(p),
     setVacuum: (on) => setVacuum(on),
+    setHere: (on) => setHere(on),
     submit: () => submit(),
     skip: () => skip(),
     intervene: () => intervene(),

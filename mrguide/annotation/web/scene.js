@@ -371,13 +371,13 @@ export class TwinView extends EventTarget {
    * Click to place: what the pixel (page coordinates) shows, and the target it stands for in `phase`
    * (see `pickRay`). Null off those surfaces.
    */
-  pick(clientX, clientY, phase, task = {}) {
+  pick(clientX, clientY, phase, task = {}, here = false) {
     const rect = this.renderer.domElement.getBoundingClientRect();
     const ndc = new THREE.Vector2((clientX - rect.left) / rect.width * 2 - 1, -((clientY - rect.top) / rect.height) * 2 + 1);
     const ray = new THREE.Raycaster();
     this.scene.updateMatrixWorld(true);
     ray.setFromCamera(ndc, this.camera);
-    return this.pickRay(ray, phase, task);
+    return this.pickRay(ray, phase, task, here);
   }
 
   /**
@@ -385,9 +385,10 @@ export class TwinView extends EventTarget {
    * stands for in `phase`. On the object, its centre; on the goal, the goal; on the table, that point; each
    * at the phase's height (task parameters from the hello): the approach hovers approach_height above the
    * part's top, the grasp and the release are at the top of a part on the table, lift and transport at
-   * lift_height. Null off those surfaces.
+   * lift_height. With `here` ("exactly here": the person teaches the point), a hit on the object stands for the
+   * point hit on its surface, at that face's height, not for its centre. Null off those surfaces.
    */
-  pickRay(ray, phase, task = {}) {
+  pickRay(ray, phase, task = {}, here = false) {
     this.scene.updateMatrixWorld(true);
     const surfaces = [this.object, this.goalDisc, this.tableGroup[0]].filter((o) => o.visible || o === this.goalDisc);
     const hit = ray.intersectObjects(surfaces, true)[0];
@@ -395,6 +396,11 @@ export class TwinView extends EventTarget {
     const top = this.objectHeight; // a part standing on the table (z = 0)
     const z = phase === 0 ? top + (task.approach_height ?? 0.08)
       : phase === 2 || phase === 3 ? (task.lift_height ?? 0.15) : top;
+    if (hit.object.parent === this.object && here) {
+      const p = this.root.worldToLocal(hit.point.clone()); // the face hit, as the part is drawn (where the cell sees it)
+      const zHere = phase === 0 ? p.z + (task.approach_height ?? 0.08) : phase === 2 || phase === 3 ? z : p.z;
+      return { on: 'object', point: [p.x, p.y, zHere] };
+    }
     if (hit.object.parent === this.object) return { on: 'object', point: [this.object.position.x, this.object.position.y, z] };
     if (hit.object === this.goalDisc) return { on: 'goal', point: [this.goal.position.x, this.goal.position.y, z] };
     const p = this.root.worldToLocal(hit.point.clone());
