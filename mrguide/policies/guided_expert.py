@@ -16,12 +16,13 @@ from typing import NamedTuple
 import numpy as np
 
 from mrguide.config import ConfigError
+from mrguide.grasp_margin import steady_grasp
 from mrguide.parts import part_named
 from mrguide.policies.annotations import Annotation, AnnotationCache
 from mrguide.policies.choices import EXPERT_SOURCES, MarksMode
 from mrguide.policies.experts import ANNOTATOR_SEED_OFFSET, ExpertSource, FileExpert, OracleExpert, SimulatedAnnotator
 from mrguide.policies.guidance import GuidanceConfig, PoseError, ReferencePose, bounded_projection
-from mrguide.policies.mark_fusion import KINDS, MarkFusion, anchor
+from mrguide.policies.mark_fusion import INTENT_RADIUS, KINDS, MarkFusion, anchor
 from mrguide.policies.pick_place_demo import PickPlaceDemo
 from mrguide.registries import register
 from mrguide.task import (
@@ -167,18 +168,27 @@ class GuidedExpert:
 
     def taught_grasp(self) -> tuple[float, float, float] | None:
         """Where the cup grips the part (m, in the part's frame as the cell sees it) as a person taught it and the
-        cell's seals refined it, for the task's targets (`TaskConfig.grasp`); None under the centre prior. Its height
-        is the part's top face there (`Part.surface_height`), where the person's mark or the cup's press does not
-        tell it; over no face, the estimate's own."""
+        cell refined it (`_steady_pick`), for the task's targets (`TaskConfig.grasp`); None under the centre prior.
+        Its height is the part's top face there (`Part.surface_height`), where the person's mark or the cup's press
+        does not tell it; over no face, the estimate's own."""
+        pick = self._steady_pick()
+        if pick is None:
+            return None
+        part = part_named(self.task.part)
+        z = part.surface_height(pick[:2])
+        low, high = part.bounds
+        grasp = np.clip([pick[0], pick[1], pick[2] if z is None else z], low, high)
+        return (float(grasp[0]), float(grasp[1]), float(grasp[2]))
+
+    def _steady_pick(self) -> np.ndarray | None:
+        """The taught pick offset (the fusion's estimate) moved the least it must, within INTENT_RADIUS, to where a
+        seal has room on the part's face (`grasp_margin.steady_grasp`); None under the centre prior."""
         if self.fusion.intent(PICK_PHASE) is None:
             return None
         est = self.fusion.estimate(PICK_PHASE)
         assert est is not None
-        part = part_named(self.task.part)
-        z = part.surface_height(est[:2])
-        low, high = part.bounds
-        grasp = np.clip([est[0], est[1], est[2] if z is None else z], low, high)
-        return (float(grasp[0]), float(grasp[1]), float(grasp[2]))
+        xy = steady_grasp(part_named(self.task.part), est[:2], INTENT_RADIUS)
+        return np.r_[xy, est[2]]
 
     def end_demonstration(self, success: bool) -> None:
         """A successful demonstration measures the place (pick_place marks): the height at which its descent set the
@@ -287,7 +297,8 @@ class GuidedExpert:
                 return False
         seen = self.perceived(ask_obs)
         at = anchor(kind, seen)
-        fused = self.fusion.point(kind, at)
+        steady = self._steady_pick() if kind == PICK_PHASE else None
+        fused = self.fusion.point(kind, at) if steady is None else at + steady
         bounded = bounded_projection(fused, self.reference.reference(seen), self.delta)
         self.counts.projected += int(not np.allclose(bounded, fused))
         self._plan[kind] = (index, bounded, at)

@@ -70,6 +70,36 @@ def test_click_to_place_on_the_part_the_goal_and_the_table(browser, page_served,
         page.close()
 
 
+def test_exactly_here_puts_the_mark_where_clicked_on_the_part_and_teaches_it(browser, page_served):
+    """With Exactly here on (the button, or H), a click on the part's top puts the pick mark at the point clicked, on
+    the face, not at the part's centre, and the answer carries `here`; the next request starts with it off."""
+    broker, server = page_served
+    task = TaskConfig()
+    page = browser.open(server.url)
+    try:
+        fut = ask_in_thread(broker, make_request(1, obj=OBJ, goal=GOAL, quat=QUAT))
+        page.wait_request()
+        page.wait_robot()
+        page.page.click("#here")
+        assert page.wait_state("s.here")["here"] is True
+        clicked = OBJ + [0.012, -0.008, 0.5 * task.object_height]
+        _click(page, clicked)
+        s = page.wait_state("s.placedOn === 'object'")
+        assert s["target"] == pytest.approx(clicked, abs=1.5e-3)  # where clicked, on the top face
+        page.click_submit()
+        pick = fut.result(10)
+        assert isinstance(pick, LiveAnswer) and pick.here and pick.target == pytest.approx(clicked, abs=1.5e-3)
+        fut = ask_in_thread(broker, make_request(1, obj=OBJ, goal=GOAL, quat=QUAT))
+        page.wait_state(f"s.requestId && s.requestId !== {pick.request_id!r}")
+        assert page.state()["here"] is False
+        page.press("h")
+        assert page.wait_state("s.here")["here"] is True
+        page.skip()
+        fut.result(10)
+    finally:
+        page.close()
+
+
 def test_the_person_steps_in_with_the_intervene_button_or_the_i_key(browser, page_served):
     """No request outstanding: Intervene (button, or I) asks the trainer to cut the agent's episode; while a
     request is shown the button is off (answer it instead)."""
