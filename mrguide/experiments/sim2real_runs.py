@@ -12,6 +12,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated, Any
 
+import numpy as np
+
 from mrguide.config import ConfigError, Range, check_ranges
 from mrguide.experiments import report
 from mrguide.experiments.registry import Experiment, register
@@ -117,10 +119,30 @@ def sim2real_report(cfg: Sim2RealConfig, root: Path, run_list: list[TrainRun]) -
     )
     return {
         "summary.csv": files["sim2real.csv"],
-        "summary.md": intro.encode() + files["sim2real.md"],
+        "summary.md": intro.encode() + files["sim2real.md"] + _per_draw(all_rows, cfg).encode(),
         "fig8_sim2real.png": files["fig8_sim2real.png"],
         "outcomes.csv": report.csv_bytes(all_rows, ["train_seed", *OUTCOME_FIELDS]),
     }
+
+
+def _per_draw(rows: list[dict], cfg: Sim2RealConfig) -> str:
+    """A markdown table: per condition, the parts placed per draw (a training seed's policy under one evaluation seed:
+    its calibration and its start states), their min and median over the draws."""
+    lines = [
+        f"\n\nPer draw (a policy under one evaluation seed, {cfg.episodes} episodes):\n",
+        "| condition | draws | placed per draw: min | median |",
+        "| --- | --- | --- | --- |",
+    ]
+    for cond in cfg.conditions:
+        draws: dict[tuple[str, str], int] = {}
+        for r in rows:
+            if r["condition"] == cond:
+                key = (str(r["train_seed"]), str(r["eval_seed"]))
+                draws[key] = draws.get(key, 0) + int(r["outcome"] == "success")
+        if draws:
+            counts = sorted(draws.values())
+            lines.append(f"| {cond} | {len(counts)} | {counts[0]} | {float(np.median(counts)):g} |")
+    return "\n".join(lines) + "\n"
 
 
 register(

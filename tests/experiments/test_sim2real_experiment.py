@@ -69,3 +69,16 @@ def test_a_missing_mujoco_cell_is_refused_only_where_a_condition_plays_it(tiny_e
     )
     assert main(["experiment", "sim2real", "--config", str(cfg), "--out", str(out)]) == 2
     assert "no_such_mujoco_cell.toml" in capsys.readouterr().err and not out.exists()
+
+
+def test_the_report_gives_each_conditions_parts_per_draw():
+    """A draw is one policy under one evaluation seed: its min and median over the draws, per condition."""
+    from mrguide.experiments.sim2real_runs import _per_draw
+
+    rows = [
+        {"train_seed": t, "condition": "mujoco_hmd", "eval_seed": e, "episode": i, "outcome": outcome}
+        for t, e, placed in ((0, 0, 9), (0, 1, 6), (1, 0, 8))
+        for i, outcome in enumerate(["success"] * placed + ["no_grasp"] * (10 - placed))
+    ]
+    table = _per_draw(rows, Sim2RealConfig(conditions=("mujoco_hmd",)))
+    assert "| mujoco_hmd | 3 | 6 | 8 |" in table
