@@ -140,20 +140,13 @@ def parts_report(cfg: PartsConfig, base: str | None, root: Path, episodes_per_ev
     for r in rows:
         r.update({k: round(float(r[k]), 3) for k in ("grasp_acceptable", "placed", "both")})
     summary = _summary(rows)
-    md = (
+    intro = (
         f"Parts a person teaches to grip, every mark over the wire (the annotation bot, the person of {cfg.config}): "
         f"{cfg.seeds} seeds taught and {cfg.centre_prior_seeds} marked under the centre prior per part, "
         f"{cfg.steps} steps; convergence with the learning-curves rule; every final policy judged on {cfg.episodes} "
         "fresh episodes (grasp in the part's acceptable region, part at its place).\n\n"
-        + report.markdown(summary, [(k, k.replace("_", " ")) for k in summary[0]])
-        + "\n\n"
-        + report.markdown(rows, [(k, k.replace("_", " ")) for k in rows[0]])
     )
-    return {
-        "summary.csv": report.csv_bytes(summary, list(summary[0])),
-        "runs.csv": report.csv_bytes(rows, list(rows[0])),
-        "summary.md": md.encode(),
-    }
+    return report.summary_files(intro, summary, [(k, k.replace("_", " ")) for k in summary[0]], rows)
 
 
 register(

@@ -118,36 +118,26 @@ def person_report(cfg: PersonConfig, root: Path, run_list: list[TrainRun], episo
         for rec, f in zip(recs, fresh)
     ]
     summary = [_summary(recs, fresh)]
-    md = (
+    intro = (
         f"A person's marks over the wire (the annotation bot): {cfg.seeds} seeds × {cfg.steps} steps; "
         f"convergence with the learning-curves rule; person-minutes at {PERSON_SECONDS_PER_MARK:.0f} s per mark; every final "
         f"policy on {cfg.episodes} fresh start states.\n\n"
-        + report.markdown(
-            summary,
-            [
-                ("seeds", "seeds"),
-                ("converged", "converged"),
-                ("ci_low", "95 % CI low"),
-                ("ci_high", "95 % CI high"),
-                ("median_step", "median convergence step"),
-                ("median_marks", "marks until convergence (median)"),
-                ("median_person_minutes", "person-minutes until convergence (median)"),
-                ("median_marks_total", "marks per run (median)"),
-                ("median_person_minutes_total", "person-minutes per run (median)"),
-                ("fresh_success_median", f"fresh success, median of {cfg.seeds}"),
-                ("fresh_success_min", "min"),
-                ("fresh_success_max", "max"),
-            ],
-        )
-        + "\n\n"
-        + report.markdown(rows, [(k, k.replace("_", " ")) for k in rows[0]])
     )
-    return {
-        "summary.csv": report.csv_bytes(summary, list(summary[0])),
-        "runs.csv": report.csv_bytes(rows, list(rows[0])),
-        "summary.md": md.encode(),
-        "person_marks.png": _figure(recs),
-    }
+    columns = [
+        ("seeds", "seeds"),
+        ("converged", "converged"),
+        ("ci_low", "95 % CI low"),
+        ("ci_high", "95 % CI high"),
+        ("median_step", "median convergence step"),
+        ("median_marks", "marks until convergence (median)"),
+        ("median_person_minutes", "person-minutes until convergence (median)"),
+        ("median_marks_total", "marks per run (median)"),
+        ("median_person_minutes_total", "person-minutes per run (median)"),
+        ("fresh_success_median", f"fresh success, median of {cfg.seeds}"),
+        ("fresh_success_min", "min"),
+        ("fresh_success_max", "max"),
+    ]
+    return report.summary_files(intro, summary, columns, rows) | {"person_marks.png": _figure(recs)}
 
 
 def _figure(recs: list[RunRecord]) -> bytes:

@@ -40,6 +40,18 @@ def markdown(rows: list[dict[str, Any]], columns: list[tuple[str, str]]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def summary_files(
+    intro: str, summary: list[dict[str, Any]], columns: list[tuple[str, str]], rows: list[dict[str, Any]]
+) -> dict[str, bytes]:
+    """summary.csv, runs.csv and summary.md: `intro`, the summary's table with `columns`, then one row per run."""
+    runs_table = markdown(rows, [(k, k.replace("_", " ")) for k in rows[0]])
+    return {
+        "summary.csv": csv_bytes(summary, list(summary[0])),
+        "runs.csv": csv_bytes(rows, list(rows[0])),
+        "summary.md": (intro + markdown(summary, columns) + "\n\n" + runs_table).encode(),
+    }
+
+
 def write_report(out: Path, files: dict[str, bytes]) -> None:
     """Write the named report files into `out` together (each whole, via temporary files and renames)."""
     out.mkdir(parents=True, exist_ok=True)
