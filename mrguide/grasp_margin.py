@@ -6,6 +6,8 @@ lip (`cell_layout.CUP_RADIUS`). A person's taught grasp carries their errors: on
 point taught 2 mm from the hole's edge seals in one demonstration and misses in the next, when the part is seen a few
 millimetres off. So the cell keeps the person's point where it has `SEAL_MARGIN` of room, and otherwise moves it the
 least it must, never further than `within` of it (`steady_grasp`): within the person's intent, away from an edge.
+The runtime reads its presses against the window a grasp leaves per axis (`seal_window`, `deploy.bias_estimate`).
+numpy only: the robot PC runs it.
 """
 
 from __future__ import annotations
@@ -13,7 +15,6 @@ from __future__ import annotations
 import functools
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from mrguide.cell_layout import CUP_RADIUS
 from mrguide.parts import Part, part_named
@@ -25,8 +26,9 @@ _RESOLUTION = 0.0005  # m, of the map of the part's top the margins are measured
 
 
 @functools.cache
-def _off_face(part: str, height: float, reach: float) -> cKDTree:
-    """The points of a grid over part `part`'s bounding box widened by `reach` where no face at `height` is."""
+def _off_face(part: str, height: float, reach: float) -> np.ndarray:
+    """The points (x, y) of a grid over part `part`'s bounding box widened by `reach` where no face at `height` is
+    but next to one: the nearest point off the face to a point on it is one of these."""
     (lx, ly, _), (hx, hy, _) = part_named(part).bounds
     xs = np.arange(lx - reach, hx + reach + _RESOLUTION, _RESOLUTION)
     ys = np.arange(ly - reach, hy + reach + _RESOLUTION, _RESOLUTION)
@@ -35,8 +37,10 @@ def _off_face(part: str, height: float, reach: float) -> cKDTree:
     for b in part_named(part).boxes:
         inside = (np.abs(gx - b.centre[0]) <= b.half[0]) & (np.abs(gy - b.centre[1]) <= b.half[1])
         top = np.where(inside, np.maximum(top, b.centre[2] + b.half[2]), top)
-    grid = np.stack([gx.ravel(), gy.ravel()], axis=1)
-    return cKDTree(grid[np.abs(top.ravel() - height) > 1e-9])
+    on = np.pad(np.abs(top - height) <= 1e-9, 1)
+    beside = on[:-2, 1:-1] | on[2:, 1:-1] | on[1:-1, :-2] | on[1:-1, 2:]
+    edge = ~on[1:-1, 1:-1] & beside
+    return np.stack([gx[edge], gy[edge]], axis=1)
 
 
 def seal_margins(part: Part, points: np.ndarray, radius: float = CUP_RADIUS) -> np.ndarray:
@@ -47,7 +51,9 @@ def seal_margins(part: Part, points: np.ndarray, radius: float = CUP_RADIUS) -> 
     out = np.full(len(points), -np.inf)
     for h in {z for z in heights if z is not None}:
         mine = [i for i, z in enumerate(heights) if z == h]
-        out[mine] = _off_face(part.name, h, radius + 0.01).query(points[mine])[0] - radius
+        edge = _off_face(part.name, h, radius + 0.01)
+        gaps = np.linalg.norm(points[mine][:, None, :] - edge[None, :, :], axis=2).min(axis=1)
+        out[mine] = gaps - radius
     return out
 
 
@@ -55,6 +61,22 @@ def steady_grasp(part: Part, xy: np.ndarray, within: float, need: float = SEAL_M
     """The point (x, y, part frame) nearest `xy`, at most `within` from it, where a seal has `need` of room; where no
     point there has, the one with the most room, the nearest among equals."""
     return np.array(_steady(part.name, *(round(float(v), 5) for v in np.asarray(xy)[:2]), within, need))
+
+
+def seal_window(part: Part, xy: np.ndarray, reach: float = 0.03) -> tuple[float, float]:
+    """m, per axis (x, y): how far the cup's axis may move from `xy` (part frame) along that axis, either way, with
+    the lip still resting whole on the face (the nearer of the two ways; at most `reach`)."""
+    steps = np.arange(0.0, reach + _RESOLUTION, _RESOLUTION)
+    out = []
+    for axis in (0, 1):
+        ways = []
+        for sign in (1.0, -1.0):
+            points = np.tile(np.asarray(xy, dtype=float)[:2], (len(steps), 1))
+            points[:, axis] += sign * steps
+            off = np.nonzero(seal_margins(part, points) < 0)[0]
+            ways.append(float(steps[off[0] - 1]) if len(off) and off[0] > 0 else 0.0 if len(off) else reach)
+        out.append(min(ways))
+    return (out[0], out[1])
 
 
 @functools.lru_cache(maxsize=256)

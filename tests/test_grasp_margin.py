@@ -25,3 +25,14 @@ def test_a_taught_grasp_moves_the_least_it_must_and_never_beyond_the_intent():
     assert kept == pytest.approx([-0.0375, 0.002], abs=1e-9)
     far = steady_grasp(plate, [0.0, -0.02], 0.0085)  # over the hole's edge: as far as the intent allows, no further
     assert np.linalg.norm(far - [0.0, -0.02]) <= 0.0085 + 1e-9 and far[1] == pytest.approx(-0.0285, abs=6e-4)
+
+
+def test_the_seal_window_about_a_grasp_is_what_the_face_leaves_per_axis():
+    """The runtime's registration estimate reads a press against this window: 5 mm per axis about the block's centre
+    (the 20 mm lip on the 5 cm face), 7.5 mm across the plate's frame and the full reach along it, 7.5 mm towards the
+    keep-out block's end and 10 mm across it."""
+    from mrguide.grasp_margin import seal_window
+
+    assert seal_window(PARTS["block"], np.zeros(2)) == pytest.approx((0.005, 0.005), abs=6e-4)
+    assert seal_window(PARTS["hole_plate"], np.array([0.0, -0.0425])) == pytest.approx((0.03, 0.0075), abs=6e-4)
+    assert seal_window(PARTS["keepout_block"], np.array([-0.0375, 0.0])) == pytest.approx((0.0075, 0.01), abs=6e-4)

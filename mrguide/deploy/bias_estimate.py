@@ -1,9 +1,9 @@
 """The pose source's registration bias, estimated from the cell's own grasps.
 
 Every press of the cup says something about where the part really was: the lip seals only where it rests whole on
-the part's face, within `window` of the face's centre per axis (`mrguide.seal`: 5 mm for the 20 mm lip on the 5 cm
-part). A press at p that sealed says the part's centre lies within that window of p; one that did not, that it lies
-outside. The pose source saw the part at s = centre + b (its mean of the looks while the part stood still), so each
+the part's face, within a window about the grasp (`SealWindow`: 5 mm per axis about the centre of the 5 cm block's
+top for the 20 mm lip, `mrguide.seal`; about a taught grasp, what the part's face leaves there). A press at p that
+sealed says the part's grasp point lies within that window of p; one that did not, that it lies outside. The pose source saw the part at s = centre + b (its mean of the looks while the part stood still), so each
 press is a measurement of the bias b, blurred by what remains of the looks' error: `LOOK_SIGMA` over the square
 root of the looks in the mean, and the arm's `ARM_SIGMA`. `BiasEstimate` keeps
 the posterior of b on a 1 mm grid of ±`RANGE` per axis, starting flat, and its mean is what the runtime subtracts
@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
@@ -39,10 +40,19 @@ def _erf(x: np.ndarray) -> np.ndarray:
     return np.vectorize(math.erf, otypes=[float])(x)
 
 
+@dataclass(frozen=True)
+class SealWindow:
+    """Where a press seals: the cup's axis within `half` (m, x and y) of `centre` (m, x and y in the part's frame:
+    the grasp point), per axis."""
+
+    centre: tuple[float, float]
+    half: tuple[float, float]
+
+
 class BiasEstimate:
     """The posterior of the source's xy bias b (seen = true + b), from presses that sealed or did not."""
 
-    def __init__(self, window: float) -> None:
+    def __init__(self, window: SealWindow) -> None:
         self.window = window
         axis = np.arange(-RANGE, RANGE + STEP / 2, STEP)
         self._bx, self._by = np.meshgrid(axis, axis, indexing="ij")
@@ -50,17 +60,18 @@ class BiasEstimate:
         self.presses = 0
         self.seals = 0
 
-    def _inside(self, offset: float, b: np.ndarray, sigma: float) -> np.ndarray:
-        """P(|offset + b| < window) along one axis for each bias b on the grid, offset = press − seen, blurred by
-        `sigma`."""
+    def _inside(self, offset: float, b: np.ndarray, sigma: float, half: float) -> np.ndarray:
+        """P(|offset + b| < half) along one axis for each bias b on the grid, offset = press − seen − the window's
+        centre, blurred by `sigma`."""
         s = sigma * math.sqrt(2.0)
-        return 0.5 * (_erf((self.window - offset - b) / s) - _erf((-self.window - offset - b) / s))
+        return 0.5 * (_erf((half - offset - b) / s) - _erf((-half - offset - b) / s))
 
     def press(self, tcp: np.ndarray, seen: np.ndarray, sealed: bool, sigma: float) -> None:
         """A press of the cup at `tcp` (m) on the part the source saw at `seen` (its raw mean, m): sealed or not;
         `sigma` (m) the press's blur (`blur`)."""
-        ox, oy = float(tcp[0] - seen[0]), float(tcp[1] - seen[1])
-        p = self._inside(ox, self._bx, sigma) * self._inside(oy, self._by, sigma)
+        (cx, cy), (hx, hy) = self.window.centre, self.window.half
+        ox, oy = float(tcp[0] - seen[0] - cx), float(tcp[1] - seen[1] - cy)
+        p = self._inside(ox, self._bx, sigma, hx) * self._inside(oy, self._by, sigma, hy)
         self._log += np.log(np.clip(p if sealed else 1.0 - p, 1e-12, 1.0))
         self._log -= self._log.max()
         self.presses += 1
@@ -75,22 +86,24 @@ class BiasEstimate:
 
     def save(self, path: Path, source: str) -> None:
         """Write the posterior to `path` (JSON), naming the pose source it belongs to."""
-        state = {"source": source, "presses": self.presses, "seals": self.seals, "window": self.window}
+        state = {"source": source, "presses": self.presses, "seals": self.seals, "window": asdict(self.window)}
         state["log_posterior"] = np.round(self._log, 6).tolist()
         tmp = path.with_suffix(path.suffix + ".tmp")
         tmp.write_text(json.dumps(state))
         tmp.replace(path)
 
     @classmethod
-    def load(cls, path: Path, source: str, window: float) -> BiasEstimate | None:
-        """The estimate saved at `path` for the same source and window; None if there is none. ValueError for a file
-        that is not one (named, with what is wrong)."""
+    def load(cls, path: Path, source: str, window: SealWindow) -> BiasEstimate | None:
+        """The estimate saved at `path` for the same source and window (a file from before the window was a
+        `SealWindow` is another window); None if there is none. ValueError for a file that is not one (named, with
+        what is wrong)."""
         if not path.exists():
             return None
         try:
             state = json.loads(path.read_text())
             log = np.asarray(state["log_posterior"], dtype=float)
-            same = state["source"] == source and math.isclose(float(state["window"]), window)
+            saved = state["window"]
+            same = state["source"] == source and saved == json.loads(json.dumps(asdict(window)))
             est = cls(window)
             if log.shape != est._log.shape or not np.all(np.isfinite(log)):
                 raise ValueError(f"a posterior of shape {log.shape}, expected {est._log.shape}")
@@ -107,7 +120,7 @@ class Registration:
     """The runtime's use of the estimate: each decision, the presses it saw reported; the correction to subtract
     from the pose source's poses returned. Saved to `path` (if any) after every press, read from it at the start."""
 
-    def __init__(self, window: float, source: str, path: Path | None = None) -> None:
+    def __init__(self, window: SealWindow, source: str, path: Path | None = None) -> None:
         self.source, self.path = source, path
         loaded = BiasEstimate.load(path, source, window) if path is not None else None
         self.estimate = loaded or BiasEstimate(window)

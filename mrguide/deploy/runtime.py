@@ -19,9 +19,8 @@ from typing import NoReturn
 
 import numpy as np
 
-from mrguide.cell_layout import CUP_RADIUS
 from mrguide.config import ConfigError
-from mrguide.deploy.bias_estimate import Registration
+from mrguide.deploy.bias_estimate import Registration, SealWindow
 from mrguide.deploy.cell_learning import LearningActor
 from mrguide.deploy.episode import HOME_SETTLE_S, EpisodeReport, RunStopped
 from mrguide.deploy.following import FollowingMonitor
@@ -35,9 +34,11 @@ from mrguide.deploy.seal_search import SealSearch
 from mrguide.drivers.cobot_state import JointState, VacuumState
 from mrguide.drivers.errors import DriverError
 from mrguide.drivers.interface import CobotInterface
+from mrguide.grasp_margin import seal_window
 from mrguide.motion.decision import NON_FINITE, ActionError, DecisionStep
 from mrguide.motion.kinematics import IKError
 from mrguide.motion.trajectory import TrajectoryError
+from mrguide.parts import part_named
 from mrguide.pose_source import ObjectPoseSource
 from mrguide.robot import RobotSpec
 from mrguide.task import OBS_OBJECT, Outcome, Phase, TaskConfig
@@ -90,7 +91,8 @@ class Runtime:
         self.seal = SealSearch(spec.workspace, self.cfg.reseat_step, self.cfg.reseat_wait)
         misses = (self.cfg.max_pose_misses, self.cfg.max_pose_misses_before_grasp)
         self.objects = ObjectTracker(pose, self.supervisor, task, self.cfg.track_carried_object, *misses)
-        window = 0.5 * task.object_height - CUP_RADIUS  # where the lip rests whole on the part's face, per axis
+        grasp = task.grasp_offset  # where the lip rests whole on the part's face, per axis, about the grasp
+        window = SealWindow((float(grasp[0]), float(grasp[1])), seal_window(part_named(task.part), grasp[:2]))
         where = Path(self.cfg.bias_estimate_file) if self.cfg.bias_estimate_file else None
         self.registration = Registration(window, type(pose).__name__, where)
 

@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mrguide.deploy.bias_estimate import BiasEstimate
+from mrguide.deploy.bias_estimate import BiasEstimate, SealWindow
 from mrguide.deploy.seal_search import search_offsets
 
-WINDOW = 0.005  # the 20 mm lip on the 5 cm part
+WINDOW = SealWindow((0.0, 0.0), (0.005, 0.005))  # the 20 mm lip on the 5 cm block, about the centre of its top
 
 
 def _picks(est: BiasEstimate, bias: np.ndarray, n: int, rng: np.random.Generator) -> None:
@@ -20,7 +20,7 @@ def _picks(est: BiasEstimate, bias: np.ndarray, n: int, rng: np.random.Generator
         first = seen - est.estimate + rng.normal(0.0, 0.0005, 2)
         for offset in [np.zeros(2), *search_offsets(0.005, part - first)]:
             press = first + offset
-            sealed = bool(np.all(np.abs(press - part) < WINDOW))
+            sealed = bool(np.all(np.abs(press - part) < WINDOW.half))
             est.press(press, seen, sealed, 0.0015)
             if sealed:
                 break
