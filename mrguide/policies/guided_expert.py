@@ -318,6 +318,8 @@ class GuidedExpert:
         self.counts.asked += 1
         if ann is None:
             return None
+        if ann.here and self._person:  # a person who stepped in and says "here" corrects what was taught
+            ann.info["correction"] = True
         index = self.cache.insert(obs, ann, supersedes=previous)  # on disk (fsync'd) when this returns
         recorded = getattr(self.source, "recorded", None)
         if recorded is not None:
@@ -329,9 +331,10 @@ class GuidedExpert:
         return index
 
     def _fuse(self, kind: int, seen: np.ndarray, ann: Annotation) -> None:
-        """Fuse a pick or place mark made with the part and goal at `seen`: taught where the person said "here"."""
+        """Fuse a pick or place mark made with the part and goal at `seen`: taught where the person said "here" (a
+        correction where they had stepped in: the record says so)."""
         if ann.here:
-            self.fusion.teach(kind, anchor(kind, seen), ann.target)
+            self.fusion.teach(kind, anchor(kind, seen), ann.target, bool(ann.info.get("correction")))
             if kind == PICK_PHASE:
                 self.demo.intent = self.fusion.intent(PICK_PHASE)[:2]  # type: ignore[index]
         else:

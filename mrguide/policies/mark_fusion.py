@@ -18,10 +18,10 @@ part the cup dragged along before it sealed is measured against where it lay bef
 search finds nothing around it says so: `withdraw` drops it, and the marks decide again.
 
 A mark is read under the centre prior: the person meant the middle of the part, and the cell's measurements find it
-(a seal is measured over the part's centre). A person who says "not there — here" (an answer with `here`: `teach`)
-teaches where the part is gripped or set down: the taught point is the person's intent, it outranks every
-measurement made before it, and a later measurement refines it only within `INTENT_RADIUS` of it; it never moves it
-where the person did not point.
+(a seal is measured over the part's centre). A person who answers with `here` (`teach`) teaches where the part is
+gripped or set down: the taught points' median is the person's intent, and the cell's measurements refine it only
+within `REFINE_RADIUS` of it; they never move it where the person did not point. A person who steps in and says
+"not there — here" corrects it: the correction replaces what was taught and outranks every measurement made before.
 """
 
 from __future__ import annotations
@@ -33,9 +33,12 @@ from mrguide.task import OBS_GOAL, OBS_OBJECT, PICK_PHASE, PLACE_PHASE
 KINDS = (PICK_PHASE, PLACE_PHASE)
 #: Marks of a kind before its median may count as settled, however tight they are.
 MIN_MARKS = 3
-#: m: a measurement refines a taught point only this close to it, laterally: one pitch of the grasp's search grid
-#: either side of its centre (`waypoint_search`), as far as a search about the taught point reaches.
+#: m: how far the cell may move a taught point to where a seal has room (`GuidedExpert`, `grasp_margin`): the
+#: diagonal of one pitch of the grasp's search grid (`waypoint_search`), as far as its nearest probes reach.
 INTENT_RADIUS = 0.0085
+#: m: a measurement refines the intent only this close to it, laterally: a probe of the search about a point the cell
+#: moved, a pitch and a half from it, with the intent moved by another taught point since (ours: twice the above).
+REFINE_RADIUS = 2 * INTENT_RADIUS
 #: Standard error of a median per standard deviation per √n (normal errors: √(π/2)), and the normal-consistent
 #: MAD scale: SE ≈ 1.2533 · 1.4826 · MAD / √n.
 _MEDIAN_SE, _MAD_SIGMA = 1.2533, 1.4826
@@ -64,19 +67,22 @@ class MarkFusion:
 
     def estimate(self, kind: int) -> np.ndarray | None:
         """The fused offset of `kind`, or None before its first mark. Taught: the median of the measurements within
-        INTENT_RADIUS of the intent, else the intent. Otherwise: the median of the measurements once there are any,
+        REFINE_RADIUS of the intent, else the intent. Otherwise: the median of the measurements once there are any,
         else of the marks."""
         intent = self.intent(kind)
         if intent is not None:
-            near = [m for m in self.measured[kind] if np.linalg.norm(m[:2] - intent[:2]) <= INTENT_RADIUS]
+            near = [m for m in self.measured[kind] if np.linalg.norm(m[:2] - intent[:2]) <= REFINE_RADIUS]
             return np.median(np.array(near), axis=0) if near else intent
         offs = self.measured[kind] or self.offsets[kind]
         return np.median(np.array(offs), axis=0) if offs else None
 
-    def teach(self, kind: int, at: np.ndarray, target: np.ndarray) -> None:
-        """A person taught `kind` at `target` with its anchor at `at`: the measurements made so far are dropped."""
-        self.taught[kind].append(np.asarray(target, dtype=float) - np.asarray(at, dtype=float))
-        self.measured[kind] = []
+    def teach(self, kind: int, at: np.ndarray, target: np.ndarray, correction: bool = False) -> None:
+        """A person taught `kind` at `target` with its anchor at `at`: one more sample of their intent, or, a
+        `correction` ("not there — here"), the intent itself, every measurement made so far dropped."""
+        offset = np.asarray(target, dtype=float) - np.asarray(at, dtype=float)
+        if correction:
+            self.taught[kind], self.measured[kind] = [], []
+        self.taught[kind].append(offset)
 
     def settled(self, kind: int, precision: float) -> bool:
         """Whether another mark of `kind` would tell nothing new: once a person taught it or the cell measured it; or once

@@ -10,7 +10,7 @@ from mrguide.policies import waypoint_search as ws
 from mrguide.policies.annotations import Annotation, AnnotationCache
 from mrguide.policies.guidance import NominalReference
 from mrguide.policies.guided_expert import GuidedExpert
-from mrguide.policies.mark_fusion import INTENT_RADIUS, MarkFusion
+from mrguide.policies.mark_fusion import REFINE_RADIUS, MarkFusion
 from mrguide.robot import load_robot
 from mrguide.task import PICK_PHASE, Phase, TaskConfig, oracle_target, phase_from_progress, phase_target
 from tests.policies.mark_scene import GOAL, OBJ, scene_obs
@@ -64,20 +64,23 @@ def test_a_grasp_outside_the_part_is_refused():
         TaskConfig(part="keepout_block", grasp=(0.08, 0.0, 0.02))
 
 
-def test_a_taught_point_outranks_earlier_measurements_and_later_ones_refine_it_only_near_it():
+def test_measurements_refine_a_taught_point_only_near_it_and_a_correction_outranks_them():
     fusion = MarkFusion()
     at = np.zeros(3)
     fusion.add(PICK_PHASE, at, [0.01, 0.0, 0.02])
     fusion.add_measurement(PICK_PHASE, at, [0.0, 0.0, 0.02])  # the centre prior's seal
     assert np.allclose(fusion.estimate(PICK_PHASE), [0.0, 0.0, 0.02]) and fusion.intent(PICK_PHASE) is None
-    fusion.teach(PICK_PHASE, at, TAUGHT)  # "not there — here"
-    assert fusion.measured[PICK_PHASE] == [] and np.allclose(fusion.estimate(PICK_PHASE), TAUGHT)
-    assert fusion.settled(PICK_PHASE, 0.0)  # nothing more to ask of it
-    fusion.add_measurement(PICK_PHASE, at, [0.0, 0.0, 0.02])  # a seal found back at the centre: not the intent
-    assert np.allclose(fusion.estimate(PICK_PHASE), TAUGHT)
-    near = TAUGHT + [0.5 * INTENT_RADIUS, 0.0, -0.001]
+    fusion.teach(PICK_PHASE, at, TAUGHT)  # taught 3.7 cm away: the seal at the centre is not what the person means
+    assert np.allclose(fusion.estimate(PICK_PHASE), TAUGHT) and fusion.settled(PICK_PHASE, 0.0)
+    near = TAUGHT + [0.5 * REFINE_RADIUS, 0.0, -0.001]
     fusion.add_measurement(PICK_PHASE, at, near)  # a seal beside the taught point refines it
     assert np.allclose(fusion.estimate(PICK_PHASE), near)
+    fusion.teach(PICK_PHASE, at, TAUGHT + [0.004, 0.0, 0.0])  # another sample of the intent: the seal still counts
+    assert np.allclose(fusion.estimate(PICK_PHASE), near) and len(fusion.taught[PICK_PHASE]) == 2
+    corrected = TAUGHT + [0.0, 0.012, 0.0]
+    fusion.teach(PICK_PHASE, at, corrected, correction=True)  # "not there — here"
+    assert fusion.measured[PICK_PHASE] == [] and np.allclose(fusion.intent(PICK_PHASE), corrected)
+    assert np.allclose(fusion.estimate(PICK_PHASE), corrected)
 
 
 @pytest.mark.parametrize("here", [True, False])
@@ -186,7 +189,7 @@ def test_a_run_on_the_keepout_block_learns_the_taught_grasp_without_reading_the_
 
 def test_a_person_who_steps_in_is_asked_again_and_corrects_the_grasp(tmp_path):
     """Taught once, the pick is settled and not asked again; a demonstration a person stepped in for asks it anyway,
-    and their taught answer ("not there — here") becomes the grasp."""
+    and their taught answer corrects the grasp ("not there — here"): it replaces what was taught."""
     task = TaskConfig(part="keepout_block")
     person = _Person(TAUGHT + [0.0, 0.008, 0.0], True, task)
     expert = _expert(person, tmp_path, task)
@@ -199,4 +202,5 @@ def test_a_person_who_steps_in_is_asked_again_and_corrects_the_grasp(tmp_path):
     expert.begin_demonstration(person=True)
     expert.action(scene_obs(1, obj=KEEPOUT_OBJ + [0.02, 0.0, 0.0]))
     assert expert.counts.asked == 2
-    assert np.allclose(expert.fusion.intent(PICK_PHASE), TAUGHT + [0.0, 0.004, -0.0015])  # the median of both
+    assert np.allclose(expert.fusion.intent(PICK_PHASE), TAUGHT - [0.0, 0.0, 0.003])  # the correction replaced it
+    assert expert.cache.get(1).info["correction"] is True  # and says so in the annotation file (a resume reads it)
