@@ -10,7 +10,6 @@ from their `metrics.csv`.
 
 from __future__ import annotations
 
-import csv
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Annotated, Any
@@ -94,8 +93,7 @@ def evaluate(run: TrainRun, root: str, cfg: PartsConfig) -> str:
 def _row(run: TrainRun, root: Path, episodes_per_eval: int) -> dict[str, Any]:
     """One run: convergence, what the person gave, what the cell spent, and the judge's reading."""
     rec = read_run(run, root, episodes_per_eval)
-    with open(run.directory(root) / "metrics.csv", newline="") as fh:
-        rows = list(csv.DictReader(fh))
+    rows = report.read_csv(run.directory(root) / "metrics.csv")
     c = rec.converged.step
     until = [r for r in rows if c is not None and int(r["step"]) <= c] or rows[:1]
     judged = report.read_csv(judged_path(run, root))
