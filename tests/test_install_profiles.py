@@ -24,9 +24,6 @@ import pytest
 from mrguide.install_profiles import MODULES, PROFILES
 from tests.conftest import build_wheel
 
-#: The robot venv (a module fixture) is built once: every test of this module on one xdist worker (run.sh runs the
-#: pass with `--dist loadgroup`; unmarked tests are spread as before).
-pytestmark = pytest.mark.xdist_group("robot_venv")
 ROOT = Path(__file__).parents[1]
 TRAIN_LINE = "needs the workstation install: pip install 'mrguide[train]' (missing: "
 REPLAY_LINE = "needs the replay install: pip install 'mrguide[replay]' (missing: "
