@@ -7,8 +7,8 @@ path, the task's targets and the page read `boxes`, `height`, `mass`, `friction`
 (`part_judge` is its one reader; `tests/test_parts.py` checks it).
 
 Nothing here says where a part is gripped: a person teaches it (`TaskConfig.grasp`, from the marks); a part nobody
-taught falls back to the centre prior (`task.centre_prior`). Adding a part: one `Part` in `PARTS` and its rows in the tests that
-tabulate every part (docs/twin.md#the-part-library).
+taught falls back to the centre prior (`task.centre_prior`). Adding a part: one `Part` in `PARTS` and its rows in the
+tests that tabulate every part (docs/twin.md#the-part-library).
 """
 
 from __future__ import annotations
@@ -80,7 +80,8 @@ class Part:
     @property
     def height(self) -> float:
         """m from the part's bottom to its top: its origin stands at half of it above the table."""
-        return max(b.centre[2] + b.half[2] for b in self.boxes) - min(b.centre[2] - b.half[2] for b in self.boxes)
+        low, high = self.bounds
+        return high[2] - low[2]
 
     @property
     def bounds(self) -> tuple[tuple[float, float, float], tuple[float, float, float]]:

@@ -3,8 +3,9 @@
 Every press of the cup says something about where the part really was: the lip seals only where it rests whole on
 the part's face, within a window about the grasp (`SealWindow`: 5 mm per axis about the centre of the 5 cm block's
 top for the 20 mm lip, `mrguide.seal`; about a taught grasp, what the part's face leaves there). A press at p that
-sealed says the part's grasp point lies within that window of p; one that did not, that it lies outside. The pose source saw the part at s = centre + b (its mean of the looks while the part stood still), so each
-press is a measurement of the bias b, blurred by what remains of the looks' error: `LOOK_SIGMA` over the square
+sealed says the part's grasp point lies within that window of p; one that did not, that it lies outside. The pose
+source saw the part at s = centre + b (its mean of the looks while the part stood still), so each press is a
+measurement of the bias b, blurred by what remains of the looks' error: `LOOK_SIGMA` over the square
 root of the looks in the mean, and the arm's `ARM_SIGMA`. `BiasEstimate` keeps
 the posterior of b on a 1 mm grid of ±`RANGE` per axis, starting flat, and its mean is what the runtime subtracts
 from the source's poses. The estimate is saved after each update and read back at the next start (`save`, `load`),

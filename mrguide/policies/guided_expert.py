@@ -183,7 +183,7 @@ class GuidedExpert:
     def _steady_pick(self) -> np.ndarray | None:
         """The taught pick offset (the fusion's estimate) moved the least it must, within INTENT_RADIUS, to where a
         seal has room on the part's face (`grasp_margin.steady_grasp`); None under the centre prior."""
-        if self.fusion.intent(PICK_PHASE) is None:
+        if not self.fusion.taught[PICK_PHASE]:
             return None
         est = self.fusion.estimate(PICK_PHASE)
         assert est is not None
