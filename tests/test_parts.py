@@ -88,12 +88,27 @@ def _reads_of_judge(path: Path) -> list[int]:
 
 def test_only_the_judge_reads_what_the_learner_must_not_see():
     """The judge reads the hidden record, and the evaluation that calls it; the simulated person asks the judge once
-    where to grip (a person knows the part), and only the simulated annotator asks the simulated person."""
+    where to grip (a person knows the part) and whether a grip may stand, and only the simulated annotator asks the
+    simulated person."""
     readers = {str(p.relative_to(PACKAGE)): _reads_of_judge(p) for p in PACKAGE.rglob("*.py")}
     knowing = ("experiments/part_grasps.py", "part_judge.py", "simulated_person.py")
     assert {p: lines for p, lines in readers.items() if lines} == {k: _reads_of_judge(PACKAGE / k) for k in knowing}
     assert _reads_of_judge(PACKAGE / "part_judge.py")  # the judge does read it: the scan sees a reader
-    asking = [str(p.relative_to(PACKAGE)) for p in PACKAGE.rglob("*.py") if "import person_grasp" in p.read_text()]
+    asking = [str(p.relative_to(PACKAGE)) for p in PACKAGE.rglob("*.py") if "simulated_person import" in p.read_text()]
     assert asking == ["policies/experts.py"]
     web = PACKAGE / "annotation" / "web"
     assert not [p for p in web.glob("*.js") if "judge_only" in p.read_text() or "keep_out" in p.read_text()]
+
+
+def test_a_person_lets_a_grip_on_the_keepout_block_stand_only_clear_of_its_label_with_room_to_spare():
+    """The simulated person corrects a grip they see wrong: on the label, beside it, or too near the edge of the grip
+    region for a policy's wobble; the grip they would teach themselves stands."""
+    from mrguide.simulated_person import SPARE, accepts, person_grasp
+
+    taught = person_grasp("keepout_block")
+    assert taught is not None and accepts("keepout_block", taught)
+    assert not accepts("keepout_block", (0.0, 0.0, 0.02))  # the label
+    edge = 0.01 + 0.020  # m: the label's half width and the cup's lip radius: the lip touches the label
+    assert accepts("keepout_block", (edge + SPARE, 0.0, 0.02))
+    assert not accepts("keepout_block", (edge + 0.5 * SPARE, 0.0, 0.02))  # acceptable, but no room to spare
+    assert not accepts("keepout_block", (0.04, 0.01, 0.02))  # at the grip region's side

@@ -47,6 +47,7 @@ class BotReport:
     refused: int = 0
     latencies_s: list[float] = field(default_factory=list)
     intervened: bool = False  # the server accepted the bot's `intervene`
+    corrections: int = 0  # times the bot stepped in to correct the grip the status showed (its person knows the part)
 
 
 def ws_url(page_url: str) -> str:
@@ -81,6 +82,7 @@ class AnnotationBot:
         self.url = ws_url(options.url)
         self.report = BotReport(latencies_s=[])
         self._annotator: SimulatedAnnotator | None = None
+        self._contested: tuple[list[float] | None, bool] = (None, False)  # the grip stepped in on; accepted yet
 
     def run(self) -> BotReport:
         """Answer until the server goes away (training ended) or `max_answers` is reached."""
@@ -116,14 +118,36 @@ class AnnotationBot:
                     await self._answer(ws, data["request"])
             elif kind == "request":
                 await self._answer(ws, data)
-            elif kind == "ack" and data.get("for") == "intervene" and data.get("accepted"):
-                self.report.intervened = True
+            elif kind == "status":
+                await self._watch(ws, data.get("grasp"))
+            elif kind == "ack" and data.get("for") == "intervene":
+                self._stepped_in(bool(data.get("accepted")))
             elif kind == "ack" and not data.get("accepted"):
                 self.report.refused += 1
                 log.warning("server refused our %s: %s", data.get("for"), data.get("reason"))
             if self._done():
                 await ws.close()
                 return
+
+    async def _watch(self, ws: aiohttp.ClientWebSocketResponse, grasp: list[float] | None) -> None:
+        """A person who knows the part and sees the cell grip it wrongly steps in (once per grip shown): the next
+        demonstration asks every mark, and their pick answer with `here` corrects the grip."""
+        if self._annotator is None or grasp == self._contested[0] or not self._annotator.corrects(grasp):
+            return
+        self._contested = (grasp, False)
+        await ws.send_json({"type": "intervene"})
+
+    def _stepped_in(self, accepted: bool) -> None:
+        """The server's answer to an `intervene`: refused (a request was outstanding), the grip is contested anew at
+        the next status."""
+        if not accepted:
+            self.report.refused += 1
+            self._contested = (None, False)
+        elif self._contested[0] is not None and not self._contested[1]:
+            self._contested = (self._contested[0], True)
+            self.report.corrections += 1
+        else:
+            self.report.intervened = True
 
     def _configure(self, hello: dict[str, Any]) -> None:
         if self._annotator is not None:

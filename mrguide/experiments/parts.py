@@ -2,7 +2,8 @@
 for each part of the library not gripped at its middle, then each final policy judged on fresh episodes.
 
 Each part trains with its shipped config (`configs/parts/<part>.toml`) and the person's `[guidance]` (the experiment's
-`person` file). The person teaches where they grip the part ("not there — here"); beside it, on fewer seeds, the same
+`person` file). The person teaches where they grip the part ("not there — here") and, shown the grip the cell then
+uses (the status's `grasp`), steps in to correct one they see wrong; beside it, on fewer seeds, the same
 person marking without teaching, read under the centre prior as before a person could teach: the comparison. The
 judge (`part_grasps`) reads each final policy's grasps and places; the runs' marks, robot time and part resets come
 from their `metrics.csv`.
@@ -104,6 +105,7 @@ def _row(run: TrainRun, root: Path, episodes_per_eval: int) -> dict[str, Any]:
         "convergence_step": c,
         "marks_until_convergence": rec.annotations_until_convergence,
         "marks_total": rec.annotations_total,
+        "corrections_total": int(rows[-1]["corrections"]),
         "robot_min_until_convergence": round(float(until[-1]["robot_s"]) / 60, 1) if c is not None else None,
         "resets_until_convergence": int(until[-1]["resets"]) if c is not None else None,
         "probes_total": int(rows[-1]["probes"]),
@@ -126,7 +128,8 @@ def _summary(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
             {"part": part, "variant": variant, "seeds": len(mine), "converged": len(conv)}
             | {k: median(k) for k in ("marks_until_convergence", "robot_min_until_convergence")}
             | {k: median(k) for k in ("resets_until_convergence",)}
-            | {f"{k}_median": median(k, mine) for k in ("marks_total", "grasp_acceptable", "placed", "both")}
+            | {f"{k}_median": median(k, mine) for k in ("marks_total", "corrections_total")}
+            | {f"{k}_median": median(k, mine) for k in ("grasp_acceptable", "placed", "both")}
             | {"both_min": round(min(r["both"] for r in mine), 3)}
         )
     return out
@@ -142,7 +145,8 @@ def parts_report(cfg: PartsConfig, base: str | None, root: Path, episodes_per_ev
         f"Parts a person teaches to grip, every mark over the wire (the annotation bot, the person of {cfg.config}): "
         f"{cfg.seeds} seeds taught and {cfg.centre_prior_seeds} marked under the centre prior per part, "
         f"{cfg.steps} steps; convergence with the learning-curves rule; every final policy judged on {cfg.episodes} "
-        "fresh episodes (grasp in the part's acceptable region, part at its place).\n\n"
+        "fresh episodes (grasp in the part's acceptable region, part at its place). Marks count every answer, the "
+        "corrections among them (the person stepped in on a grip they saw wrong, and taught it anew).\n\n"
     )
     return report.summary_files(intro, summary, [(k, k.replace("_", " ")) for k in summary[0]], rows)
 

@@ -150,6 +150,7 @@ def train(run: TrainRun, root: str, on_episode: Callable[[dict], None] | None = 
         raise
     if bot:
         tr.stop_requested = stop
+        on_episode = _publishing(bot, tr, on_episode)
     try:
         if (out / "checkpoint.pt").exists():
             tr.load_checkpoint()
@@ -178,6 +179,22 @@ def train(run: TrainRun, root: str, on_episode: Callable[[dict], None] | None = 
         if bot:
             bot.close()
     return finished(run, Path(root))
+
+
+def _publishing(bot: Any, tr: Any, on_episode: Callable[[dict], None] | None) -> Callable[[dict], None]:
+    """`on_episode` that first publishes the run's status to the bot's session, as `mrguide train --expert live` does
+    to the page: the bot's person sees the grip the cell uses, and steps in where they see it wrong."""
+    from mrguide.policies.session_status import SessionStatus
+
+    status = SessionStatus(tr)
+
+    def publish(row: dict) -> None:
+        status.episode(row)
+        bot.session.publish(**status.fields())
+        if on_episode is not None:
+            on_episode(row)
+
+    return publish
 
 
 def finished(run: TrainRun, root: Path) -> RunResult:

@@ -7,7 +7,6 @@ import dataclasses
 import json
 import signal
 import sys
-from collections import deque
 from collections.abc import Callable
 from contextlib import contextmanager
 from functools import partial
@@ -18,6 +17,7 @@ from tqdm import tqdm
 
 from mrguide.cli_args import add_set_argument, nonnegative_int, positive_int
 from mrguide.policies.choices import EXPERT_SOURCES
+from mrguide.policies.session_status import SessionStatus
 
 #: What a training run's config holds (`policies.train_config.RunConfig`), for the help texts (no torch imported).
 SECTIONS_HELP = "train, guidance, robot, twin, task and each registered learner's (ddpg, sac, ...)"
@@ -263,39 +263,23 @@ def _output_refusal(out: Path, resume: bool) -> str | None:
 
 
 def _run(tr, stop_after: int | None, bar: tqdm, session: LiveSessionLike | None) -> None:
-    recent: deque[int] = deque(maxlen=20)
-
-    def status() -> dict:
-        return {
-            "step": tr.counters.step,
-            "total_steps": tr.cfg.total_steps,
-            "episode": tr.counters.episode,
-            "lambda": round(tr.lam(), 4),
-            "success_rate": sum(recent) / len(recent) if recent else None,
-            "asked": tr.counters.asked,
-            "reused": tr.counters.reused,
-            "remarks": tr.counters.remarks,
-            "skipped": tr.counters.skipped,
-            "interventions": tr.counters.interventions,
-            "person_interventions": tr.counters.person_interventions,
-            **tr.counters.session_cost(tr.env.twin_cfg.decision_period),
-        }
+    status = SessionStatus(tr)
 
     def progress(row: dict) -> None:
-        recent.append(row["success"])
+        status.episode(row)
         bar.update(row["step"] - bar.n)
         bar.set_postfix(
             ret=f"{row['return']:.1f}",
-            succ20=f"{sum(recent) / len(recent):.0%}",
+            succ20=f"{status.success_rate():.0%}",
             lam=f"{row['lambda']:.2f}",
             interv=tr.counters.interventions,
             asked=row["asked"],
         )
         if session:
-            session.publish(**status())
+            session.publish(**status.fields())
 
     if session:
-        session.publish(**status())
+        session.publish(**status.fields())
     tr.run(progress, stop_at=stop_after)
 
 

@@ -11,7 +11,7 @@ import numpy as np
 from mrguide.config import ConfigError, Range, check_number, check_ranges
 from mrguide.policies.annotations import Annotation, AnnotationCache, AnnotationError
 from mrguide.robot import Workspace
-from mrguide.simulated_person import person_grasp
+from mrguide.simulated_person import accepts, person_grasp
 from mrguide.task import OBS_PROGRESS, PICK_PHASE, TaskConfig, oracle_target, phase_from_progress
 
 #: The simulated annotator of training seed s draws its noise from RNG seed s + this.
@@ -109,6 +109,11 @@ class SimulatedAnnotator:
         marked = self.workspace.clamp(exact.target + self.error(exact.target))[0]
         here = self.teaches and phase_from_progress(obs[OBS_PROGRESS]) == PICK_PHASE
         return Annotation(marked, exact.grip, "simulated", here=here)
+
+    def corrects(self, grasp: list[float] | None) -> bool:
+        """Whether this person, shown that the cell grips the part at `grasp` (m, part frame; None: the centre
+        prior, before anything was taught), steps in to correct it: only a person who teaches, only a taught grip."""
+        return self.teaches and grasp is not None and not accepts(self.oracle.task.part, grasp)
 
     def error(self, point: np.ndarray) -> np.ndarray:
         """One mark's error (m) at `point`: the run's bias plus fresh isotropic, line-of-sight and slip terms."""

@@ -66,6 +66,7 @@ class ExpertCounts:
     remarks: int = 0  # waypoints asked again because the arm did not reach them
     probes: int = 0  # targets a demonstration's search tried beyond a waypoint that did not complete its phase
     measured: int = 0  # seals and placements the cell measured (recorded as pick and place measurements)
+    corrections: int = 0  # of the marks asked, those that corrected what was taught ("not there — here" after Intervene)
 
 
 class PerceivedPose:
@@ -320,6 +321,7 @@ class GuidedExpert:
             return None
         if ann.here and self._person:  # a person who stepped in and says "here" corrects what was taught
             ann.info["correction"] = True
+            self.counts.corrections += 1
         index = self.cache.insert(obs, ann, supersedes=previous)  # on disk (fsync'd) when this returns
         recorded = getattr(self.source, "recorded", None)
         if recorded is not None:

@@ -28,10 +28,12 @@ class TrainerCounters(ExpertCounts):
     update_s: float = 0.0  # wall time spent in updates, minibatch sampling included (s)
 
     def session_cost(self, decision_period: float) -> dict[str, float]:
-        """What the run has cost the cell beside the marks (train_log's METRIC_FIELDS): probes, the robot's seconds
-        (every decision for `decision_period` s), part resets (each agent episode, each demonstration put back)."""
+        """What the run has cost the cell beside the marks asked (train_log's METRIC_FIELDS): probes, the robot's seconds
+        (every decision for `decision_period` s), part resets (each agent episode, each demonstration put back), and
+        which of the marks were a person's corrections."""
         robot_s = round(self.step * decision_period, 1)
-        return {"probes": self.probes, "robot_s": robot_s, "resets": self.episode + self.interventions}
+        resets = self.episode + self.interventions
+        return {"probes": self.probes, "robot_s": robot_s, "resets": resets, "corrections": self.corrections}
 
     def restore(self, saved: dict[str, Any]) -> None:
         """Set every counter from a checkpoint's `counters`, in place (the expert holds this object). Each must be

@@ -34,10 +34,12 @@ METRIC_FIELDS = (
     "probes",
     "robot_s",
     "resets",
+    "corrections",
 )  # new columns go at the end
 #: A session's cost beside its marks (asked, remarks): `probes`, the targets a demonstration's search tried; `robot_s`,
 #: the robot's time so far (every decision, the agent's and the expert's, for the twin's decision period); `resets`,
-#: the times the part was put where an episode starts (each agent episode, each demonstration put back to its start).
+#: the times the part was put where an episode starts (each agent episode, each demonstration put back to its start);
+#: `corrections`, the marks (counted in `asked`) with which a person who stepped in corrected what they had taught.
 EVAL_FIELDS = ("step", "success_rate", "mean_return")
 #: learner.csv (a run with a learner process), one row per agent episode: the actor's step, the version of the weights
 #: it acts with and the actor's step those weights were learned up to (lag_steps: the difference), the learner's

@@ -267,3 +267,20 @@ def test_annotate_bot_takes_its_error_model_from_a_training_config(tmp_path, cap
     bad.write_text("[guidance.noise]\nsigma_along = -1\n")
     assert main(["annotate", "bot", "--url", url, "--config", str(bad)]) == 2
     assert "guidance.noise.sigma_along" in capsys.readouterr().err and len(seen) == 2
+
+
+def test_a_bot_whose_person_sees_the_grip_on_the_label_steps_in_and_corrects_it(tmp_path):
+    """An experiment's run over the wire on the keep-out block: the person's registration bias puts the grip they
+    teach on the label; shown it in the status, they step in, and their `here` answer is recorded and counted as a
+    correction (the annotation file, metrics.csv and the bot agree)."""
+    from mrguide.experiments.train_runs import TrainRun, train
+
+    config = Path(__file__).resolve().parents[2] / "configs" / "parts" / "keepout_block.toml"
+    overrides = {"guidance.noise.bias": [0.03, 0.0, 0.0], "guidance.intake_steps": 700, "train.eval_every": 10_000}
+    overrides |= {"train.learning_starts": 64, "train.batch_size": 32, "ddpg.hidden": [32, 32]}
+    run = TrainRun("keepout", 0, 800, True, str(config), overrides, "bot")
+    train(run, str(tmp_path))
+    recs = records(tmp_path / "keepout" / "annotations.jsonl")
+    corrections = [r for r in recs if r.get("correction")]
+    assert corrections and all(r["here"] and r["grip"] > 0 for r in corrections)
+    assert int(rows(tmp_path / "keepout" / "metrics.csv")[-1]["corrections"]) == len(corrections)

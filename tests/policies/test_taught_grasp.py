@@ -204,3 +204,4 @@ def test_a_person_who_steps_in_is_asked_again_and_corrects_the_grasp(tmp_path):
     assert expert.counts.asked == 2
     assert np.allclose(expert.fusion.intent(PICK_PHASE), TAUGHT - [0.0, 0.0, 0.003])  # the correction replaced it
     assert expert.cache.get(1).info["correction"] is True  # and says so in the annotation file (a resume reads it)
+    assert expert.counts.corrections == 1

@@ -392,6 +392,8 @@ async function main() {
     $('st-interventions').textContent = s.interventions === undefined ? '–' : `${s.interventions} (${fmt(s.person_interventions)})`;
     $('st-skipped').textContent = `${fmt(s.skipped)} / ${fmt(s.fallbacks)}`;
     $('st-robot').textContent = s.robot_s === undefined ? '–' : `${(s.robot_s / 60).toFixed(1)} min, ${fmt(s.resets)} resets, ${fmt(s.probes)} probes`;
+    $('st-grasp').textContent = s.grasp === undefined ? '–' : s.grasp === null ? 'middle of the top (centre prior)'
+      : `x ${(1000 * s.grasp[0]).toFixed(0)}, y ${(1000 * s.grasp[1]).toFixed(0)} mm from the part's centre · ${fmt(s.corrections)} corrections`;
     $('st-waiting').textContent = s.waiting ? 'yes — for an annotation' : s.waiting === false ? 'no' : '–';
     $('st-clients').textContent = fmt(s.clients);
     const refused = s.refused ? Object.values(s.refused).reduce((a, b) => a + b, 0) : undefined;
