@@ -143,6 +143,7 @@ class GuidedExpert:
         self.mark_precision = mark_precision
         self.demo = PickPlaceDemo(task)
         self._person = False  # a person stepped in for this demonstration: every mark is asked of them
+        self._corrected = False  # a person corrected what they had taught, since the trainer last looked
         self._streak = (
             -1,
             0,
@@ -166,6 +167,12 @@ class GuidedExpert:
             return None
         self.task = self.demo.task = self.reference.task = replace(self.task, grasp=grasp)
         return self.task
+
+    def corrected(self) -> bool:
+        """Whether a person corrected what they had taught since the last call: the demonstrations made before it aimed
+        elsewhere (the trainer forgets them)."""
+        was, self._corrected = self._corrected, False
+        return was
 
     def taught_grasp(self) -> tuple[float, float, float] | None:
         """Where the cup grips the part (m, in the part's frame as the cell sees it) as a person taught it and the
@@ -322,6 +329,7 @@ class GuidedExpert:
         if ann.here and self._person:  # a person who stepped in and says "here" corrects what was taught
             ann.info["correction"] = True
             self.counts.corrections += 1
+            self._corrected = True
         index = self.cache.insert(obs, ann, supersedes=previous)  # on disk (fsync'd) when this returns
         recorded = getattr(self.source, "recorded", None)
         if recorded is not None:

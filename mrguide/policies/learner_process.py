@@ -133,6 +133,13 @@ class LearnerProcess:
             self._send(step)
         self.receive()
 
+    def forget_demonstrations(self) -> None:
+        """Send what was stored so far, then ask the learner to empty its expert pool (in that order: the pipe keeps
+        it)."""
+        self._send(self._sent_step)
+        if self._lost is None:
+            self._inbox.put(Message("forget"))
+
     def _send(self, step: int) -> None:
         rows, self._rows, self._sent_step = self._rows, [], step
         if self._lost is None and not self.process.is_alive():

@@ -70,7 +70,8 @@ class Publication:
 
 @dataclass(frozen=True)
 class Message:
-    """A request to the learner ("state", "load" with `state`, "evaluate" with {step, seeds}, "stop") or its answer
+    """A request to the learner ("state", "load" with `state`, "evaluate" with {step, seeds}, "forget", "stop") or its
+    answer
     ("ready", "state", "loaded", "evaluated" with {step, success_rate, mean_return}, "failed" with `error`)."""
 
     kind: str
@@ -151,6 +152,8 @@ class LearnerServer:
                     self._store(message)
                 elif message.kind == "stop":
                     return
+                elif message.kind == "forget":  # a person corrected the grasp (`Learning.forget_demonstrations`)
+                    self.replay.expert.clear()
                 else:
                     self.outbox.put(self._answer(message))
             self._update()

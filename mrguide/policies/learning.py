@@ -98,6 +98,11 @@ class Learning(Protocol):
         (raises then)."""
         ...
 
+    def forget_demonstrations(self) -> None:
+        """Empty the expert pool (ζ = 1), after every transition stored so far: a person corrected what they had
+        taught, and the demonstrations made before aimed elsewhere."""
+        ...
+
     def state(self) -> dict:
         """The checkpoint's `agent`, `agent_pool` and `expert_pool` (and what else resumes this learning)."""
         ...
@@ -140,6 +145,9 @@ class LocalLearning:
 
     def episode_end(self, step: int) -> None:
         """Nothing to check: the updates ran in this thread."""
+
+    def forget_demonstrations(self) -> None:
+        self.replay.expert.clear()
 
     def state(self) -> dict:
         return {

@@ -35,6 +35,10 @@ class RingBuffer:
         self.pos = (i + 1) % self.capacity
         self.size = min(self.size + 1, self.capacity)
 
+    def clear(self) -> None:
+        """Forget every transition (the storage stays allocated)."""
+        self.pos = self.size = 0
+
     def index(self, idx: np.ndarray) -> tuple[np.ndarray, ...]:
         return tuple(getattr(self, f)[idx] for f in self.FIELDS)
 

@@ -9,10 +9,9 @@ expert) counts as a training step and is followed by the learner's update (DDPG:
 mixed by λ_t, Eq. 9, 11): in this thread (`learning.LocalLearning`), or, with `train.learner_process`, in the
 learner's own process while the env loop goes on with the latest weights it has (`learner_process`).
 
-Files in the run directory: `metrics.csv` (one row per agent or expert episode), `eval.csv` (one row per
-evaluation), `annotations.jsonl`, `checkpoint.pt`, with a learner process `learner.csv` (its weights' version and
-lag at every agent episode's end); with a `TensorBoardLog` attached (`mrguide train
---tensorboard`), the same figures as TensorBoard event files in `tensorboard/`.
+Files in the run directory: `metrics.csv` (a row per agent or expert episode), `eval.csv` (a row per evaluation),
+`annotations.jsonl`, `checkpoint.pt`, with a learner process `learner.csv` (its weights' version and lag at every agent
+episode's end); with a `TensorBoardLog` (`mrguide train --tensorboard`), the same figures in `tensorboard/`.
 """
 
 from __future__ import annotations
@@ -221,9 +220,8 @@ class Trainer:
         """The expert demonstrates from `obs` (ζ = 1); a waypoint nobody annotates ends the demonstration there.
 
         A demonstration's steps are held per phase and stored as expert data (ζ = 1) once the phase is completed;
-        the steps of a phase it did not complete, and those that followed a mark that was then marked again, go to
-        the agent pool (ζ = 0): the critic learns from them, nothing clones them (ours: a mark the arm cannot
-        complete the phase with is no demonstration of it)."""
+        the steps of a phase it did not complete, and those after a mark that was marked again, go to the agent pool
+        (ζ = 0): the critic learns from them, nothing clones them (ours: a mark the arm cannot complete is none)."""
         ret, length = 0.0, 0
         info: dict[str, Any] = {"outcome": None, "is_success": False}
         self.expert.begin_demonstration(person)
@@ -232,6 +230,8 @@ class Trainer:
             step = self.expert.action(obs)
             if (task := self.expert.retasked()) is not None:  # a person taught the grasp: the reward follows it
                 self.env.teach(task)
+            if self.expert.corrected():  # and corrected it: the demonstrations before it aimed elsewhere, forgotten
+                self.learning.forget_demonstrations()
             if step is None:
                 self.counters.skipped += int(not self.stop_requested.is_set())
                 info = {"outcome": "skipped", "is_success": False}

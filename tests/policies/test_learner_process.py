@@ -242,3 +242,24 @@ def test_a_split_run_resumes_from_its_checkpoint(tmp_path, monkeypatch):
     _, learner_rows = read_csv(tmp_path / "run" / "learner.csv")
     learner_steps = [int(r["step"]) for r in learner_rows]
     assert learner_steps == sorted(set(learner_steps))  # the rows after the checkpoint were cut back, not doubled
+
+
+@pytest.mark.parametrize("split", [False, True], ids=["in-process", "learner-process"])
+def test_forgetting_the_demonstrations_empties_the_expert_pool_after_what_was_stored(tmp_path, split):
+    """A person's correction (`Learning.forget_demonstrations`): every expert transition stored before it is gone, in
+    the trainer's process and in the learner's alike; the agent's pool keeps its own."""
+    tr = make(tmp_path, "run", split=split)
+    try:
+        tr.run(stop_at=200)
+        rng = np.random.default_rng(0)
+        obs, act = rng.uniform(-1, 1, (3, 11)).astype(np.float32), rng.uniform(-1, 1, (3, 4)).astype(np.float32)
+        tr.learning.add(obs[0], act[0], 0.0, obs[1], False, 1)  # stored (not yet sent) before the correction
+        tr.learning.forget_demonstrations()
+        tr.learning.add(obs[1], act[1], 0.0, obs[2], False, 1)  # after it
+        if split:
+            learner(tr).stepped(tr.counters.step + 1_000)  # send it
+        state = tr.learning.state()
+    finally:
+        tr.close()
+    assert len(state["expert_pool"]["rew"]) == 1 and np.array_equal(state["expert_pool"]["obs"][0], obs[1])
+    assert len(state["agent_pool"]["rew"]) > 0

@@ -205,3 +205,46 @@ def test_a_person_who_steps_in_is_asked_again_and_corrects_the_grasp(tmp_path):
     assert np.allclose(expert.fusion.intent(PICK_PHASE), TAUGHT - [0.0, 0.0, 0.003])  # the correction replaced it
     assert expert.cache.get(1).info["correction"] is True  # and says so in the annotation file (a resume reads it)
     assert expert.counts.corrections == 1
+
+
+def test_a_correction_in_a_run_forgets_the_demonstrations_made_before_it(tmp_path):
+    """A person teaches a grasp on the label, then steps in and corrects it: the trainer forgets every demonstration
+    of the wrong grasp (they aimed elsewhere) the moment the correction is recorded, and counts it."""
+    import dataclasses
+    from pathlib import Path
+
+    from mrguide.policies.train import Trainer
+    from mrguide.policies.train_config import RunConfig
+
+    class StepsIn(_Person):
+        """Teaches `offset`; at the 30th agent step after its first answer steps in, and teaches TAUGHT from then."""
+
+        polls = 0
+
+        def intervention_requested(self) -> bool:
+            self.polls += 1
+            if self.polls == 30:
+                self.offset = TAUGHT - [0.0, 0.0, 0.003]
+                return True
+            return False
+
+    config = Path(__file__).resolve().parents[2] / "configs" / "parts" / "keepout_block.toml"
+    run = RunConfig.load(config)
+    run = run.replace(train=dataclasses.replace(run.train, total_steps=600, eval_every=10_000, checkpoint_every=10_000))
+    tr = Trainer(run, tmp_path, source_factory=lambda env: StepsIn([0.0, 0.0, 0.017], True, env.task_cfg))
+    pool: list[tuple[int, int]] = []  # the expert pool's size before and after each forgetting
+    forget = tr.learning.forget_demonstrations
+
+    def spy() -> None:
+        before = tr.replay.expert.size
+        forget()
+        pool.append((before, tr.replay.expert.size))
+
+    tr.learning.forget_demonstrations = spy
+    try:
+        tr.run(stop_at=600)
+    finally:
+        tr.close()
+    assert tr.counters.corrections == 1 and tr.counters.person_interventions == 1
+    assert len(pool) == 1 and pool[0][0] > 0 and pool[0][1] == 0
+    assert np.allclose(tr.env.task_cfg.grasp[:2], TAUGHT[:2], atol=0.006)
