@@ -61,6 +61,7 @@ def _shows_the_request(page, s, req, spec) -> np.ndarray:
     assert page.text("st-success") == "35 %"
     assert page.text("st-asked") == "212 / 1930"
     assert page.text("st-robot") == "5.2 min, 80 resets, 9 probes"  # the session's cost beside the marks
+    assert page.text("st-grasp") == "x -37, y 2 mm from the part's centre · 1 corrections"  # what to correct
     # No headset in plain headless Chromium: the XR button says so instead of failing later.
     assert page.page.is_disabled("#xr-button")
     assert "headset" in page.text("xr-message").lower() or "webxr" in page.text("xr-message").lower()
@@ -125,6 +126,8 @@ def test_page_shows_request_drag_keys_and_submit(browser, page_served, spec, tmp
         probes=9,
         robot_s=312.0,
         resets=80,
+        corrections=1,
+        grasp=[-0.037, 0.002, 0.02],
         **{"lambda": 0.775},
     )
     page = browser.open(server.url)
