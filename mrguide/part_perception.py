@@ -8,7 +8,7 @@ the bias remains, which the cell estimates from its seals (`deploy.bias_estimate
 
 In the twin, `PartPerception` draws the looks through `PerceptionConfig`'s errors and applies the runtime's rules:
 the filter, the part's height that of a part on the table, the marker hidden under the arm (`occluded`: the last
-estimate stands), and the part held on the cup where the TCP is (the runtime's `ObjectTracker`). The policy
+estimate stands), and the part held on the cup where the TCP and the grasp say (the runtime's `ObjectTracker`). The policy
 observes what it gives; the reward and the phases read the twin's truth.
 """
 
@@ -93,8 +93,10 @@ class PerceptionConfig:
 class PartPerception:
     """The part's position the policy observes in the twin, one look per decision (module docstring)."""
 
-    def __init__(self, cfg: PerceptionConfig, half_height: float) -> None:
-        self.cfg, self.half = cfg, half_height
+    def __init__(self, cfg: PerceptionConfig, half_height: float, hang: np.ndarray) -> None:
+        """`half_height`: the part's (m; its top above its centre); `hang`: where the cup grips it (m, part frame;
+        the task's `grasp_offset`: the part hangs this far below the TCP while held)."""
+        self.cfg, self.half, self.hang = cfg, half_height, np.asarray(hang, dtype=float)
         self.rng = np.random.default_rng(0)
         self.bias = np.zeros(3)
         self.filter = StillPartFilter()
@@ -114,7 +116,7 @@ class PartPerception:
         if self.cfg.exact:
             return np.asarray(part, dtype=float)
         if held:
-            self._carried = np.asarray(tcp, dtype=float) - [0.0, 0.0, self.half]
+            self._carried = np.asarray(tcp, dtype=float) - self.hang
             return self._carried
         if self._carried is not None:  # let go: where the cup released it
             return self._carried

@@ -90,7 +90,8 @@ class PickPlaceEnv(gym.Env):
         self.observation_space = gym.spaces.Box(low, lim, (OBS_DIM,), np.float32)
         self.vacuum = False
         #: what the policy sees of the part (the pose source's errors, the runtime's rules: `part_perception`)
-        self.perception = PartPerception(self.twin_cfg.perception, 0.5 * self.task_cfg.object_height)
+        half = 0.5 * self.task_cfg.object_height
+        self.perception = PartPerception(self.twin_cfg.perception, half, self.task_cfg.grasp_offset)
         self._obs = np.zeros(OBS_DIM, np.float32)  # the observation, the part as perceived
         self._state_obs = self._obs.copy()  # the same with the part where it is: the scripted expert's
         self._camera: Camera | None = None
@@ -176,6 +177,7 @@ class PickPlaceEnv(gym.Env):
         if replace(task, grasp=self.task_cfg.grasp) != self.task_cfg:
             raise ValueError("a taught task may differ from the env's only in its grasp")
         self.task_cfg = self.decision.task = task
+        self.perception.hang = task.grasp_offset
 
     @property
     def phase(self) -> int:

@@ -4,6 +4,7 @@ runtime's rules, while the task model judges the twin's truth."""
 from __future__ import annotations
 
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 
@@ -83,3 +84,20 @@ def test_a_restored_episode_sees_the_part_as_it_saw_it():
         env.discard(snap)
     finally:
         env.close()
+
+
+def test_a_part_gripped_where_a_person_taught_is_seen_hanging_from_that_grip():
+    """The keep-out block gripped 37 mm off its middle (a taught grasp): while held, the policy sees the part's centre
+    that far from the cup, where it is, not under the cup."""
+    from mrguide.policies.train_config import RunConfig
+    from tests.policies.test_taught_grasp import TAUGHT
+
+    run = RunConfig.load(Path(__file__).resolve().parents[2] / "configs" / "parts" / "keepout_block.toml")
+    env = PickPlaceEnv(replace(run.env, twin=replace(run.env.twin, perception=HMD)))
+    try:
+        env.teach(replace(env.task_cfg, grasp=tuple(TAUGHT)))
+        held = [(seen, true) for seen, true, h in _episode(env, 1) if h]
+    finally:
+        env.close()
+    assert held, "the scripted expert grasps at the taught point"
+    assert all(np.linalg.norm(s[:2] - t[:2]) < 0.006 for s, t in held)
