@@ -20,7 +20,7 @@ import numpy as np
 from mrguide.annotation.protocol import PROTOCOL_VERSION
 from mrguide.policies.experts import ANNOTATOR_SEED_OFFSET, AnnotatorNoise, SimulatedAnnotator
 from mrguide.robot import Workspace
-from mrguide.task import TaskConfig, observation, progress
+from mrguide.task import PICK_PHASE, TaskConfig, observation, progress
 
 log = logging.getLogger(__name__)
 
@@ -83,6 +83,7 @@ class AnnotationBot:
         self.report = BotReport(latencies_s=[])
         self._annotator: SimulatedAnnotator | None = None
         self._contested: tuple[list[float] | None, bool] = (None, False)  # the grip stepped in on; accepted yet
+        self._shown: list[float] | None = None  # the grip the last status showed
 
     def run(self) -> BotReport:
         """Answer until the server goes away (training ended) or `max_answers` is reached."""
@@ -132,6 +133,7 @@ class AnnotationBot:
     async def _watch(self, ws: aiohttp.ClientWebSocketResponse, grasp: list[float] | None) -> None:
         """A person who knows the part and sees the cell grip it wrongly steps in (once per grip shown): the next
         demonstration asks every mark, and their pick answer with `here` corrects the grip."""
+        self._shown = grasp
         if self._annotator is None or grasp == self._contested[0] or not self._annotator.corrects(grasp):
             return
         self._contested = (grasp, False)
@@ -165,7 +167,8 @@ class AnnotationBot:
         if req.get("claimed_by") or self._annotator is None:
             return
         t0 = time.perf_counter()
-        ann = self._annotator.annotate(obs_from_request(req))
+        obs = obs_from_request(req)
+        ann = self._annotator.correct(obs) if self._correcting(req) else self._annotator.annotate(obs)
         if self.options.delay_s:
             await asyncio.sleep(self.options.delay_s)
         answer = {
@@ -177,6 +180,11 @@ class AnnotationBot:
         await ws.send_json(answer | ({"here": True} if ann.here else {}))  # a part it knows: it teaches the grasp
         self.report.answers += 1
         self.report.latencies_s.append(time.perf_counter() - t0)
+
+    def _correcting(self, req: dict[str, Any]) -> bool:
+        """Whether `req` asks the pick of the demonstration the bot stepped in for, the grip it contested still shown."""
+        stepped_in = self._contested[1] and self._shown == self._contested[0]
+        return stepped_in and int(req["phase_index"]) == PICK_PHASE
 
     def _done(self) -> bool:
         m = self.options.max_answers

@@ -66,6 +66,9 @@ class AnnotatorNoise:
     viewpoint: tuple[float, float, float] = DEFAULT_VIEWPOINT  # m, the person's eyes, robot base frame
     outlier_rate: Annotated[float, Range(0.0, 1.0)] = 0.0  # fraction of annotations that are gross mistakes (slips)
     outlier_scale: float = 0.15  # m, std per axis of an outlier's error
+    #: m, std per axis (on the part's top) of a correction: the person moves the grip the page shows on the part to
+    #: where they judge it belongs, an error of judging a point against what is drawn, not of marking it afresh
+    sigma_correction: float = 0.0
     #: A part not gripped at its middle: the person marks where they grip it and teaches it ("not there — here");
     #: false: they mark it, read under the centre prior, as before a person could teach (the comparison)
     teaches: bool = True
@@ -74,7 +77,7 @@ class AnnotatorNoise:
     draw: Annotated[int, Range(0, 2**32 - 1)] = 0
 
     def __post_init__(self) -> None:
-        for name in ("sigma", "bias_sigma", "sigma_across", "sigma_along", "outlier_scale"):
+        for name in ("sigma", "bias_sigma", "sigma_across", "sigma_along", "outlier_scale", "sigma_correction"):
             check_number(f"guidance.noise.{name}", getattr(self, name), 0.0, 1.0, " m")
         check_ranges(self, "guidance.noise")
         for field_name, vec, limit in (("bias", self.bias, 1.0), ("viewpoint", self.viewpoint, 100.0)):
@@ -109,6 +112,14 @@ class SimulatedAnnotator:
         marked = self.workspace.clamp(exact.target + self.error(exact.target))[0]
         here = self.teaches and phase_from_progress(obs[OBS_PROGRESS]) == PICK_PHASE
         return Annotation(marked, exact.grip, "simulated", here=here)
+
+    def correct(self, obs: np.ndarray) -> Annotation:
+        """The pick of a demonstration this person stepped in for to correct the grip shown on the part: the grip
+        moved to where they judge it belongs, on the part as drawn (`sigma_correction` per axis across its top; no
+        registration bias, no line of sight: both the grip and the part are drawn), taught (`here`)."""
+        exact = self.oracle.annotate(obs)
+        off = np.r_[self.rng.normal(0.0, self.noise.sigma_correction, 2), 0.0] if self.noise.sigma_correction else 0.0
+        return Annotation(self.workspace.clamp(exact.target + off)[0], exact.grip, "simulated", here=True)
 
     def corrects(self, grasp: list[float] | None) -> bool:
         """Whether this person, shown that the cell grips the part at `grasp` (m, part frame; None: the centre

@@ -133,9 +133,8 @@ class LearnerProcess:
             self._send(step)
         self.receive()
 
-    def forget_demonstrations(self) -> None:
-        """Send what was stored so far, then ask the learner to empty its expert pool (in that order: the pipe keeps
-        it)."""
+    def forget(self) -> None:
+        """Send what was stored so far, then ask the learner to empty its pools (in that order: the pipe keeps it)."""
         self._send(self._sent_step)
         if self._lost is None:
             self._inbox.put(Message("forget"))

@@ -152,8 +152,9 @@ class LearnerServer:
                     self._store(message)
                 elif message.kind == "stop":
                     return
-                elif message.kind == "forget":  # a person corrected the grasp (`Learning.forget_demonstrations`)
+                elif message.kind == "forget":  # a person corrected the grasp (`Learning.forget`)
                     self.replay.expert.clear()
+                    self.replay.agent.clear()
                 else:
                     self.outbox.put(self._answer(message))
             self._update()

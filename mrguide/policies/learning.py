@@ -98,9 +98,9 @@ class Learning(Protocol):
         (raises then)."""
         ...
 
-    def forget_demonstrations(self) -> None:
-        """Empty the expert pool (ζ = 1), after every transition stored so far: a person corrected what they had
-        taught, and the demonstrations made before aimed elsewhere."""
+    def forget(self) -> None:
+        """Empty both pools, after every transition stored so far: a person corrected what they had taught, and the
+        demonstrations made before aimed elsewhere, every reward was the old grasp's."""
         ...
 
     def state(self) -> dict:
@@ -146,8 +146,9 @@ class LocalLearning:
     def episode_end(self, step: int) -> None:
         """Nothing to check: the updates ran in this thread."""
 
-    def forget_demonstrations(self) -> None:
+    def forget(self) -> None:
         self.replay.expert.clear()
+        self.replay.agent.clear()
 
     def state(self) -> dict:
         return {

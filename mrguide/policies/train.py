@@ -230,8 +230,8 @@ class Trainer:
             step = self.expert.action(obs)
             if (task := self.expert.retasked()) is not None:  # a person taught the grasp: the reward follows it
                 self.env.teach(task)
-            if self.expert.corrected():  # and corrected it: the demonstrations before it aimed elsewhere, forgotten
-                self.learning.forget_demonstrations()
+            if self.expert.corrected():  # and corrected it: what was learned from (the old grasp's) is forgotten
+                self.learning.forget()
             if step is None:
                 self.counters.skipped += int(not self.stop_requested.is_set())
                 info = {"outcome": "skipped", "is_success": False}

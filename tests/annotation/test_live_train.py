@@ -284,3 +284,24 @@ def test_a_bot_whose_person_sees_the_grip_on_the_label_steps_in_and_corrects_it(
     corrections = [r for r in recs if r.get("correction")]
     assert corrections and all(r["here"] and r["grip"] > 0 for r in corrections)
     assert int(rows(tmp_path / "keepout" / "metrics.csv")[-1]["corrections"]) == len(corrections)
+
+
+def test_a_correction_moves_the_shown_grip_with_the_judging_error_only():
+    """A correction is the grip moved on the part as drawn: its error is `sigma_correction` across the part's top, not
+    the marks' registration bias and line of sight."""
+    from mrguide.policies.experts import SimulatedAnnotator
+    from mrguide.robot import load_robot
+    from mrguide.simulated_person import person_grasp
+    from mrguide.task import GRASP_PRESS, TaskConfig
+    from tests.policies.mark_scene import scene_obs
+
+    noise = dataclasses.replace(PERSON, bias=(0.03, 0.0, 0.0), sigma_correction=0.0033)
+    person = SimulatedAnnotator(TaskConfig(part="keepout_block"), noise, load_robot().workspace, seed=1)
+    part = np.array([0.5, -0.1, 0.03])  # its grip above the default workspace's floor
+    obs = scene_obs(1, obj=part)
+    meant = part + person_grasp("keepout_block") - [0.0, 0.0, GRASP_PRESS]
+    marks = np.array([person.annotate(obs).target - meant for _ in range(200)])
+    fixes = np.array([person.correct(obs).target - meant for _ in range(200)])
+    assert abs(np.median(marks[:, 0]) - 0.03) < 0.006 and np.std(marks[:, 0]) > 0.01  # bias and line of sight
+    assert np.all(np.abs(np.median(fixes, axis=0)) < 0.001) and np.allclose(fixes[:, 2], 0.0, atol=1e-6)
+    assert np.std(fixes[:, 0]) == pytest.approx(0.0033, rel=0.2) and all(person.correct(obs).here for _ in range(3))

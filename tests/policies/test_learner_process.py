@@ -245,21 +245,22 @@ def test_a_split_run_resumes_from_its_checkpoint(tmp_path, monkeypatch):
 
 
 @pytest.mark.parametrize("split", [False, True], ids=["in-process", "learner-process"])
-def test_forgetting_the_demonstrations_empties_the_expert_pool_after_what_was_stored(tmp_path, split):
-    """A person's correction (`Learning.forget_demonstrations`): every expert transition stored before it is gone, in
-    the trainer's process and in the learner's alike; the agent's pool keeps its own."""
+def test_forgetting_empties_both_pools_after_what_was_stored(tmp_path, split):
+    """A person's correction (`Learning.forget`): every transition stored before it is gone, in the trainer's process
+    and in the learner's alike; what is stored after it is kept."""
     tr = make(tmp_path, "run", split=split)
     try:
         tr.run(stop_at=200)
         rng = np.random.default_rng(0)
-        obs, act = rng.uniform(-1, 1, (3, 11)).astype(np.float32), rng.uniform(-1, 1, (3, 4)).astype(np.float32)
+        obs, act = rng.uniform(-1, 1, (4, 11)).astype(np.float32), rng.uniform(-1, 1, (4, 4)).astype(np.float32)
         tr.learning.add(obs[0], act[0], 0.0, obs[1], False, 1)  # stored (not yet sent) before the correction
-        tr.learning.forget_demonstrations()
+        tr.learning.forget()
         tr.learning.add(obs[1], act[1], 0.0, obs[2], False, 1)  # after it
+        tr.learning.add(obs[2], act[2], 0.0, obs[3], False, 0)
         if split:
-            learner(tr).stepped(tr.counters.step + 1_000)  # send it
+            learner(tr).stepped(tr.counters.step + 1_000)  # send them
         state = tr.learning.state()
     finally:
         tr.close()
     assert len(state["expert_pool"]["rew"]) == 1 and np.array_equal(state["expert_pool"]["obs"][0], obs[1])
-    assert len(state["agent_pool"]["rew"]) > 0
+    assert len(state["agent_pool"]["rew"]) == 1 and np.array_equal(state["agent_pool"]["obs"][0], obs[2])

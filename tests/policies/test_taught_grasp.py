@@ -207,9 +207,10 @@ def test_a_person_who_steps_in_is_asked_again_and_corrects_the_grasp(tmp_path):
     assert expert.counts.corrections == 1
 
 
-def test_a_correction_in_a_run_forgets_the_demonstrations_made_before_it(tmp_path):
-    """A person teaches a grasp on the label, then steps in and corrects it: the trainer forgets every demonstration
-    of the wrong grasp (they aimed elsewhere) the moment the correction is recorded, and counts it."""
+def test_a_correction_in_a_run_forgets_what_was_learned_from_before_it(tmp_path):
+    """A person teaches a grasp on the label, then steps in and corrects it: the trainer forgets every transition of
+    the wrong grasp (its demonstrations aimed elsewhere, its rewards were for it) the moment the correction is
+    recorded, and counts it."""
     import dataclasses
     from pathlib import Path
 
@@ -232,15 +233,15 @@ def test_a_correction_in_a_run_forgets_the_demonstrations_made_before_it(tmp_pat
     run = RunConfig.load(config)
     run = run.replace(train=dataclasses.replace(run.train, total_steps=600, eval_every=10_000, checkpoint_every=10_000))
     tr = Trainer(run, tmp_path, source_factory=lambda env: StepsIn([0.0, 0.0, 0.017], True, env.task_cfg))
-    pool: list[tuple[int, int]] = []  # the expert pool's size before and after each forgetting
-    forget = tr.learning.forget_demonstrations
+    pool: list[tuple[int, int]] = []  # the pools' size before and after each forgetting
+    forget = tr.learning.forget
 
     def spy() -> None:
-        before = tr.replay.expert.size
+        before = len(tr.replay)
         forget()
-        pool.append((before, tr.replay.expert.size))
+        pool.append((before, len(tr.replay)))
 
-    tr.learning.forget_demonstrations = spy
+    tr.learning.forget = spy
     try:
         tr.run(stop_at=600)
     finally:
