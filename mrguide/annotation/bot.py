@@ -182,9 +182,9 @@ class AnnotationBot:
         self.report.latencies_s.append(time.perf_counter() - t0)
 
     def _correcting(self, req: dict[str, Any]) -> bool:
-        """Whether `req` asks the pick of the demonstration the bot stepped in for, the grip it contested still shown."""
-        stepped_in = self._contested[1] and self._shown == self._contested[0]
-        return stepped_in and int(req["phase_index"]) == PICK_PHASE
+        """Whether `req` asks the pick while the page shows a taught grip on the part: the person moves that grip to
+        where they judge it belongs (`SimulatedAnnotator.correct`) rather than marking the point afresh."""
+        return self._shown is not None and int(req["phase_index"]) == PICK_PHASE
 
     def _done(self) -> bool:
         m = self.options.max_answers

@@ -114,9 +114,10 @@ class SimulatedAnnotator:
         return Annotation(marked, exact.grip, "simulated", here=here)
 
     def correct(self, obs: np.ndarray) -> Annotation:
-        """The pick of a demonstration this person stepped in for to correct the grip shown on the part: the grip
-        moved to where they judge it belongs, on the part as drawn (`sigma_correction` per axis across its top; no
-        registration bias, no line of sight: both the grip and the part are drawn), taught (`here`)."""
+        """The pick answered while the page shows a taught grip on the part (a correction, or the taught point asked
+        again): the grip moved to where this person judges it belongs, on the part as drawn (`sigma_correction` per
+        axis across its top; no registration bias, no line of sight: the grip and the part are drawn together),
+        taught (`here`)."""
         exact = self.oracle.annotate(obs)
         off = np.r_[self.rng.normal(0.0, self.noise.sigma_correction, 2), 0.0] if self.noise.sigma_correction else 0.0
         return Annotation(self.workspace.clamp(exact.target + off)[0], exact.grip, "simulated", here=True)
