@@ -66,7 +66,7 @@ class ExpertCounts:
     remarks: int = 0  # waypoints asked again because the arm did not reach them
     probes: int = 0  # targets a demonstration's search tried beyond a waypoint that did not complete its phase
     measured: int = 0  # seals and placements the cell measured (recorded as pick and place measurements)
-    corrections: int = 0  # of the marks asked, those that corrected what was taught ("not there — here" after Intervene)
+    corrections: int = 0  # of the marks asked, those correcting what was taught ("here" after Intervene)
 
 
 class PerceivedPose:
