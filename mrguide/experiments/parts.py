@@ -95,19 +95,17 @@ def _row(run: TrainRun, root: Path, episodes_per_eval: int) -> dict[str, Any]:
     """One run: convergence, what the person gave, what the cell spent, and the judge's reading."""
     rec = read_run(run, root, episodes_per_eval)
     rows = report.read_csv(run.directory(root) / "metrics.csv")
-    c = rec.converged.step
-    until = [r for r in rows if c is not None and int(r["step"]) <= c] or rows[:1]
     judged = report.read_csv(judged_path(run, root))
     return {
         "part": run.name.split("/")[0],
         "variant": run.name.split("/")[1],
         "seed": run.seed,
-        "convergence_step": c,
+        "convergence_step": rec.converged.step,
         "marks_until_convergence": rec.annotations_until_convergence,
         "marks_total": rec.annotations_total,
-        "corrections_total": int(rows[-1]["corrections"]),
-        "robot_min_until_convergence": round(float(until[-1]["robot_s"]) / 60, 1) if c is not None else None,
-        "resets_until_convergence": int(until[-1]["resets"]) if c is not None else None,
+        "corrections_total": rec.corrections,
+        "robot_min_until_convergence": rec.robot_min_until_convergence,
+        "resets_until_convergence": rec.resets_until_convergence,
         "probes_total": int(rows[-1]["probes"]),
         "grasp_acceptable": np.mean([r["grasp_acceptable"] == "True" for r in judged]),
         "placed": np.mean([r["placed"] == "True" for r in judged]),

@@ -82,6 +82,8 @@ def _summary(recs: list[RunRecord], fresh: list[float]) -> dict[str, Any]:
     marks = [a for r in conv if (a := r.annotations_until_convergence) is not None]  # all of them: converged
     lo, hi = wilson(len(conv), len(recs))
     total = float(np.median([r.annotations_total for r in recs]))
+    robot = [m for r in conv if (m := r.robot_min_until_convergence) is not None]
+    resets = [n for r in conv if (n := r.resets_until_convergence) is not None]
     return {
         "seeds": len(recs),
         "converged": len(conv),
@@ -92,6 +94,8 @@ def _summary(recs: list[RunRecord], fresh: list[float]) -> dict[str, Any]:
         "median_person_minutes": person_minutes(float(np.median(marks))) if marks else None,
         "median_marks_total": int(total),
         "median_person_minutes_total": person_minutes(total),
+        "median_robot_minutes": round(float(np.median(robot)), 1) if robot else None,
+        "median_resets": float(np.median(resets)) if resets else None,
         "fresh_success_median": round(float(np.median(fresh)), 3),
         "fresh_success_min": round(min(fresh), 3),
         "fresh_success_max": round(max(fresh), 3),
@@ -111,6 +115,8 @@ def person_report(cfg: PersonConfig, root: Path, run_list: list[TrainRun], episo
             "person_minutes_until_convergence": person_minutes(rec.annotations_until_convergence),
             "marks_total": rec.annotations_total,
             "person_minutes_total": person_minutes(rec.annotations_total),
+            "robot_min_until_convergence": rec.robot_min_until_convergence,
+            "resets_until_convergence": rec.resets_until_convergence,
             "final_eval_success": float(rec.eval_rates[-1]),
             f"fresh_success_{cfg.episodes}": f,
             "wall_s": rec.wall_s,
@@ -120,7 +126,8 @@ def person_report(cfg: PersonConfig, root: Path, run_list: list[TrainRun], episo
     summary = [_summary(recs, fresh)]
     intro = (
         f"A person's marks over the wire (the annotation bot): {cfg.seeds} seeds × {cfg.steps} steps; "
-        f"convergence with the learning-curves rule; person-minutes at {PERSON_SECONDS_PER_MARK:.0f} s per mark; every final "
+        f"convergence with the learning-curves rule; person-minutes at {PERSON_SECONDS_PER_MARK:.0f} s per mark; robot "
+        "minutes every decision's 0.1 s, part resets every episode's start; every final "
         f"policy on {cfg.episodes} fresh start states.\n\n"
     )
     columns = [
@@ -133,6 +140,8 @@ def person_report(cfg: PersonConfig, root: Path, run_list: list[TrainRun], episo
         ("median_person_minutes", "person-minutes until convergence (median)"),
         ("median_marks_total", "marks per run (median)"),
         ("median_person_minutes_total", "person-minutes per run (median)"),
+        ("median_robot_minutes", "robot minutes until convergence (median)"),
+        ("median_resets", "part resets until convergence (median)"),
         ("fresh_success_median", f"fresh success, median of {cfg.seeds}"),
         ("fresh_success_min", "min"),
         ("fresh_success_max", "max"),

@@ -29,6 +29,9 @@ class RunRecord:
     wall_s: float
     exploring_outcomes: Counter[str]  # how the agent's own episodes ended (metrics.csv `outcome` of `agent` rows)
     final_temperature: float | None  # SAC's entropy temperature at the last row that logged one (None: DDPG)
+    robot_s: np.ndarray  # the robot's seconds so far, per row (NaN in a run from before metrics.csv counted them)
+    resets: np.ndarray  # the part's resets so far, per row (NaN likewise)
+    corrections: int  # a person's corrections over the run (0 in a run from before they were counted)
 
     @property
     def annotations_until_convergence(self) -> int | None:
@@ -37,6 +40,24 @@ class RunRecord:
             return None
         before = self.row_steps <= c
         return int(self.asked[before].max()) if before.any() else 0
+
+    def _until_convergence(self, per_row: np.ndarray) -> float | None:
+        """A cumulative metrics column at the last row up to convergence; None for a run that did not converge."""
+        c = self.converged.step
+        if c is None:
+            return None
+        before = self.row_steps <= c
+        return float(per_row[before][-1] if before.any() else per_row[0])
+
+    @property
+    def robot_min_until_convergence(self) -> float | None:
+        s = self._until_convergence(self.robot_s)
+        return None if s is None else round(s / 60, 1)
+
+    @property
+    def resets_until_convergence(self) -> int | None:
+        n = self._until_convergence(self.resets)
+        return None if n is None else int(n)
 
     @property
     def annotations_total(self) -> int:
@@ -86,4 +107,7 @@ def read_run(run: TrainRun, root: Path, episodes_per_eval: int) -> RunRecord:
         finished(run, root).wall_s,
         Counter(r["outcome"] for r in rows if r["kind"] == "agent" and r["outcome"]),
         next((float(r["temperature"]) for r in reversed(rows) if r.get("temperature")), None),
+        np.array([float(r.get("robot_s") or np.nan) for r in rows]),
+        np.array([float(r.get("resets") or np.nan) for r in rows]),
+        int(rows[-1].get("corrections") or 0) if rows else 0,
     )
