@@ -17,7 +17,6 @@ from tqdm import tqdm
 
 from mrguide.cli_args import add_set_argument, nonnegative_int, positive_int
 from mrguide.policies.choices import EXPERT_SOURCES
-from mrguide.policies.session_status import SessionStatus
 
 #: What a training run's config holds (`policies.train_config.RunConfig`), for the help texts (no torch imported).
 SECTIONS_HELP = "train, guidance, robot, twin, task and each registered learner's (ddpg, sac, ...)"
@@ -263,6 +262,8 @@ def _output_refusal(out: Path, resume: bool) -> str | None:
 
 
 def _run(tr, stop_after: int | None, bar: tqdm, session: LiveSessionLike | None) -> None:
+    from mrguide.policies.session_status import SessionStatus
+
     status = SessionStatus(tr)
 
     def progress(row: dict) -> None:
