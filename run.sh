@@ -77,7 +77,8 @@ case "$cmd" in
     if [ $# -gt 0 ]; then exec "$VENV/bin/python" -m pytest -q "$@"; fi
     # The suite in two passes on two workers each (pytest-xdist): first the tests that compute, then those that
     # keep time with threads (simulated CAN bus, dry runs; marked `realtime` by tests/conftest.py), which then
-    # share the machine only with each other (`loadscope`: each module's tests on one worker, so a module fixture such as the robot venv is built once).
+    # share the machine only with each other (`loadscope`: each module's tests on one worker, so a module fixture
+    # such as the robot venv is built once).
     rc=0
     "$VENV/bin/python" -m pytest -q -n 2 -m "not slow and not realtime" || rc=$?
     "$VENV/bin/python" -m pytest -q -n 2 --dist loadscope -m "not slow and realtime" || rc=$((rc ? rc : $?))

@@ -8,8 +8,8 @@ the bias remains, which the cell estimates from its seals (`deploy.bias_estimate
 
 In the twin, `PartPerception` draws the looks through `PerceptionConfig`'s errors and applies the runtime's rules:
 the filter, the part's height that of a part on the table, the marker hidden under the arm (`occluded`: the last
-estimate stands), and the part held on the cup where the TCP and the grasp say (the runtime's `ObjectTracker`). The policy
-observes what it gives; the reward and the phases read the twin's truth.
+estimate stands), and the part held on the cup where the TCP and the grasp say (the runtime's `ObjectTracker`). The
+policy observes what it gives; the reward and the phases read the twin's truth.
 """
 
 from __future__ import annotations

@@ -94,7 +94,6 @@ def evaluate(run: TrainRun, root: str, cfg: PartsConfig) -> str:
 def _row(run: TrainRun, root: Path, episodes_per_eval: int) -> dict[str, Any]:
     """One run: convergence, what the person gave, what the cell spent, and the judge's reading."""
     rec = read_run(run, root, episodes_per_eval)
-    rows = report.read_csv(run.directory(root) / "metrics.csv")
     judged = report.read_csv(judged_path(run, root))
     return {
         "part": run.name.split("/")[0],
@@ -106,7 +105,7 @@ def _row(run: TrainRun, root: Path, episodes_per_eval: int) -> dict[str, Any]:
         "corrections_total": rec.corrections,
         "robot_min_until_convergence": rec.robot_min_until_convergence,
         "resets_until_convergence": rec.resets_until_convergence,
-        "probes_total": int(rows[-1]["probes"]),
+        "probes_total": rec.probes,
         "grasp_acceptable": np.mean([r["grasp_acceptable"] == "True" for r in judged]),
         "placed": np.mean([r["placed"] == "True" for r in judged]),
         "both": np.mean([r["grasp_acceptable"] == "True" and r["placed"] == "True" for r in judged]),

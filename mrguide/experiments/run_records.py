@@ -32,6 +32,7 @@ class RunRecord:
     robot_s: np.ndarray  # the robot's seconds so far, per row (NaN in a run from before metrics.csv counted them)
     resets: np.ndarray  # the part's resets so far, per row (NaN likewise)
     corrections: int  # a person's corrections over the run (0 in a run from before they were counted)
+    probes: int  # the targets the demonstrations' searches tried over the run
 
     @property
     def annotations_until_convergence(self) -> int | None:
@@ -110,4 +111,5 @@ def read_run(run: TrainRun, root: Path, episodes_per_eval: int) -> RunRecord:
         np.array([float(r.get("robot_s") or np.nan) for r in rows]),
         np.array([float(r.get("resets") or np.nan) for r in rows]),
         int(rows[-1].get("corrections") or 0) if rows else 0,
+        int(rows[-1].get("probes") or 0) if rows else 0,
     )

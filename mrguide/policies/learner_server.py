@@ -71,8 +71,7 @@ class Publication:
 @dataclass(frozen=True)
 class Message:
     """A request to the learner ("state", "load" with `state`, "evaluate" with {step, seeds}, "forget", "stop") or its
-    answer
-    ("ready", "state", "loaded", "evaluated" with {step, success_rate, mean_return}, "failed" with `error`)."""
+    answer ("ready", "state", "loaded", "evaluated" with {step, success_rate, mean_return}, "failed" with `error`)."""
 
     kind: str
     state: dict | None = None
@@ -153,8 +152,7 @@ class LearnerServer:
                 elif message.kind == "stop":
                     return
                 elif message.kind == "forget":  # a person corrected the grasp (`Learning.forget`)
-                    self.replay.expert.clear()
-                    self.replay.agent.clear()
+                    self.replay.clear()
                 else:
                     self.outbox.put(self._answer(message))
             self._update()

@@ -147,8 +147,7 @@ class LocalLearning:
         """Nothing to check: the updates ran in this thread."""
 
     def forget(self) -> None:
-        self.replay.expert.clear()
-        self.replay.agent.clear()
+        self.replay.clear()
 
     def state(self) -> dict:
         return {

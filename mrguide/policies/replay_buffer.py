@@ -95,6 +95,11 @@ class TaggedReplay:
     def __len__(self) -> int:
         return self.agent.size + self.expert.size
 
+    def clear(self) -> None:
+        """Forget every transition of both pools."""
+        self.agent.clear()
+        self.expert.clear()
+
     def sample(self, batch_size: int, lam: float, rng: np.random.Generator) -> Batch:
         """A minibatch with each sample expert-drawn with probability λ (Eq. 9), capped by the pools' sizes."""
         if len(self) == 0:
