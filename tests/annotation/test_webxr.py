@@ -62,11 +62,14 @@ RIGHT_PINCH = "(v) => window.mrguide.xrDevice.hands.right.updatePinchValue(v)"
 RIGHT_SQUEEZE = "(v) => window.mrguide.xrDevice.controllers.right.updateButtonValue('squeeze', v)"
 
 
-def press(page, button: str) -> None:
-    """A full select with an IWER input (`button`: JS taking the value): press, which fires `select`, release."""
-    n = page.state()["xr"]["selects"]
+def press(page, button: str, counted: str = "selects") -> None:
+    """A full press of an IWER input (`button`: JS taking the value): press until the page counted its event
+    (`counted`: IWER fires `select` or `squeeze` on the press's frame), release until IWER sampled the release.
+    IWER samples the buttons once per XR frame: a release not yet sampled when the next press is written is
+    overwritten by it, and that press is no edge, no event (the race a busy machine once lost)."""
+    n = page.state()["xr"][counted]
     page.page.evaluate(button, 1)
-    page.wait_state(f"s.xr.selects > {n}")
+    page.wait_state(f"s.xr.{counted} > {n}")
     f = page.state()["xr"]["frames"]
     page.page.evaluate(button, 0)
     page.wait_state(f"s.xr.frames > {f + 2}")
@@ -201,17 +204,6 @@ def test_quest3_without_ar_falls_back_to_vr_and_places_in_front(browser, spec):
         server.stop()
 
 
-def squeeze(page) -> None:
-    """A full squeeze of the right controller's grip: press, held for a few XR frames (IWER samples the buttons
-    once per frame: a press released before the next frame never happened), release, until the page counted it."""
-    n = page.state()["xr"]["squeezes"]
-    f = page.state()["xr"]["frames"]
-    page.page.evaluate(RIGHT_SQUEEZE, 1)
-    page.wait_state(f"s.xr.frames > {f + 2}")
-    page.page.evaluate(RIGHT_SQUEEZE, 0)
-    page.wait_state(f"s.xr.squeezes > {n}")
-
-
 def test_squeeze_steps_in_without_a_request_and_toggles_the_vacuum_with_one(browser, spec):
     """In the headset the grip does what the Intervene button does while no request is open, and
     toggles the vacuum of the answer while one is."""
@@ -221,14 +213,14 @@ def test_squeeze_steps_in_without_a_request_and_toggles_the_vacuum_with_one(brow
         page.wait_state("s.connected")
         page.enter_xr()
         page.wait_state("s.xr.placed")
-        squeeze(page)
+        press(page, RIGHT_SQUEEZE, "squeezes")
         assert wait_until(lambda: broker._intervene is not None, timeout=15)
         assert broker.take_intervention() == page.state()["clientId"]
 
         fut = ask_in_thread(broker, make_request(1, obj=OBJ, goal=GOAL))  # grasp: vacuum suggested on
         s = page.wait_request()
         assert s["vacuum"] is True
-        squeeze(page)
+        press(page, RIGHT_SQUEEZE, "squeezes")
         s = page.wait_state("s.vacuum === false")
         M = placement(s)
         p_robot = np.array([0.50, -0.05, 0.10])
