@@ -19,8 +19,14 @@ import pytest
 #: display; mujoco reads the variable once, at its import (run.sh installs Debian's EGL).
 os.environ.setdefault("MUJOCO_GL", "egl")
 
+#: The DDPG update runs eagerly in the tests (torch reads the variable at its import; the processes the tests start,
+#: Ray's workers and the learner's among them, inherit it): building the compiled update costs every new process 4-5 s
+#: even from TorchInductor's cache, about a minute of the README's test command. The compiled build is checked
+#: against the eager arithmetic once, in tests/policies/test_ddpg_update.py, which turns the compiler back on.
+os.environ.setdefault("TORCH_COMPILE_DISABLE", "1")
+
 #: Tests that keep time with threads (simulated CANopen devices on the virtual bus, dry runs, the sim-to-real
-#: conditions): `./run.sh test` runs them in a pass of their own (two workers), after the rest, so that a test that
+#: conditions): `./run.sh test` runs them in a pass of their own (three workers), after the rest, so that a test that
 #: computes flat out on both cores never shares the machine with a control cycle: a cycle starved for a few hundred ms
 #: is a (correct) safety stop, not a failure of the code.
 REALTIME = (

@@ -8,6 +8,7 @@ yet (one Ray task per run), then writes its report (CSV, markdown, PNG) from the
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import sys
 from pathlib import Path
@@ -89,16 +90,21 @@ def _setup(args: argparse.Namespace) -> tuple[Experiment, Any, str | None, Path]
 
 
 def cmd_experiment(args: argparse.Namespace) -> int:
-    from mrguide.experiments.execution import ExperimentError, run_all
+    from mrguide.experiments.execution import ExperimentError, ray_session, run_all
+    from mrguide.experiments.train_runs import is_done
 
     exp, cfg, base, out = _setup(args)
     specs = exp.runs(cfg, base)
     for run in specs:  # a run started or done with another configuration is not resumed into this one
         check_same_config(run, out)
+    work = [
+        r for r in specs if not is_done(r, out) or (exp.evaluated is not None and not exp.evaluated(r, out).exists())
+    ]
     try:
-        run_all(specs, out, args.workers, args.address, show_progress=not args.quiet)
-        if exp.evaluate is not None:
-            _evaluate(exp, cfg, base, out, args.workers, args.address, not args.quiet)
+        with ray_session(args.workers, args.address) if work else contextlib.nullcontext():
+            run_all(specs, out, args.workers, args.address, show_progress=not args.quiet)
+            if exp.evaluate is not None:
+                _evaluate(exp, cfg, base, out, args.workers, args.address, not args.quiet)
     except ExperimentError as exc:
         print(f"mrguide experiment {args.name}: {exc}", file=sys.stderr)
         return 1

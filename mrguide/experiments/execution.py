@@ -78,9 +78,14 @@ def map_tasks(
 
 @contextmanager
 def ray_session(workers: int, address: str | None):
-    """A private local Ray with `workers` CPUs, or a connection to the cluster at `address`; shut down after."""
+    """A private local Ray with `workers` CPUs, or a connection to the cluster at `address`; shut down after.
+    Inside a session already open (an experiment's training and then its evaluations) it is that session: one
+    Ray start and one pool of worker processes for both."""
     import ray
 
+    if ray.is_initialized():
+        yield
+        return
     env = {"env_vars": {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "RAY_DEDUP_LOGS": "0"}}
     if address:
         ray.init(address=address, runtime_env=env, log_to_driver=False)

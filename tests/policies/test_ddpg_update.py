@@ -1,4 +1,7 @@
-"""The compiled DDPG update: the same arithmetic as the eager one, Adam's as torch's, an eager fallback."""
+"""The compiled DDPG update: the same arithmetic as the eager one, Adam's as torch's, an eager fallback.
+
+The other tests run the update eagerly (tests/conftest.py sets TORCH_COMPILE_DISABLE); these turn the compiler on.
+"""
 
 import copy
 import logging
@@ -28,7 +31,15 @@ def tensors(batch) -> tuple[torch.Tensor, ...]:
     return (*(torch.as_tensor(x) for x in arrays), torch.as_tensor(batch.expert, dtype=torch.float32))
 
 
-def test_the_compiled_update_computes_what_the_eager_one_does():
+@pytest.fixture
+def compiler_on():
+    """torch.compile enabled, whatever the environment says (its own patch: monkeypatch's undo would not do)."""
+    with torch._dynamo.config.patch(disable=False):
+        yield
+
+
+def test_the_compiled_update_computes_what_the_eager_one_does(compiler_on):
+    assert ddpg_update.update_build() == "compiled"
     compiled, batches = agent_and_batches(4)
     eager = copy.deepcopy(compiled)
     eager.nets = ddpg_update.Networks(eager.actor, eager.critic, eager.actor_target, eager.critic_target)
@@ -67,7 +78,7 @@ def test_a_checkpointed_optimizer_state_of_another_shape_or_version_is_refused()
         moments.load_state_dict({"state": {}, "param_groups": []})  # torch.optim.Adam's state_dict
 
 
-def test_without_a_compiler_the_update_runs_eagerly_and_says_so(monkeypatch, caplog):
+def test_without_a_compiler_the_update_runs_eagerly_and_says_so(compiler_on, monkeypatch, caplog):
     agent, batches = agent_and_batches(1)
     torch._dynamo.reset()  # forget the builds this process made: the next call compiles
     monkeypatch.setattr(ddpg_update, "_compiler_works", True)
@@ -83,7 +94,7 @@ def test_without_a_compiler_the_update_runs_eagerly_and_says_so(monkeypatch, cap
     assert ddpg_update._compiler_works is False
 
 
-def test_with_torch_compile_disabled_the_update_runs_eagerly_and_the_run_says_so(monkeypatch):
+def test_with_torch_compile_disabled_the_update_runs_eagerly_and_the_run_says_so(compiler_on, monkeypatch):
     """TORCH_COMPILE_DISABLE=1 (the eager comparison runs of the results page) trains and is named in run.json."""
     agent, batches = agent_and_batches(1)
     monkeypatch.setattr(ddpg_update, "_compiler_works", True)
