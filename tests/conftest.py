@@ -37,6 +37,7 @@ REALTIME = (
     "tests/replay/test_replay.py",
     "tests/test_install_profiles.py",
     "tests/test_robot_pc_imports.py",
+    "tests/tools/test_press_probe.py",
 )
 
 
