@@ -1,14 +1,19 @@
 """How far a held part drifts across the cup's lip in a scripted transport, with MuJoCo's default contact time
-constant and with the MuJoCo cell's (the evidence for `model.CONTACT_TIMECONST_STEPS`).
+constant and with the MuJoCo cell's (the evidence for `model.CONTACT_TIMECONST_STEPS`); then, with the cell's, which
+motion makes it drift and whether MuJoCo's no-slip pass removes it.
 
     python tools/slip_probe.py
 
 The cup seals on a part at (0.50, -0.10), lifts it 12.5 cm and carries it to (0.45, 0.25) on a jerk-limited joint
 trajectory at the arm's limits; printed: the part's displacement in the TCP frame over the transport (mm) and
-whether the seal held to the end. No bus: the plant is stepped directly, one control period at a time.
+whether the seal held to the end. Then, from the same lifted grasp, single moves: the base joint or the wrist
+turned 0.8 rad, a 10 cm straight move, the base's turn at half speed and with 50 no-slip iterations. No bus: the
+plant is stepped directly, one control period at a time.
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable
 
 import numpy as np
 
@@ -22,46 +27,86 @@ from mrguide.robot import load_robot
 PART, PLACE = np.array([0.50, -0.10, 0.025]), np.array([0.45, 0.25, 0.15])
 PERIOD = 0.004  # s, the bus's SYNC period
 MUJOCO_DEFAULT_TIMECONST = 0.02  # s, MuJoCo's default solref
+TURN = 0.8  # rad, the single joint moves
+
+
+class HeldPart:
+    """The MuJoCo cell with the part sealed and lifted 12.5 cm, moved by joint trajectories."""
+
+    def __init__(self, timeconst: float):
+        self.spec = load_robot()
+        self.kin, self.plant = Kinematics(self.spec), MujocoPlant(self.spec)
+        self.plant.model.geom_solref[:] = (timeconst, 1.0)
+        self.plant.place_objects(PART, PART + [0.0, 0.2, 0.0])
+        self.held = True
+        self.move_to(PART + [0.0, 0.0, 0.08])
+        self.move_to(PART + [0.0, 0.0, 0.025])
+        self.plant.set_vacuum(True, False)
+        self.move_to(PART + [0.0, 0.0, 0.15])
+
+    def in_tcp(self) -> np.ndarray:
+        """The part's position in the TCP frame (mm)."""
+        d, c = self.plant.data, self.plant.cell
+        return 1e3 * d.xmat[c.tcp_body].reshape(3, 3).T @ (d.xpos[c.part_body] - d.xpos[c.tcp_body])
+
+    def move_to(self, target: np.ndarray, hold: int = 50, watch: bool = False) -> None:
+        self.move_joints(self.kin.ik(target, self.plant.joint_positions()), hold=hold, watch=watch)
+
+    def move_joints(self, q_to: np.ndarray, hold: int = 50, watch: bool = False, slower: int = 1) -> None:
+        """A jerk-limited move to `q_to`, `slower` times as long (the same path), then `hold` periods at rest."""
+        path = np.array(point_to_point(self.spec, self.plant.joint_positions(), q_to, PERIOD))
+        t = np.linspace(0.0, len(path) - 1, (len(path) - 1) * slower + 1)
+        path = np.array([np.interp(t, np.arange(len(path)), path[:, j]) for j in range(path.shape[1])]).T
+        for q in [*path, *[q_to] * hold]:
+            self.plant.set_joint_targets(q)
+            self.plant.step(PERIOD)
+            self.held = self.held and (not watch or self.plant.lip_sealed())
 
 
 def drift(timeconst: float) -> tuple[np.ndarray, bool]:
     """(the part's displacement in the TCP frame over the transport in mm, whether the seal held throughout)."""
-    spec = load_robot()
-    kin, plant = Kinematics(spec), MujocoPlant(spec)
-    plant.model.geom_solref[:] = (timeconst, 1.0)
-    plant.place_objects(PART, PART + [0.0, 0.2, 0.0])
-    held = [True]
+    cell = HeldPart(timeconst)
+    start = cell.in_tcp()
+    cell.move_to(PLACE, hold=20, watch=True)
+    return cell.in_tcp() - start, cell.held
 
-    def in_tcp() -> np.ndarray:
-        d, c = plant.data, plant.cell
-        return 1e3 * d.xmat[c.tcp_body].reshape(3, 3).T @ (d.xpos[c.part_body] - d.xpos[c.tcp_body])
 
-    def move(target: np.ndarray, hold: int = 50, watch: bool = False) -> None:
-        q_to = kin.ik(target, plant.joint_positions())
-        for q in [*point_to_point(spec, plant.joint_positions(), q_to, PERIOD), *[q_to] * hold]:
-            plant.set_joint_targets(q)
-            plant.step(PERIOD)
-            held[0] = held[0] and (not watch or plant.lip_sealed())
+def drift_per_motion(timeconst: float) -> dict[str, float]:
+    """The part's drift across the lip (mm) for each single move from the lifted grasp."""
 
-    move(PART + [0.0, 0.0, 0.08])
-    move(PART + [0.0, 0.0, 0.025])
-    plant.set_vacuum(True, False)
-    move(PART + [0.0, 0.0, 0.15])
-    start = in_tcp()
-    move(PLACE, hold=20, watch=True)
-    return in_tcp() - start, held[0]
+    def turn(joint: int) -> Callable[[HeldPart], np.ndarray]:
+        return lambda cell: cell.plant.joint_positions() + TURN * np.eye(cell.spec.dof)[joint]
+
+    def straight(cell: HeldPart) -> np.ndarray:
+        return cell.kin.ik(PART + [0.10, 0.0, 0.15], cell.plant.joint_positions())
+
+    moves = {
+        f"base joint turned {TURN} rad": (turn(0), 1, 0),
+        f"wrist turned {TURN} rad about the cup's axis": (turn(5), 1, 0),
+        "a 10 cm straight move": (straight, 1, 0),
+        f"base joint turned {TURN} rad, half speed": (turn(0), 2, 0),
+        f"base joint turned {TURN} rad, 50 no-slip iterations": (turn(0), 1, 50),
+    }
+    out = {}
+    for label, (target, slower, noslip) in moves.items():
+        cell = HeldPart(timeconst)
+        cell.plant.model.opt.noslip_iterations = noslip
+        start = cell.in_tcp()
+        cell.move_joints(target(cell), hold=20, slower=slower)
+        out[label] = float(np.linalg.norm((cell.in_tcp() - start)[:2]))
+    return out
 
 
 def main() -> None:
-    for label, timeconst in (
-        ("MuJoCo's default", MUJOCO_DEFAULT_TIMECONST),
-        ("the MuJoCo cell's", CONTACT_TIMECONST_STEPS * MujocoCellConfig().timestep),
-    ):
+    cells = CONTACT_TIMECONST_STEPS * MujocoCellConfig().timestep
+    for label, timeconst in (("MuJoCo's default", MUJOCO_DEFAULT_TIMECONST), ("the MuJoCo cell's", cells)):
         moved, held = drift(timeconst)
         print(
             f"{label} contact time constant {timeconst * 1e3:.0f} ms: the part moved {np.round(moved, 2).tolist()} mm "
             f"in the TCP frame ({np.linalg.norm(moved[:2]):.1f} mm across the lip); seal held: {held}"
         )
+    for label, across in drift_per_motion(cells).items():
+        print(f"the cell's contacts, {label}: {across:.2f} mm across the lip")
 
 
 if __name__ == "__main__":
