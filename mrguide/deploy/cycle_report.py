@@ -53,6 +53,10 @@ def cycle_figures(records: list[dict]) -> dict[str, Any]:
         raise InputError("a run log without production cycles (no cycle_end record)")
     segments = [r for r in records if r.get("kind") == "cycles_end"]
     placed = [r for r in ends if r["placed"]]
+    # the wall time is the ended segments': the parts per hour count only their cycles (a live or killed session's
+    # cycles have no wall time yet)
+    last_end = max((i for i, r in enumerate(records) if r.get("kind") == "cycles_end"), default=-1)
+    placed_in_ended = sum(1 for r in records[:last_end] if r.get("kind") == "cycle_end" and r["placed"])
     times = np.array([r["cycle_s"] for r in placed])
     wall = sum(float(s.get("wall_s") or 0.0) for s in segments)
     return {
@@ -65,7 +69,7 @@ def cycle_figures(records: list[dict]) -> dict[str, Any]:
         "retries": dict(Counter(c for r in ends for c in r["retries"])),
         "cycle_s_median": float(np.median(times)) if len(times) else None,
         "cycle_s_p95": float(np.percentile(times, 95)) if len(times) else None,
-        "parts_per_hour": 3600.0 * len(placed) / wall if wall > 0 else None,
+        "parts_per_hour": 3600.0 * placed_in_ended / wall if wall > 0 else None,
         # the driver's counters are in the run's summary record(s): unknown for a run that ended without one
         "missed_cycles": sum(int(s["missed_cycles"]) for s in segments) if segments else None,
         "underruns": sum(int(s["underruns"]) for s in segments) if segments else None,

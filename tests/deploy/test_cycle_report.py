@@ -72,6 +72,18 @@ def test_the_figures_come_from_the_cycle_records(tmp_path):
     assert f["cut"] == 0  # the unplaced cycle has its alarm
 
 
+def test_a_session_still_running_adds_no_parts_to_the_hourly_rate(tmp_path):
+    """Resumed with `--resume` and read while the new session runs: its cycles count as cycles, but the parts per
+    hour are the ended session's (its wall time is all the log has), not every part over that session's time."""
+    write_run(tmp_path / "live.jsonl")
+    with RunLog(tmp_path / "live.jsonl", {"command": "deploy", "cycles": 100}) as log:
+        for cycle in range(3, 40):
+            write_placed_cycle(log, cycle)
+    f = cycle_figures(read_log(tmp_path / "live.jsonl"))
+    assert (f["cycles"], f["placed"]) == (40, 39)
+    assert f["parts_per_hour"] == pytest.approx(200.0)  # 2 parts in the first session's 36 s
+
+
 def test_a_cycle_a_stop_cut_short_is_counted_apart_from_the_alarms(tmp_path, capsys):
     """A run stopped in a cycle (the watchdog, Ctrl-C twice) ends it unplaced without an alarm; `--resume` goes on
     with the next one. The table says how many of the unplaced cycles were cut so."""
