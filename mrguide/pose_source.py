@@ -27,3 +27,12 @@ class PoseDetails(Protocol):
     draws them."""
 
     def pose_details(self) -> dict: ...
+
+
+class PoseAccuracy(Protocol):
+    """Optional beside `ObjectPoseSource`: how far one of its positions may be off, per axis (m, about three
+    standard deviations), from what the source knows of itself (e.g. its calibration's residual). A check of a
+    position against a fixed height never asks for less than that (`deploy.cycles`: whether the part rests on the
+    table)."""
+
+    def accuracy_m(self) -> float: ...

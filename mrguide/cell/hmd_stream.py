@@ -13,6 +13,7 @@ cell (`MujocoDrawing`). At start-up the HMD is calibrated against the board exac
 from __future__ import annotations
 
 import logging
+import math
 import multiprocessing as mp
 import multiprocessing.connection
 import os
@@ -229,7 +230,7 @@ class HmdPoseStream(ObjectPoseSource):
         from mrguide.calibration.config import load_calibration_config
 
         noise = replace(load_calibration_config(calibration_path).hmd, seed=noise_seed, **(hmd_overrides or {}))
-        self.latency, self._drop = noise.latency_s, noise.frame_drop
+        self.latency, self._drop, self._look_sigma = noise.latency_s, noise.frame_drop, noise.tracking_noise_m
         self._drops = np.random.default_rng([noise_seed, 402])  # which frames the HMD loses
         ctx = mp.get_context("spawn")
         self._conn, child = ctx.Pipe()
@@ -364,6 +365,10 @@ class HmdPoseStream(ObjectPoseSource):
             raise PoseUnavailable(f"the last HMD estimate is {age:.2f} s old")
         self._given = t
         return pos.copy()
+
+    def accuracy_m(self) -> float:
+        """`PoseAccuracy`: three times the registration's RMS residual and one look's tracking noise together."""
+        return 3.0 * math.hypot(self.calibration["rms_residual_m"], self._look_sigma)
 
     def pose_details(self) -> dict:
         """For the run log: the age of the estimate `object_position` gave last (from the moment the HMD saw the

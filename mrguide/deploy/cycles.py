@@ -198,6 +198,12 @@ class CycleSummary:
         return "\n".join(lines)
 
 
+def _source_accuracy(source: object) -> float:
+    """The pose source's stated accuracy (m, `PoseAccuracy`), 0 for a source that states none."""
+    accuracy = getattr(source, "accuracy_m", None)
+    return float(accuracy()) if callable(accuracy) else 0.0
+
+
 class CycleRunner:
     """Runs cycles `start`, `start + 1`, ... on a runtime whose cobot is connected and enabled."""
 
@@ -212,6 +218,11 @@ class CycleRunner:
         self.rt, self.feeder, self.goal_for, self.cfg = runtime, feeder, goal_for, config
         self.after_cycle = after_cycle
         self.rest_z = 0.5 * runtime.task.object_height
+        #: m a part's centre may be off its resting height: the config's, or more where the pose source's own
+        #: accuracy is coarser (an HMD's depth: its registration residual)
+        self.rest_tolerance = max(config.rest_height_tolerance, _source_accuracy(runtime.pose))
+        if self.rest_tolerance > config.rest_height_tolerance:
+            log.info("the part's resting height is checked to ±%.3f m: the pose source's accuracy", self.rest_tolerance)
         self._attempt = 0  # episode index in the run log of the next attempt
         self._departed = False  # whether the arm rose from a place and the next attempt may start there
         self._collections = FullCollections()
@@ -355,7 +366,7 @@ class CycleRunner:
         x, y, z = (float(v) for v in obj)
         if not (x0 <= x <= x1 and y0 <= y <= y1):
             return f"the part lies at ({x:.3f}, {y:.3f}) m, outside the pick region {self.cfg.pick_region}"
-        if abs(z - self.rest_z) > self.cfg.rest_height_tolerance:
+        if abs(z - self.rest_z) > self.rest_tolerance:
             return f"the part's centre is at z = {z:.3f} m, not resting on the table (expected {self.rest_z:.3f} m)"
         return None
 

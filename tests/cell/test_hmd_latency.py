@@ -23,6 +23,9 @@ def test_estimates_arrive_after_the_latency_and_dropped_frames_give_none():
     stream = HmdPoseStream(TwinPlant(scene), REAL, cfg.task.object_height, drawing, hmd_overrides=LATE_AND_LOSSY)
     try:
         assert (stream.latency, stream._drop) == (0.4, 0.5)
+        # its stated accuracy (`PoseAccuracy`): the registration's residual beside one look's noise, three times
+        residual = stream.calibration["rms_residual_m"]
+        assert 3.0 * max(residual, 0.003) <= stream.accuracy_m() <= 3.0 * (residual + 0.003)  # the cell's 3 mm looks
         for _ in range(3):
             stream.invalidate()
             stream.wait_fresh(timeout=60.0)

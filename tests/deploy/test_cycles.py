@@ -188,6 +188,34 @@ def test_a_part_that_cannot_be_picked_where_it_lies_raises_an_alarm(tmp_path, wh
     assert reason in summary.cycles[0].alarm and summary.placed == 0 and len(rt.episodes) == 1
 
 
+@dataclass
+class CoarseSourceRuntime(ScriptedRuntime):
+    """The same, its pose source stating its accuracy (`PoseAccuracy`), as an HMD does from its registration."""
+
+    accuracy: float = 0.022
+
+    def accuracy_m(self):
+        return self.accuracy
+
+
+@pytest.mark.parametrize(("z", "alarm"), [(0.013, False), (0.037, False), (0.0, True), (-0.2, True)])
+def test_the_resting_height_is_checked_no_finer_than_the_pose_source_sees(tmp_path, z, alarm):
+    """A headset whose registration is good to 22 mm sees a part on the table 12 mm low or high (the MuJoCo cell's
+    HMD did, raising alarms in a 1,000-cycle run); a part 25 mm off its height, or off the table, is still not
+    picked."""
+    with RunLog(tmp_path / "cycles.jsonl", {"test": "cycles"}) as log:
+        rt = CoarseSourceRuntime([D, S], log, [(0.5, -0.075, z)])
+        config = CycleConfig(pose_wait_s=0.0, max_retries=1)
+        summary = CycleRunner(rt, Feeder(), lambda c: np.zeros(3), config).run(0, 1)
+    assert ("not resting on the table" in (summary.cycles[0].alarm or "")) is alarm
+    assert summary.placed == (0 if alarm else 1)
+
+
+def test_a_source_that_states_no_accuracy_is_held_to_the_configured_tolerance(tmp_path):
+    summary, *_ = run(tmp_path, [D, S], 2, CycleConfig(pose_wait_s=0.0), positions=[(0.5, -0.075, 0.013)])
+    assert "not resting on the table" in summary.cycles[0].alarm
+
+
 def test_the_arm_waits_at_home_for_a_pose_source_that_lost_its_view(tmp_path):
     log_path = tmp_path / "cycles.jsonl"
     with RunLog(log_path, {"test": "cycles"}) as log:
