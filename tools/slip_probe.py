@@ -33,9 +33,10 @@ TURN = 0.8  # rad, the single joint moves
 class HeldPart:
     """The MuJoCo cell with the part sealed and lifted 12.5 cm, moved by joint trajectories."""
 
-    def __init__(self, timeconst: float):
+    def __init__(self, timeconst: float, part_mass: float | None = None):
         self.spec = load_robot()
-        self.kin, self.plant = Kinematics(self.spec), MujocoPlant(self.spec)
+        cfg = MujocoCellConfig() if part_mass is None else MujocoCellConfig(part_mass=part_mass)
+        self.kin, self.plant = Kinematics(self.spec), MujocoPlant(self.spec, cfg)
         self.plant.model.geom_solref[:] = (timeconst, 1.0)
         self.plant.place_objects(PART, PART + [0.0, 0.2, 0.0])
         self.held = True
@@ -80,16 +81,21 @@ def drift_per_motion(timeconst: float) -> dict[str, float]:
     def straight(cell: HeldPart) -> np.ndarray:
         return cell.kin.ik(PART + [0.10, 0.0, 0.15], cell.plant.joint_positions())
 
+    def back(cell: HeldPart) -> np.ndarray:
+        return cell.plant.joint_positions() - TURN * np.eye(cell.spec.dof)[0]
+
     moves = {
-        f"base joint turned {TURN} rad": (turn(0), 1, 0),
-        f"wrist turned {TURN} rad about the cup's axis": (turn(5), 1, 0),
-        "a 10 cm straight move": (straight, 1, 0),
-        f"base joint turned {TURN} rad, half speed": (turn(0), 2, 0),
-        f"base joint turned {TURN} rad, 50 no-slip iterations": (turn(0), 1, 50),
+        f"base joint turned {TURN} rad": (turn(0), 1, 0, None),
+        f"base joint turned {TURN} rad the other way": (back, 1, 0, None),
+        f"wrist turned {TURN} rad about the cup's axis": (turn(5), 1, 0, None),
+        "a 10 cm straight move": (straight, 1, 0, None),
+        f"base joint turned {TURN} rad, half speed": (turn(0), 2, 0, None),
+        f"base joint turned {TURN} rad, 50 no-slip iterations": (turn(0), 1, 50, None),
+        f"base joint turned {TURN} rad, a 1.3 kg part": (turn(0), 1, 0, 1.3),
     }
     out = {}
-    for label, (target, slower, noslip) in moves.items():
-        cell = HeldPart(timeconst)
+    for label, (target, slower, noslip, mass) in moves.items():
+        cell = HeldPart(timeconst, mass)
         cell.plant.model.opt.noslip_iterations = noslip
         start = cell.in_tcp()
         cell.move_joints(target(cell), hold=20, slower=slower)
