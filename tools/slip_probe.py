@@ -7,7 +7,8 @@ motion makes it drift and whether MuJoCo's no-slip pass removes it.
 The cup seals on a part at (0.50, -0.10), lifts it 12.5 cm and carries it to (0.45, 0.25) on a jerk-limited joint
 trajectory at the arm's limits; printed: the part's displacement in the TCP frame over the transport (mm) and
 whether the seal held to the end. Then, from the same lifted grasp, single moves: the base joint or the wrist
-turned 0.8 rad, a 10 cm straight move, the base's turn at half speed and with 50 no-slip iterations. No bus: the
+turned 0.8 rad, a 10 cm straight move; the base's turn at half speed, with a heavy part, and with MuJoCo's
+no-slip pass, harder contact impedance or half the contact time constant. No bus: the
 plant is stepped directly, one control period at a time.
 """
 
@@ -15,6 +16,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+import mujoco
 import numpy as np
 
 from mrguide.motion.kinematics import Kinematics
@@ -72,31 +74,46 @@ def drift(timeconst: float) -> tuple[np.ndarray, bool]:
     return cell.in_tcp() - start, cell.held
 
 
+def _no_slip(model: mujoco.MjModel) -> None:
+    model.opt.noslip_iterations = 50
+
+
+def _hard_impedance(model: mujoco.MjModel) -> None:
+    model.geom_solimp[:, :2] = (0.999, 0.9999)
+
+
+def _half_time_constant(model: mujoco.MjModel) -> None:
+    model.geom_solref[:, 0] *= 0.5
+
+
 def drift_per_motion(timeconst: float) -> dict[str, float]:
     """The part's drift across the lip (mm) for each single move from the lifted grasp."""
 
-    def turn(joint: int) -> Callable[[HeldPart], np.ndarray]:
-        return lambda cell: cell.plant.joint_positions() + TURN * np.eye(cell.spec.dof)[joint]
+    def turn(joint: int, angle: float = TURN) -> Callable[[HeldPart], np.ndarray]:
+        return lambda cell: cell.plant.joint_positions() + angle * np.eye(cell.spec.dof)[joint]
 
     def straight(cell: HeldPart) -> np.ndarray:
         return cell.kin.ik(PART + [0.10, 0.0, 0.15], cell.plant.joint_positions())
 
-    def back(cell: HeldPart) -> np.ndarray:
-        return cell.plant.joint_positions() - TURN * np.eye(cell.spec.dof)[0]
+    def keep(model: mujoco.MjModel) -> None:
+        pass
 
-    moves = {
-        f"base joint turned {TURN} rad": (turn(0), 1, 0, None),
-        f"base joint turned {TURN} rad the other way": (back, 1, 0, None),
-        f"wrist turned {TURN} rad about the cup's axis": (turn(5), 1, 0, None),
-        "a 10 cm straight move": (straight, 1, 0, None),
-        f"base joint turned {TURN} rad, half speed": (turn(0), 2, 0, None),
-        f"base joint turned {TURN} rad, 50 no-slip iterations": (turn(0), 1, 50, None),
-        f"base joint turned {TURN} rad, a 1.3 kg part": (turn(0), 1, 0, 1.3),
+    base = f"base joint turned {TURN} rad"
+    moves: dict[str, tuple[Callable[[HeldPart], np.ndarray], int, Callable[[mujoco.MjModel], None], float | None]] = {
+        base: (turn(0), 1, keep, None),
+        f"{base} the other way": (turn(0, -TURN), 1, keep, None),
+        f"wrist turned {TURN} rad about the cup's axis": (turn(5), 1, keep, None),
+        "a 10 cm straight move": (straight, 1, keep, None),
+        f"{base}, half speed": (turn(0), 2, keep, None),
+        f"{base}, a 1.3 kg part": (turn(0), 1, keep, 1.3),
+        f"{base}, 50 no-slip iterations": (turn(0), 1, _no_slip, None),
+        f"{base}, contact impedance 0.999-0.9999": (turn(0), 1, _hard_impedance, None),
+        f"{base}, half the contact time constant": (turn(0), 1, _half_time_constant, None),
     }
     out = {}
-    for label, (target, slower, noslip, mass) in moves.items():
+    for label, (target, slower, tweak, mass) in moves.items():
         cell = HeldPart(timeconst, mass)
-        cell.plant.model.opt.noslip_iterations = noslip
+        tweak(cell.plant.model)
         start = cell.in_tcp()
         cell.move_joints(target(cell), hold=20, slower=slower)
         out[label] = float(np.linalg.norm((cell.in_tcp() - start)[:2]))
