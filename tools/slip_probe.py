@@ -1,6 +1,7 @@
-"""How far a held part drifts across the cup's lip in a scripted transport, with MuJoCo's default contact time
-constant and with the MuJoCo cell's (the evidence for `model.CONTACT_TIMECONST_STEPS`); then, with the cell's, which
-motion makes it drift and whether MuJoCo's no-slip pass removes it.
+"""How far a held part drifts across the cup's lip in a scripted transport when the lip's contacts and the adhesion
+alone hold it, with MuJoCo's default contact time constant and with the MuJoCo cell's (the evidence for
+`model.CONTACT_TIMECONST_STEPS`); which motion makes it drift and what of MuJoCo's options changes it; and the same
+with the cell's seal weld (`mujoco_cell.seal_weld`, the evidence for it).
 
     python tools/slip_probe.py
 
@@ -35,10 +36,12 @@ TURN = 0.8  # rad, the single joint moves
 class HeldPart:
     """The MuJoCo cell with the part sealed and lifted 12.5 cm, moved by joint trajectories."""
 
-    def __init__(self, timeconst: float, part_mass: float | None = None):
+    def __init__(self, timeconst: float, part_mass: float | None = None, weld: bool = False):
         self.spec = load_robot()
         cfg = MujocoCellConfig() if part_mass is None else MujocoCellConfig(part_mass=part_mass)
         self.kin, self.plant = Kinematics(self.spec), MujocoPlant(self.spec, cfg)
+        if not weld:  # the lip's contacts and the adhesion alone, as the cell held a part before its weld
+            self.plant.weld.update = lambda *args: None  # type: ignore[method-assign]
         self.plant.model.geom_solref[:] = (timeconst, 1.0)
         self.plant.place_objects(PART, PART + [0.0, 0.2, 0.0])
         self.held = True
@@ -66,9 +69,9 @@ class HeldPart:
             self.held = self.held and (not watch or self.plant.lip_sealed())
 
 
-def drift(timeconst: float) -> tuple[np.ndarray, bool]:
+def drift(timeconst: float, weld: bool = False) -> tuple[np.ndarray, bool]:
     """(the part's displacement in the TCP frame over the transport in mm, whether the seal held throughout)."""
-    cell = HeldPart(timeconst)
+    cell = HeldPart(timeconst, weld=weld)
     start = cell.in_tcp()
     cell.move_to(PLACE, hold=20, watch=True)
     return cell.in_tcp() - start, cell.held
@@ -122,14 +125,25 @@ def drift_per_motion(timeconst: float) -> dict[str, float]:
 
 def main() -> None:
     cells = CONTACT_TIMECONST_STEPS * MujocoCellConfig().timestep
-    for label, timeconst in (("MuJoCo's default", MUJOCO_DEFAULT_TIMECONST), ("the MuJoCo cell's", cells)):
-        moved, held = drift(timeconst)
+    for label, timeconst, weld in (
+        ("the contacts alone, MuJoCo's default", MUJOCO_DEFAULT_TIMECONST, False),
+        ("the contacts alone, the MuJoCo cell's", cells, False),
+        ("the MuJoCo cell (its seal's weld), its", cells, True),
+    ):
+        moved, held = drift(timeconst, weld)
         print(
             f"{label} contact time constant {timeconst * 1e3:.0f} ms: the part moved {np.round(moved, 2).tolist()} mm "
             f"in the TCP frame ({np.linalg.norm(moved[:2]):.1f} mm across the lip); seal held: {held}"
         )
     for label, across in drift_per_motion(cells).items():
-        print(f"the cell's contacts, {label}: {across:.2f} mm across the lip")
+        print(f"the cell's contacts alone, {label}: {across:.2f} mm across the lip")
+    cell = HeldPart(cells, weld=True)
+    start = cell.in_tcp()
+    cell.move_joints(cell.plant.joint_positions() + TURN * np.eye(cell.spec.dof)[0], hold=20)
+    print(
+        f"the MuJoCo cell (its seal's weld), base joint turned {TURN} rad: "
+        f"{np.linalg.norm((cell.in_tcp() - start)[:2]):.2f} mm across the lip"
+    )
 
 
 if __name__ == "__main__":

@@ -9,7 +9,8 @@ and the suction cup.
   velocity feed-forward on the CSP setpoints, tuned as a second-order servo of the configured bandwidth on the
   joint's inertia at home.
 - The cup: an adhesion actuator on the cup's body: an attractive force at its contacts, ctrl the vacuum level
-  (kPa), gain the cup's area, so that the holding force is F = Δp · A (about 82 N at 65 kPa for a 2 cm lip).
+  (kPa), gain the cup's area, so that the holding force is F = Δp · A (about 82 N at 65 kPa for a 2 cm lip); and
+  the `seal` weld between the cup and the part, inactive until the plant makes it (`seal_weld`).
 - Contact, friction and solver: MuJoCo's defaults (pyramidal cones, friction 1, solimp), but contacts as stiff as
   its manual allows at this timestep (`CONTACT_TIMECONST_STEPS`); the integrator is `implicitfast`, MuJoCo's
   recommendation for position actuators with damping.
@@ -66,6 +67,8 @@ class CellModel:
     part_geoms: np.ndarray  # the part's boxes
     part_qpos: int  # the part's free joint: position (3) and quaternion w, x, y, z (4)
     part_dof: int
+    cup_body: int
+    seal_weld: int  # the weld that holds a sealed part where it sealed (inactive until then)
 
 
 def _collision_mesh_dir(urdf: str) -> Path:
@@ -183,6 +186,9 @@ def build_cell(spec: RobotSpec, cfg: MujocoCellConfig, part: Part, cup: CupConfi
     adhesion.set_to_adhesion(gain=math.pi * CUP_RADIUS**2 * PA_PER_KPA)
     adhesion.ctrlrange = [0.0, 101.3]
     _add_lip(s, float(spec.T_flange_tcp[2, 3]))
+    weld = s.add_equality(name="seal", type=mujoco.mjtEq.mjEQ_WELD, objtype=mujoco.mjtObj.mjOBJ_BODY)
+    weld.name1, weld.name2, weld.active = "suction_cup", "part", False
+    weld.solref = [CONTACT_TIMECONST_STEPS * cfg.timestep, 1.0]
     model = s.compile()
     part_body = model.body("part")
     lips = np.array([model.geom(f"lip{i}").id for i in range(LIP_POINTS)])
@@ -204,4 +210,6 @@ def build_cell(spec: RobotSpec, cfg: MujocoCellConfig, part: Part, cup: CupConfi
         part_geoms=np.array([model.geom(f"part{i}").id for i in range(len(part.boxes))]),
         part_qpos=int(model.joint("part_free").qposadr[0]),
         part_dof=int(model.joint("part_free").dofadr[0]),
+        cup_body=model.body("suction_cup").id,
+        seal_weld=model.equality("seal").id,
     )

@@ -10,7 +10,8 @@ The vacuum at the cup: the generator's level follows a first-order lag toward th
 less what the lip leaks where it hangs past the face's edge, the open-cup level where it does not rest on one),
 and decays with the valve closed (time constants and levels: the drivers' simulated generator,
 `FirstOrderParams`). The level drives the cup's adhesion actuator, so the part is held by F = Δp · A and
-nothing else: a lift that asks more of it tears the part off.
+nothing else: a lift that asks more of it tears the part off. Once sealed and held, a weld keeps the part where it
+sealed until its load passes what the level holds (`seal_weld`: MuJoCo's contacts alone let a held part creep).
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ from mrguide.cell_layout import CupConfig
 from mrguide.drivers.mock.first_order_plant import FirstOrderParams
 from mrguide.mujoco_cell.config import MujocoCellConfig
 from mrguide.mujoco_cell.model import build_cell
+from mrguide.mujoco_cell.seal_weld import SealWeld
 from mrguide.parts import PARTS, Part
 from mrguide.plant import CellPlant
 from mrguide.robot import RobotSpec
@@ -56,6 +58,8 @@ class MujocoPlant(CellPlant):
         self._level = 0.0
         self._leak = 0.0
         self.goal = np.zeros(3)
+        self.weld = SealWeld(self.model, self.data, self.cell)
+        self._reached = self.level_reached()  # kPa the generator reaches through the lip as it is
 
     @property
     def dof(self) -> int:
@@ -75,8 +79,9 @@ class MujocoPlant(CellPlant):
                 d.ctrl[c.position_actuators] = self._prev_target + (self._target - self._prev_target) * (i / n)
                 d.ctrl[c.velocity_actuators] = dq
                 self._step_vacuum(self.model.opt.timestep)
-                d.ctrl[c.cup_actuator] = self._level
+                d.ctrl[c.cup_actuator] = 0.0 if self.weld.active else self._level  # the weld alone holds
                 mujoco.mj_step(self.model, d)
+                self._hold_or_release()
             self._prev_target = self._target.copy()
 
     def set_joint_targets(self, q: np.ndarray) -> None:
@@ -99,9 +104,9 @@ class MujocoPlant(CellPlant):
             return self._level
 
     def part_present(self) -> bool:
-        """The part touches the cup."""
+        """The part touches the cup (welded to it, or in contact with the lip)."""
         with self.lock:
-            return self._cup_touches_part()
+            return self.weld.active or self._cup_touches_part()
 
     def set_vacuum_leak(self, fraction: float) -> None:
         if not 0.0 <= fraction <= 1.0:
@@ -116,10 +121,12 @@ class MujocoPlant(CellPlant):
             c, d = self.cell, self.data
             self._vacuum_on = self._blow_off = False
             self._level = 0.0
+            self.weld.release()
             d.qpos[c.part_qpos : c.part_qpos + 3] = obj
             d.qpos[c.part_qpos + 3 : c.part_qpos + 7] = (1.0, 0.0, 0.0, 0.0)
             d.qvel[c.part_dof : c.part_dof + 6] = 0.0
             mujoco.mj_forward(self.model, d)
+            self._reached = self.level_reached()
             self.goal = np.asarray(goal, dtype=float).copy()
 
     def object_position(self) -> np.ndarray:
@@ -145,11 +152,22 @@ class MujocoPlant(CellPlant):
         if self._blow_off:
             goal, tau = 0.0, p.blow_off_time_constant
         elif self._vacuum_on:
-            goal = self.level_reached() * (1.0 - self._leak)
+            goal = self._reached * (1.0 - self._leak)
             tau = p.evacuation_time_constant
         else:
             goal, tau = 0.0, p.release_time_constant
         self._level += (goal - self._level) * (1.0 - math.exp(-dt / tau))
+
+    def _hold_or_release(self) -> None:
+        """The seal's weld (`seal_weld`): made as the lip seals on the part, released when the load passes what
+        the vacuum holds or the vacuum is off. While it holds, the lip stays where it sealed, and so does the level
+        its seal reaches (`_reached`)."""
+        if not self.weld.active:
+            self._reached = self.level_reached()
+        sealed = self._reached >= self.vacuum.sealed_level_kpa
+        on = self._vacuum_on and not self._blow_off
+        touching = self.weld.active or self._cup_touches_part()
+        self.weld.update(self._level, self.vacuum.hold_level_kpa, on, sealed, touching)
 
     def _cup_touches_part(self) -> bool:
         c, d = self.cell, self.data
@@ -175,5 +193,7 @@ class MujocoPlant(CellPlant):
     def lip_sealed(self) -> bool:
         """The cup's lip rests whole on a face of the part: square to it, within the lip's compliance, not over an edge
         or a hole."""
+        if self.weld.active:  # held where it sealed
+            return True
         lip = seal.lip_on_face(*self._lip(), self.boxes)
         return lip is not None and lip.rests and lip.open_area == 0.0
