@@ -164,7 +164,7 @@ class MujocoPlant(CellPlant):
         its seal reaches (`_reached`)."""
         if not self.weld.active:
             self._reached = self.level_reached()
-        sealed = self._reached >= self.vacuum.sealed_level_kpa
+        sealed = self._reached > self.vacuum.open_level_kpa  # the lip rests on a face, whole or leaking past its edge
         on = self._vacuum_on and not self._blow_off
         touching = self.weld.active or self._cup_touches_part()
         self.weld.update(self._level, self.vacuum.hold_level_kpa, on, sealed, touching)

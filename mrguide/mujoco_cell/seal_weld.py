@@ -40,8 +40,9 @@ class SealWeld:
         return bool(self.data.eq_active[self.id])
 
     def update(self, level_kpa: float, hold_kpa: float, vacuum_on: bool, sealed: bool, touching: bool) -> None:
-        """Weld a part sealed on the lip once the level reaches `hold_kpa` (the generator's level that holds a
-        part: the adhesion has drawn it against the lip by then); release one whose load the seal no longer holds."""
+        """Weld a part the lip rests on (`sealed`: whole, or leaking where it hangs past the face's edge) once the
+        level reaches `hold_kpa` (the generator's level that holds a part: the adhesion has drawn it against the lip
+        by then); release one whose load the seal no longer holds."""
         holding = level_kpa * PA_PER_KPA * seal.CUP_AREA
         if self.active:
             if not vacuum_on or self._overloaded(holding):
