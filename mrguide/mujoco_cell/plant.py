@@ -60,6 +60,7 @@ class MujocoPlant(CellPlant):
         self.goal = np.zeros(3)
         self.weld = SealWeld(self.model, self.data, self.cell)
         self._reached = self.level_reached()  # kPa the generator reaches through the lip as it is
+        self._lips, self._part = set(self.cell.lip_geoms.tolist()), set(self.cell.part_geoms.tolist())
 
     @property
     def dof(self) -> int:
@@ -166,12 +167,11 @@ class MujocoPlant(CellPlant):
             self._reached = self.level_reached()
         sealed = self._reached > self.vacuum.open_level_kpa  # the lip rests on a face, whole or leaking past its edge
         on = self._vacuum_on and not self._blow_off
-        touching = self.weld.active or self._cup_touches_part()
+        touching = self.weld.active or (on and sealed and self._cup_touches_part())  # the contacts only when it counts
         self.weld.update(self._level, self.vacuum.hold_level_kpa, on, sealed, touching)
 
     def _cup_touches_part(self) -> bool:
-        c, d = self.cell, self.data
-        lips, part = set(c.lip_geoms.tolist()), set(c.part_geoms.tolist())
+        d, lips, part = self.data, self._lips, self._part
         for i in range(d.ncon):
             a, b = int(d.contact.geom1[i]), int(d.contact.geom2[i])
             if (a in part and b in lips) or (b in part and a in lips):
@@ -192,8 +192,8 @@ class MujocoPlant(CellPlant):
 
     def lip_sealed(self) -> bool:
         """The cup's lip rests whole on a face of the part: square to it, within the lip's compliance, not over an edge
-        or a hole."""
-        if self.weld.active:  # held where it sealed
+        or a hole; or the seal's weld holds the part where it sealed."""
+        if self.weld.active:
             return True
         lip = seal.lip_on_face(*self._lip(), self.boxes)
         return lip is not None and lip.rests and lip.open_area == 0.0

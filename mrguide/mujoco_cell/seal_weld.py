@@ -21,9 +21,7 @@ import numpy as np
 
 from mrguide import seal
 from mrguide.cell_layout import CUP_RADIUS
-
-#: Pa per kPa (the vacuum level is kept in kPa below atmosphere).
-PA_PER_KPA = 1000.0
+from mrguide.mujoco_cell.model import PA_PER_KPA
 
 
 class SealWeld:
