@@ -7,8 +7,9 @@ sealed says the part's grasp point lies within that window of p; one that did no
 source saw the part at s = centre + b (its mean of the looks while the part stood still), so each press is a
 measurement of the bias b, blurred by what remains of the looks' error: `LOOK_SIGMA` over the square
 root of the looks in the mean, and the arm's `ARM_SIGMA`. `BiasEstimate` keeps
-the posterior of b on a 1 mm grid of ±`RANGE` per axis, starting flat, and its mean is what the runtime subtracts
-from the source's poses. The estimate is saved after each update and read back at the next start (`save`, `load`),
+the posterior of b on a 1 mm grid of ±`RANGE` per axis, starting from a normal prior of `PRIOR_SIGMA` per axis, and
+its mean is what the runtime subtracts from the source's poses. The same posterior says where a press most likely
+seals (`best_press`): where the seal search presses next. The estimate is saved after each update and read back at the next start (`save`, `load`),
 so that the cell improves its registration with every part it picks, across runs.
 """
 
@@ -20,9 +21,12 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
+from scipy.ndimage import gaussian_filter, uniform_filter
 
 #: m: the bias range the grid covers per axis (ours: three times the HMD's 5 mm calibration error).
 RANGE = 0.015
+#: m: the prior's standard deviation per axis (ours: the cells' HMD's 5 mm calibration error).
+PRIOR_SIGMA = 0.005
 #: m: the grid's spacing.
 STEP = 0.001
 #: m: the standard deviation per axis of one look's error: the cells' HMD at the part (3 mm and 0.3° per frame; a
@@ -57,7 +61,7 @@ class BiasEstimate:
         self.window = window
         axis = np.arange(-RANGE, RANGE + STEP / 2, STEP)
         self._bx, self._by = np.meshgrid(axis, axis, indexing="ij")
-        self._log = np.zeros_like(self._bx)  # log posterior up to a constant, flat at first
+        self._log = -(self._bx**2 + self._by**2) / (2 * PRIOR_SIGMA**2)  # log posterior up to a constant
         self.presses = 0
         self.seals = 0
 
@@ -84,6 +88,22 @@ class BiasEstimate:
         w = np.exp(self._log)
         w /= w.sum()
         return np.array([(w * self._bx).sum(), (w * self._by).sum()])
+
+    def best_press(self, missed: list[np.ndarray], sigma: float) -> np.ndarray:
+        """The offset (m, xy) from the source's mean pose at which the next press on this part most likely seals: the
+        window's placement that holds the most mass of where this part's grasp point lies, from the bias's posterior
+        blurred by this part's look error `sigma` (m, `blur`) less the offsets this part was `missed` at (each ruled
+        out up to the arm's `ARM_SIGMA`: the same part, the same look error)."""
+        here = gaussian_filter(np.exp(self._log), sigma / STEP, mode="constant")
+        (cx, cy), (hx, hy) = self.window.centre, self.window.half
+        for ox, oy in missed:
+            here *= 1.0 - self._inside(ox - cx, self._bx, ARM_SIGMA, hx) * self._inside(
+                oy - cy, self._by, ARM_SIGMA, hy
+            )
+        box = uniform_filter(here, (2 * round(hx / STEP) + 1, 2 * round(hy / STEP) + 1), mode="constant")
+        i, j = np.unravel_index(int(np.argmax(box)), box.shape)
+        # sealed where |press - seen - centre + b| < half: the window about b* is hit by press = seen + centre - b*
+        return np.array([cx - self._bx[i, j], cy - self._by[i, j]])
 
     def save(self, path: Path, source: str) -> None:
         """Write the posterior to `path` (JSON), naming the pose source it belongs to."""
@@ -126,10 +146,17 @@ class Registration:
         loaded = BiasEstimate.load(path, source, window) if path is not None else None
         self.estimate = loaded or BiasEstimate(window)
         self._sealed = False  # this episode's seal was reported
+        self._missed: list[np.ndarray] = []  # where (m, xy) this part was pressed without a seal
 
     def reset(self) -> None:
         """A new episode."""
-        self._sealed = False
+        self._sealed, self._missed = False, []
+
+    def aim(self, seen: np.ndarray, looks: int) -> np.ndarray:
+        """Where (m, xy) the next press on the part the source sees at `seen` (its raw mean of `looks` looks) most
+        likely seals, after this episode's presses that did not."""
+        seen = np.asarray(seen, dtype=float)[:2]
+        return seen + self.estimate.best_press([m - seen for m in self._missed], blur(looks))
 
     @property
     def correction(self) -> np.ndarray:
@@ -145,6 +172,8 @@ class Registration:
         if seen is None or not grasping or not (reseat or (gripped and not self._sealed)):
             return False
         self._sealed = self._sealed or gripped
+        if reseat:
+            self._missed.append(np.asarray(tcp, dtype=float)[:2].copy())
         self.estimate.press(tcp, seen, gripped and not reseat, blur(looks))
         if self.path is not None:
             self.estimate.save(self.path, self.source)

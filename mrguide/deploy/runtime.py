@@ -14,34 +14,29 @@ import logging
 import time
 from collections import Counter
 from collections.abc import Callable
-from pathlib import Path
 from typing import NoReturn
 
 import numpy as np
 
 from mrguide.config import ConfigError
-from mrguide.deploy.bias_estimate import Registration, SealWindow
 from mrguide.deploy.cell_learning import LearningActor
+from mrguide.deploy.cell_rules import CellRules
 from mrguide.deploy.episode import HOME_SETTLE_S, EpisodeReport, RunStopped
 from mrguide.deploy.following import FollowingMonitor
 from mrguide.deploy.interventions import sense_start
-from mrguide.deploy.lift_rule import LiftRule, hold_in_transit
 from mrguide.deploy.object_tracking import ObjectStartUnknown, ObjectTracker
 from mrguide.deploy.runlog import RunLog
 from mrguide.deploy.runtime_config import RuntimeConfig
 from mrguide.deploy.safety import Event, Reaction, SafetyConfig, Supervisor, Watchdog
-from mrguide.deploy.seal_search import SealSearch
 from mrguide.drivers.cobot_state import JointState, VacuumState
 from mrguide.drivers.errors import DriverError
 from mrguide.drivers.interface import CobotInterface
-from mrguide.grasp_margin import seal_window
 from mrguide.motion.decision import NON_FINITE, ActionError, DecisionStep
 from mrguide.motion.kinematics import IKError
 from mrguide.motion.trajectory import TrajectoryError
-from mrguide.parts import part_named
 from mrguide.pose_source import ObjectPoseSource
 from mrguide.robot import RobotSpec
-from mrguide.task import OBS_OBJECT, Outcome, Phase, TaskConfig
+from mrguide.task import Outcome, TaskConfig
 
 log = logging.getLogger(__name__)
 
@@ -87,14 +82,9 @@ class Runtime:
         self.watchdog = Watchdog(self.supervisor.cfg.stall_timeout, self._on_stall)
         self._episode_events: Counter[str] = Counter()
         self._t = 0
-        self.lift = LiftRule(spec.workspace, decision_period, self.cfg.break_away_distance, self.cfg.break_away_speed)
-        self.seal = SealSearch(spec.workspace, self.cfg.reseat_step, self.cfg.reseat_wait)
         misses = (self.cfg.max_pose_misses, self.cfg.max_pose_misses_before_grasp)
         self.objects = ObjectTracker(pose, self.supervisor, task, self.cfg.track_carried_object, *misses)
-        grasp = task.grasp_offset  # where the lip rests whole on the part's face, per axis, about the grasp
-        window = SealWindow((float(grasp[0]), float(grasp[1])), seal_window(part_named(task.part), grasp[:2]))
-        where = Path(self.cfg.bias_estimate_file) if self.cfg.bias_estimate_file else None
-        self.registration = Registration(window, type(pose).__name__, where)
+        self.rules = CellRules(spec.workspace, decision_period, self.cfg, task, type(pose).__name__, self.supervisor)
 
     # -- lifecycle ----------------------------------------------------------------------------------
     def __enter__(self) -> Runtime:
@@ -212,10 +202,7 @@ class Runtime:
         self.log.write("episode_start", episode=index, goal=goal)
         self.decision.reset(self.cobot.setpoint)
         self.objects.reset()
-        self.objects.correction = self.registration.correction
-        self.registration.reset()
-        self.lift.reset()
-        self.seal.reset()
+        self.rules.reset(self.objects)
         if self.learning is not None:  # between episodes: new weights, a person stepping in (interventions.py)
             self.learning.episode_start(
                 index, self.log.write, lambda: sense_start(self.cobot, self.decision, self.objects, goal)
@@ -311,7 +298,7 @@ class Runtime:
         t_inf = time.perf_counter()
         action = self.policy(obs)
         inference_ms = (time.perf_counter() - t_inf) * 1e3
-        executed, notes = self._cell_rules(action, tcp, obs, vac)
+        executed, notes = self.rules.apply(action, tcp, obs, vac, self.decision.phase, self.objects)
         if self.learning is not None:
             self.learning.tap.acted(obs, executed)
         record = {
@@ -352,33 +339,9 @@ class Runtime:
             self.supervisor.ik_result(True)
             record["q_target"] = cmd.q_target
         # every release with a blow-off pulse (one decision): a cup whose valve only closes stays evacuated for a second
-        self.cobot.set_vacuum(cmd.vacuum, blow_off=not cmd.vacuum and (vac.vacuum_on or self.seal.blow_off))
+        self.cobot.set_vacuum(cmd.vacuum, blow_off=not cmd.vacuum and (vac.vacuum_on or self.rules.blow_off))
         self._stream_decision(t, t_read, inference_ms, record, report)
         return None
-
-    def _cell_rules(
-        self, action: np.ndarray, tcp: np.ndarray, obs: np.ndarray, vac: VacuumState
-    ) -> tuple[np.ndarray, dict]:
-        """The action after the cell's rules (the lift rules, the seal search), and what they did for the run log."""
-        notes: dict = {}
-        executed, rule = self.lift.apply(action, tcp, self.decision.phase, vac)
-        if rule is not None:
-            self.supervisor.report(Event(rule), f"height target lowered in phase {self.decision.phase}")
-            notes["lift_rule"] = rule
-        executed, held = hold_in_transit(executed, self.decision.phase, vac)
-        if held is not None:
-            self.supervisor.report(Event(held), f"release refused in phase {self.decision.phase}: the part is held")
-            notes["hold_rule"] = held
-        executed, reseat = self.seal.apply(executed, tcp, obs[OBS_OBJECT], self.decision.phase, vac)
-        if reseat is not None:
-            self.supervisor.report(Event.RESEAT, f"no seal at {vac.level_kpa:.0f} kPa: re-seat {self.seal.reseats}")
-            notes["reseat"] = self.seal.reseats
-        grasping = self.decision.phase in (Phase.GRASP, Phase.LIFT)
-        seen, looks = self.objects.seen, self.objects.filter.looks
-        if self.registration.after_decision(tcp, seen, looks, grasping, vac.part_gripped, reseat is not None):
-            self.objects.correction = self.registration.correction  # the cell's registration, improved by this press
-            notes["bias_estimate"] = self.objects.correction[:2]
-        return executed, notes
 
     def _stream_decision(self, t: int, t_read: float, inference_ms: float, record: dict, report: EpisodeReport) -> None:
         """One decision period streamed; its timing and setpoints go to `report` and the run log's `record`."""

@@ -29,10 +29,8 @@ class RuntimeConfig:
     break_away_distance: Annotated[float, Range(0.0, 0.1, " m")] = 0.015
     break_away_speed: Annotated[float, Range(0.005, 1.0, " m/s")] = 0.1
     #: The seal search (seal_search.py): a cup pressed without "vacuum OK" for `reseat_wait` decisions is re-seated
-    #: at the next point of a hexagonal pattern `reseat_step` apart (m, in [0, 0.02]; 0 = off). 5 mm: every point
-    #: within 2.9 mm of one of the pattern's, inside the 5 mm the cup's 2 cm-radius lip leaves on the 5 cm part
-    #: (`mrguide.seal`, in both engines).
-    reseat_step: Annotated[float, Range(0.0, 0.02, " m")] = 0.005
+    #: where a press most likely seals, as the registration's posterior says (bias_estimate.py); false turns it off.
+    seal_search: bool = True
     reseat_wait: Annotated[int, Range(1, 50)] = 1
     #: Where the cell keeps its estimate of the pose source's registration bias (bias_estimate.py) across runs: a
     #: JSON file read at the start and written after every press; "" keeps it for the run only.

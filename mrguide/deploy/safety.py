@@ -1,7 +1,7 @@
 """Safety supervisor of the deploy runtime: what is watched, how each event is answered, and counts.
 
 Reactions, mildest first:
-- CLAMP: the target is moved (into the workspace box, or by a rule of the cell: the lift rules, the seal search);
+- CLAMP: the target is moved (into the workspace box, or by a rule of the cell: the descent and lift rules, the seal search);
   the episode goes on.
 - LAST_KNOWN: the decision uses the last valid value (the object pose) and the episode goes on.
 - HOLD: the arm brakes to rest on a jerk-limited ramp (Ruckig) and keeps its position; the episode goes on.
@@ -57,6 +57,7 @@ class Event(str, enum.Enum):
     VACUUM_NOT_OK = "vacuum_not_ok"  # a lift asked before the part was reported gripped: the arm does not rise
     BREAK_AWAY = "break_away"  # the lift's first millimetres slowed (lift_rule.py)
     HOLD_IN_TRANSIT = "hold_in_transit"  # a release asked in the lift or transport: the vacuum stays on (lift_rule.py)
+    DESCENT = "descent"  # the cup kept off the part until over it, and not slid while down (descent_rule.py)
     RESEAT = "reseat"  # a cup pressed without a seal re-seated at the next point of the search (seal_search.py)
     STALL = "stall"  # the decision loop stopped feeding setpoints (watchdog)
     INTERRUPT = "interrupt"  # Ctrl-C
@@ -78,6 +79,7 @@ REACTIONS: dict[Event, Reaction] = {
     Event.VACUUM_NOT_OK: Reaction.CLAMP,
     Event.BREAK_AWAY: Reaction.CLAMP,
     Event.HOLD_IN_TRANSIT: Reaction.CLAMP,
+    Event.DESCENT: Reaction.CLAMP,
     Event.RESEAT: Reaction.CLAMP,
     Event.STALL: Reaction.QUICK_STOP,
     Event.INTERRUPT: Reaction.QUICK_STOP,

@@ -1,6 +1,7 @@
 """The failed episodes of run logs, one line each: the outcome, the phase it ended in, the vacuum level and TCP
 height over its last decisions — where a part was lost, and whether the seal broke at once or leaked away — and
-how far off the cup's axis the part hung when the lift began (a simulated cell's ground truth).
+how far the part was pushed across the table before the cup held it, and how far off the cup's axis it hung when the
+lift began (a simulated cell's ground truth).
 
     python -m mrguide.replay.failures LOG... [--grasps FILE.csv]
 
@@ -26,6 +27,8 @@ from mrguide.task import Phase
 
 #: Decisions at the end of a failed episode that its line shows.
 TAIL = 5
+#: mm: a part that got this far before the grasp was pushed (a look's noise is no push: the truth does not move).
+PUSHED = 3.0
 
 
 def failure_line(ep: Episode) -> str:
@@ -34,9 +37,19 @@ def failure_line(ep: Episode) -> str:
     phase = Phase(frames[-1].phase).name.lower() if frames else "?"
     vacuum = " ".join("?" if f.vacuum_kpa is None else f"{f.vacuum_kpa:.0f}" for f in frames)
     height = " ".join("?" if f.tcp is None else f"{1e3 * f.tcp[2]:.0f}" for f in frames)
-    offset = grasp_offset_mm(ep)
+    offset, pushed = grasp_offset_mm(ep), pushed_mm(ep)
+    push = "" if pushed is None or pushed < PUSHED else f"; the part pushed {pushed:.0f} mm before the cup held it"
     off = "" if offset is None else f"; the part {offset:.1f} mm off the cup's axis as the lift began"
-    return f"{ep.label}: {ep.outcome} in {phase}; vacuum {vacuum} kPa; TCP z {height} mm{off}"
+    return f"{ep.label}: {ep.outcome} in {phase}; vacuum {vacuum} kPa; TCP z {height} mm{push}{off}"
+
+
+def pushed_mm(ep: Episode) -> float | None:
+    """How far (mm, ground truth, laterally) the part got from where it lay at the start before the cup held it (the
+    approach and the grasp, the part not reported held), if the log knows where it was."""
+    before = [f.obj_true for f in ep.frames if f.phase <= Phase.GRASP and not f.part and f.obj_true is not None]
+    if not before:
+        return None
+    return float(1e3 * max(np.linalg.norm((p - before[0])[:2]) for p in before))
 
 
 def grasp_offset_mm(ep: Episode) -> float | None:
