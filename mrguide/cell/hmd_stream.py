@@ -174,16 +174,18 @@ def _calibration_quality(record: CalibrationRecord, T_base_hmd_true: np.ndarray)
 
 
 def _answer_poses(conn: multiprocessing.connection.Connection, pose: ScenePoser, source: ObjectPoseSource) -> None:
-    """Until None arrives: pose the scene as received, and send back the HMD's object estimate."""
-    while True:
-        msg = conn.recv()
-        if msg is None:
-            break
-        pose(*msg)
-        try:
-            conn.send(("pose", source.object_position()))
-        except PoseUnavailable as exc:
-            conn.send(("none", str(exc)))
+    """Until None arrives: pose the scene as received, and send back the HMD's object estimate. A parent that is gone
+    (killed: its end of the pipe closed) ends it quietly."""
+    try:
+        while (msg := conn.recv()) is not None:
+            pose(*msg)
+            try:
+                answer: tuple[str, object] = ("pose", source.object_position())
+            except PoseUnavailable as exc:
+                answer = ("none", str(exc))
+            conn.send(answer)
+    except (EOFError, BrokenPipeError):
+        return
 
 
 def _start(proc: mp.process.BaseProcess, offscreen_gl: bool) -> None:

@@ -151,3 +151,20 @@ def test_an_hmd_that_cannot_start_fails_its_seed_and_the_run_goes_on(tmp_path, m
     records = read_log(log)
     assert records[0]["hmd_overrides"] == {"tracking_noise_m": 0.02}
     assert records[-1]["kind"] == "run_stopped" and "the HMD could not start" in records[-1]["reason"]
+
+
+def test_the_hmd_process_ends_quietly_when_its_parent_is_gone():
+    """A parent killed mid-run (its end of the pipe closed) ends the HMD process's answer loop without a traceback,
+    whether it was waiting for a request or answering one."""
+    from mrguide.cell.hmd_stream import _answer_poses
+
+    class Blind:
+        def object_position(self) -> np.ndarray:
+            raise PoseUnavailable("marker 0 not visible")
+
+    for last_request in (False, True):
+        ours, theirs = mp.Pipe()
+        if last_request:
+            theirs.send((np.eye(4),))  # a request, then the parent dies before the answer is read
+        theirs.close()
+        _answer_poses(ours, lambda *_: None, Blind())  # returns: no EOFError, no BrokenPipeError
