@@ -21,7 +21,6 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
-from scipy.ndimage import gaussian_filter, uniform_filter
 
 #: m: the bias range the grid covers per axis (ours: three times the HMD's 5 mm calibration error).
 RANGE = 0.015
@@ -94,13 +93,16 @@ class BiasEstimate:
         window's placement that holds the most mass of where this part's grasp point lies, from the bias's posterior
         blurred by this part's look error `sigma` (m, `blur`) less the offsets this part was `missed` at (each ruled
         out up to the arm's `ARM_SIGMA`: the same part, the same look error)."""
-        here = gaussian_filter(np.exp(self._log), sigma / STEP, mode="constant")
+        cells = np.arange(self._bx.shape[0])
+        apart = np.abs(cells[:, None] - cells[None, :]) * STEP  # m between the grid's cells along an axis
+        smear = np.exp(-0.5 * (apart / max(sigma, 1e-6)) ** 2)  # this part's look error, per axis
+        here = smear @ np.exp(self._log) @ smear.T
         (cx, cy), (hx, hy) = self.window.centre, self.window.half
         for ox, oy in missed:
             here *= 1.0 - self._inside(ox - cx, self._bx, ARM_SIGMA, hx) * self._inside(
                 oy - cy, self._by, ARM_SIGMA, hy
             )
-        box = uniform_filter(here, (2 * round(hx / STEP) + 1, 2 * round(hy / STEP) + 1), mode="constant")
+        box = (apart <= hx + STEP / 2) @ here @ (apart <= hy + STEP / 2).T  # the window's mass about each cell
         i, j = np.unravel_index(int(np.argmax(box)), box.shape)
         # sealed where |press - seen - centre + b| < half: the window about b* is hit by press = seen + centre - b*
         return np.array([cx - self._bx[i, j], cy - self._by[i, j]])
