@@ -74,8 +74,9 @@ def test_a_dry_run_replays_into_a_recording_of_what_the_log_holds(dry_log, tmp_p
         phases = [r["phase"] for r in mine]
         changes = 1 + sum(a != b_ for a, b_ in itertools.pairwise(phases))
         assert rows[f"/phase/{ep.label}"] == changes
-        # the outcome, and one per safety event: only the lift rule's break-away in these episodes
-        assert {e["event"] for e in ep.events} == {"break_away"}
+        # the outcome, and one per safety event: the lift rule's break-away in these episodes, and the descent rule's
+        # where the arm came down before it was over the part (timing decides)
+        assert {"break_away"} <= {e["event"] for e in ep.events} <= {"break_away", "descent"}
         assert rows[f"{b}/markers"] == 1 + len(ep.events)
         # the arm: its URDF frames and link meshes (static), its goal
         assert f"{b}/tf_static" in entities and f"{b}/goal" in entities
