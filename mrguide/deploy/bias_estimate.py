@@ -61,6 +61,13 @@ class BiasEstimate:
         axis = np.arange(-RANGE, RANGE + STEP / 2, STEP)
         self._bx, self._by = np.meshgrid(axis, axis, indexing="ij")
         self._log = -(self._bx**2 + self._by**2) / (2 * PRIOR_SIGMA**2)  # log posterior up to a constant
+        cells = np.arange(axis.size)
+        self._apart = np.abs(cells[:, None] - cells[None, :]) * STEP  # m between the grid's cells along an axis
+        (hx, hy) = window.half
+        self._box_x, self._box_y = (
+            (self._apart <= hx + STEP / 2),
+            (self._apart <= hy + STEP / 2),
+        )  # the window, per axis
         self.presses = 0
         self.seals = 0
 
@@ -93,16 +100,14 @@ class BiasEstimate:
         window's placement that holds the most mass of where this part's grasp point lies, from the bias's posterior
         blurred by this part's look error `sigma` (m, `blur`) less the offsets this part was `missed` at (each ruled
         out up to the arm's `ARM_SIGMA`: the same part, the same look error)."""
-        cells = np.arange(self._bx.shape[0])
-        apart = np.abs(cells[:, None] - cells[None, :]) * STEP  # m between the grid's cells along an axis
-        smear = np.exp(-0.5 * (apart / max(sigma, 1e-6)) ** 2)  # this part's look error, per axis
+        smear = np.exp(-0.5 * (self._apart / max(sigma, 1e-6)) ** 2)  # this part's look error, per axis
         here = smear @ np.exp(self._log) @ smear.T
         (cx, cy), (hx, hy) = self.window.centre, self.window.half
         for ox, oy in missed:
             here *= 1.0 - self._inside(ox - cx, self._bx, ARM_SIGMA, hx) * self._inside(
                 oy - cy, self._by, ARM_SIGMA, hy
             )
-        box = (apart <= hx + STEP / 2) @ here @ (apart <= hy + STEP / 2).T  # the window's mass about each cell
+        box = self._box_x @ here @ self._box_y.T  # the window's mass about each cell
         i, j = np.unravel_index(int(np.argmax(box)), box.shape)
         # sealed where |press - seen - centre + b| < half: the window about b* is hit by press = seen + centre - b*
         return np.array([cx - self._bx[i, j], cy - self._by[i, j]])

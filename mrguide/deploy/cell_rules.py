@@ -70,7 +70,7 @@ class CellRules:
             self.supervisor.report(Event(held), f"release refused in phase {phase}: the part is held")
             notes["hold_rule"] = held
         seen, looks = objects.seen, objects.filter.looks
-        aim = self.registration.aim(seen, looks) if seen is not None and phase == Phase.GRASP else None
+        aim = self.registration.aim(seen, looks) if seen is not None and self.seal.wants_aim else None
         executed, reseat = self.seal.apply(executed, tcp, aim, phase, vac)
         if reseat is not None:
             self.supervisor.report(Event.RESEAT, f"no seal at {vac.level_kpa:.0f} kPa: re-seat {self.seal.reseats}")

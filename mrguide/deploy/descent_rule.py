@@ -2,8 +2,8 @@
 
 A cup that moves sideways while it is down at the part pushes the part: pressed on the face's edge or beside it, the
 lip drags it along, and a policy whose target follows the part as it is seen then chases it across the table. In the
-MuJoCo cell every part the Fig. 8 policies failed to pick in a probe of 100 episodes had been pushed 75–170 mm before
-a seal (docs/sim2real.md). A cell program never slides its tool across the part: it moves over the part, then goes
+MuJoCo cell, in each of the 5 failures of a probe of Fig. 8's seed-1 policy (76 episodes, exact poses), the part had
+been pushed 75–168 mm before a seal (docs/robot.md, the descent rule). A cell program never slides its tool across the part: it moves over the part, then goes
 straight down. So, before the part is held and until the seal search takes over:
 
 - a target farther than `REACH` from the grasp point as seen keeps at least `CLEARANCE` above it: the cup goes down

@@ -60,6 +60,11 @@ class SealSearch:
         return self._k
 
     @property
+    def wants_aim(self) -> bool:
+        """The next decision moves the cup over its next point: the only one that reads `aim`."""
+        return self._stage == RISING
+
+    @property
     def blow_off(self) -> bool:
         """The last action released the cup: send the blow-off pulse with its vacuum-off command."""
         return self._stage == RISING
