@@ -55,6 +55,8 @@ class ObjectTracker:
         self._last: np.ndarray | None = None  # last pose the source gave in this episode
         self._misses = 0  # decisions in a row without a pose from the source
         self._carried: np.ndarray | None = None  # where the part hung under the cup, last seen
+        #: where the episode's first pose put the part on the table (corrected): where a part carried back goes
+        self.start: np.ndarray | None = None
         self.filter.reset()
         self.source = "source"  # where the last position came from
 
@@ -75,7 +77,10 @@ class ObjectTracker:
         except PoseUnavailable as exc:
             return self._missing(exc, phase)
         self._last, self._misses = self.filter.update(obj), 0
-        return self._on_table(self._last)
+        out = self._on_table(self._last)
+        if self.start is None:
+            self.start = out.copy()
+        return out
 
     def first_look(self) -> np.ndarray:
         """Where an episode's first decision will see the part (a look of the source, corrected, on the table),

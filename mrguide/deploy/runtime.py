@@ -40,6 +40,11 @@ from mrguide.task import Outcome, TaskConfig
 
 log = logging.getLogger(__name__)
 
+#: m: a cup with the vacuum on this far above where it grips a part on the table may carry one (`_set_down`).
+SET_DOWN_RAISED = 0.01
+#: m above the table's grip height that a part carried back travels at (at least) and the cup rises to after it.
+SET_DOWN_CLEAR = 0.05
+
 
 class Runtime:
     """Runs episodes of an exported policy on a connected, enabled cobot (any `CobotInterface`).
@@ -163,10 +168,37 @@ class Runtime:
         self._move(target, arrive=False)
         return True
 
-    def _move(self, q: np.ndarray, arrive: bool) -> None:
-        """Stream a jerk-limited move to the joint configuration `q` with the vacuum off until it is at rest; with
-        `arrive`, then hold `q` until the joints are within `home_tolerance` of it (servo lag), HOME_SETTLE_S at most."""
-        self.cobot.set_vacuum(False)
+    def _set_down(self) -> None:
+        """After an episode that did not place the part: a cup that may hold it (the vacuum on, the cup raised above
+        where it grips a part on the table) carries it back over where the episode first saw it, lowers it onto the
+        table there and lets it go. A part is never dropped from where the horizon ran out, nor left outside the pick
+        region for the next attempt. Without a joint configuration for either point the vacuum goes off where the
+        cup stands (the run log says why)."""
+        start, vac = self.objects.start, self.cobot.vacuum_state()
+        q = self.cobot.joint_state().positions
+        tcp = self.decision.tcp(q)
+        if start is None or not vac.vacuum_on:
+            return
+        down = start + self.objects.hang  # the TCP gripping the part as it stood at the episode's start
+        if tcp[2] < down[2] + SET_DOWN_RAISED:
+            return
+        above = np.array([down[0], down[1], max(float(tcp[2]), down[2] + SET_DOWN_CLEAR)])
+        try:
+            for point in (above, down):
+                q = self.decision.kin.ik(self.spec.workspace.clamp(point)[0], q)
+                self._move(q, arrive=False, vacuum=True)
+        except IKError as exc:
+            self.log.write("set_down", t=self._t, tcp=tcp, to=down, done=False, reason=str(exc))
+            return
+        self.log.write("set_down", t=self._t, tcp=tcp, to=down, done=True)
+        self.cobot.set_vacuum(False, blow_off=True)
+        self.depart(SET_DOWN_CLEAR)
+
+    def _move(self, q: np.ndarray, arrive: bool, vacuum: bool = False) -> None:
+        """Stream a jerk-limited move to the joint configuration `q` until it is at rest, the vacuum off (or kept on,
+        carrying a part); with `arrive`, then hold `q` until the joints are within `home_tolerance` of it (servo
+        lag), HOME_SETTLE_S at most."""
+        self.cobot.set_vacuum(vacuum)
         self.streamer.reset(self.cobot.setpoint)
         self.streamer.set_target(q)
         self.watchdog.arm(True)
@@ -214,6 +246,7 @@ class Runtime:
             self.streamer.brake()
             self._settle()
             if outcome is not Outcome.SUCCESS:
+                self._set_down()
                 self.cobot.set_vacuum(False)
         except KeyboardInterrupt:
             self.cobot.stop()

@@ -3,6 +3,8 @@ where it fell, and the lift rules of the runtime act on every lift."""
 
 from __future__ import annotations
 
+import numpy as np
+
 from mrguide.cell.config import CellConfig
 from mrguide.cell.dry_run import dry_run_cycles
 from mrguide.cli import main
@@ -11,6 +13,7 @@ from mrguide.deploy.runlog import RunLog, read_log
 from mrguide.motion.kinematics import Kinematics
 from mrguide.replay.runs import load_run
 from mrguide.robot import load_robot
+from mrguide.task import OBS_OBJECT, Phase
 from tests.deploy.conftest import Expert, bus_config
 
 
@@ -100,3 +103,37 @@ def test_a_release_asked_in_transport_is_refused_and_the_part_placed(tmp_path):
     decisions = [r for r in read_log(log) if r["kind"] == "decision"]
     held = [r for r in decisions if r.get("hold_rule") == "hold_in_transit"]
     assert len(held) == 1 and held[0]["action"][3] == -1.0, held
+
+
+def test_a_part_held_when_the_horizon_runs_out_is_set_down_where_it_was_seen_and_picked_again(tmp_path):
+    cfg = CellConfig()
+    ws = load_robot(cfg.robot).workspace
+    hovered: list[int] = []
+    retried: list[int] = []
+
+    def hover_in_the_first_transport(obs, phase, a):
+        """The first attempt's transport stops 15 cm up over the place side, the part held, until the horizon."""
+        if phase == Phase.APPROACH and hovered:
+            retried.append(1)
+        if phase == Phase.TRANSPORT and not retried:
+            hovered.append(1)
+            return np.array([*ws.to_normalized(np.array([0.5, 0.12, 0.15])), 1.0])
+        return a
+
+    log = tmp_path / "cycles.jsonl"
+    with RunLog(log, {"test": "set down"}) as run_log:
+        summary = dry_run_cycles(
+            None,
+            cfg,
+            bus_config(),
+            CycleRun(0, 1, seed=3, config=CycleConfig()),
+            run_log,
+            policy=Expert(cfg, hover_in_the_first_transport),
+        )
+    assert summary.cycles[0].outcomes == ["timeout", "success"], summary.text()
+    records = read_log(log)
+    (down,) = [r for r in records if r["kind"] == "set_down"]
+    assert down["done"] and down["tcp"][1] > 0.1 and down["tcp"][2] > 0.1  # carried back from over the place side
+    first, again = (r["obs"][OBS_OBJECT] for r in records if r["kind"] == "decision" and r["t"] == 0)
+    # the retry found the part where the first attempt had, in the pick region (not dropped from 15 cm up)
+    assert np.linalg.norm(np.subtract(again, first)[:2]) < 0.01, (first, again)
