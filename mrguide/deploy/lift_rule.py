@@ -6,10 +6,7 @@
 - Break-away: the first `break_away_distance` of the lift rises at most `break_away_speed`. A cup on a spring
   level-compensator is pressed in at the grasp; lifted fast, the compensator reaches its end stop with the part
   hanging under it and jerks the part at the arm's full speed: in the 'real' cell's twin, the drops in the lift
-  were that jerk at full vacuum (docs/robot.md, production cycles). The ceiling climbs by the speed's step each
-  decision from the higher of where it stood and where the TCP is: an arm that lags its setpoints by a step (a
-  position loop's sag under load) still rises, where a ceiling one step above the measured TCP held it in place
-  until the horizon (the MuJoCo cell, 17 decisions).
+  were that jerk at full vacuum (docs/robot.md, production cycles).
 
 - Hold in transit: a release asked while the part is held in the lift or the transport is not carried out: the
   vacuum stays on. The task model lets a part go only in the release phase, over its goal; anywhere before, a
@@ -60,7 +57,6 @@ class LiftRule:
 
     def reset(self) -> None:
         self._seal_z: float | None = None  # the TCP's height at the first decision of the lift
-        self._allowed = 0.0  # m: the highest target the break-away has allowed so far
 
     def apply(self, action: np.ndarray, tcp: np.ndarray, phase: int, vac: VacuumState) -> tuple[np.ndarray, str | None]:
         """(the action to run, the rule that lowered it or None). An action the decision step will refuse
@@ -83,8 +79,7 @@ class LiftRule:
             return z, VACUUM_NOT_OK
         if phase == Phase.LIFT:
             if self._seal_z is None:
-                self._seal_z = self._allowed = z
-            if self._allowed < self._seal_z + self.distance:
-                self._allowed = max(self._allowed, z) + self.rise_per_decision
-                return self._allowed, BREAK_AWAY
+                self._seal_z = z
+            if z < self._seal_z + self.distance:
+                return z + self.rise_per_decision, BREAK_AWAY
         return None, None
