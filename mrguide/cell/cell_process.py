@@ -76,6 +76,9 @@ class CellServer:
     def view(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         return self.plant.view()
 
+    def sync_backlog(self) -> float:
+        return self.sim.backlog.take()
+
     def close(self) -> None:
         """The devices leave the link, the plant's world closes."""
         self.sim.stop()
@@ -101,6 +104,10 @@ class CellProxy:
 
     def view(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         return self._call("view")
+
+    def sync_backlog(self) -> float:
+        """s: how far the cell's world ran behind the wall clock at most since the last call (`sync_backlog`)."""
+        return self._call("sync_backlog")
 
     def _call(self, name: str, *args: Any) -> Any:
         try:
@@ -129,7 +136,9 @@ class _CellManager(BaseManager):
     """Runs `CellServer`s in its server process."""
 
 
-_CellManager.register("CellServer", CellServer, exposed=("place_objects", "object_position", "view", "close"))
+_CellManager.register(
+    "CellServer", CellServer, exposed=("place_objects", "object_position", "view", "sync_backlog", "close")
+)
 
 
 @contextlib.contextmanager

@@ -53,6 +53,8 @@ class SimulatedCell:
     plant: FedCell
     sim: SimulatedCobot | None
     cobot: Cobot
+    #: s: how far the simulated world ran behind the wall clock at most since the last call (`sync_backlog`)
+    backlog: Callable[[], float]
 
 
 @contextlib.contextmanager
@@ -73,7 +75,7 @@ def simulated_cell(
             Cobot(master_cfg, spec) as cobot,
         ):
             cobot.enable()
-            yield SimulatedCell(None, proxy, None, cobot)
+            yield SimulatedCell(None, proxy, None, cobot, proxy.sync_backlog)
         return
     with settled_heap():
         plant, scene = build_plant(env_cfg, bus_cfg, spec, seed)
@@ -82,7 +84,7 @@ def simulated_cell(
         try:
             with Cobot(bus_cfg, spec) as cobot:
                 cobot.enable()
-                yield SimulatedCell(scene, plant, sim, cobot)
+                yield SimulatedCell(scene, plant, sim, cobot, sim.backlog.take)
         finally:
             sim.stop()
             if scene is not None:
@@ -155,12 +157,19 @@ def dry_run(
             cell.plant.place_objects(*layouts[i])
             if on_placed:
                 on_placed()
+            cell.backlog()  # each episode's backlog from its start
+
+        def judged(report: EpisodeReport) -> None:
+            report.cell_backlog_s = cell.backlog()
+            run_log.write("cell_backlog", episode=report.index, seconds=round(report.cell_backlog_s, 4))
+            if after_episode:
+                after_episode(report)
 
         return run_session(
             runtime,
             [g for _, g in layouts],
             before_episode=place,
-            after_episode=after_episode,
+            after_episode=judged,
             max_recoveries=max_recoveries,
         )
 
@@ -252,6 +261,7 @@ def dry_run_cycles(
         feeder = TwinFeeder(cell, env_cfg, run.seed, on_placed)
         scored = _scored(run.after_cycle, cell, feeder, env_cfg.task, run_log)
         runner = CycleRunner(runtime, feeder, feeder.goal, run.config, scored)
+        cell.backlog()  # each cycle's backlog from the first cycle's start (`_scored`)
         return runner.run(run.start, run.count, run.interrupt, run.first_attempt)
 
 
@@ -268,13 +278,16 @@ def _scored(
 ) -> Callable[[CycleReport], None]:
     """`after_cycle`, first writing the dry run's score of the cycle to the run log (`scored`): whether the part
     truly lies at its goal, resting on the table (within `REST_TOLERANCE` of its height there), read from the
-    simulated cell's state — which nothing the runtime or a learner reads."""
+    simulated cell's state — which nothing the runtime or a learner reads — and how far the simulated cell's world
+    ran behind the wall clock during the cycle at most (`cell_backlog_s`: a cycle the cell played late is not one a
+    cell on time would have played)."""
 
     def after(report: CycleReport) -> None:
         part = cell.plant.object_position()
         resting = abs(part[2] - 0.5 * task.object_height) <= REST_TOLERANCE
         at_goal = report.placed and resting and placed_at_goal(task, part, feeder.goal(report.cycle))
-        run_log.write("scored", cycle=report.cycle, at_goal=bool(at_goal), part=part)
+        backlog = round(cell.backlog(), 4)
+        run_log.write("scored", cycle=report.cycle, at_goal=bool(at_goal), part=part, cell_backlog_s=backlog)
         if after_cycle:
             after_cycle(report)
 

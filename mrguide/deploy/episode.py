@@ -28,3 +28,5 @@ class EpisodeReport:
     latency_ms: list[float] = field(default_factory=list)
     inference_ms: list[float] = field(default_factory=list)
     wall_s: float = 0.0
+    #: s, dry runs only: how far the simulated cell's world ran behind the wall clock at most (`sync_backlog`)
+    cell_backlog_s: float = 0.0

@@ -50,6 +50,13 @@ CELL_CONDITIONS = {
 #: Failure causes as reported: the task model's failures, and "safety_stop" for every episode the deploy
 #: runtime's supervisor ended (safety stops, aborted episodes, a lost object pose).
 CAUSES = tuple(o.value for o in Outcome if o.from_task and o is not Outcome.SUCCESS) + (Outcome.SAFETY_STOP.value,)
+#: An episode during which the simulated cell's world ran more than `MAX_CELL_BACKLOG_S` behind the wall clock
+#: (`mrguide.drivers.mock.sync_backlog`): the arm the runtime read stood where it had been, as no cell's arm does. It
+#: is not the policy's outcome: counted apart and left out of the success rates, as are the episodes of the draw
+#: left unplayed after it stopped the run.
+CELL_BEHIND = "cell_behind"
+#: s: a simulated cell on time trails by about 10 ms at most (the setpoint queue's SYNC jitter)
+MAX_CELL_BACKLOG_S = 0.1
 
 
 @dataclass(frozen=True)
@@ -99,26 +106,28 @@ class ConditionResult:
     outcomes: dict[int, list[str]]  # seed -> outcome per episode
 
     def rates(self) -> np.ndarray:
-        return np.array([np.mean([o == "success" for o in v]) for v in self.outcomes.values()])
+        """Per seed, the share of its judged episodes placed (an episode the cell's lag voided is not judged)."""
+        judged = ([o for o in v if o != CELL_BEHIND] for v in self.outcomes.values())
+        return np.array([np.mean([o == "success" for o in v]) for v in judged if v])
 
     def summary(self) -> dict:
         """Pooled success rate with its 95 % Wilson interval, the spread over seeds (the least and the median seed's
-        rate), failures by cause."""
+        rate), failures by cause; episodes voided by the cell's lag (`CELL_BEHIND`) are counted, not judged."""
         pooled = Counter(o for v in self.outcomes.values() for o in v)
-        total = sum(pooled.values())
+        total = sum(pooled.values()) - pooled.get(CELL_BEHIND, 0)
         lo, hi = wilson(pooled.get("success", 0), total)
         rates = self.rates()
         return {
             "condition": self.condition,
-            "seeds": len(rates),
-            "episodes": total,
+            "seeds": len(self.outcomes),
+            "episodes": total,  # judged: those the cell's lag voided are counted under CELL_BEHIND
             "success_rate": pooled.get("success", 0) / max(total, 1),
             "ci95_low": lo,
             "ci95_high": hi,
             "seed_std": float(rates.std(ddof=1)) if len(rates) > 1 else 0.0,
             "seed_min": float(rates.min()) if len(rates) else 0.0,  # a seed is a calibration draw of the played cell
             "seed_median": float(np.median(rates)) if len(rates) else 0.0,
-            **{c: pooled.get(c, 0) for c in CAUSES},
+            **{c: pooled.get(c, 0) for c in (*CAUSES, CELL_BEHIND)},
         }
 
 
@@ -251,7 +260,12 @@ class _SeedHooks:
     def judge(self, report: EpisodeReport) -> None:
         """Record the episode's outcome, judged on the ground truth of the twin that played the robot."""
         outcome = _cause(report.outcome)
-        if outcome in (Outcome.SUCCESS, Outcome.MISPLACED):
+        if report.cell_backlog_s > MAX_CELL_BACKLOG_S:
+            log.warning(
+                "episode %d: the simulated cell ran %.2f s behind: not judged", report.index, report.cell_backlog_s
+            )
+            outcome = CELL_BEHIND
+        elif outcome in (Outcome.SUCCESS, Outcome.MISPLACED):
             # released at the goal pose: the task model's placement rule decides, on the ground truth of the
             # twin that played the robot (the runtime judged on its pose source or the tracked TCP)
             placed = placed_at_goal(self.task, self.cells[0].plant.object_position(), self.goals[report.index])
@@ -262,7 +276,8 @@ class _SeedHooks:
 
     def finish(self, summary: DeploySummary, seed: int, episodes: int) -> list[str]:
         """The seed's outcomes: a run stopped early leaves its remaining episodes unplayed, counted as safety stops."""
-        self.outcomes += ["safety_stop"] * (episodes - len(self.outcomes))
+        behind = self.outcomes[-1:] == [CELL_BEHIND]  # the stop came in an episode the cell's lag voided
+        self.outcomes += [CELL_BEHIND if behind else "safety_stop"] * (episodes - len(self.outcomes))
         if summary.recoveries:
             log.warning("seed %d: %d safety stop(s) recovered from", seed, summary.recoveries)
         if summary.stopped:

@@ -12,7 +12,7 @@ import numpy as np
 
 from mrguide.cell.config import CellConfig
 from mrguide.experiments import report
-from mrguide.experiments.sim2real import CAUSES, CELL_CONDITIONS, ConditionResult, RealCell
+from mrguide.experiments.sim2real import CAUSES, CELL_BEHIND, CELL_CONDITIONS, ConditionResult, RealCell
 from mrguide.output_files import write_files_atomically
 
 LABELS = {
@@ -46,17 +46,17 @@ def report_files(results: list[ConditionResult], cells_text: str) -> dict[str, b
     w.writeheader()
     w.writerows(rows)
     lines = [
-        "| condition | seeds × episodes | success | 95 % CI (Wilson) | std over seeds | seed min / median | "
-        + " | ".join(CAUSES)
+        "| condition | draws, episodes judged | success | 95 % CI (Wilson) | std over seeds | seed min / median | "
+        + " | ".join((*CAUSES, CELL_BEHIND))
         + " |",
-        "| --- | --- | --- | --- | --- | --- | " + " | ".join("---" for _ in CAUSES) + " |",
+        "| --- | --- | --- | --- | --- | --- | " + " | ".join("---" for _ in (*CAUSES, CELL_BEHIND)) + " |",
     ]
     for r in rows:
         lines.append(
-            f"| {r['condition']} | {r['seeds']} × {r['episodes'] // max(r['seeds'], 1)} | {100 * r['success_rate']:.0f} % | "
+            f"| {r['condition']} | {r['seeds']}, {r['episodes']} | {100 * r['success_rate']:.0f} % | "
             f"{100 * r['ci95_low']:.0f}–{100 * r['ci95_high']:.0f} % | {100 * r['seed_std']:.0f} % | "
             f"{100 * r['seed_min']:.0f} / {100 * r['seed_median']:.0f} % | "
-            + " | ".join(str(r[c]) for c in CAUSES)
+            + " | ".join(str(r[c]) for c in (*CAUSES, CELL_BEHIND))
             + " |"
         )
     lines += ["", cells_text] if cells_text else []

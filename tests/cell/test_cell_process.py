@@ -51,6 +51,9 @@ def test_production_cycles_run_against_a_cell_in_its_own_process(tmp_path):
     assert cell.sim is None and cell.scene is None  # the devices and the physics ran in the other process
     goals = [r["goal"] for r in read_log(log) if r["kind"] == "episode_start"]
     assert len(goals) == 2 and len(resting) == 2
+    # each cycle's score says how far the cell's world ran behind the wall clock (read from the cell's process)
+    backlogs = [r["cell_backlog_s"] for r in read_log(log) if r["kind"] == "scored"]
+    assert len(backlogs) == 2 and all(b >= 0.0 for b in backlogs)
     for goal, rest in zip(goals, resting, strict=True):
         assert np.linalg.norm(np.asarray(goal)[:2] - rest[:2]) < 0.02
 

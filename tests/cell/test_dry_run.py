@@ -72,3 +72,5 @@ def test_the_scripted_expert_places_parts_in_the_mujoco_cell(run_dry):
     assert type(used.plant).__name__ == "MujocoPlant" and used.scene is None
     assert summary.stopped is None and summary.successes == 4, summary.text()
     _check_logged_trajectory(log)
+    backlogs = [r for r in read_log(log) if r["kind"] == "cell_backlog"]  # how far the world ran behind, per episode
+    assert [r["episode"] for r in backlogs] == [0, 1, 2, 3] and all(r["seconds"] >= 0.0 for r in backlogs)

@@ -187,3 +187,14 @@ def test_sweep_runs_each_value_as_its_type_and_reports_it(tmp_path, run_cli, pol
     ]
     assert (out / "fig8_sim2real.png").stat().st_size > 1000 and "| real_hmd tracking_noise_m=0.004 |" in result.out
     assert sorted(p.name for p in out.iterdir()) == ["fig8_sim2real.png", "sim2real.csv", "sim2real.md"]
+
+
+def test_an_episode_the_simulated_cell_played_behind_the_clock_is_voided_with_what_its_stop_left_unplayed():
+    from mrguide.deploy.episode import EpisodeReport
+    from mrguide.deploy.session import DeploySummary
+    from mrguide.task import Outcome, TaskConfig
+
+    hooks = s2r._SeedHooks(TaskConfig(), [np.zeros(3)] * 4, [], None)
+    hooks.judge(EpisodeReport(0, Outcome.NO_GRASP, 60, {}, cell_backlog_s=0.05))  # on time: the policy's outcome
+    hooks.judge(EpisodeReport(1, Outcome.SAFETY_STOP, 44, {}, cell_backlog_s=1.3))  # 1.3 s behind: not judged
+    assert hooks.finish(DeploySummary(), 0, 4) == ["no_grasp", "cell_behind", "cell_behind", "cell_behind"]

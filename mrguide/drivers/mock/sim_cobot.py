@@ -19,6 +19,7 @@ from __future__ import annotations
 import logging
 import math
 import threading
+import time
 from dataclasses import dataclass, replace
 
 import canopen
@@ -31,6 +32,7 @@ from mrguide.drivers.conversion import JointConversion
 from mrguide.drivers.errors import NotReadyError
 from mrguide.drivers.mock.drive_sim import SimulatedDrive
 from mrguide.drivers.mock.faults import FaultInjector, FaultStats, FaultyBus
+from mrguide.drivers.mock.sync_backlog import SyncBacklog
 from mrguide.drivers.mock.vacuum_sim import SimulatedVacuumGenerator
 from mrguide.plant import Plant
 
@@ -88,6 +90,8 @@ class SimulatedCobot:
         #: Held while a SYNC is processed (plant stepping); take it to touch the plant from another thread.
         self.lock = threading.RLock()
         self.sync_count = 0
+        #: How far the world (one control period per SYNC) runs behind the wall clock (`sync_backlog`).
+        self.backlog = SyncBacklog(config.timing.control_period)
         self._network: canopen.Network | None = None
         self._receiver: BusReceiver | None = None
         self.drives: list[SimulatedDrive] = []
@@ -182,6 +186,7 @@ class SimulatedCobot:
                 if not slave.silent:
                     slave.check_heartbeats(timestamp)
             self.sync_count += 1
+            self.backlog.tick(time.monotonic())
             plant = self.plant
             dt = self.drives[0].interpolation_period
             q, v = plant.joint_positions(), plant.joint_velocities()
