@@ -197,6 +197,9 @@ def run_real(
                     on_placed=hooks.refresh,
                     policy=policy,
                     max_recoveries=episodes,
+                    # the cell in a process of its own, as `mrguide deploy --dry-run` runs it: in the runtime's, its
+                    # physics waited for the GIL behind the decisions and ran up to a second behind the clock
+                    own_process=True,
                 )
             except DriverError as exc:  # the cell did not start (drives not enabled in time on a starved PC)
                 if hooks.outcomes:
