@@ -12,6 +12,7 @@ import numpy as np
 
 from mrguide.deploy.host_stats import MISS_ANATOMY, anatomy_value
 from mrguide.deploy.runlog import RunLogError, read_log, slim_records, write_gzipped
+from mrguide.drivers.mock.sync_backlog import MAX_CELL_BACKLOG_S
 from mrguide.errors import InputError
 
 #: Cycles a session runs before its resident set is taken as the baseline of "RSS growth after warm-up": the
@@ -67,6 +68,7 @@ def cycle_figures(records: list[dict]) -> dict[str, Any]:
         # a cycle ends unplaced without an alarm only when the run stopped in it (a safety stop, Ctrl-C twice)
         "cut": sum(not r["placed"] and r["alarm"] is None for r in ends),
         "retries": dict(Counter(c for r in ends for c in r["retries"])),
+        "cells_behind": _cells_behind(records),
         "cycle_s_median": float(np.median(times)) if len(times) else None,
         "cycle_s_p95": float(np.percentile(times, 95)) if len(times) else None,
         "parts_per_hour": 3600.0 * placed_in_ended / wall if wall > 0 else None,
@@ -80,6 +82,13 @@ def cycle_figures(records: list[dict]) -> dict[str, Any]:
         **{f"cycles_with_missed_and_{key}": _cycles_with(ends, "missed_cycles", key) for key in MISS_CONTEXT},
         **{f"missed_with_{key}": _missed_with(ends, key) for key in MISS_CONTEXT},
     }
+
+
+def _cells_behind(records: list[dict]) -> int | None:
+    """How many cycles of a dry run its simulated cell played more than MAX_CELL_BACKLOG_S behind the clock (the
+    `scored` records); None for a log that does not record it (a robot's, or a dry run's from before)."""
+    scored = [r for r in records if r.get("kind") == "scored" and "cell_backlog_s" in r]
+    return sum(float(r["cell_backlog_s"]) > MAX_CELL_BACKLOG_S for r in scored) if scored else None
 
 
 def _cycles_with(ends: list[dict], *keys: str) -> int | None:
@@ -110,7 +119,8 @@ def table(rows: dict[str, dict[str, Any]]) -> str:
         n = f["cycles"]
         retries = ", ".join(f"{k} {v}" for k, v in sorted(f["retries"].items())) or "none"
         lines.append(
-            f"| {name} | {f['placed']} / {n}{f' ({cut} cut by a stop)' if (cut := f['cut']) else ''} | {(n - f['alarms']) / n:.1%} | {f['placed_first_attempt']} | {retries} "
+            f"| {name} | {f['placed']} / {n}{f' ({cut} cut by a stop)' if (cut := f['cut']) else ''}{_behind(f)} "
+            f"| {(n - f['alarms']) / n:.1%} | {f['placed_first_attempt']} | {retries} "
             f"| {f['alarms']} | {_num(f['cycle_s_median'], '.2f')} / {_num(f['cycle_s_p95'], '.2f')} s "
             f"| {_num(f['parts_per_hour'], '.0f')} | {_num(f['missed_cycles'], 'd')}{_in_cycles(f)} | {_num(f['underruns'], 'd')} "
             f"| {_num(f['rss_growth_mb'], '.1f', ' MB')} | {_num(f['rss_growth_after_warmup_mb'], '.1f', ' MB')} |"
@@ -160,6 +170,12 @@ def _in_cycles(f: dict[str, Any]) -> str:
         if f[f"cycles_with_missed_and_{key}"] is not None
     ]
     return f" (in {f['cycles_with_missed']} cycles" + (": " + ", ".join(events) if events else "") + ")"
+
+
+def _behind(f: dict[str, Any]) -> str:
+    """A dry run's cycles its cell played behind the clock, if any (not cycles a cell on time would have played)."""
+    k = f["cells_behind"]
+    return f" ({k} with the simulated cell > {MAX_CELL_BACKLOG_S:g} s behind the clock)" if k else ""
 
 
 def _num(value: float | int | None, fmt: str, unit: str = "") -> str:

@@ -32,6 +32,7 @@ from mrguide.deploy.safety import SafetyConfig
 from mrguide.deploy.session import DeploySummary
 from mrguide.drivers.config import CobotBusConfig
 from mrguide.drivers.errors import DriverError
+from mrguide.drivers.mock.sync_backlog import MAX_CELL_BACKLOG_S
 from mrguide.experiments.stats import wilson
 from mrguide.robot import load_robot
 from mrguide.task import Outcome, TaskConfig, placed_at_goal
@@ -55,8 +56,6 @@ CAUSES = tuple(o.value for o in Outcome if o.from_task and o is not Outcome.SUCC
 #: is not the policy's outcome: counted apart and left out of the success rates, as are the episodes of the draw
 #: left unplayed after it stopped the run.
 CELL_BEHIND = "cell_behind"
-#: s: a simulated cell on time trails by about 10 ms at most (the setpoint queue's SYNC jitter)
-MAX_CELL_BACKLOG_S = 0.1
 
 
 @dataclass(frozen=True)

@@ -275,3 +275,16 @@ def test_full_collections_are_counted_while_started():
     collections.stop()
     gc.collect()
     assert collections.count == 1 and collections.seconds > 0.0
+
+
+def test_the_cycles_a_dry_runs_cell_played_behind_the_clock_are_counted(tmp_path, capsys):
+    log_path = tmp_path / "behind.jsonl"
+    with RunLog(log_path, {"command": "deploy", "cycles": 3}) as log:
+        for cycle, backlog in enumerate([0.012, 0.45, 0.02]):
+            write_placed_cycle(log, cycle)
+            log.write("scored", cycle=cycle, at_goal=True, part=[0.5, 0.1, 0.025], cell_backlog_s=backlog)
+    assert cycle_figures(read_log(log_path))["cells_behind"] == 1
+    assert main(["cycles", "report", str(log_path)]) == 0
+    assert "| 3 / 3 (1 with the simulated cell > 0.1 s behind the clock) |" in capsys.readouterr().out
+    write_run(tmp_path / "robot.jsonl")  # no scored records: a robot's log, or a dry run's from before
+    assert cycle_figures(read_log(tmp_path / "robot.jsonl"))["cells_behind"] is None
