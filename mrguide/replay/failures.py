@@ -1,7 +1,8 @@
 """The failed episodes of run logs, one line each: the outcome, the phase it ended in, the vacuum level and TCP
 height over its last decisions — where a part was lost, and whether the seal broke at once or leaked away — and
 how far the part was pushed across the table before the cup held it, and how far off the cup's axis it hung when the
-lift began (a simulated cell's ground truth).
+lift began (a simulated cell's ground truth). A dry run's episode whose simulated cell ran more than 0.1 s behind the
+clock (its `cell_backlog` record) is marked: `mrguide sim2real` does not judge it.
 
     python -m mrguide.replay.failures LOG... [--grasps FILE.csv]
 
@@ -22,6 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
+from mrguide.deploy.runlog import read_log
+from mrguide.drivers.mock.sync_backlog import MAX_CELL_BACKLOG_S
 from mrguide.replay.runs import Episode, RunError, load_run
 from mrguide.task import Phase
 
@@ -60,6 +63,13 @@ def grasp_offset_mm(ep: Episode) -> float | None:
     return float(1e3 * np.linalg.norm((lift.obj_true - lift.tcp)[:2]))
 
 
+def cells_behind(path: str) -> dict[int, float]:
+    """The episodes of a dry run's log whose simulated cell ran more than MAX_CELL_BACKLOG_S behind the clock, and by
+    how much (s); none for a log that does not record it."""
+    seconds = {r["episode"]: float(r["seconds"]) for r in read_log(path) if r.get("kind") == "cell_backlog"}
+    return {e: s for e, s in seconds.items() if s > MAX_CELL_BACKLOG_S}
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m mrguide.replay.failures", description=__doc__.split("\n")[0])
     ap.add_argument("logs", nargs="+", help="run logs (.jsonl or .jsonl.gz) of deploy, a dry run or sim2real")
@@ -72,9 +82,11 @@ def main(argv: list[str] | None = None) -> int:
         except RunError as exc:
             print(f"error: {exc}", file=sys.stderr)
             return 1
+        behind = cells_behind(path)
         for ep in episodes:
             if ep.outcome != "success":
-                print(failure_line(ep))
+                late = f"; the cell ran {behind[ep.index]:.2f} s behind the clock: not judged" if ep.index in behind else ""
+                print(failure_line(ep) + late)
             offset = grasp_offset_mm(ep)
             if offset is not None:
                 rows.append(
@@ -86,7 +98,8 @@ def main(argv: list[str] | None = None) -> int:
                     }
                 )
         outcomes = Counter(str(ep.outcome) for ep in episodes)
-        print(f"{path}: {len(episodes)} episodes, " + ", ".join(f"{k} {v}" for k, v in sorted(outcomes.items())))
+        late = f"; {len(behind)} with the cell behind the clock (not judged)" if behind else ""
+        print(f"{path}: {len(episodes)} episodes, " + ", ".join(f"{k} {v}" for k, v in sorted(outcomes.items())) + late)
     if args.grasps:
         with args.grasps.open("w", newline="") as fh:
             writer = csv.DictWriter(fh, ["log", "episode", "outcome", "grasp_offset_mm"])
