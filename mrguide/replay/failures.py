@@ -85,7 +85,11 @@ def main(argv: list[str] | None = None) -> int:
         behind = cells_behind(path)
         for ep in episodes:
             if ep.outcome != "success":
-                late = f"; the cell ran {behind[ep.index]:.2f} s behind the clock: not judged" if ep.index in behind else ""
+                late = (
+                    f"; the cell ran {behind[ep.index]:.2f} s behind the clock: not judged"
+                    if ep.index in behind
+                    else ""
+                )
                 print(failure_line(ep) + late)
             offset = grasp_offset_mm(ep)
             if offset is not None:
