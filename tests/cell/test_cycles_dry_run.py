@@ -1,7 +1,10 @@
 """Production cycles through the whole stack against the simulated cell: a part lost in the lift is picked again
-where it fell, and the lift rules of the runtime act on every lift."""
+where it fell, the lift rules of the runtime act on every lift, and a part still on the cup when the horizon runs out
+is set down where it was seen."""
 
 from __future__ import annotations
+
+from pathlib import Path
 
 import numpy as np
 
@@ -76,6 +79,14 @@ def test_a_part_dropped_in_the_lift_is_picked_again_and_placed(tmp_path):
     assert (tmp_path / "recovered.rrd").stat().st_size > 0
 
 
+def one_cycle(log: Path, cfg: CellConfig, hook):
+    """One production cycle of the scripted expert (`hook` may make it misbehave) in the simulated cell, logged."""
+    with RunLog(log, {"test": log.stem}) as run_log:
+        return dry_run_cycles(
+            None, cfg, bus_config(), CycleRun(0, 1, seed=3, config=CycleConfig()), run_log, policy=Expert(cfg, hook)
+        )
+
+
 def test_a_release_asked_in_transport_is_refused_and_the_part_placed(tmp_path):
     cfg = CellConfig()
     asked = []
@@ -89,15 +100,7 @@ def test_a_release_asked_in_transport_is_refused_and_the_part_placed(tmp_path):
         return a
 
     log = tmp_path / "cycles.jsonl"
-    with RunLog(log, {"test": "hold in transit"}) as run_log:
-        summary = dry_run_cycles(
-            None,
-            cfg,
-            bus_config(),
-            CycleRun(0, 1, seed=3, config=CycleConfig()),
-            run_log,
-            policy=Expert(cfg, release_in_transport),
-        )
+    summary = one_cycle(log, cfg, release_in_transport)
     assert len(asked) >= 3, "the transport never got to its third decision"
     assert summary.placed == 1 and summary.retries() == {}, summary.text()
     decisions = [r for r in read_log(log) if r["kind"] == "decision"]
@@ -121,15 +124,7 @@ def test_a_part_held_when_the_horizon_runs_out_is_set_down_where_it_was_seen_and
         return a
 
     log = tmp_path / "cycles.jsonl"
-    with RunLog(log, {"test": "set down"}) as run_log:
-        summary = dry_run_cycles(
-            None,
-            cfg,
-            bus_config(),
-            CycleRun(0, 1, seed=3, config=CycleConfig()),
-            run_log,
-            policy=Expert(cfg, hover_in_the_first_transport),
-        )
+    summary = one_cycle(log, cfg, hover_in_the_first_transport)
     assert summary.cycles[0].outcomes == ["timeout", "success"], summary.text()
     records = read_log(log)
     (down,) = [r for r in records if r["kind"] == "set_down"]
