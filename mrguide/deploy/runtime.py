@@ -44,6 +44,9 @@ log = logging.getLogger(__name__)
 SET_DOWN_RAISED = 0.01
 #: m above the table's grip height that a part carried back travels at (at least) and the cup rises to after it.
 SET_DOWN_CLEAR = 0.05
+#: The share of the arm's joint limits (velocity, acceleration, jerk) a part is carried back at: a part the episode
+#: failed with may be held badly (carried back at full speed, one in the MuJoCo cell tore off half-way).
+SET_DOWN_SPEED = 0.25
 
 
 class Runtime:
@@ -184,9 +187,10 @@ class Runtime:
             return
         above = np.array([down[0], down[1], max(float(tcp[2]), down[2] + SET_DOWN_CLEAR)])
         try:
-            for point in (above, down):
-                q = self.decision.kin.ik(self.spec.workspace.clamp(point)[0], q)
-                self._move(q, arrive=False, vacuum=True)
+            with self.streamer.slowed(SET_DOWN_SPEED):
+                for point in (above, down):
+                    q = self.decision.kin.ik(self.spec.workspace.clamp(point)[0], q)
+                    self._move(q, arrive=False, vacuum=True)
         except IKError as exc:
             self.log.write("set_down", t=self._t, tcp=tcp, to=down, done=False, reason=str(exc))
             return

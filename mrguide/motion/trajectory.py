@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -69,6 +71,21 @@ class JointStreamer:
             raise TrajectoryError(f"trajectory target {np.round(q_target, 4).tolist()} outside the joint limits")
         self._inp.control_interface = ControlInterface.Position
         self._inp.target_position = q_target.tolist()
+
+    @contextlib.contextmanager
+    def slowed(self, factor: float) -> Iterator[None]:
+        """Within the block, the velocity, acceleration and jerk limits are `factor` (0 < factor <= 1) of the arm's:
+        a move that carries what may be held badly."""
+        if not 0.0 < factor <= 1.0:
+            raise ValueError(f"a slowed move's factor must be in (0, 1], got {factor}")
+        spec, i = self.spec, self._inp
+        i.max_velocity, i.max_acceleration, i.max_jerk = (
+            (x * factor).tolist() for x in (spec.v_max, spec.a_max, spec.j_max)
+        )
+        try:
+            yield
+        finally:
+            i.max_velocity, i.max_acceleration, i.max_jerk = (x.tolist() for x in (spec.v_max, spec.a_max, spec.j_max))
 
     def brake(self) -> None:
         """Come to rest as fast as the limits allow (jerk-limited), wherever that is: the 'hold' reaction."""

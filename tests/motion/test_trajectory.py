@@ -91,3 +91,26 @@ def test_a_plan_ruckig_refuses_raises_trajectory_error():
     streamer._inp.max_jerk = [float("nan")] * spec.dof  # what no retry can plan
     with pytest.raises(TrajectoryError, match="Ruckig"):
         streamer.step()
+
+
+def test_a_slowed_move_keeps_to_its_share_of_the_limits_and_the_next_has_them_all_again():
+    spec = load_robot()
+    s = JointStreamer(spec, 0.004)
+    far = spec.q_home + np.array([0.8, -0.4, 0.5, 0.6, 0.4, 0.9])
+
+    def peak(target):
+        s.set_target(target)
+        dq, ddq = [], []
+        while not (sp := s.step()).finished:
+            dq.append(np.abs(sp.dq) / spec.v_max)
+            ddq.append(np.abs(sp.ddq) / spec.a_max)
+        return np.max(dq), np.max(ddq)
+
+    with s.slowed(0.25):
+        v, a = peak(far)
+    assert v <= 0.25 + 1e-6 and a <= 0.25 + 1e-6 and v > 0.2  # the move used its share, no more
+    v, a = peak(spec.q_home)
+    assert v > 0.9  # the limits are the arm's again after the block
+    with pytest.raises(ValueError):
+        with s.slowed(0.0):
+            pass
