@@ -172,18 +172,14 @@ class Runtime:
         return True
 
     def _set_down(self) -> None:
-        """After an episode that did not place the part: a cup that may hold it (the vacuum on, the cup raised above
-        where it grips a part on the table) carries it back over where the episode first saw it, lowers it onto the
-        table there and lets it go. A part is never dropped from where the horizon ran out, nor left outside the pick
-        region for the next attempt. Without a joint configuration for either point the vacuum goes off where the
-        cup stands (the run log says why)."""
-        start, vac = self.objects.start, self.cobot.vacuum_state()
-        q = self.cobot.joint_state().positions
+        """After an episode that did not place the part: a cup that may hold it (the vacuum on, raised above where it
+        grips a part on the table) carries it back over where the episode first saw it, lowers it onto the table and
+        lets go: a part is never dropped where the horizon ran out. Without a joint configuration for either point
+        the vacuum goes off where the cup stands (the run log says why)."""
+        start, q = self.objects.start, self.cobot.joint_state().positions
         tcp = self.decision.tcp(q)
-        if start is None or not vac.vacuum_on:
-            return
-        down = start + self.objects.hang  # the TCP gripping the part as it stood at the episode's start
-        if tcp[2] < down[2] + SET_DOWN_RAISED:
+        down = None if start is None else start + self.objects.hang  # the TCP gripping the part at the start
+        if down is None or not self.cobot.vacuum_state().vacuum_on or tcp[2] < down[2] + SET_DOWN_RAISED:
             return
         above = np.array([down[0], down[1], max(float(tcp[2]), down[2] + SET_DOWN_CLEAR)])
         try:
@@ -195,8 +191,18 @@ class Runtime:
             self.log.write("set_down", t=self._t, tcp=tcp, to=down, done=False, reason=str(exc))
             return
         self.log.write("set_down", t=self._t, tcp=tcp, to=down, done=True)
-        self.cobot.set_vacuum(False, blow_off=True)
+        self._let_go()
         self.depart(SET_DOWN_CLEAR)
+
+    def _let_go(self) -> None:
+        """The vacuum off, with a blow-off pulse for one decision period while the arm stands if it was on: a cup
+        whose valve only closes stays evacuated for a second, and the move that follows carried the part off
+        (the MuJoCo cell: a part that had not sealed hung under the cup at home, 0.2 m from the pick region)."""
+        if self.cobot.vacuum_state().vacuum_on:
+            self.cobot.set_vacuum(False, blow_off=True)
+            for _ in range(self.cycles):
+                self._stream_cycle()
+        self.cobot.set_vacuum(False)
 
     def _move(self, q: np.ndarray, arrive: bool, vacuum: bool = False) -> None:
         """Stream a jerk-limited move to the joint configuration `q` until it is at rest, the vacuum off (or kept on,
@@ -251,7 +257,7 @@ class Runtime:
             self._settle()
             if outcome is not Outcome.SUCCESS:
                 self._set_down()
-                self.cobot.set_vacuum(False)
+                self._let_go()
         except KeyboardInterrupt:
             self.cobot.stop()
             self.supervisor.report(Event.INTERRUPT, "Ctrl-C")

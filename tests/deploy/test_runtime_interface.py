@@ -215,3 +215,30 @@ def test_every_release_blows_off_for_one_decision(tmp_path):
     decisions = calls[: task.horizon]
     assert decisions[:5] == [(False, False), (False, False), (True, False), (True, False), (False, True)]
     assert decisions[5:] == [(False, False)] * (len(decisions) - 5)
+
+
+def test_an_episode_that_ends_with_the_vacuum_on_blows_off_for_a_decision_before_the_arm_moves(tmp_path):
+    """A cup pressed without a seal when the horizon runs out: a valve that only closed left it evacuated, and the
+    home move carried the part off (the MuJoCo cell: a part hung under the cup at home, 0.2 m from the pick region)."""
+    spec, task = load_robot(), TaskConfig(horizon=8)
+    cobot = IdealCobot(spec.q_home)
+    calls = []
+    set_vacuum = cobot.set_vacuum
+
+    def spy(on, blow_off=False):
+        calls.append((bool(on), bool(blow_off), len(cobot.streamed)))
+        set_vacuum(on, blow_off)
+
+    cobot.set_vacuum = spy
+    policy = lambda obs: oracle_action(obs, task, spec.workspace.to_normalized)  # noqa: E731  (presses, vacuum on)
+    with (
+        RunLog(tmp_path / "log.jsonl", {"test": "let go"}) as log,
+        Runtime(cobot, policy, FixedObjectPose((0.5, -0.075, 0.025)), spec, task, log, 0.1, RuntimeConfig()) as rt,
+    ):
+        report = rt.run_episode(np.array([0.5, 0.21, 0.025]), 0)
+        rt.home()
+    assert report.outcome is Outcome.NO_GRASP
+    pulse = next(i for i, (on, blow, _) in enumerate(calls) if blow)
+    assert calls[pulse - 1][0] and not calls[pulse][0]  # the pulse follows the last decision's vacuum-on
+    streamed_during = calls[pulse + 1][2] - calls[pulse][2]
+    assert calls[pulse + 1][:2] == (False, False) and streamed_during == 25  # held a decision (25 cycles), then off
