@@ -10,9 +10,9 @@ from typing import Any
 
 import numpy as np
 
+from mrguide.deploy.episode import MAX_CELL_BACKLOG_S
 from mrguide.deploy.host_stats import MISS_ANATOMY, anatomy_value
 from mrguide.deploy.runlog import RunLogError, read_log, slim_records, write_gzipped
-from mrguide.drivers.mock.sync_backlog import MAX_CELL_BACKLOG_S
 from mrguide.errors import InputError
 
 #: Cycles a session runs before its resident set is taken as the baseline of "RSS growth after warm-up": the

@@ -15,6 +15,10 @@ class RunStopped(RuntimeError):
     report: EpisodeReport | None = None
 
 
+#: s: an episode or cycle whose simulated cell ran further behind the clock than this (`cell_backlog_s`) is not one a
+#: cell on time would have played (on time: about 10 ms at most, the SYNCs' jitter).
+MAX_CELL_BACKLOG_S = 0.1
+
 #: How long the arm may take to arrive home after its last setpoint was home (s): servo lag, settling.
 HOME_SETTLE_S = 1.0
 

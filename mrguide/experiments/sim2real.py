@@ -25,14 +25,13 @@ from mrguide.cell.hmd_feed import HmdFeed
 from mrguide.cell.hmd_stream import HmdPoseStream, HmdStartError
 from mrguide.cell.twin_plant import TwinObjectPose
 from mrguide.config import to_dict
-from mrguide.deploy.episode import EpisodeReport
+from mrguide.deploy.episode import MAX_CELL_BACKLOG_S, EpisodeReport
 from mrguide.deploy.policy import ExportedPolicy, check_arm, check_decision_period
 from mrguide.deploy.runlog import RunLog
 from mrguide.deploy.safety import SafetyConfig
 from mrguide.deploy.session import DeploySummary
 from mrguide.drivers.config import CobotBusConfig
 from mrguide.drivers.errors import DriverError
-from mrguide.drivers.mock.sync_backlog import MAX_CELL_BACKLOG_S
 from mrguide.experiments.stats import wilson
 from mrguide.robot import load_robot
 from mrguide.task import Outcome, TaskConfig, placed_at_goal

@@ -23,8 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
+from mrguide.deploy.episode import MAX_CELL_BACKLOG_S
 from mrguide.deploy.runlog import read_log
-from mrguide.drivers.mock.sync_backlog import MAX_CELL_BACKLOG_S
 from mrguide.replay.runs import Episode, RunError, load_run
 from mrguide.task import Phase
 

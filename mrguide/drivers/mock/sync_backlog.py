@@ -16,10 +16,6 @@ from __future__ import annotations
 import math
 import threading
 
-#: s: an episode or cycle whose simulated cell ran further behind than this is not one a cell on time would have
-#: played (on time: about 10 ms at most, the SYNCs' jitter).
-MAX_CELL_BACKLOG_S = 0.1
-
 
 class SyncBacklog:
     """`tick()` per SYNC handled, from the thread that handles it; `take()` from any thread."""
