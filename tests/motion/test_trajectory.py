@@ -111,6 +111,5 @@ def test_a_slowed_move_keeps_to_its_share_of_the_limits_and_the_next_has_them_al
     assert v <= 0.25 + 1e-6 and a <= 0.25 + 1e-6 and v > 0.2  # the move used its share, no more
     v, a = peak(spec.q_home)
     assert v > 0.9  # the limits are the arm's again after the block
-    with pytest.raises(ValueError):
-        with s.slowed(0.0):
-            pass
+    with pytest.raises(ValueError), s.slowed(0.0):
+        pass
