@@ -3,9 +3,8 @@
 The simulated devices step their plant one control period per SYNC, so the world's time is the SYNCs handled times
 the period. On a real cell the drives' world is the physical one and never falls behind; a simulated cell on a busy
 PC (its process or thread waiting for a CPU, or for the GIL) handles SYNCs late and then in a burst, and meanwhile the
-arm the controller reads stands where it stood a moment ago: measured in the MuJoCo cell beside a second dry run, the
-joints trailed their setpoints by 0.2–1.3 s where a cell on time trails by 24–28 ms (servo lag and the setpoint
-queue). An episode played that way is not a measurement of the policy on a cell.
+arm the controller reads stands where it stood a moment ago. An episode played that way is not a measurement of the
+policy on a cell.
 
 The lag of SYNC k is `now − t₀ − k · period`; the backlog over an interval is how far the lag rose above its lowest
 within it (a SYNC the master itself skipped adds one period, counted apart in its missed control cycles).
