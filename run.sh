@@ -78,14 +78,15 @@ case "$cmd" in
       if [ ${#EGL[@]} -gt 0 ]; then apt_install "MuJoCo's offscreen renderer" "${EGL[@]}" || true; fi
     fi
     if [ $# -gt 0 ]; then exec "$VENV/bin/python" -m pytest -q "$@"; fi
-    # The suite in two passes (pytest-xdist): first the tests that compute, on two workers (one per core), then
-    # those that keep time with threads (simulated CAN bus, dry runs; marked `realtime` by tests/conftest.py),
-    # which then share the machine only with each other: on three workers, as they wait on their control periods
-    # more than they compute (`loadscope`: each module's tests on one worker, so a module fixture such as the
-    # robot venv is built once).
+    # The suite in two passes (pytest-xdist), each on two workers (one per core): first the tests that compute,
+    # then those that keep time with threads (simulated CAN bus, dry runs; marked `realtime` by tests/conftest.py),
+    # which then share the machine only with each other. A dry run keeps most of a core busy (the simulated
+    # devices answer every 4 ms SYNC in Python): on three workers they starved each other into correct safety
+    # stops (`loadscope`: each module's tests on one worker, so a module fixture such as the robot venv is built
+    # once).
     rc=0
     "$VENV/bin/python" -m pytest -q -n 2 -m "not slow and not realtime" || rc=$?
-    "$VENV/bin/python" -m pytest -q -n 3 --dist loadscope -m "not slow and realtime" || rc=$((rc ? rc : $?))
+    "$VENV/bin/python" -m pytest -q -n 2 --dist loadscope -m "not slow and realtime" || rc=$((rc ? rc : $?))
     exit "$rc" ;;
   *) echo "usage: ./run.sh {main|test} [args]" >&2; exit 2 ;;
 esac
