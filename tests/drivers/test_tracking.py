@@ -73,14 +73,17 @@ def test_csp_tracks_a_ruckig_trajectory(rig, robot):
 
 def test_added_delay_is_counted_and_tolerated(rig, robot):
     # Replies 2.5 cycles late: the master cannot tell which SYNC they answer (SYNC carries no counter here),
-    # so samples look up to 3 cycles older than assumed; the arm still follows and nothing faults.
+    # so samples look up to 3 cycles older than assumed, and older by what the delay line's thread waited for the
+    # CPU on a busy machine; the arm still follows and nothing faults.
     rig.sim.faults.set_delay(2.5 * rig.cobot.period)
     recorder, final, path = _run_trajectory(rig, robot)
     n = len(path)
     rig.sim.faults.set_delay(0.0)
-    assert rig.sim.stats().faults.delayed_tx > 13 * n
+    faults = rig.sim.stats().faults
+    assert faults.delayed_tx > 13 * n
     assert rig.cobot.stats().lost_feedback > 0  # the gap when the delay set in was seen
-    assert recorder.max_error.max() < LOSSY_TRACKING_TOLERANCE + 3 * rig.cobot.period * robot.v_max.max()
+    age = 3 * rig.cobot.period + faults.delay_overrun_s
+    assert recorder.max_error.max() < LOSSY_TRACKING_TOLERANCE + age * robot.v_max.max(), faults
     assert final.max() < FINAL_TOLERANCE
     assert rig.cobot.status().fault is None
 

@@ -34,6 +34,8 @@ class FaultStats:
     dropped_tx: int
     silenced_tx: int
     delayed_tx: int
+    #: The most a delayed frame went out after its due time (s): its delay line's thread waiting for the CPU.
+    delay_overrun_s: float = 0.0
 
 
 class FaultInjector:
@@ -48,6 +50,7 @@ class FaultInjector:
         self._silent: dict[int, bool] = {}  # node ID -> heartbeat only
         self._position_error: dict[int, float] = {}  # node ID -> rad added to the reported position
         self._counts = dict.fromkeys(("dropped_rx", "dropped_tx", "silenced_tx", "delayed_tx"), 0)
+        self._delay_overrun_s = 0.0
 
     def set_drop_rate(self, rate: float, cyclic_only: bool = False) -> None:
         """Drop each frame (either direction) with probability `rate`; only SYNC and PDOs if `cyclic_only`."""
@@ -111,16 +114,22 @@ class FaultInjector:
         with self._lock:
             self._counts[what] += 1
 
+    def overran(self, seconds: float) -> None:
+        """A delayed frame went out `seconds` after its due time."""
+        with self._lock:
+            self._delay_overrun_s = max(self._delay_overrun_s, seconds)
+
     def stats(self) -> FaultStats:
         with self._lock:
-            return FaultStats(**self._counts)
+            return FaultStats(**self._counts, delay_overrun_s=self._delay_overrun_s)
 
 
 class _DelayLine:
-    """Sends frames at their due time from one background thread."""
+    """Sends frames at their due time from one background thread; how late it was, to `faults`."""
 
-    def __init__(self, send: can.BusABC) -> None:
+    def __init__(self, send: can.BusABC, faults: FaultInjector) -> None:
         self._bus = send
+        self._faults = faults
         self._heap: list[tuple[float, int, can.Message]] = []
         self._seq = itertools.count()
         self._cv = threading.Condition()
@@ -140,7 +149,8 @@ class _DelayLine:
                     self._cv.wait(self._heap[0][0] - time.monotonic() if self._heap else None)
                 if self._stopped:
                     return
-                _, _, msg = heapq.heappop(self._heap)
+                due, _, msg = heapq.heappop(self._heap)
+            self._faults.overran(time.monotonic() - due)
             try:
                 self._bus.send(msg)
             except can.CanError as exc:
@@ -173,7 +183,7 @@ class FaultyBus(can.BusABC):
             return
         if faults.delay > 0.0:
             if self._delay_line is None:
-                self._delay_line = _DelayLine(self._inner)
+                self._delay_line = _DelayLine(self._inner, faults)
             faults.count("delayed_tx")
             self._delay_line.put(msg, time.monotonic() + faults.delay)
             return
