@@ -10,7 +10,11 @@ whole, one update of the default learner costs about half the eager version on t
 
 from __future__ import annotations
 
+import functools
 import logging
+import os
+import sys
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -166,14 +170,33 @@ def update_step(
         return torch.stack([critic_loss, q1.mean(), q1.max(), *actor_stats])
 
 
-_compiled_step = torch.compile(update_step, fullgraph=True)
 _compiler_works = True
+
+
+@functools.cache
+def _compiled_step() -> Callable[..., torch.Tensor]:
+    """`update_step` wrapped by torch.compile, made at the first compiled update (TorchInductor builds it then)."""
+    return torch.compile(update_step, fullgraph=True)
+
+
+def _compile_disabled() -> bool:
+    """Whether torch.compile is off: ``TORCH_COMPILE_DISABLE=1``, as torch reads it, or torch._dynamo's config.
+
+    The compiler's package (torch._dynamo, 1.5 s of CPU) is imported only where the update may be compiled: a
+    process that the environment keeps eager (the tests' learner processes, workers and CLI runs) starts without it.
+    """
+    dynamo = sys.modules.get("torch._dynamo")
+    if dynamo is None and os.environ.get("TORCH_COMPILE_DISABLE", "0") == "1":
+        return True
+    import torch._dynamo
+
+    return bool(torch._dynamo.config.disable)
 
 
 def update_build() -> str:
     """How this process runs the update, for a run's record: compiled, or eager where torch.compile is disabled
     (``TORCH_COMPILE_DISABLE=1``, the comparison the results page makes) or has failed."""
-    if torch._dynamo.config.disable:
+    if _compile_disabled():
         return "eager (torch.compile disabled)"
     return "compiled" if _compiler_works else "eager (TorchInductor failed)"
 
@@ -184,9 +207,9 @@ def run_update(
     """`update_step`, compiled; eagerly (the same arithmetic, slower) where torch.compile is disabled or once
     TorchInductor has failed to build it, e.g. with no C++ compiler on the machine (said once, in the log)."""
     global _compiler_works
-    if _compiler_works and not torch._dynamo.config.disable:
+    if _compiler_works and not _compile_disabled():
         try:
-            return _compiled_step(nets, moments, rates, batch)
+            return _compiled_step()(nets, moments, rates, batch)
         except torch._dynamo.exc.BackendCompilerFailed as exc:
             _compiler_works = False
             log.warning("the DDPG update runs uncompiled, about twice as slow: TorchInductor failed (%s)", exc)
