@@ -91,7 +91,7 @@ def browser():
     ./run.sh runs `npm ci`."""
     chromium_path()
     assert (WEB_DIR / "node_modules" / "three").is_dir(), "run `npm ci` in mrguide/annotation/web (./run.sh does)"
-    with HeadlessBrowser() as b:
+    with HeadlessBrowser(viewport=(960, 600)) as b:  # a smaller canvas is faster on SwiftShader
         yield b
 
 
