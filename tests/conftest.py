@@ -26,7 +26,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 os.environ.setdefault("TORCH_COMPILE_DISABLE", "1")
 
 #: Tests that keep time with threads (simulated CANopen devices on the virtual bus, dry runs, the sim-to-real
-#: conditions): `./run.sh test` runs them in a pass of their own (three workers), after the rest, so that a test that
+#: conditions): `./run.sh test` runs them in a pass of their own (two workers), after the rest, so that a test that
 #: computes flat out on both cores never shares the machine with a control cycle: a cycle starved for a few hundred ms
 #: is a (correct) safety stop, not a failure of the code.
 REALTIME = (
