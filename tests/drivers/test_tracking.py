@@ -16,7 +16,11 @@ MOVE = np.array([0.8, -0.3, 0.35, 0.4, -0.4, 0.8])
 
 
 def _run_trajectory(rig, robot):
+    """Stream a near-v_max move; (recorder, final error, path, backlog): the backlog is how far the simulated
+    devices fell behind the clock meanwhile (s, `SyncBacklog`), on a busy machine. A reply handled that late may be
+    taken for the answer to a later SYNC, its error then larger by what the joint moved in between."""
     cobot = rig.cobot
+    rig.sim.backlog.take()
     recorder = TrackingRecorder(robot.dof)
     cobot.add_cycle_observer(recorder)
     start = cobot.setpoint
@@ -27,7 +31,7 @@ def _run_trajectory(rig, robot):
         cobot.stream(q)
     time.sleep(0.1)
     final = np.abs(cobot.joint_state().positions - (start + MOVE))
-    return recorder, final, np.array(path)
+    return recorder, final, np.array(path), rig.sim.backlog.take()
 
 
 class _PlantLog:
@@ -53,7 +57,7 @@ def test_csp_tracks_a_ruckig_trajectory(rig, robot):
     last one its end; and in every SYNC period each joint moved toward its target as the drive's position loop
     does (the first-order lag of the plant, to 1e-9 rad)."""
     log = _PlantLog(rig.plant)
-    recorder, final, path = _run_trajectory(rig, robot)
+    recorder, final, path, _ = _run_trajectory(rig, robot)
     with rig.sim.lock:  # the simulator goes on stepping the plant: one consistent look at the log
         targets, positions = np.array(log.targets), np.array(log.positions)
     moving = targets[np.any(np.abs(np.diff(targets, axis=0, prepend=targets[:1])) > 0, axis=1)]
@@ -76,27 +80,30 @@ def test_added_delay_is_counted_and_tolerated(rig, robot):
     # so samples look up to 3 cycles older than assumed, and older by what the delay line's thread waited for the
     # CPU on a busy machine; the arm still follows and nothing faults.
     rig.sim.faults.set_delay(2.5 * rig.cobot.period)
-    recorder, final, path = _run_trajectory(rig, robot)
+    recorder, final, path, backlog = _run_trajectory(rig, robot)
     n = len(path)
     rig.sim.faults.set_delay(0.0)
     faults = rig.sim.stats().faults
     assert faults.delayed_tx > 13 * n
     assert rig.cobot.stats().lost_feedback > 0  # the gap when the delay set in was seen
-    age = 3 * rig.cobot.period + faults.delay_overrun_s
-    assert recorder.max_error.max() < LOSSY_TRACKING_TOLERANCE + age * robot.v_max.max(), faults
+    age = 3 * rig.cobot.period + faults.delay_overrun_s + backlog
+    assert recorder.max_error.max() < LOSSY_TRACKING_TOLERANCE + age * robot.v_max.max(), (faults, backlog)
     assert final.max() < FINAL_TOLERANCE
     assert rig.cobot.status().fault is None
 
 
 def test_tracking_survives_5_percent_frame_loss(rig, robot):
     rig.sim.faults.set_drop_rate(0.05, cyclic_only=True)
-    recorder, final, path = _run_trajectory(rig, robot)
+    recorder, final, path, backlog = _run_trajectory(rig, robot)
     n = len(path)
     rig.sim.faults.set_drop_rate(0.0)
     faults = rig.sim.stats().faults
     stats = rig.cobot.stats()
     assert faults.dropped_rx + faults.dropped_tx > 0.02 * n * 14
     assert stats.lost_feedback > 0  # the master saw and counted missing TPDOs
-    assert recorder.max_error.max() < LOSSY_TRACKING_TOLERANCE, recorder.max_error
+    assert recorder.max_error.max() < LOSSY_TRACKING_TOLERANCE + backlog * robot.v_max.max(), (
+        recorder.max_error,
+        backlog,
+    )
     assert final.max() < FINAL_TOLERANCE
     assert rig.cobot.status().fault is None
