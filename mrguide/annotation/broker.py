@@ -139,8 +139,10 @@ class AnnotationBroker:
             if self._closed.is_set():
                 return NoAnswer(request_id, "shutdown")
             self._pending = pending
-            self._deliver([(c, pending.message) for c in self._clients.values()])
-        self._set_waiting(True)
+            self._status["waiting"] = True  # with the request, under one lock: a hello never has one without the other
+            status = self._status_message()
+            self._deliver([(c, m) for c in self._clients.values() for m in (pending.message, status)])
+        self._waiting_changed(True)
         try:
             with self._lock:
                 while pending.result is None:
@@ -192,10 +194,11 @@ class AnnotationBroker:
                 self._pending = None
             r = pending.result
             reason = "interrupted" if r is None else ("answered" if isinstance(r, LiveAnswer) else r.reason)
-            self._deliver(
-                [(c, {"type": "cancel", "id": pending.request_id, "reason": reason}) for c in self._clients.values()]
-            )
-        self._set_waiting(False)
+            cancel = {"type": "cancel", "id": pending.request_id, "reason": reason}
+            self._status["waiting"] = False
+            status = self._status_message()
+            self._deliver([(c, m) for c in self._clients.values() for m in (cancel, status)])
+        self._waiting_changed(False)
 
     def take_intervention(self) -> str | None:
         """The client that asked to step in since the last call (and forget it), or None."""
@@ -356,8 +359,8 @@ class AnnotationBroker:
         refused = {code: self.stats.refused[code] for code in REFUSALS if self.stats.refused[code]}
         return {**self._status, "type": "status", "refused": refused, "claims_expired": self.stats.claims_expired}
 
-    def _set_waiting(self, waiting: bool) -> None:
-        self.publish_status(waiting=waiting)
+    def _waiting_changed(self, waiting: bool) -> None:
+        """Tell `on_waiting` (outside the lock: it is the caller's code)."""
         if self.on_waiting is not None:
             self.on_waiting(waiting)
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import asyncio
 import json
 import re
+import threading
 
 import aiohttp
 import numpy as np
@@ -257,6 +258,44 @@ def test_one_request_at_a_time_and_close_ends_a_waiting_request(broker):
     broker.close()
     res = fut.result(5)
     assert isinstance(res, NoAnswer) and res.reason == "shutdown"
+
+
+class _LockPausingAfterTheRequest:
+    """The broker's lock, which holds the requesting thread just after it first lets go of the lock with a request
+    outstanding: where that thread may lose the CPU on a busy machine."""
+
+    def __init__(self, broker):
+        self._lock, self._broker = threading.Lock(), broker
+        self.paused, self.resume = threading.Event(), threading.Event()
+
+    def acquire(self, blocking=True, timeout=-1):
+        return self._lock.acquire(blocking, timeout)
+
+    def release(self):
+        self._lock.release()
+        if self._broker._pending is not None and not self.paused.is_set():
+            self.paused.set()
+            self.resume.wait(5)
+
+    __enter__ = acquire
+
+    def __exit__(self, *exc):
+        self.release()
+
+
+def test_a_client_connecting_as_a_request_is_made_sees_it_and_the_waiting_status_together(broker):
+    """The request and "waiting" change under one lock: a hello never has the one without the other (a client that
+    reconnected in between was told of a request while the status said nothing was waiting)."""
+    lock = broker._lock = _LockPausingAfterTheRequest(broker)
+    broker._changed = threading.Condition(lock)
+    fut = ask_in_thread(broker, make_request())
+    assert lock.paused.wait(5)
+    hellos = []
+    broker.attach(hellos.append)
+    lock.resume.set()
+    assert hellos[0]["request"] is not None and hellos[0]["status"]["waiting"] is True, hellos[0]["status"]
+    broker.close()
+    assert fut.result(5).reason == "shutdown"
 
 
 def test_a_flood_of_bad_messages_does_not_stall_the_trainer(served):
