@@ -152,7 +152,10 @@ class LearnerServer:
                 elif message.kind == "stop":
                     return
                 elif message.kind == "forget":  # a person corrected the grasp (`Learning.forget`)
+                    # the updates owed were the emptied pools': as in the actor's process, the next comes once the
+                    # pools hold learning_starts transitions again (an update owed here sampled an empty pool)
                     self.replay.clear()
+                    self.owed = 0
                 else:
                     self.outbox.put(self._answer(message))
             self._update()
