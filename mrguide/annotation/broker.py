@@ -139,8 +139,7 @@ class AnnotationBroker:
             if self._closed.is_set():
                 return NoAnswer(request_id, "shutdown")
             self._pending = pending
-            self._status["waiting"] = True  # with the request, under one lock: a hello never has one without the other
-            status = self._status_message()
+            status = self._status_changed(waiting=True)  # with the request, under one lock: a hello has both or none
             self._deliver([(c, m) for c in self._clients.values() for m in (pending.message, status)])
         self._waiting_changed(True)
         try:
@@ -195,8 +194,7 @@ class AnnotationBroker:
             r = pending.result
             reason = "interrupted" if r is None else ("answered" if isinstance(r, LiveAnswer) else r.reason)
             cancel = {"type": "cancel", "id": pending.request_id, "reason": reason}
-            self._status["waiting"] = False
-            status = self._status_message()
+            status = self._status_changed(waiting=False)
             self._deliver([(c, m) for c in self._clients.values() for m in (cancel, status)])
         self._waiting_changed(False)
 
@@ -211,8 +209,7 @@ class AnnotationBroker:
     def publish_status(self, **fields: Any) -> None:
         """Update the training status and push it to every client."""
         with self._lock:
-            self._status.update(fields)
-            msg = self._status_message()
+            msg = self._status_changed(**fields)
             self._deliver([(c, msg) for c in self._clients.values()])
 
     def close(self) -> None:
@@ -358,6 +355,11 @@ class AnnotationBroker:
     def _status_message(self) -> dict[str, Any]:
         refused = {code: self.stats.refused[code] for code in REFUSALS if self.stats.refused[code]}
         return {**self._status, "type": "status", "refused": refused, "claims_expired": self.stats.claims_expired}
+
+    def _status_changed(self, **fields: Any) -> dict[str, Any]:
+        """Update the training status (lock held); the status message to send."""
+        self._status.update(fields)
+        return self._status_message()
 
     def _waiting_changed(self, waiting: bool) -> None:
         """Tell `on_waiting` (outside the lock: it is the caller's code)."""

@@ -185,8 +185,7 @@ def _compile_disabled() -> bool:
     The compiler's package (torch._dynamo, 1.5 s of CPU) is imported only where the update may be compiled: a
     process that the environment keeps eager (the tests' learner processes, workers and CLI runs) starts without it.
     """
-    dynamo = sys.modules.get("torch._dynamo")
-    if dynamo is None and os.environ.get("TORCH_COMPILE_DISABLE", "0") == "1":
+    if "torch._dynamo" not in sys.modules and os.environ.get("TORCH_COMPILE_DISABLE", "0") == "1":
         return True
     import torch._dynamo
 
