@@ -18,6 +18,9 @@ class TrajectoryError(RuntimeError):
 
 #: Jerk limits of the retry after Ruckig fails on a numerical edge case (scaled by this, i.e. lowered).
 EDGE_CASE_JERK_SCALE = 1.0 - 1e-9
+#: A joint this close to its target, this slow and this little accelerated (rad, rad/s, rad/s^2) is at rest there:
+#: what is left is floating-point residue of the last plan, which the retry clears.
+RESIDUE = 1e-9
 
 
 @dataclass
@@ -93,14 +96,28 @@ class JointStreamer:
         self._inp.target_velocity = [0.0] * self.spec.dof
         self._inp.target_acceleration = [0.0] * self.spec.dof
 
+    def _settle_residue(self) -> None:
+        """Joints within RESIDUE of their target, velocity and acceleration are put exactly at rest on it."""
+        i = self._inp
+        q, dq, ddq, target = (
+            np.array(x) for x in (i.current_position, i.current_velocity, i.current_acceleration, i.target_position)
+        )
+        rest = (np.abs(target - q) < RESIDUE) & (np.abs(dq) < RESIDUE) & (np.abs(ddq) < RESIDUE)
+        if i.control_interface == ControlInterface.Position and rest.any():
+            i.current_position = np.where(rest, target, q).tolist()
+            i.current_velocity = np.where(rest, 0.0, dq).tolist()
+            i.current_acceleration = np.where(rest, 0.0, ddq).tolist()
+
     def _update(self) -> Result:
         """Ruckig's update. Ruckig 0.19 throws on some exact inputs lying on a boundary between its profile
         types (from rest, -0.1200000000000001 -> 0 rad at 1.5 rad/s, 6 rad/s^2, 60 rad/s^3 throws "error in
-        step 1"); such a plan is retried once with the jerk limits lowered by 1e-9, which moves the boundary.
-        Any other failure raises TrajectoryError."""
+        step 1"; a joint 1e-16 rad from its target at 2e-16 rad/s throws "error in step 2"); such a plan is
+        retried once with the joints at rest on their targets within RESIDUE put exactly there and the jerk
+        limits lowered by 1e-9, which moves the boundary. Any other failure raises TrajectoryError."""
         try:
             return self._otg.update(self._inp, self._out)
         except RuckigError:
+            self._settle_residue()
             jerk = list(self._inp.max_jerk)
             self._inp.max_jerk = [j * EDGE_CASE_JERK_SCALE for j in jerk]
             try:

@@ -30,6 +30,9 @@ def _run_trajectory(rig, robot):
     for q in path:
         cobot.stream(q)
     time.sleep(0.1)
+    deadline = time.monotonic() + 10.0  # on a busy machine the master's samples, taken on at rest, come later
+    while recorder.samples < len(path) and time.monotonic() < deadline:
+        time.sleep(0.02)
     final = np.abs(cobot.joint_state().positions - (start + MOVE))
     return recorder, final, np.array(path), rig.sim.backlog.take()
 

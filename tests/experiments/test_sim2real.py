@@ -98,8 +98,10 @@ def test_real_hmd_condition_uses_marker_pipeline_poses(tmp_path, monkeypatch):
     # off-centre by the HMD's error can seal partly and drop the part in the lift (the runtime's "vacuum OK" rule is
     # the production issue's), or land beyond the cup's 5 mm seal margin (`mrguide.seal`) and leave the runtime's
     # seal search to spend the horizon (on a busy machine, with fewer fresh HMD frames, 5-7 re-seats: no grasp or a
-    # timeout); here, that the episodes ran on the marker pipeline's poses
-    assert len(out) == 2 and set(out) <= {"success", "dropped", "misplaced", "no_grasp", "timeout"}, out
+    # timeout), and a machine too busy for the cell's real time leaves an episode not judged; here, that the episodes
+    # ran on the marker pipeline's poses
+    judged = {"success", "dropped", "misplaced", "no_grasp", "timeout"}
+    assert len(out) == 2 and set(out) <= judged | {s2r.CELL_BEHIND}, out
     assert len(seen) > 10 and max(f for *_, f in seen) > 2
     # poses really came out of the marker pipeline with its noise: never the ground truth, and close to
     # it while the object rests on the table (while carried, the HMD estimate lags the moving object)

@@ -83,6 +83,32 @@ def test_ruckig_edge_case_from_rest_is_planned():
     np.testing.assert_allclose(sp.q, spec.q_home, atol=1e-9)
 
 
+def test_a_joint_at_rest_on_its_target_but_for_float_residue_is_planned():
+    """The state a CI run's dry run stopped on ("error in step 2"): the arm on its target but for 1e-16 rad and
+    2e-16 rad/s left by the last plan. The retry puts it at rest there."""
+    spec = load_robot()
+    streamer = JointStreamer(spec)
+    target = np.array(
+        [
+            -0.5229453910300563,
+            -1.456909805822409,
+            2.248614502407839,
+            -2.362501218453161,
+            -1.5707963219737,
+            -0.5229453921,
+        ]
+    )
+    current = target + np.array([-1.1e-16, 0.0, 0.0, -4.4e-16, 0.0, 0.0])
+    streamer.reset(
+        current, np.array([0.0, 5.551115123125783e-17, 2.220446049250313e-16, -2.775557561562891e-17, 0.0, 0.0])
+    )
+    streamer.set_target(target)
+    sp = streamer.step()
+    assert sp.finished
+    np.testing.assert_allclose(sp.q, target, atol=1e-12)
+    assert np.all(sp.dq == 0.0)
+
+
 def test_a_plan_ruckig_refuses_raises_trajectory_error():
     spec = load_robot()
     streamer = JointStreamer(spec)
