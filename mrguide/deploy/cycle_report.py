@@ -63,7 +63,9 @@ def cycle_figures(records: list[dict]) -> dict[str, Any]:
     return {
         "cycles": len(ends),
         "placed": len(placed),
-        "placed_first_attempt": sum(len(r["outcomes"]) == 1 for r in placed),
+        "placed_first_attempt": sum(r["outcomes"] == ["success"] for r in placed),
+        # placed by an attempt that failed as it set the part down (`placed_on_check`): no attempt ended in success
+        "placed_on_check": sum("success" not in r["outcomes"] for r in placed),
         "alarms": sum(r["alarm"] is not None for r in ends),
         # a cycle ends unplaced without an alarm only when the run stopped in it (a safety stop, Ctrl-C twice)
         "cut": sum(not r["placed"] and r["alarm"] is None for r in ends),
@@ -119,7 +121,7 @@ def table(rows: dict[str, dict[str, Any]]) -> str:
         n = f["cycles"]
         retries = ", ".join(f"{k} {v}" for k, v in sorted(f["retries"].items())) or "none"
         lines.append(
-            f"| {name} | {f['placed']} / {n}{f' ({cut} cut by a stop)' if (cut := f['cut']) else ''}{_behind(f)} "
+            f"| {name} | {f['placed']} / {n}{f' ({cut} cut by a stop)' if (cut := f['cut']) else ''}{_on_check(f)}{_behind(f)} "
             f"| {(n - f['alarms']) / n:.1%} | {f['placed_first_attempt']} | {retries} "
             f"| {f['alarms']} | {_num(f['cycle_s_median'], '.2f')} / {_num(f['cycle_s_p95'], '.2f')} s "
             f"| {_num(f['parts_per_hour'], '.0f')} | {_num(f['missed_cycles'], 'd')}{_in_cycles(f)} | {_num(f['underruns'], 'd')} "
@@ -170,6 +172,12 @@ def _in_cycles(f: dict[str, Any]) -> str:
         if f[f"cycles_with_missed_and_{key}"] is not None
     ]
     return f" (in {f['cycles_with_missed']} cycles" + (": " + ", ".join(events) if events else "") + ")"
+
+
+def _on_check(f: dict[str, Any]) -> str:
+    """The parts placed by an attempt that failed as it set them down, if any."""
+    k = f["placed_on_check"]
+    return f" ({k} seen at the goal after a failed attempt)" if k else ""
 
 
 def _behind(f: dict[str, Any]) -> str:

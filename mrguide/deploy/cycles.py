@@ -8,7 +8,9 @@ false` the next cycle starts from there instead (a policy trained from such star
 part from there, else the arm homes); the first attempt of a run and every attempt after a failed one start from
 home. An
 attempt that fails with the part still on the table (dropped in the lift or transport, no seal, time out)
-is a retry: the part is perceived again where it lies and, if it lies in the pick region, picked again.
+is a retry: the part is perceived again where it lies and, if it lies in the pick region, picked again; one
+that the pose source sees resting at the cycle's goal (within the task's place tolerance) was placed by the
+attempt that failed (its horizon ran out as the cup set it down): the cycle is placed, and logged `placed_on_check`.
 A part outside the pick region, a pose source that cannot see where a lost part went, or more than
 `max_retries` retries raise an alarm: the run stops (`on_alarm = "stop"`) or the part is left for the
 operator and the next one fed (`"skip"`). Every retry and alarm, with its cause, goes to the run log.
@@ -27,13 +29,13 @@ from typing import Annotated, Protocol
 import numpy as np
 
 from mrguide.config import ConfigError, Range, check_number, check_ranges
-from mrguide.deploy.episode import EpisodeReport, RunStopped
+from mrguide.deploy.episode import RunStopped
 from mrguide.deploy.host_stats import FullCollections, HostCounters, miss_anatomy_text, peak_rss_mb, resident_mb
 from mrguide.deploy.interrupt import CycleInterrupt
 from mrguide.deploy.runtime import Runtime
 from mrguide.drivers.errors import DriverError
 from mrguide.pose_source import PoseUnavailable
-from mrguide.task import Outcome
+from mrguide.task import Outcome, placed_at_goal
 
 log = logging.getLogger(__name__)
 
@@ -277,21 +279,7 @@ class CycleRunner:
             except PoseUnavailable as exc:
                 self._alarm(cycle, report, f"no part came: {exc}")
                 return report
-            while True:
-                problem = self._start_attempt()
-                if problem:
-                    self._alarm(cycle, report, problem)
-                    break
-                episode = self.rt.run_episode(goal, self._attempt)
-                self._attempt += 1
-                report.outcomes.append(episode.outcome.value)
-                if episode.outcome is Outcome.SUCCESS:
-                    report.placed = True
-                    departed = self.cfg.depart_height > 0 and self.rt.depart(self.cfg.depart_height)
-                    self._departed = departed and not self.cfg.home_between_cycles
-                    break
-                if not self._retry(cycle, report, episode):
-                    break
+            self._attempts(cycle, goal, report)
         finally:
             report.cycle_s = time.perf_counter() - t0
             stats = self.rt.cobot.stats()
@@ -315,39 +303,70 @@ class CycleRunner:
             self.rt.log.sync()
         return report
 
-    def _retry(self, cycle: int, report: CycleReport, episode: EpisodeReport) -> bool:
-        """After a failed attempt: whether to try again (counted and logged), or the alarm that ends the cycle."""
-        cause = episode.outcome
-        if cause not in RETRYABLE:
-            self._alarm(cycle, report, f"attempt {len(report.outcomes)} ended {cause.value}: the part is gone")
-            return False
-        if not self.feeder.tracks_part and cause is not Outcome.NO_GRASP:
-            self._alarm(
-                cycle, report, f"attempt ended {cause.value} and the pose source cannot see where the part lies"
-            )
-            return False
-        if len(report.outcomes) > self.cfg.max_retries:
-            self._alarm(cycle, report, f"{len(report.outcomes)} failed attempts (last: {cause.value})")
-            return False
-        report.retries.append(cause.value)
-        self.rt.log.write("retry", cycle=cycle, attempt=len(report.outcomes), cause=cause.value)
-        log.info("cycle %d: attempt %d ended %s; picking the part again", cycle, len(report.outcomes), cause.value)
-        return True
+    def _attempts(self, cycle: int, goal: np.ndarray, report: CycleReport) -> None:
+        """Attempts on the fed part until it is placed (by an attempt, or seen at its goal after one that failed)
+        or an alarm ends the cycle."""
+        while True:
+            part = self._start_attempt()
+            if report.outcomes and not isinstance(part, str) and self._rests_at(part, goal):
+                report.placed = True
+                self.rt.log.write("placed_on_check", cycle=cycle, part=part, goal=goal)
+                log.info("cycle %d: the part rests at its goal after attempt %d", cycle, len(report.outcomes))
+                return
+            problem = part if isinstance(part, str) else self._unpickable(part)
+            if not problem and report.outcomes:
+                problem = self._retry(cycle, report)
+            if problem:
+                self._alarm(cycle, report, problem)
+                return
+            episode = self.rt.run_episode(goal, self._attempt)
+            self._attempt += 1
+            report.outcomes.append(episode.outcome.value)
+            if episode.outcome is Outcome.SUCCESS:
+                report.placed = True
+                departed = self.cfg.depart_height > 0 and self.rt.depart(self.cfg.depart_height)
+                self._departed = departed and not self.cfg.home_between_cycles
+                return
+            if gone := self._gone(report, episode.outcome):
+                self._alarm(cycle, report, gone)
+                return
 
-    def _start_attempt(self) -> str | None:
+    def _gone(self, report: CycleReport, cause: Outcome) -> str | None:
+        """After a failed attempt: why the part cannot be looked for again (the alarm), or None."""
+        if cause not in RETRYABLE:
+            return f"attempt {len(report.outcomes)} ended {cause.value}: the part is gone"
+        if not self.feeder.tracks_part and cause is not Outcome.NO_GRASP:
+            return f"attempt ended {cause.value} and the pose source cannot see where the part lies"
+        return None
+
+    def _retry(self, cycle: int, report: CycleReport) -> str | None:
+        """Before picking the part again: the retry counted and logged, or the alarm of too many attempts."""
+        cause = report.outcomes[-1]
+        if len(report.outcomes) > self.cfg.max_retries:
+            return f"{len(report.outcomes)} failed attempts (last: {cause})"
+        report.retries.append(cause)
+        self.rt.log.write("retry", cycle=cycle, attempt=len(report.outcomes), cause=cause)
+        log.info("cycle %d: attempt %d ended %s; picking the part again", cycle, len(report.outcomes), cause)
+        return None
+
+    def _start_attempt(self) -> np.ndarray | str:
         """Bring the arm where the attempt starts and find the part: where the arm departed after the last place
-        if the pose source sees the part from there, else home. Why the part cannot be picked, or None."""
+        if the pose source sees the part from there, else home. The part's position, or why no pose came."""
         if self._departed:
             self._departed = False
             try:
-                return self._unpickable(self._part_position(0.0))
+                return self._part_position(0.0)
             except PoseUnavailable as exc:
                 log.info("the part is not seen from where the arm departed (%s): homing", exc)
         self.rt.home()  # where every policy episode of the training starts, and the camera sees the part
         try:
-            return self._unpickable(self._part_position(self.cfg.pose_wait_s))
+            return self._part_position(self.cfg.pose_wait_s)
         except PoseUnavailable as exc:
             return f"no pose of the part for {self.cfg.pose_wait_s:g} s: {exc}"
+
+    def _rests_at(self, part: np.ndarray, goal: np.ndarray) -> bool:
+        """Whether the part, as the pose source sees it, rests on the table at `goal` (the task's place rule)."""
+        return abs(float(part[2]) - self.rest_z) <= self.rest_tolerance and placed_at_goal(self.rt.task, part, goal)
 
     def _part_position(self, wait_s: float) -> np.ndarray:
         """The part's position from the pose source, asked again for `wait_s` s (PoseUnavailable after that)."""

@@ -72,6 +72,18 @@ def test_the_figures_come_from_the_cycle_records(tmp_path):
     assert f["cut"] == 0  # the unplaced cycle has its alarm
 
 
+def test_a_part_seen_at_its_goal_after_a_failed_attempt_is_placed_but_not_at_the_first_attempt(tmp_path, capsys):
+    with RunLog(tmp_path / "run.jsonl", {"command": "deploy"}) as log:
+        write_placed_cycle(log, 0)
+        log.write("placed_on_check", cycle=1, part=[0.5, 0.2, 0.025], goal=[0.5, 0.21, 0.025])
+        log.write("cycle_end", cycle=1, placed=True, outcomes=["timeout"], retries=[], alarm=None, cycle_s=7.0)
+        log.write("cycles_end", wall_s=11.0, missed_cycles=0, underruns=0, rss_growth_mb=0.0)
+    f = cycle_figures(read_log(tmp_path / "run.jsonl"))
+    assert (f["placed"], f["placed_first_attempt"], f["placed_on_check"]) == (2, 1, 1)
+    assert main(["cycles", "report", str(tmp_path / "run.jsonl"), "--out", str(tmp_path / "out")]) == 0
+    assert "2 / 2 (1 seen at the goal after a failed attempt)" in capsys.readouterr().out
+
+
 def test_a_session_still_running_adds_no_parts_to_the_hourly_rate(tmp_path):
     """Resumed with `--resume` and read while the new session runs: its cycles count as cycles, but the parts per
     hour are the ended session's (its wall time is all the log has), not every part over that session's time."""

@@ -188,6 +188,26 @@ def test_a_part_that_cannot_be_picked_where_it_lies_raises_an_alarm(tmp_path, wh
     assert reason in summary.cycles[0].alarm and summary.placed == 0 and len(rt.episodes) == 1
 
 
+T = Outcome.TIMEOUT
+
+
+@pytest.mark.parametrize(
+    ("where", "placed"),
+    [
+        ((0.51, 0.22, 0.025), True),  # 14 mm off the goal, on the table: the cup set it down as the horizon ran out
+        ((0.5, 0.245, 0.025), False),  # 35 mm off: beyond the task's 30 mm place tolerance, outside the pick region
+        ((0.5, 0.21, 0.08), False),  # over the goal but 55 mm up: still on the cup, not placed
+    ],
+)
+def test_a_part_seen_resting_at_its_goal_after_a_failed_attempt_is_placed(tmp_path, where, placed):
+    summary, rt, _, records = run(tmp_path, [T, S], 1, CycleConfig(pose_wait_s=0.0), positions=[where])
+    report = summary.cycles[0]
+    assert report.placed is placed and report.outcomes == ["timeout"] and len(rt.episodes) == 1
+    assert (report.alarm is None) is placed and not report.retries
+    checks = [r for r in records if r["kind"] == "placed_on_check"]
+    assert [(r["cycle"], r["part"]) for r in checks] == ([(0, list(where))] if placed else [])
+
+
 @dataclass
 class CoarseSourceRuntime(ScriptedRuntime):
     """The same, its pose source stating its accuracy (`PoseAccuracy`), as an HMD does from its registration."""
