@@ -80,10 +80,18 @@ def test_a_part_dropped_in_the_lift_is_picked_again_and_placed(tmp_path):
 
 
 def one_cycle(log: Path, cfg: CellConfig, hook):
-    """One production cycle of the scripted expert (`hook` may make it misbehave) in the simulated cell, logged."""
+    """One production cycle of the scripted expert (`hook` may make it misbehave) in the simulated cell, logged; the
+    cell in a process of its own, as `mrguide deploy --dry-run` runs it (in the test's process its physics waits for
+    the GIL, and on a busy machine fell behind the setpoints into a following-error stop)."""
     with RunLog(log, {"test": log.stem}) as run_log:
         return dry_run_cycles(
-            None, cfg, bus_config(), CycleRun(0, 1, seed=3, config=CycleConfig()), run_log, policy=Expert(cfg, hook)
+            None,
+            cfg,
+            bus_config(),
+            CycleRun(0, 1, seed=3, config=CycleConfig()),
+            run_log,
+            policy=Expert(cfg, hook),
+            own_process=True,
         )
 
 
