@@ -6,9 +6,8 @@ toward the cycle's goal from home (where every episode of the training starts). 
 `depart_height` straight up, clear of the part it let go, as a cell program departs. With `home_between_cycles =
 false` the next cycle starts from there instead (a policy trained from such starts; the pose source must see the
 part from there, else the arm homes); the first attempt of a run and every attempt after a failed one start from
-home. An
-attempt that fails with the part still on the table (dropped in the lift or transport, no seal, time out)
-is a retry: the part is perceived again where it lies and, if it lies in the pick region, picked again; one
+home. An attempt that fails with the part still on the table (dropped in the lift or transport, no seal, time
+out) is a retry: the part is perceived again where it lies and, if it lies in the pick region, picked again; one
 that the pose source sees resting at the cycle's goal (within the task's place tolerance) was placed by the
 attempt that failed (its horizon ran out as the cup set it down): the cycle is placed, and logged `placed_on_check`.
 A part outside the pick region, a pose source that cannot see where a lost part went, or more than
@@ -366,7 +365,11 @@ class CycleRunner:
 
     def _rests_at(self, part: np.ndarray, goal: np.ndarray) -> bool:
         """Whether the part, as the pose source sees it, rests on the table at `goal` (the task's place rule)."""
-        return abs(float(part[2]) - self.rest_z) <= self.rest_tolerance and placed_at_goal(self.rt.task, part, goal)
+        return self._on_table(part) and placed_at_goal(self.rt.task, part, goal)
+
+    def _on_table(self, part: np.ndarray) -> bool:
+        """Whether the part's centre, as seen, is at its resting height on the table (within `rest_tolerance`)."""
+        return abs(float(part[2]) - self.rest_z) <= self.rest_tolerance
 
     def _part_position(self, wait_s: float) -> np.ndarray:
         """The part's position from the pose source, asked again for `wait_s` s (PoseUnavailable after that)."""
@@ -385,7 +388,7 @@ class CycleRunner:
         x, y, z = (float(v) for v in obj)
         if not (x0 <= x <= x1 and y0 <= y <= y1):
             return f"the part lies at ({x:.3f}, {y:.3f}) m, outside the pick region {self.cfg.pick_region}"
-        if abs(z - self.rest_z) > self.rest_tolerance:
+        if not self._on_table(obj):
             return f"the part's centre is at z = {z:.3f} m, not resting on the table (expected {self.rest_z:.3f} m)"
         return None
 
