@@ -7,10 +7,10 @@ setpoints and vacuum commands over CANopen, and answers with encoder positions a
 from __future__ import annotations
 
 import contextlib
+import logging
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -21,7 +21,7 @@ from mrguide.cell.twin_plant import TwinObjectPose
 from mrguide.config import ConfigError
 from mrguide.deploy.cell_learning import LearningActor
 from mrguide.deploy.cycles import CycleReport, CycleRun, CycleRunner, CycleSummary
-from mrguide.deploy.episode import EpisodeReport
+from mrguide.deploy.episode import MAX_CELL_BACKLOG_S, EpisodeReport
 from mrguide.deploy.policy import ExportedPolicy, check_decision_period
 from mrguide.deploy.runlog import RunLog
 from mrguide.deploy.runtime import Runtime
@@ -39,8 +39,7 @@ from mrguide.task import TaskConfig, placed_at_goal
 from mrguide.twin.env import EnvConfig
 from mrguide.twin.scene import Scene
 
-if TYPE_CHECKING:
-    pass
+log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -160,8 +159,7 @@ def dry_run(
             cell.backlog()  # each episode's backlog from its start
 
         def judged(report: EpisodeReport) -> None:
-            report.cell_backlog_s = cell.backlog()
-            run_log.write("cell_backlog", episode=report.index, seconds=round(report.cell_backlog_s, 4))
+            report.cell_backlog_s = _logged_backlog(cell, run_log, f"episode {report.index}", episode=report.index)
             if after_episode:
                 after_episode(report)
 
@@ -262,7 +260,25 @@ def dry_run_cycles(
         scored = _scored(run.after_cycle, cell, feeder, env_cfg.task, run_log)
         runner = CycleRunner(runtime, feeder, feeder.goal, run.config, scored)
         cell.backlog()  # each cycle's backlog from the first cycle's start (`_scored`)
-        return runner.run(run.start, run.count, run.interrupt, run.first_attempt)
+        summary = runner.run(run.start, run.count, run.interrupt, run.first_attempt)
+        if summary.stopped:  # the cycle the stop ended is not scored: its backlog, for whoever asks why it stopped
+            _logged_backlog(cell, run_log, "the cycle the run stopped in", stopped=True)
+        return summary
+
+
+def _logged_backlog(cell: SimulatedCell, run_log: RunLog, what: str, **where: int | bool) -> float:
+    """How far the simulated cell ran behind the clock since the last reading (s), written to the run log
+    (`cell_backlog`, with `where`) and warned of, for `what`, beyond `MAX_CELL_BACKLOG_S`."""
+    seconds = cell.backlog()
+    run_log.write("cell_backlog", **where, seconds=round(seconds, 4))
+    if seconds > MAX_CELL_BACKLOG_S:
+        log.warning(
+            "%s: the simulated cell ran %.2f s behind the clock (this PC was too busy to keep its time): not a "
+            "measurement of the policy",
+            what,
+            seconds,
+        )
+    return seconds
 
 
 #: m: a scored part lies on the table when its centre is this close to its resting height (not carried off by the cup).

@@ -66,7 +66,8 @@ def grasp_offset_mm(ep: Episode) -> float | None:
 def cells_behind(path: str) -> dict[int, float]:
     """The episodes of a dry run's log whose simulated cell ran more than MAX_CELL_BACKLOG_S behind the clock, and by
     how much (s); none for a log that does not record it."""
-    seconds = {r["episode"]: float(r["seconds"]) for r in read_log(path) if r.get("kind") == "cell_backlog"}
+    records = (r for r in read_log(path) if r.get("kind") == "cell_backlog" and "episode" in r)
+    seconds = {r["episode"]: float(r["seconds"]) for r in records}
     return {e: s for e, s in seconds.items() if s > MAX_CELL_BACKLOG_S}
 
 
