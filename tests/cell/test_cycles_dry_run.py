@@ -1,6 +1,6 @@
 """Production cycles through the whole stack against the simulated cell: a part lost in the lift is picked again
 where it fell, the lift rules of the runtime act on every lift, and a part still on the cup when the horizon runs out
-is set down where it was seen."""
+is set down where it was seen; the cycle a safety stop ends says how far the simulated cell ran behind the clock."""
 
 from __future__ import annotations
 
@@ -140,3 +140,40 @@ def test_a_part_held_when_the_horizon_runs_out_is_set_down_where_it_was_seen_and
     first, again = (r["obs"][OBS_OBJECT] for r in records if r["kind"] == "decision" and r["t"] == 0)
     # the retry found the part where the first attempt had, in the pick region (not dropped from 15 cm up)
     assert np.linalg.norm(np.subtract(again, first)[:2]) < 0.01, (first, again)
+
+
+def test_a_run_a_safety_stop_ends_logs_how_far_its_cell_ran_behind(tmp_path):
+    """The cycle a safety stop ends is not scored; the run log still says how far the simulated cell ran behind the
+    clock in it (`cell_backlog`, `stopped`), the record by which a dry run on a busy PC is told from a policy's
+    failure."""
+    cfg = CellConfig()
+    cells, faults = [], []
+
+    def fault_in_the_grasp(obs, phase, a, cell):
+        if phase == Phase.GRASP and not faults:
+            cell.sim.inject_drive_fault(5)
+            faults.append(5)
+        return a
+
+    def pose_factory(cell):
+        from mrguide.cell.twin_plant import TwinObjectPose
+
+        cells.append(cell)
+        return TwinObjectPose(cell.plant)
+
+    log = tmp_path / "cycles.jsonl"
+    with RunLog(log, {"test": "cycles"}) as run_log:
+        summary = dry_run_cycles(
+            None,
+            cfg,
+            bus_config(),
+            CycleRun(0, 2, seed=3, config=CycleConfig()),
+            run_log,
+            pose_factory=pose_factory,
+            policy=Expert(cfg, lambda o, p, a: fault_in_the_grasp(o, p, a, cells[0])),
+        )
+    assert summary.stopped is not None and "drive_fault" in summary.stopped, summary.text()
+    records = read_log(log)
+    assert not [r for r in records if r["kind"] == "scored"]
+    (behind,) = [r for r in records if r["kind"] == "cell_backlog"]
+    assert behind["stopped"] is True and behind["seconds"] >= 0.0
