@@ -83,10 +83,11 @@ case "$cmd" in
     # which then share the machine only with each other. A dry run keeps most of a core busy (the simulated
     # devices answer every 4 ms SYNC in Python): on three workers they starved each other into correct safety
     # stops (`loadscope`: each module's tests on one worker, so a module fixture such as the robot venv is built
-    # once).
+    # once). A test that failed while its simulated cell ran behind the clock runs again (tests/conftest.py); -rR
+    # names it.
     rc=0
     "$VENV/bin/python" -m pytest -q -n 2 -m "not slow and not realtime" || rc=$?
-    "$VENV/bin/python" -m pytest -q -n 2 --dist loadscope -m "not slow and realtime" || rc=$((rc ? rc : $?))
+    "$VENV/bin/python" -m pytest -q -rR -n 2 --dist loadscope -m "not slow and realtime" || rc=$((rc ? rc : $?))
     exit "$rc" ;;
   *) echo "usage: ./run.sh {main|test} [args]" >&2; exit 2 ;;
 esac

@@ -20,9 +20,8 @@ def _check_logged_trajectory(log):
 
 
 def test_expert_succeeds_through_the_full_stack(run_dry):
-    summary, log, _ = run_dry(episodes=6, seed=1)
-    assert summary.stopped is None
-    assert summary.successes >= 6 * 0.95, summary.text()
+    summary, log, _ = run_dry(episodes=3, seed=1)  # the rate: test_expert_success_rate_over_40_episodes (slow)
+    assert summary.stopped is None and summary.successes == 3, summary.text()
     _check_logged_trajectory(log)
     kinds = {r["kind"] for r in read_log(log)}
     assert {"episode_start", "decision", "episode_end"} <= kinds
@@ -68,9 +67,9 @@ def test_the_scripted_expert_places_parts_in_the_mujoco_cell(run_dry):
     from pathlib import Path
 
     cell = Path(__file__).parents[2] / "configs" / "cells" / "mujoco_cell.toml"
-    summary, log, used = run_dry(episodes=4, seed=1, env_cfg=CellConfig.load(cell))
+    summary, log, used = run_dry(episodes=2, seed=1, env_cfg=CellConfig.load(cell))
     assert type(used.plant).__name__ == "MujocoPlant" and used.scene is None
-    assert summary.stopped is None and summary.successes == 4, summary.text()
+    assert summary.stopped is None and summary.successes == 2, summary.text()
     _check_logged_trajectory(log)
     backlogs = [r for r in read_log(log) if r["kind"] == "cell_backlog"]  # how far the world ran behind, per episode
-    assert [r["episode"] for r in backlogs] == [0, 1, 2, 3] and all(r["seconds"] >= 0.0 for r in backlogs)
+    assert [r["episode"] for r in backlogs] == [0, 1] and all(r["seconds"] >= 0.0 for r in backlogs)
