@@ -19,7 +19,7 @@ from mrguide.drivers.cobot_state import VacuumState
 from mrguide.grasp_margin import seal_window
 from mrguide.parts import part_named
 from mrguide.robot import Workspace
-from mrguide.task import OBS_OBJECT, Phase, TaskConfig
+from mrguide.task import OBS_GOAL, OBS_OBJECT, Phase, TaskConfig
 
 
 class CellRules:
@@ -37,7 +37,7 @@ class CellRules:
         self.supervisor = supervisor
         self.lift = LiftRule(workspace, decision_period, cfg.break_away_distance, cfg.break_away_speed)
         self.seal = SealSearch(workspace, cfg.reseat_wait, cfg.seal_search)
-        self.descent = DescentRule(workspace)
+        self.descent = DescentRule(workspace, task.place_tolerance)
         self.grasp = grasp = task.grasp_offset  # where the lip rests whole on the part's face, per axis, about it
         window = SealWindow((float(grasp[0]), float(grasp[1])), seal_window(part_named(task.part), grasp[:2]))
         where = Path(cfg.bias_estimate_file) if cfg.bias_estimate_file else None
@@ -53,7 +53,7 @@ class CellRules:
     def apply(
         self, action: np.ndarray, tcp: np.ndarray, obs: np.ndarray, vac: VacuumState, phase: int, objects: ObjectTracker
     ) -> tuple[np.ndarray, dict]:
-        """The action after the rules (descent, lift, seal search), and what they did for the run log; a press
+        """The action after the rules (descent and carry, lift, seal search), and what they did for the run log; a press
         updates the registration and `objects`' correction."""
         notes: dict = {}
         done = vac.part_gripped or self.seal.reseats > 0
@@ -61,6 +61,10 @@ class CellRules:
         if descent is not None:
             self.supervisor.report(Event(descent), f"kept the cup off the part in phase {phase}")
             notes["descent_rule"] = descent
+        executed, carry = self.descent.carry(executed, obs[OBS_GOAL] + self.grasp, phase, vac.part_gripped)
+        if carry is not None:
+            self.supervisor.report(Event(carry), f"kept the part above the table in phase {phase}")
+            notes["descent_rule"] = carry
         executed, rule = self.lift.apply(executed, tcp, phase, vac)
         if rule is not None:
             self.supervisor.report(Event(rule), f"height target lowered in phase {phase}")

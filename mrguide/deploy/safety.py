@@ -58,6 +58,7 @@ class Event(str, enum.Enum):
     BREAK_AWAY = "break_away"  # the lift's first millimetres slowed (lift_rule.py)
     HOLD_IN_TRANSIT = "hold_in_transit"  # a release asked in the lift or transport: the vacuum stays on (lift_rule.py)
     DESCENT = "descent"  # the cup kept off the part until over it, and not slid while down (descent_rule.py)
+    CARRY = "carry"  # a held part kept above the table until over its goal (descent_rule.py)
     RESEAT = "reseat"  # a cup pressed without a seal re-seated at the next point of the search (seal_search.py)
     STALL = "stall"  # the decision loop stopped feeding setpoints (watchdog)
     INTERRUPT = "interrupt"  # Ctrl-C
@@ -80,6 +81,7 @@ REACTIONS: dict[Event, Reaction] = {
     Event.BREAK_AWAY: Reaction.CLAMP,
     Event.HOLD_IN_TRANSIT: Reaction.CLAMP,
     Event.DESCENT: Reaction.CLAMP,
+    Event.CARRY: Reaction.CLAMP,
     Event.RESEAT: Reaction.CLAMP,
     Event.STALL: Reaction.QUICK_STOP,
     Event.INTERRUPT: Reaction.QUICK_STOP,
