@@ -11,13 +11,35 @@ import numpy as np
 from mrguide.cell.config import CellConfig
 from mrguide.cell.dry_run import dry_run_cycles
 from mrguide.cli import main
-from mrguide.deploy.cycles import CycleConfig, CycleRun
+from mrguide.deploy.cycles import CycleConfig, CycleRun, CycleSummary
 from mrguide.deploy.runlog import RunLog, read_log
 from mrguide.motion.kinematics import Kinematics
 from mrguide.replay.runs import load_run
 from mrguide.robot import load_robot
 from mrguide.task import OBS_OBJECT, Phase
 from tests.deploy.conftest import Expert, bus_config
+
+
+def in_process(log: Path, cfg: CellConfig, run: CycleRun, hook, cells: list) -> CycleSummary:
+    """Cycles of the expert against a cell in the test's process, `hook(obs, phase, action, cell)` on its every
+    action (`cells` gets the cell: a hook may reach its simulated devices)."""
+
+    def pose_factory(cell):
+        from mrguide.cell.twin_plant import TwinObjectPose
+
+        cells.append(cell)
+        return TwinObjectPose(cell.plant)
+
+    with RunLog(log, {"test": log.stem}) as run_log:
+        return dry_run_cycles(
+            None,
+            cfg,
+            bus_config(),
+            run,
+            run_log,
+            pose_factory=pose_factory,
+            policy=Expert(cfg, lambda o, p, a: hook(o, p, a, cells[0])),
+        )
 
 
 def test_a_part_dropped_in_the_lift_is_picked_again_and_placed(tmp_path):
@@ -33,14 +55,7 @@ def test_a_part_dropped_in_the_lift_is_picked_again_and_placed(tmp_path):
             cell.sim.set_vacuum_leak(0.0)
         return a
 
-    cells = []
-
-    def pose_factory(cell):
-        from mrguide.cell.twin_plant import TwinObjectPose
-
-        cells.append(cell)
-        return TwinObjectPose(cell.plant)
-
+    cells: list = []
     kin = Kinematics(load_robot(cfg.robot))
     clearance = []  # after each placed cycle: how far the TCP stands above the top of the part it let go
 
@@ -50,16 +65,9 @@ def test_a_part_dropped_in_the_lift_is_picked_again_and_placed(tmp_path):
         clearance.append(kin.tcp_position(q)[2] - part_top)
 
     log = tmp_path / "cycles.jsonl"
-    with RunLog(log, {"test": "cycles"}) as run_log:
-        summary = dry_run_cycles(
-            None,
-            cfg,
-            bus_config(),
-            CycleRun(0, 2, seed=3, config=CycleConfig(), after_cycle=after_cycle),
-            run_log,
-            pose_factory=pose_factory,
-            policy=Expert(cfg, lambda o, p, a: leak_once(o, p, a, cells[0])),
-        )
+    summary = in_process(
+        log, cfg, CycleRun(0, 2, seed=3, config=CycleConfig(), after_cycle=after_cycle), leak_once, cells
+    )
     assert summary.stopped is None, summary.text()
     assert summary.placed == 2 and summary.retries() == {"dropped": 1}, summary.text()
     assert summary.cycles[0].outcomes == ["dropped", "success"]
@@ -147,7 +155,7 @@ def test_a_run_a_safety_stop_ends_logs_how_far_its_cell_ran_behind(tmp_path):
     clock in it (`cell_backlog`, `stopped`), the record by which a dry run on a busy PC is told from a policy's
     failure."""
     cfg = CellConfig()
-    cells, faults = [], []
+    faults: list[int] = []
 
     def fault_in_the_grasp(obs, phase, a, cell):
         if phase == Phase.GRASP and not faults:
@@ -155,23 +163,8 @@ def test_a_run_a_safety_stop_ends_logs_how_far_its_cell_ran_behind(tmp_path):
             faults.append(5)
         return a
 
-    def pose_factory(cell):
-        from mrguide.cell.twin_plant import TwinObjectPose
-
-        cells.append(cell)
-        return TwinObjectPose(cell.plant)
-
     log = tmp_path / "cycles.jsonl"
-    with RunLog(log, {"test": "cycles"}) as run_log:
-        summary = dry_run_cycles(
-            None,
-            cfg,
-            bus_config(),
-            CycleRun(0, 2, seed=3, config=CycleConfig()),
-            run_log,
-            pose_factory=pose_factory,
-            policy=Expert(cfg, lambda o, p, a: fault_in_the_grasp(o, p, a, cells[0])),
-        )
+    summary = in_process(log, cfg, CycleRun(0, 2, seed=3, config=CycleConfig()), fault_in_the_grasp, [])
     assert summary.stopped is not None and "drive_fault" in summary.stopped, summary.text()
     records = read_log(log)
     assert not [r for r in records if r["kind"] == "scored"]
