@@ -1,5 +1,5 @@
-"""Shared by the tests: the realtime marker (and a rerun when a simulated cell ran behind the clock), and the CLI
-tests' helpers."""
+"""Shared by the tests: the realtime marker (and which realtime failures had a simulated cell behind the clock), and
+the CLI tests' helpers."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import os
 import subprocess
 import sys
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Generator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -55,8 +55,10 @@ COMPUTE_ONLY = (
 )
 
 
-#: How many times a realtime test that failed is run again when its simulated cell ran behind the clock.
-BEHIND_RERUNS = 2
+#: The file (environment variable) where the realtime pass of `./run.sh test` has its failed tests listed, one line
+#: each: "behind NODEID" when a simulated cell of the test ran behind the clock, "on-time NODEID" otherwise. run.sh
+#: runs the first kind again, alone, when the pass failed only so.
+FAILED_REALTIME = "MRGUIDE_FAILED_REALTIME"
 
 #: The backlogs (s) the dry runs of the test being run wrote to their run logs (`cell_backlog`, and `scored` cycles):
 #: how far each simulated cell ran behind the wall clock.
@@ -78,14 +80,44 @@ RunLog.write = _recording(RunLog.write)  # type: ignore[method-assign]
 
 
 def cell_ran_behind() -> bool:
-    """Whether a simulated cell of the test's last attempt ran further behind the clock than `mrguide sim2real` judges
-    (MAX_CELL_BACKLOG_S): a run that was not a real-time one on a machine too busy for it, as the CI's is at times. A
-    test that failed so is run again (`BEHIND_RERUNS`, pytest-rerunfailures), never one that failed on time."""
+    """Whether a simulated cell of the test being run ran further behind the clock than `mrguide sim2real` judges
+    (MAX_CELL_BACKLOG_S): a run that was not a real-time one, on a machine too busy for it (the CI's is at times)."""
     return any(s > MAX_CELL_BACKLOG_S for s in _backlogs)
 
 
 def pytest_runtest_setup(item: pytest.Item) -> None:
-    _backlogs.clear()  # each attempt judged on its own cells
+    _backlogs.clear()  # each test judged on its own cells
+
+
+#: Whether this process is pytest's controller (not an xdist worker): the one that lists the failures.
+_controller = True
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    global _controller
+    _controller = not hasattr(config, "workerinput")
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_makereport(
+    item: pytest.Item, call: pytest.CallInfo
+) -> Generator[None, pytest.TestReport, pytest.TestReport]:
+    """A failure while a simulated cell of the test ran behind the clock says so in the report's properties (which
+    reach the controller from an xdist worker)."""
+    report = yield
+    if report.failed and cell_ran_behind():
+        report.user_properties.append(("cell_behind_the_clock", True))
+    return report
+
+
+def pytest_runtest_logreport(report: pytest.TestReport) -> None:
+    """Every failure, in the controller, listed in $MRGUIDE_FAILED_REALTIME (`FAILED_REALTIME`): "behind" only with
+    the report's word for it, so that a worker's crash, which has none, counts as a failure on time."""
+    listed = os.environ.get(FAILED_REALTIME)
+    if listed and _controller and report.failed:
+        behind = ("cell_behind_the_clock", True) in report.user_properties
+        with open(listed, "a") as fh:
+            fh.write(f"{'behind' if behind else 'on-time'} {report.nodeid}\n")
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
@@ -93,7 +125,6 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         path = item.path.relative_to(config.rootpath).as_posix()
         if path.startswith(REALTIME) and not path.startswith(COMPUTE_ONLY):
             item.add_marker(pytest.mark.realtime)
-            item.add_marker(pytest.mark.flaky(reruns=BEHIND_RERUNS, condition=cell_ran_behind))
 
 
 @dataclass
