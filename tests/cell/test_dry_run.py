@@ -20,7 +20,7 @@ def _check_logged_trajectory(log):
 
 
 def test_expert_succeeds_through_the_full_stack(run_dry):
-    summary, log, _ = run_dry(episodes=3, seed=1)  # the rate: test_expert_success_rate_over_40_episodes (slow)
+    summary, log, _ = run_dry(episodes=3, seed=1, own_process=True)  # the rate: the slow 40-episode test
     assert summary.stopped is None and summary.successes == 3, summary.text()
     _check_logged_trajectory(log)
     kinds = {r["kind"] for r in read_log(log)}
@@ -67,8 +67,9 @@ def test_the_scripted_expert_places_parts_in_the_mujoco_cell(run_dry):
     from pathlib import Path
 
     cell = Path(__file__).parents[2] / "configs" / "cells" / "mujoco_cell.toml"
-    summary, log, used = run_dry(episodes=2, seed=1, env_cfg=CellConfig.load(cell))
-    assert type(used.plant).__name__ == "MujocoPlant" and used.scene is None
+    cfg = CellConfig.load(cell)
+    summary, log, used = run_dry(episodes=2, seed=1, env_cfg=cfg, own_process=True)  # as `deploy --dry-run` runs it
+    assert cfg.plant.engine == "mujoco" and used.sim is None and type(used.plant).__name__ == "CellProxy"
     assert summary.stopped is None and summary.successes == 2, summary.text()
     _check_logged_trajectory(log)
     backlogs = [r for r in read_log(log) if r["kind"] == "cell_backlog"]  # how far the world ran behind, per episode

@@ -42,7 +42,8 @@ def run_dry(tmp_path):
     """dry_run with the expert; returns (summary, run log path, the cell the run used).
 
     `pose(cell)` may give the object pose source (default: the exact pose from the twin), `on_placed` runs
-    after the object was placed; `runtime_cfg` sets the runtime (RuntimeConfig)."""
+    after the object was placed; `runtime_cfg` sets the runtime (RuntimeConfig); `own_process` runs the cell in a
+    process of its own, as `mrguide deploy --dry-run` does (a hook then has no simulated devices to reach)."""
 
     def run(
         episodes=1,
@@ -55,6 +56,7 @@ def run_dry(tmp_path):
         pose=None,
         runtime_cfg=None,
         on_placed=None,
+        own_process=False,
     ):
         cfg = env_cfg if isinstance(env_cfg, CellConfig) else CellConfig(env=env_cfg or EnvConfig())  # a cell of an env
         cells = []
@@ -82,6 +84,7 @@ def run_dry(tmp_path):
                 max_recoveries=max_recoveries,
                 runtime_cfg=runtime_cfg,
                 on_placed=on_placed,
+                own_process=own_process,
             )
         return summary, log, cells[0]
 
