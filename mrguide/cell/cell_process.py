@@ -142,6 +142,33 @@ _CellManager.register(
 
 
 @contextlib.contextmanager
+def _drained(end: socket.socket) -> Iterator[None]:
+    """Frames arriving at `end` read and dropped for the block, as a bus drops what no node listens to: a link end
+    nobody reads fills after a few hundred frames and blocks its sender, and the cell's devices, booted in its
+    constructor, would wait for a master that waits for the constructor (seen on a slow machine: a hung dry run)."""
+    done = threading.Event()
+
+    def drain() -> None:
+        while not done.is_set():
+            try:
+                end.recv(64)
+            except TimeoutError:
+                continue
+            except OSError:
+                return
+
+    end.settimeout(0.05)
+    reader = threading.Thread(target=drain, name="cell-link-drain", daemon=True)
+    reader.start()
+    try:
+        yield
+    finally:
+        done.set()
+        reader.join()
+        end.settimeout(None)
+
+
+@contextlib.contextmanager
 def cell_process(env_cfg: CellConfig, bus_cfg: CobotBusConfig, seed: int) -> Iterator[tuple[CellProxy, CobotBusConfig]]:
     """Start the cell's process (plant + simulated devices, booted and waiting in PRE-OPERATIONAL); yield the deploy
     side's handle on it (`CellProxy`) and the bus config of the master's end of the link. The process ends with the
@@ -152,7 +179,8 @@ def cell_process(env_cfg: CellConfig, bus_cfg: CobotBusConfig, seed: int) -> Ite
     server = None
     try:
         try:
-            server = manager.CellServer(env_cfg, bus_cfg, seed, device_end)  # type: ignore[attr-defined]
+            with _drained(master_end):  # the devices boot (and talk) before the master reads the link
+                server = manager.CellServer(env_cfg, bus_cfg, seed, device_end)  # type: ignore[attr-defined]
         except RemoteError as exc:  # its text is the child's traceback: the last line says what failed
             logger.debug("the simulated cell's process failed to start:%s", exc)
             lines = [line for line in str(exc).splitlines() if line.strip(" -")]

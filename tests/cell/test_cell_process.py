@@ -104,3 +104,21 @@ def test_a_killed_deploy_process_leaves_no_cell_behind():
     else:
         os.kill(cell_pid, signal.SIGKILL)
         pytest.fail("the cell's process outlived the deploy process by 10 s")
+
+
+def test_the_link_is_drained_while_the_cell_starts_so_its_devices_never_block():
+    """The devices boot and talk in the cell's constructor, before the master reads the link: undrained, the link's
+    end fills after a few hundred frames and the sender blocks (a hung dry run on a slow machine)."""
+    from mrguide.cell.cell_process import _drained
+    from mrguide.drivers.mock.pipe_bus import pipe_link
+
+    master_end, device_end = pipe_link()
+    device_end.settimeout(5.0)  # a blocked send fails the test instead of hanging it
+    try:
+        with _drained(master_end):
+            for _ in range(5000):
+                device_end.send(bytes(16))
+        assert master_end.gettimeout() is None  # the master's bus reads a blocking end again
+    finally:
+        master_end.close()
+        device_end.close()
