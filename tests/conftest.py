@@ -89,15 +89,6 @@ def pytest_runtest_setup(item: pytest.Item) -> None:
     _backlogs.clear()  # each test judged on its own cells
 
 
-#: Whether this process is pytest's controller (not an xdist worker): the one that lists the failures.
-_controller = True
-
-
-def pytest_configure(config: pytest.Config) -> None:
-    global _controller
-    _controller = not hasattr(config, "workerinput")
-
-
 @pytest.hookimpl(wrapper=True)
 def pytest_runtest_makereport(
     item: pytest.Item, call: pytest.CallInfo
@@ -114,7 +105,7 @@ def pytest_runtest_logreport(report: pytest.TestReport) -> None:
     """Every failure, in the controller, listed in $MRGUIDE_FAILED_REALTIME (`FAILED_REALTIME`): "behind" only with
     the report's word for it, so that a worker's crash, which has none, counts as a failure on time."""
     listed = os.environ.get(FAILED_REALTIME)
-    if listed and _controller and report.failed:
+    if listed and report.failed and "PYTEST_XDIST_WORKER" not in os.environ:  # the controller lists, not a worker
         behind = ("cell_behind_the_clock", True) in report.user_properties
         with open(listed, "a") as fh:
             fh.write(f"{'behind' if behind else 'on-time'} {report.nodeid}\n")

@@ -113,7 +113,7 @@ def test_the_link_is_drained_while_the_cell_starts_so_its_devices_never_block():
     from mrguide.drivers.mock.pipe_bus import pipe_link
 
     master_end, device_end = pipe_link()
-    device_end.settimeout(5.0)  # a blocked send fails the test instead of hanging it
+    device_end.settimeout(60.0)  # a blocked send fails the test instead of hanging it
     try:
         with _drained(master_end):
             for _ in range(5000):
