@@ -8,7 +8,6 @@ seals' offsets). A person marks the real part: the source is asked with the obse
 from __future__ import annotations
 
 import logging
-import zlib
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import NamedTuple
@@ -23,11 +22,11 @@ from mrguide.policies.choices import EXPERT_SOURCES, MarksMode
 from mrguide.policies.experts import ANNOTATOR_SEED_OFFSET, ExpertSource, FileExpert, OracleExpert, SimulatedAnnotator
 from mrguide.policies.guidance import GuidanceConfig, PoseError, ReferencePose, bounded_projection
 from mrguide.policies.mark_fusion import INTENT_RADIUS, KINDS, MarkFusion, anchor
+from mrguide.policies.perceived_part import PerceivedPart
 from mrguide.policies.pick_place_demo import PickPlaceDemo
 from mrguide.registries import register
 from mrguide.task import (
     G_REQUIRED,
-    OBS_OBJECT,
     OBS_PROGRESS,
     PICK_PHASE,
     PLACE_PHASE,
@@ -43,7 +42,6 @@ from mrguide.twin.env import PickPlaceEnv
 log = logging.getLogger(__name__)
 
 ACTION_NOISE_SEED_OFFSET = 104_729  # the expert-action noise of training seed s draws from RNG seed s + this
-POSE_SEED_OFFSET = 15_485_863  # the perceived part's registration bias of training seed s: RNG seed (s, this)
 
 
 class ExpertStep(NamedTuple):
@@ -67,32 +65,6 @@ class ExpertCounts:
     probes: int = 0  # targets a demonstration's search tried beyond a waypoint that did not complete its phase
     measured: int = 0  # seals and placements the cell measured (recorded as pick and place measurements)
     corrections: int = 0  # of the marks asked, those correcting what was taught ("here" after Intervene)
-
-
-class PerceivedPose:
-    """The part's position as the cell perceives it: the observed one plus a registration bias drawn once per run
-    and an error per look (guidance.pose: both zero, the pose as observed). A look's error is drawn from the run's
-    seed and the observation itself, so the same observation is always seen alike: a resumed run, rebuilding its
-    fused marks from the annotation file, sees every mark's part where the interrupted run saw it."""
-
-    def __init__(self, error: PoseError, seed: int):
-        self.error, self.seed = error, seed
-        rng = np.random.default_rng([seed, POSE_SEED_OFFSET])
-        self.bias = rng.normal(0.0, error.bias_sigma, 3) if error.bias_sigma > 0 else np.zeros(3)
-
-    @property
-    def exact(self) -> bool:
-        """The part seen where it is (no error set)."""
-        return self.error.sigma == 0 and self.error.bias_sigma == 0
-
-    def __call__(self, obs: np.ndarray) -> np.ndarray:
-        """`obs` with the part where the cell sees it (a float64 copy)."""
-        seen = np.array(obs, dtype=np.float64)
-        seen[OBS_OBJECT] += self.bias
-        if self.error.sigma > 0:
-            look = np.random.default_rng([self.seed, zlib.crc32(np.asarray(obs, dtype=np.float32).tobytes())])
-            seen[OBS_OBJECT] += look.normal(0.0, self.error.sigma, 3)
-        return seen
 
 
 class GuidedExpert:
@@ -139,7 +111,7 @@ class GuidedExpert:
         self.marks = marks
         self.fusion = MarkFusion()
         self.counts = counts if counts is not None else ExpertCounts()
-        self.perceived = PerceivedPose(pose_error or PoseError(), seed)
+        self.perceived = PerceivedPart(pose_error or PoseError(), seed)
         self.mark_precision = mark_precision
         self.demo = PickPlaceDemo(task)
         self._person = False  # a person stepped in for this demonstration: every mark is asked of them
@@ -157,6 +129,7 @@ class GuidedExpert:
         self._person = person
         self._streak = (-1, 0)
         self._plan = {}
+        self.perceived.new_part()
         self.demo = PickPlaceDemo(self.task, self.fusion.intent(PICK_PHASE))
 
     def retasked(self) -> TaskConfig | None:
@@ -256,38 +229,52 @@ class GuidedExpert:
             sealed = self.demo.enter(phase, obs)
             if sealed is not None:
                 self._measured(PICK_PHASE, sealed)
+        seen = self.perceived.at_decision(obs, phase)
         if phase == Phase.LIFT:
-            self.demo.carried(self.perceived(obs))
+            self.demo.carried(seen)
         steps = self._streak[1] + 1 if self._streak[0] == phase else 1
         planned = self._plan.get(kind)
         due = planned is not None and self.demo.search is None and self.reask_after and steps > self.reask_after
         if planned is None or due:
-            if not self._plan_mark(obs, kind, None if planned is None else planned[0]):
+            if not self._plan_mark(obs, kind, None if planned is None else planned[0], seen):
                 return None
             steps = 1
         else:
             self.counts.reused += 1
+            self._follow_still_part(kind, phase, seen)
         self._streak = (phase, steps)
         probe = self.demo.probe
-        target = self.demo.next_target(self._plan[kind][1], self.perceived(obs))
+        target = self.demo.next_target(self._plan[kind][1], seen)
         if target is None:  # nothing around the waypoint completes the phase: the person marks again
             self.counts.remarks += 1
             if withdrawn := self.fusion.withdraw(kind):
                 log.info(
                     "the search found nothing around %d measurement(s) of mark phase %d: withdrawn", withdrawn, kind
                 )
-            if not self._plan_mark(obs, kind, self._plan[kind][0], force=True):
+            if not self._plan_mark(obs, kind, self._plan[kind][0], seen, force=True):
                 return None
             self.demo.restart_phase()
-            target = self.demo.next_target(self._plan[kind][1], self.perceived(obs))
+            target = self.demo.next_target(self._plan[kind][1], seen)
             assert target is not None
         elif self.demo.probe != probe:
             self.counts.probes += 1
         return target, float(G_REQUIRED[phase])
 
-    def _plan_mark(self, obs: np.ndarray, kind: int, previous: int | None, force: bool = False) -> bool:
+    def _follow_still_part(self, kind: int, phase: int, seen: np.ndarray) -> None:
+        """The pick planned against an earlier estimate of the part's centre moves with the estimate as looks add to
+        it (the seal is then measured against the estimate the cup went down on)."""
+        if kind != PICK_PHASE or phase > Phase.GRASP or self.perceived.exact:
+            return
+        index, point, at = self._plan[kind]
+        now = anchor(kind, seen)
+        self._plan[kind] = (index, point + (now - at), now)
+
+    def _plan_mark(
+        self, obs: np.ndarray, kind: int, previous: int | None, seen: np.ndarray, force: bool = False
+    ) -> bool:
         """Fix this demonstration's fused `kind` mark: from a cached mark for this observation, from the fusion alone
-        once it is settled, or from a fresh mark (a re-mark of record `previous`); False when nobody answered."""
+        once it is settled, or from a fresh mark (a re-mark of record `previous`); False when nobody answered. `seen`:
+        the decision's observation with the part where the cell sees it (`PerceivedPart.at_decision`)."""
         ask_obs = obs.copy()  # the request names the mark's phase: the page asks for the grasp or set-down point
         ask_obs[OBS_PROGRESS] = progress(kind)
         hit = self.cache.lookup(ask_obs) if previous is None else None
@@ -303,7 +290,8 @@ class GuidedExpert:
             index = self._ask(ask_obs, previous)
             if index is None:
                 return False
-        seen = self.perceived(ask_obs)
+        seen = seen.copy()
+        seen[OBS_PROGRESS] = ask_obs[OBS_PROGRESS]
         at = anchor(kind, seen)
         steady = self._steady_pick() if kind == PICK_PHASE else None
         fused = self.fusion.point(kind, at) if steady is None else at + steady
