@@ -1,9 +1,10 @@
 """The expert side of guided training: annotations from a source, cached, re-marked when unreached,
 bounded by Eq. 13, optionally perturbed, and turned into normalized actions.
 
-The expert sees the part where the cell would: through the configured pose error (`PerceivedPose`), never the
-twin's exact pose, wherever the part's pose enters the expert path (Eq. 13's reference, the marks' anchors, the
-seals' offsets). A person marks the real part: the source is asked with the observation as it is."""
+The expert sees the part where the cell would: through the configured pose error, its looks averaged while the part
+stands still (`PerceivedPart`), never the twin's exact pose, wherever the part's pose enters the expert path (Eq. 13's
+reference, the marks' anchors, the seals' offsets). A person marks the real part: the source is asked with the
+observation as it is."""
 
 from __future__ import annotations
 
