@@ -36,11 +36,12 @@ missing_debs() {
 if [ ! -f "$STAMP" ]; then
   echo "[run.sh] setting up $VENV (first run takes a few minutes)..." >&2
   "$PY" -m venv "$VENV"
-  "$VENV/bin/python" -m pip install --quiet --upgrade pip
-  # torch is pinned to the CPU build; install it first so nothing pulls a CUDA build.
-  "$VENV/bin/python" -m pip install --quiet --no-compile "torch==2.13.0"
+  # torch is pinned to the CPU build; pip installs it first (from the machine's wheel directory where it has one, as
+  # pip is configured) so nothing pulls a CUDA build. uv, from PyPI, then installs the rest: it fetches the ~100
+  # packages in parallel, 2.7x faster than pip here, to the same versions (benchmarks/install.py).
+  "$VENV/bin/python" -m pip install --quiet --no-compile "torch==2.13.0" "uv==0.13.10"
   # The workstation profile and the test tools (docs/install.md; a robot PC installs '.[robot]' instead).
-  "$VENV/bin/python" -m pip install --quiet --no-compile -e ".[train,dev]"
+  UV_LINK_MODE=copy "$VENV/bin/uv" pip install --quiet --python "$VENV/bin/python" -e ".[train,dev]"
   # The bytecode on every core at once (pip compiles file by file: ~40 s; left to the first imports, every process
   # started before the files are written compiles them again: about a minute of the first test pass). A file that
   # does not compile (a package's Python 2 example) is one nothing imports.
