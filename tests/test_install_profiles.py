@@ -2,7 +2,8 @@
 torch, PyBullet and Ray are not in it; a command whose profile is missing says which extra to install.
 
 The robot venv is real: the checkout's wheel (built as the annotation page's wheel test builds it) installed
-with its `robot` extra from the package index into `python -m venv`, nothing else. The bare install (no extra)
+with its `robot` extra from the package index into `python -m venv`, nothing else (by uv, as run.sh installs: the
+versions pip resolves, benchmarks/install.py). The bare install (no extra)
 is played in this interpreter by a finder that refuses every module the extras provide.
 """
 
@@ -141,9 +142,11 @@ def robot_venv(tmp_path_factory):
     venv = where / "venv"
     try:
         subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True, capture_output=True, timeout=300)
-        # --no-compile: the bytecode of the modules the tests import is written as they import them, not all of it
-        install = _in_venv(
-            venv, ["python", "-m", "pip", "install", "-q", "--no-compile", f"{wheel}[robot]"], where, timeout=1200
+        # uv (the dev extra's, as run.sh installs with it): the packages pip would install, from its cache where
+        # run.sh's install left them; without bytecode, which the modules the tests import write as they load
+        uv = [str(Path(sys.executable).parent / "uv"), "pip", "install", "-q", "--python", str(venv / "bin" / "python")]
+        install = subprocess.run(
+            [*uv, f"{wheel}[robot]"], cwd=where, env=_venv_env(venv), capture_output=True, text=True, timeout=1200
         )
         assert install.returncode == 0, install.stderr[-3000:]
         yield venv
@@ -154,11 +157,22 @@ def robot_venv(tmp_path_factory):
 def _in_venv(venv: Path, argv: list[str], cwd: Path, timeout: float = 300) -> subprocess.CompletedProcess:
     """Run `argv` (its first item a program in the venv's bin/) apart from the checkout: in `cwd`, without
     PYTHONPATH (pip would take the checkout's mrguide.egg-info for an installed mrguide and skip it)."""
+    return subprocess.run(
+        [str(venv / "bin" / argv[0]), *argv[1:]],
+        cwd=cwd,
+        env=_venv_env(venv),
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+    )
+
+
+def _venv_env(venv: Path) -> dict[str, str]:
+    """The environment without PYTHON* variables, the venv's bin/ first on PATH."""
     env = {k: v for k, v in os.environ.items() if not k.startswith("PYTHON")}
     env["PATH"] = f"{venv / 'bin'}:/usr/bin:/bin"
-    return subprocess.run(
-        [str(venv / "bin" / argv[0]), *argv[1:]], cwd=cwd, env=env, capture_output=True, text=True, timeout=timeout
-    )
+    env["UV_LINK_MODE"] = "copy"
+    return env
 
 
 def _script(venv: Path, code: str, cwd: Path) -> subprocess.CompletedProcess:
