@@ -14,6 +14,7 @@ from mrguide.policies.mark_fusion import REFINE_RADIUS, MarkFusion
 from mrguide.robot import load_robot
 from mrguide.task import PICK_PHASE, Phase, TaskConfig, oracle_target, phase_from_progress, phase_target
 from tests.policies.mark_scene import GOAL, OBJ, scene_obs
+from tests.run_configs import TEST_EVAL_EPISODES
 
 #: m, a grasp 3.7 cm off the centre of the keep-out block's top (clear of its label), in the part's frame
 TAUGHT = np.array([0.037, 0.0, 0.02])
@@ -172,7 +173,10 @@ def test_a_run_on_the_keepout_block_learns_the_taught_grasp_without_reading_the_
 
     config = Path(__file__).resolve().parents[2] / "configs" / "parts" / "keepout_block.toml"
     run = RunConfig.load(config)
-    run = run.replace(train=dataclasses.replace(run.train, total_steps=800, eval_every=10_000, checkpoint_every=10_000))
+    train = dataclasses.replace(
+        run.train, total_steps=800, eval_every=10_000, checkpoint_every=10_000, eval_episodes=TEST_EVAL_EPISODES
+    )
+    run = run.replace(train=train)
     monkeypatch.setitem(PARTS, "keepout_block", dataclasses.replace(PARTS["keepout_block"], judge_only=_Tripwire()))
     tr = Trainer(run, tmp_path, source_factory=lambda env: _Person(TAUGHT + [0, 0, -0.003], True, env.task_cfg))
     try:
@@ -231,7 +235,10 @@ def test_a_correction_in_a_run_forgets_what_was_learned_from_before_it(tmp_path)
 
     config = Path(__file__).resolve().parents[2] / "configs" / "parts" / "keepout_block.toml"
     run = RunConfig.load(config)
-    run = run.replace(train=dataclasses.replace(run.train, total_steps=600, eval_every=10_000, checkpoint_every=10_000))
+    train = dataclasses.replace(
+        run.train, total_steps=600, eval_every=10_000, checkpoint_every=10_000, eval_episodes=TEST_EVAL_EPISODES
+    )
+    run = run.replace(train=train)
     tr = Trainer(run, tmp_path, source_factory=lambda env: StepsIn([0.0, 0.0, 0.017], True, env.task_cfg))
     pool: list[tuple[int, int]] = []  # the pools' size before and after each forgetting
     forget = tr.learning.forget

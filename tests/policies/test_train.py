@@ -8,6 +8,7 @@ import pytest
 import torch
 
 from mrguide.policies.train import CheckpointError, Trainer
+from mrguide.policies.train_config import RunConfig
 from mrguide.policies.train_counters import TrainerCounters
 from tests.run_configs import run_config, sections
 
@@ -148,13 +149,14 @@ def test_guided_training_converges_within_5000_steps_by_the_experiments_rule(tmp
     80 % by 5,000 steps and stays there through 7,000 (the learning-curves rule on the evaluations so far)."""
     from mrguide.experiments.stats import convergence
 
-    tc, dc, gc, ec = sections()
-    tr = Trainer(run_config(tc, dc, gc, ec), tmp_path / "slow")
+    run = RunConfig()  # the default, its 10 evaluation episodes included (not the tests' sections)
+    tr = Trainer(run, tmp_path / "slow")
     try:
         tr.run(stop_at=7_000)
         with (tmp_path / "slow" / "eval.csv").open() as fh:
             rows = list(csv.DictReader(fh))
-        conv = convergence([int(r["step"]) for r in rows], [float(r["success_rate"]) for r in rows], tc.eval_episodes)
+        steps, rates = [int(r["step"]) for r in rows], [float(r["success_rate"]) for r in rows]
+        conv = convergence(steps, rates, run.train.eval_episodes)
         assert conv.step is not None and conv.step <= 5_100, rows  # the 5k evaluation runs just after 5,000 steps
     finally:
         tr.close()
