@@ -79,7 +79,9 @@ class PickPlaceEnv(gym.Env):
         self.twin_cfg = self.config.twin
         self.workspace = self.robot_spec.workspace
         self.render_mode = render_mode
-        self.scene = Scene(self.robot_spec, self.twin_cfg, part_named(self.task_cfg.part))
+        self.scene = Scene(
+            self.robot_spec, self.twin_cfg, part_named(self.task_cfg.part), visuals=render_mode == "rgb_array"
+        )
         self.decision = DecisionStep(self.robot_spec, self.task_cfg, self.twin_cfg.control_period)
         self.kin, self.streamer = self.decision.kin, self.decision.streamer
         self.action_space = gym.spaces.Box(-1.0, 1.0, (ACT_DIM,), np.float32)

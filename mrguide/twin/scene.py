@@ -128,9 +128,21 @@ class SceneSnapshot:
 class Scene:
     """One PyBullet world with the cell in it."""
 
-    def __init__(self, spec: RobotSpec, cfg: TwinConfig, part: Part = PARTS["block"], seed: int | None = None):
-        """Connect to PyBullet (its GUI if `cfg.gui`) and build the cell: arm at home, the part and goal placed."""
+    def __init__(
+        self,
+        spec: RobotSpec,
+        cfg: TwinConfig,
+        part: Part = PARTS["block"],
+        seed: int | None = None,
+        visuals: bool = False,
+    ):
+        """Connect to PyBullet (its GUI if `cfg.gui`) and build the cell: arm at home, the part and goal placed.
+
+        The arm's visual meshes are loaded only with `visuals` (or the GUI): parsing them is most of a scene's start
+        (0.3 s; 7 ms without), and only `camera()` draws this world — the cell's HMD and camera render worlds of
+        their own (`twin.visual_arm`)."""
         self.spec, self.cfg, self.part = spec, cfg, part
+        self.visuals = visuals or cfg.gui
         #: the part's centre of mass in its frame: PyBullet's body frame, which `object_pose` turns into the part's
         self.com = np.asarray(part.centre_of_mass)
         self.client = pb.connect(pb.GUI if cfg.gui else pb.DIRECT)
@@ -139,7 +151,12 @@ class Scene:
         pb.setTimeStep(cfg.control_period, physicsClientId=c)
         pb.setPhysicsEngineParameter(deterministicOverlappingPairs=1, physicsClientId=c)
         self.table = _add_table(c)
-        self.robot = pb.loadURDF(str(urdf_with_cup(spec, cfg.cup.stroke)), useFixedBase=True, physicsClientId=c)
+        self.robot = pb.loadURDF(
+            str(urdf_with_cup(spec, cfg.cup.stroke)),
+            useFixedBase=True,
+            flags=0 if self.visuals else pb.URDF_IGNORE_VISUAL_SHAPES,
+            physicsClientId=c,
+        )
         links, joints = _link_and_joint_ids(self.robot, c)
         self.joint_ids = [joints[name] for name in spec.joint_names]
         self.tcp_link = links["tcp"]
@@ -287,6 +304,9 @@ class Scene:
         return np.array(pos), np.array(orn)
 
     def camera(self) -> Camera:
+        """The twin's camera on this world; the arm must have been loaded with its visual meshes."""
+        if not self.visuals:
+            raise RuntimeError("this twin scene was built without the arm's visual meshes: Scene(..., visuals=True)")
         return Camera.from_config(self.client, self.cfg.camera)
 
     # -- save / restore --------------------------------------------------------------------------

@@ -121,6 +121,26 @@ def test_render_gives_an_image():
         e.close()
 
 
+def test_only_a_rendering_env_loads_the_arms_meshes_and_a_blind_one_refuses_to_draw():
+    """The arm's visual meshes are most of a scene's start: a training env goes without them (its physics is the
+    same: the meshes are not its collision shapes), and a camera on it is refused rather than drawing no arm."""
+    import pybullet as pb
+
+    drawn, blind = PickPlaceEnv(render_mode="rgb_array"), PickPlaceEnv()
+    try:
+        files = [
+            [shape[4].decode() for shape in pb.getVisualShapeData(e.scene.robot, physicsClientId=e.scene.client)]
+            for e in (drawn, blind)
+        ]
+        dae = [sum(f.endswith(".dae") for f in names) for names in files]
+        assert dae == [7, 0], files  # the UR5's seven visual meshes, and none (PyBullet shows the collision shapes)
+        with pytest.raises(RuntimeError, match="without the arm's visual meshes"):
+            blind.scene.camera()
+    finally:
+        drawn.close()
+        blind.close()
+
+
 def test_gymnasium_make_builds_the_env_and_its_checker_passes():
     import warnings
 
