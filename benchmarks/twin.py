@@ -1,4 +1,4 @@
-"""Twin benchmark: env decisions/s, sim-to-wall factor, oracle success, IK and Ruckig timing.
+"""Twin benchmark: env decisions/s, sim-to-wall factor, oracle success, a scene's start, IK and Ruckig timing.
 
 Run: python benchmarks/twin.py [--episodes N] [--config C]. The arm is the config's ([robot], default UR5;
 e.g. --config configs/runs/ur10_run.toml). Oracle episodes use env seeds 0..N-1. Prints a table; the last line is
@@ -37,6 +37,19 @@ def bench_env(episodes: int, cfg: EnvConfig) -> dict:
         "oracle_success": s.success_rate,
         "episodes": episodes,
     }
+
+
+def bench_scene_start(cfg: EnvConfig, n: int = 7) -> dict:
+    """Median seconds to build the env with the arm's visual meshes (a rendering env) and without (every other)."""
+    times: dict[str, list[float]] = {"drawn": [], "blind": []}
+    for _ in range(n):  # interleaved, so that a busy moment of the machine falls on both
+        for kind, mode in (("drawn", "rgb_array"), ("blind", None)):
+            t = time.perf_counter()
+            env = PickPlaceEnv(cfg, render_mode=mode)
+            times[kind].append(time.perf_counter() - t)
+            env.close()
+    drawn, blind = float(np.median(times["drawn"])), float(np.median(times["blind"]))
+    return {"scene_start_drawn_s": drawn, "scene_start_blind_s": blind, "scene_start_ratio": drawn / blind}
 
 
 def bench_ik(spec: RobotSpec, n: int = 3000) -> dict:
@@ -105,6 +118,7 @@ def main() -> None:
     res = {
         "robot": spec.name,
         **bench_env(args.episodes, cfg),
+        **bench_scene_start(cfg),
         **bench_ik(spec),
         **bench_ik_round_trips(spec),
         **bench_ruckig(spec),
@@ -117,6 +131,11 @@ def main() -> None:
         ("env decisions/s (0.1 s decision, 4 ms control)", f"{res['decisions_per_s']:.0f}", ">= 200"),
         ("simulated / wall time", f"{res['sim_to_wall']:.1f}x", ""),
         (f"oracle success ({res['episodes']} seeded episodes)", f"{res['oracle_success']:.1%}", ">= 98 %"),
+        (
+            "env start, drawn / blind (median of 7)",
+            f"{res['scene_start_drawn_s']:.3f} / {res['scene_start_blind_s']:.3f} s",
+            "",
+        ),
         ("IK solve median (warm start)", f"{res['ik_median_ms']:.3f} ms", "<= 0.3 ms"),
         ("IK solve p99", f"{res['ik_p99_ms']:.3f} ms", ""),
         (f"IK round trip, worst of {res['ik_round_trips']}", f"{res['ik_round_trip_max_mm']:.4f} mm", "<= 1 mm"),

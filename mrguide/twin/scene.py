@@ -138,8 +138,8 @@ class Scene:
     ):
         """Connect to PyBullet (its GUI if `cfg.gui`) and build the cell: arm at home, the part and goal placed.
 
-        The arm's visual meshes are loaded only with `visuals` (or the GUI): parsing them is most of a scene's start
-        (0.3 s; 7 ms without), and only `camera()` draws this world — the cell's HMD and camera render worlds of
+        The arm's visual meshes are loaded only with `visuals` (or the GUI): parsing them is most of an env's start
+        (0.26 s against 0.02 s without: `benchmarks/twin.py`), and only `camera()` draws this world — the cell's HMD and camera render worlds of
         their own (`twin.visual_arm`)."""
         self.spec, self.cfg, self.part = spec, cfg, part
         self.visuals = visuals or cfg.gui
