@@ -37,9 +37,11 @@ if [ ! -f "$STAMP" ]; then
   echo "[run.sh] setting up $VENV (first run takes a few minutes)..." >&2
   "$PY" -m venv "$VENV"
   # torch is pinned to the CPU build; pip installs it first (from the machine's wheel directory where it has one, as
-  # pip is configured) so nothing pulls a CUDA build. uv, from PyPI, then installs the rest: it fetches the ~100
-  # packages in parallel, 2.7x faster than pip here, to the same versions (benchmarks/install.py).
-  "$VENV/bin/python" -m pip install --quiet --no-compile "torch==2.13.0" "uv==0.13.10"
+  # pip is configured) so nothing pulls a CUDA build. uv (the dev extra's pin), from PyPI, then installs the rest: it
+  # fetches the ~100 packages in parallel, 2.7x faster than pip here, to the same versions (benchmarks/install.py).
+  UV=$("$PY" -c 'import tomllib
+print(next(r for r in tomllib.load(open("pyproject.toml", "rb"))["project"]["optional-dependencies"]["dev"] if r.startswith("uv")))')
+  "$VENV/bin/python" -m pip install --quiet --no-compile "torch==2.13.0" "$UV"
   # The workstation profile and the test tools (docs/install.md; a robot PC installs '.[robot]' instead).
   UV_LINK_MODE=copy "$VENV/bin/uv" pip install --quiet --python "$VENV/bin/python" -e ".[train,dev]"
   # The bytecode on every core at once (pip compiles file by file: ~40 s; left to the first imports, every process

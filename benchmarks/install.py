@@ -21,13 +21,21 @@ import subprocess
 import sys
 import tempfile
 import time
+import tomllib
 from pathlib import Path
 
 from mrguide.cli_args import positive_int
 
 ROOT = Path(__file__).resolve().parent.parent
-#: What run.sh installs with pip before the rest (its pins).
-FIRST = ["torch==2.13.0", "uv==0.13.10"]
+#: What run.sh installs with pip before the rest: torch's CPU build and uv at the dev extra's pin.
+FIRST = [
+    "torch==2.13.0",
+    next(
+        r
+        for r in tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["optional-dependencies"]["dev"]
+        if r.startswith("uv")
+    ),
+]
 
 
 def fresh_venv(where: Path, cache: Path) -> Path:
