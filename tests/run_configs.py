@@ -7,8 +7,9 @@ from typing import Any
 
 from mrguide.policies.train_config import RunConfig
 
-#: Evaluation episodes of a test's training run: at the default 10 the evaluations are about a fifth of a short test
-#: run's cost, and no test built from these sections judges a policy by its evaluations' rate.
+#: Evaluation episodes of a test's training run: at the default 10 a short test run's final evaluation plays up to
+#: 600 decisions (10 x the 60-decision horizon), as many as a 600-step test run trains, and no test built from these
+#: sections judges a policy by its evaluations' rate.
 TEST_EVAL_EPISODES = 2
 
 
