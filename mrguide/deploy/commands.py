@@ -81,7 +81,7 @@ def add_deploy_command(
     annotation: AnnotationPlugin,
 ) -> None:
     """Register `mrguide deploy`; `dry_run_factory(config_file)` builds the simulated cell's DryRunBackend,
-    `learning_factory(run_dir, policy, robot, task, exploration, seed, resume)` the learner of `--learn`, `annotation`
+    `learning_factory(run_dir, policy, robot, task, learning, seed, resume)` the learner of `--learn`, `annotation`
     the page through which a person steps in while it learns."""
     sp = sub.add_parser("deploy", help="run an exported policy on the cobot, or --dry-run it against the simulated bus")
     sp.add_argument("--policy", required=True, help="exported policy file (.npz) from `mrguide train`")
@@ -211,7 +211,7 @@ def _cell_learner(args: argparse.Namespace, dcfg, policy, spec, task, seed: int)
         return None
     if args.cycles is None:
         raise InputError("--learn needs --cycles: the cell learns over production cycles")
-    return args.learning_factory(Path(args.learn), policy, spec, task, dcfg.learning.exploration, seed, args.resume)
+    return args.learning_factory(Path(args.learn), policy, spec, task, dcfg.learning, seed, args.resume)
 
 
 def _annotation_page(args: argparse.Namespace, learner: CellLearning | None, seed: int) -> Any:

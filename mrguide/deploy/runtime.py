@@ -253,6 +253,8 @@ class Runtime:
         try:
             outcome = self._decisions(goal, index, report)
             report.outcome = outcome
+            if self.learning is not None:
+                self.learning.episode_end(index, outcome, self.log.write)
             self.streamer.brake()
             self._settle()
             if outcome is not Outcome.SUCCESS:

@@ -25,7 +25,7 @@ import numpy as np
 import torch
 
 from mrguide.config import from_dict
-from mrguide.deploy.cell_learning import LearningActor, PolicyVersions, Transition, TransitionTap
+from mrguide.deploy.cell_learning import LearningActor, LearningConfig, PolicyVersions, Transition, TransitionTap
 from mrguide.deploy.policy import ExportedPolicy
 from mrguide.errors import InputError
 from mrguide.policies.checkpoint import read_checkpoint
@@ -75,11 +75,11 @@ class CellLearner:
         policy: ExportedPolicy,
         spec: RobotSpec,
         task: TaskConfig,
-        exploration: float,
+        learning: LearningConfig,
         seed: int,
         resume: bool,
     ):
-        """`exploration`: the std of the noise on the cell's actions ([deploy.learning]); `seed` draws it."""
+        """`learning`: [deploy.learning] (the noise on the cell's actions, drawn from `seed`; the versions' trial)."""
         self.out = run_dir / ON_CELL
         if self.out.exists() and not resume:
             raise InputError(f"{self.out} exists: --resume to go on learning from it, or remove it")
@@ -96,29 +96,34 @@ class CellLearner:
         self.episodes = 0
         saved = self.out / STATE
         try:
-            self._load(saved if resume and saved.exists() else None, state, run.train.seed)
+            gate = self._load(saved if resume and saved.exists() else None, state, run.train.seed)
+            kept = int(gate.get("kept_version", 0))
+            first = ExportedPolicy.load(self.out / f"policy-v{kept}.npz", spec, task) if kept else policy
         except BaseException:
             self.learner.close()
             raise
-        start = self._export() if self.learner.version else None
-        first = ExportedPolicy.load(start, spec, task) if start else policy
-        versions = PolicyVersions(first, spec, task, exploration, seed)
-        versions.version = self.learner.version
+        versions = PolicyVersions(first, spec, task, learning, seed, version=kept)
+        if gate:
+            versions.gate.restore(gate)
+        self._offered = kept
         self._rows: list[Transition] = []
         self.actor = LearningActor(versions, TransitionTap(self._rows.append), self.between_episodes)
+        self._offer_newest()  # on --resume, the version the learner had
 
-    def _load(self, saved: Path | None, training: dict, seed: int) -> None:
+    def _load(self, saved: Path | None, training: dict, seed: int) -> dict:
         """The learner from its on-cell state (`saved`), else from the training run's checkpoint (its minibatches
-        drawn from `seed`'s stream of its own)."""
+        drawn from `seed`'s stream of its own); the versions' gate as saved ({} for a new session)."""
+        gate: dict = {}
         if saved is not None:
             state = torch.load(saved, weights_only=False)
-            self.counters.step = state["step"]
+            self.counters.step, gate = state["step"], state.get("gate", {})
         else:
             rng = np.random.default_rng([seed, ON_CELL_STREAM]).bit_generator.state
             own: dict[str, Any] = {"seen_step": self.counters.step, "owed": 0, "version": 0, "calls": 0}
             own |= {"update_s": 0.0, "last_ratio": 0.0, "rng": rng, "torch_rng": torch.get_rng_state()}
             state = {k: training[k] for k in ("agent", "agent_pool", "expert_pool")} | {"learner": own}
         self.learner.load(state)
+        return gate
 
     def between_episodes(self) -> None:
         """Hand the learner the last episode's transitions, take in its newest weights as a policy version."""
@@ -136,10 +141,15 @@ class CellLearner:
             log.error("on-cell learning stopped, the cell acts on with policy version %d: %s", self.version, exc)
             return
         self.episodes += 1
-        if self.learner.version > self.actor.versions.version:
-            self.actor.versions.offer(self.learner.version, self._export())
+        self._offer_newest()
         if self.episodes % CHECKPOINT_EPISODES == 0:
             self.save()
+
+    def _offer_newest(self) -> None:
+        """The learner's newest version, exported as a policy file and offered to the cell (once per version)."""
+        if self.learner.version > self._offered:
+            self._offered = self.learner.version
+            self.actor.versions.offer(self.learner.version, self._export())
 
     @property
     def version(self) -> int:
@@ -155,13 +165,17 @@ class CellLearner:
         """For the progress line and the run log: the version acted with, the learner's updates, whether it is lost,
         the interventions (episodes a person's expert played, and those asked for that the policy played)."""
         counts = self.actor.counts.as_dict()
-        return {"version": self.version, "updates": self.learner.agent.updates, "lost": self.lost, **counts}
+        gate = self.actor.versions.gate
+        versions = {"version": self.version, "kept_version": self.actor.versions.kept_version}
+        tried = {"versions_kept": gate.kept_count, "versions_dropped": gate.dropped_count}
+        return versions | tried | {"updates": self.learner.agent.updates, "lost": self.lost, **counts}
 
     def save(self) -> None:
         """The learner's state, atomically (`--resume` goes on from it); nothing if the learner is lost."""
         if self.lost is not None:
             return
-        state = self.learner.state() | {"step": self.counters.step}
+        gate = self.actor.versions.gate.state() | {"kept_version": self.actor.versions.kept_version}
+        state = self.learner.state() | {"step": self.counters.step, "gate": gate}
         tmp = self.out / (STATE + ".tmp")
         torch.save(state, tmp)
         os.replace(tmp, self.out / STATE)

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mrguide.deploy.cell_learning import LearningActor, PolicyVersions, Transition, TransitionTap
+from mrguide.deploy.cell_learning import LearningActor, LearningConfig, PolicyVersions, Transition, TransitionTap
 from mrguide.deploy.interventions import CellStart
 from mrguide.deploy.policy import ExportedPolicy
 from mrguide.deploy.runlog import RunLog, read_log
@@ -57,7 +57,7 @@ def test_a_newer_policy_is_taken_in_only_when_it_passes_the_checks(tmp_path):
     spec, task = load_robot(), TaskConfig(horizon=8)
     first = ExportedPolicy.load(_policy_file(tmp_path / "v0.npz", 0, task), spec, task)
     changes = []
-    versions = PolicyVersions(first, spec, task, on_change=lambda *a: changes.append(a))
+    versions = PolicyVersions(first, spec, task, LearningConfig(trial=0), on_change=lambda *a: changes.append(a))
     obs = np.array([0.5, 0.0, 0.3, -1.0, 0.0, 0.5, -0.1, 0.025, 0.4, 0.2, 0.025])
     versions.offer(2, _policy_file(tmp_path / "v2.npz", 2, task))
     versions.offer(1, _policy_file(tmp_path / "v1.npz", 1, task))  # older than what was offered: ignored
@@ -70,6 +70,31 @@ def test_a_newer_policy_is_taken_in_only_when_it_passes_the_checks(tmp_path):
     assert versions.take_newest() == 2 and "v3.npz" in changes[-1][2]  # refused, said, the old one acts on
     versions.offer(4, _policy_file(tmp_path / "v4.npz", 4, task, period=0.2))
     assert versions.take_newest() == 2 and "decision period" in changes[-1][2]
+
+
+def test_a_newer_version_is_kept_only_after_its_trial_and_a_failure_brings_back_the_kept_one(tmp_path):
+    spec, task = load_robot(), TaskConfig(horizon=8)
+    files = {v: _policy_file(tmp_path / f"v{v}.npz", v, task) for v in range(5)}
+    obs = np.array([0.5, 0.0, 0.3, -1.0, 0.0, 0.5, -0.1, 0.025, 0.4, 0.2, 0.025])
+    first = ExportedPolicy.load(files[0], spec, task)
+    versions = PolicyVersions(first, spec, task, LearningConfig(trial=3))
+    versions.offer(1, files[1])
+    assert versions.take_newest() == 1 and versions.gate.trying and versions.kept_version == 0
+    versions.offer(2, files[2])
+    for outcome in (Outcome.SUCCESS, Outcome.POSE_LOST, Outcome.SUCCESS):  # the supervisor's end judges nothing
+        assert versions.episode_end(outcome) is None and versions.take_newest() == 1  # no newer one mid-trial
+    assert versions.episode_end(Outcome.SUCCESS) == "kept" and versions.kept_version == 1
+    assert versions.take_newest() == 2  # the next try at once after a version kept
+    assert versions.episode_end(Outcome.DROPPED) == "dropped" and versions.version == 1
+    assert versions(obs).tolist() == ExportedPolicy.load(files[1], spec, task)(obs).tolist()  # the kept one acts
+    versions.offer(2, files[2])
+    assert [versions.take_newest() for _ in range(4)] == [1, 1, 1, 1]  # `trial` episodes; v2 is never tried again
+    versions.offer(3, files[3])
+    assert versions.take_newest() == 3
+    versions.offer(4, files[4])
+    assert versions.episode_end(Outcome.NO_GRASP) == "dropped"
+    assert [versions.take_newest() for _ in range(7)] == [1] * 6 + [4]  # twice as long after two dropped in a row
+    assert versions.gate.state() == {"wait": 0, "backoff": 12, "kept": 1, "dropped": 2}
 
 
 def test_the_runtime_as_actor_hands_over_every_decision_it_carried_out(tmp_path):
@@ -88,6 +113,8 @@ def test_the_runtime_as_actor_hands_over_every_decision_it_carried_out(tmp_path)
     assert report.outcome is Outcome.NO_GRASP  # the cup never seals on this cobot
     records = read_log(tmp_path / "log.jsonl")
     assert [r["version"] for r in records if r["kind"] == "policy_version"] == [1]
+    trials = [r for r in records if r["kind"] == "policy_trial"]
+    assert [(t["version"], t["verdict"], t["acting"]) for t in trials] == [(1, "dropped", 0)]  # no seal: v0 again
     decisions = [r for r in records if r["kind"] == "decision"]
     acted = [r for r in decisions if "action" in r]
     assert len(got) == len(acted) == task.horizon
@@ -102,10 +129,10 @@ def test_exploration_adds_seeded_noise_inside_the_action_box(tmp_path):
     spec, task = load_robot(), TaskConfig(horizon=8)
     policy = ExportedPolicy.load(_policy_file(tmp_path / "p.npz", 0, task), spec, task)
     obs = np.array([0.5, 0.0, 0.3, -1.0, 0.0, 0.5, -0.1, 0.025, 0.4, 0.2, 0.025])
-    a, b = (PolicyVersions(policy, spec, task, exploration=0.5, seed=3) for _ in range(2))
+    a, b = (PolicyVersions(policy, spec, task, LearningConfig(exploration=0.1), seed=3) for _ in range(2))
     noisy = np.array([a(obs) for _ in range(50)])
     assert np.array_equal(noisy, np.array([b(obs) for _ in range(50)]))  # seeded
-    assert np.all(np.abs(noisy) <= 1.0) and np.std(noisy[:, 0]) > 0.1
+    assert np.all(np.abs(noisy) <= 1.0) and np.std(noisy[:, 0]) > 0.05
     assert np.array_equal(PolicyVersions(policy, spec, task)(obs), policy(obs))  # none by default
 
 

@@ -10,6 +10,7 @@ import time
 import numpy as np
 import pytest
 
+from mrguide.deploy.cell_learning import LearningConfig
 from mrguide.deploy.policy import ExportedPolicy
 from mrguide.errors import InputError
 from mrguide.policies.cell_learner import ON_CELL, STATE, CellLearner
@@ -38,9 +39,11 @@ def trained(tmp_path_factory):
         tr.close()
 
 
-def _learner(run_dir, task, resume=False) -> CellLearner:
-    spec = load_robot()
-    return CellLearner(run_dir, ExportedPolicy.load(run_dir / "policy.npz", spec, task), spec, task, 0.0, 0, resume)
+def _learner(run_dir, task, resume=False, trial: int = 0) -> CellLearner:
+    """The learner of `run_dir`; each newer version taken in at once unless `trial`."""
+    spec, learning = load_robot(), LearningConfig(trial=trial)
+    policy = ExportedPolicy.load(run_dir / "policy.npz", spec, task)
+    return CellLearner(run_dir, policy, spec, task, learning, 0, resume)
 
 
 def _episode(learner: CellLearner, rng: np.random.Generator, decisions: int = 20) -> None:
@@ -104,3 +107,26 @@ def test_a_learner_that_dies_leaves_the_cell_acting_with_its_last_version(traine
         assert learner.version == 0 and learner.status()["lost"]
     finally:
         learner.close()
+
+
+def test_a_resumed_session_acts_with_the_version_its_trials_kept(trained, tmp_path):
+    run_dir = tmp_path / "copy"
+    run_dir.mkdir()
+    for name in ("checkpoint.pt", "policy.npz"):
+        (run_dir / name).write_bytes((trained[0] / name).read_bytes())
+    learner = _learner(run_dir, trained[1], trial=2)
+    try:
+        _until_a_version(learner, np.random.default_rng(2))
+        tried = learner.version
+        assert learner.actor.versions.gate.trying and learner.actor.versions.kept_version == 0
+        for _ in range(2):
+            learner.actor.episode_end(0, Outcome.SUCCESS, lambda kind, **fields: None)
+        assert learner.status()["kept_version"] == tried and learner.status()["versions_kept"] == 1
+    finally:
+        learner.close()
+    again = _learner(run_dir, trained[1], resume=True, trial=2)
+    try:
+        assert again.version == again.actor.versions.kept_version == tried  # from its own policy file
+        assert again.actor.versions.gate.state() == learner.actor.versions.gate.state()
+    finally:
+        again.close()
