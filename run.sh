@@ -88,11 +88,12 @@ case "$cmd" in
     # stops (`loadscope`: each module's tests on one worker, so a module fixture such as the robot venv is built
     # once). When every test the second pass failed had a simulated cell run behind the clock (a machine too busy for
     # real-time dry runs; tests/conftest.py lists the failures), those run again, alone; a failure on time fails.
+    # Each pass lists its 15 slowest tests: where the CI's time goes.
     rc=0
-    "$VENV/bin/python" -m pytest -q -n 2 -m "not slow and not realtime" || rc=$?
+    "$VENV/bin/python" -m pytest -q -n 2 --durations=15 -m "not slow and not realtime" || rc=$?
     failed=$(mktemp)
     rt=0
-    MRGUIDE_FAILED_REALTIME=$failed "$VENV/bin/python" -m pytest -q -n 2 --dist loadscope -m "not slow and realtime" || rt=$?
+    MRGUIDE_FAILED_REALTIME=$failed "$VENV/bin/python" -m pytest -q -n 2 --dist loadscope --durations=15 -m "not slow and realtime" || rt=$?
     if [ "$rt" = 1 ] && [ -s "$failed" ] && ! grep -qv '^behind ' "$failed"; then
       mapfile -t again < <(cut -d' ' -f2- "$failed" | sort -u)
       echo "[run.sh] ${#again[@]} realtime test(s) failed while a simulated cell ran behind the clock; again, alone:" >&2

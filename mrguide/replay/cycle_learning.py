@@ -7,8 +7,9 @@ Each log (a `deploy --dry-run --cycles` run log, with `--learn` or without) give
 part truly lay at its goal afterwards (the `scored` record a dry run writes; a robot's log has none and is refused),
 its attempts, the cell's wall clock so far and the policy version of its first attempt. DIR gets `cycles.csv` (every
 cycle of every log), `learning.md` (per log: cycles, parts at their goal, the same over the last `--last` cycles,
-and the first cycle and cell minutes at which the trailing `--last` reached 98 %) and `learning.png` (the share at
-the goal over the trailing `--window` cycles, against the cell's minutes).
+the first cycle and cell minutes at which the trailing `--last` reached 98 %, the versions tried and kept or dropped
+(`policy_trial` records; none in a frozen run or one that took each version at once)) and `learning.png` (the share
+at the goal over the trailing `--window` cycles, against the cell's minutes).
 """
 
 from __future__ import annotations
@@ -60,6 +61,12 @@ def cycles(path: Path) -> list[Cycle]:
     return out
 
 
+def trials(path: Path) -> str:
+    """The versions tried on the cell, kept and dropped ("kept / dropped"; "—" for a log without trials)."""
+    verdicts = [r["verdict"] for r in read_log(path) if r.get("kind") == "policy_trial"]
+    return f"{verdicts.count('kept')} / {verdicts.count('dropped')}" if verdicts else "—"
+
+
 def trailing(rows: list[Cycle], n: int) -> np.ndarray:
     """The share at the goal over the trailing `n` cycles (fewer at the start), per cycle."""
     hits = np.array([c.at_goal for c in rows], dtype=float)
@@ -68,7 +75,7 @@ def trailing(rows: list[Cycle], n: int) -> np.ndarray:
     return (sums - np.concatenate([np.zeros(n), sums[:-n]])[: len(sums)]) / counts
 
 
-def summary_line(name: str, rows: list[Cycle], last: int) -> str:
+def summary_line(name: str, rows: list[Cycle], last: int, tried: str = "—") -> str:
     """One row of learning.md."""
     placed = sum(c.at_goal for c in rows)
     tail = rows[-last:]
@@ -78,7 +85,7 @@ def summary_line(name: str, rows: list[Cycle], last: int) -> str:
     tail_placed = sum(c.at_goal for c in tail)
     return (
         f"| {name} | {len(rows)} | {placed} ({placed / len(rows):.0%}) | {tail_placed} / {len(tail)} | {when} "
-        f"| {rows[-1].minutes:.1f} | {rows[-1].version} |"
+        f"| {rows[-1].minutes:.1f} | {rows[-1].version} | {tried} |"
     )
 
 
@@ -92,8 +99,8 @@ def write(logs: list[Path], out: Path, window: int, last: int) -> str:
     out.mkdir(parents=True, exist_ok=True)
     table = [
         f"| run log | cycles | at the goal | over the last {last} | trailing {last} ≥ {TARGET:.0%} from | cell minutes "
-        "| last version |",
-        "| --- | --- | --- | --- | --- | --- | --- |",
+        "| last version | versions kept / dropped |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
     buf = io.StringIO()
     writer = csv.writer(buf)
@@ -101,7 +108,7 @@ def write(logs: list[Path], out: Path, window: int, last: int) -> str:
     fig, ax = plt.subplots(figsize=(7, 4))
     for path in logs:
         rows = cycles(path)
-        table.append(summary_line(path.name, rows, last))
+        table.append(summary_line(path.name, rows, last, trials(path)))
         writer.writerows([path.name, c.cycle, int(c.at_goal), c.attempts, f"{c.minutes:.3f}", c.version] for c in rows)
         ax.plot([c.minutes for c in rows], trailing(rows, window), label=path.name)
     ax.set_xlabel("cell time (min)")

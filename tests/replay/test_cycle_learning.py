@@ -4,7 +4,7 @@ wrote; a log without scores is refused with its name."""
 from __future__ import annotations
 
 from mrguide.deploy.runlog import RunLog
-from mrguide.replay.cycle_learning import cycles, main, trailing
+from mrguide.replay.cycle_learning import cycles, main, trailing, trials
 
 
 def _log(path, results: list[tuple[bool, int]]) -> None:
@@ -29,8 +29,16 @@ def test_the_curve_counts_parts_at_their_goal_against_the_cells_minutes(tmp_path
     assert trailing(rows, 20)[-1] == 1.0 and trailing(rows, 20)[4] == 0.0
     assert main([str(tmp_path / "learn.jsonl"), "--out", str(tmp_path / "out"), "--last", "50"]) == 0
     table = (tmp_path / "out" / "learning.md").read_text()
-    assert "| 95 (95%) | 50 / 50 | cycle 53, 5.4 min |" in table  # 49 of the 50 up to cycle 53: 98 %
+    assert "| 95 (95%) | 50 / 50 | cycle 53, 5.4 min | 10.0 | 104 | — |" in table  # 49 of 50 up to cycle 53: 98 %
     assert (tmp_path / "out" / "learning.png").stat().st_size > 0
+
+
+def test_the_table_counts_the_versions_kept_and_dropped(tmp_path):
+    _log(tmp_path / "learn.jsonl", [(True, 1)] * 3)
+    with RunLog(tmp_path / "learn.jsonl", {"command": "deploy"}) as log:  # appends
+        for verdict in ("dropped", "kept", "dropped", "dropped"):
+            log.write("policy_trial", episode=0, version=1, verdict=verdict, acting=0)
+    assert trials(tmp_path / "learn.jsonl") == "1 / 3"
 
 
 def test_a_log_without_scores_is_refused(tmp_path, capsys):
