@@ -7,7 +7,8 @@ Each log (a `deploy --dry-run --cycles` run log, with `--learn` or without) give
 part truly lay at its goal afterwards (the `scored` record a dry run writes; a robot's log has none and is refused),
 its attempts, the cell's wall clock so far and the policy version of its first attempt. DIR gets `cycles.csv` (every
 cycle of every log), `learning.md` (per log: cycles, parts at their goal, the same over the last `--last` cycles,
-the first cycle and cell minutes at which the trailing `--last` reached 98 %, the versions tried and kept or dropped
+the cycles placed at their first attempt (it ended in success) over the last `--last`, the first cycle and cell
+minutes at which the trailing `--last` reached 98 %, the versions tried and kept or dropped
 (`policy_trial` records; none in a frozen run or one that took each version at once)) and `learning.png` (the share
 at the goal over the trailing `--window` cycles, against the cell's minutes).
 """
@@ -35,6 +36,7 @@ class Cycle:
     attempts: int
     minutes: float  # the cell's wall clock at the cycle's end, from the log's first cycle
     version: int  # the policy version of the cycle's first attempt (0: the file given; no attempt: the last before)
+    first_try: bool = False  # its first attempt ended in success (the task model on the cell's sensed state)
 
 
 def cycles(path: Path) -> list[Cycle]:
@@ -56,7 +58,8 @@ def cycles(path: Path) -> list[Cycle]:
     for r in ends:
         clock += float(r["cycle_s"])
         version = versions[min(episode, len(versions) - 1)] if versions else 0  # a cycle with no attempt: the last
-        out.append(Cycle(r["cycle"], scored.get(r["cycle"], False), len(r["outcomes"]), clock / 60.0, version))
+        first = r["outcomes"][:1] == ["success"]
+        out.append(Cycle(r["cycle"], scored.get(r["cycle"], False), len(r["outcomes"]), clock / 60.0, version, first))
         episode += len(r["outcomes"])
     return out
 
@@ -82,10 +85,10 @@ def summary_line(name: str, rows: list[Cycle], last: int, tried: str = "—") ->
     share = trailing(rows, last)
     reached = [i for i in range(last - 1, len(rows)) if share[i] >= TARGET]
     when = f"cycle {rows[reached[0]].cycle}, {rows[reached[0]].minutes:.1f} min" if reached else "not reached"
-    tail_placed = sum(c.at_goal for c in tail)
+    tail_placed, tail_first = sum(c.at_goal for c in tail), sum(c.first_try for c in tail)
     return (
-        f"| {name} | {len(rows)} | {placed} ({placed / len(rows):.0%}) | {tail_placed} / {len(tail)} | {when} "
-        f"| {rows[-1].minutes:.1f} | {rows[-1].version} | {tried} |"
+        f"| {name} | {len(rows)} | {placed} ({placed / len(rows):.0%}) | {tail_placed} / {len(tail)} "
+        f"| {tail_first} / {len(tail)} | {when} | {rows[-1].minutes:.1f} | {rows[-1].version} | {tried} |"
     )
 
 
@@ -98,9 +101,9 @@ def write(logs: list[Path], out: Path, window: int, last: int) -> str:
 
     out.mkdir(parents=True, exist_ok=True)
     table = [
-        f"| run log | cycles | at the goal | over the last {last} | trailing {last} ≥ {TARGET:.0%} from | cell minutes "
-        "| last version | versions kept / dropped |",
-        "| --- | --- | --- | --- | --- | --- | --- | --- |",
+        f"| run log | cycles | at the goal | over the last {last} | at the first attempt, last {last} "
+        f"| trailing {last} ≥ {TARGET:.0%} from | cell minutes | last version | versions kept / dropped |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
     buf = io.StringIO()
     writer = csv.writer(buf)

@@ -26,10 +26,11 @@ def test_the_curve_counts_parts_at_their_goal_against_the_cells_minutes(tmp_path
     rows = cycles(tmp_path / "learn.jsonl")
     assert len(rows) == 100 and rows[-1].minutes == 10.0
     assert [r.version for r in rows[:7]] == [0, 2, 4, 6, 8, 10, 11]  # each cycle's first attempt
+    assert [r.first_try for r in rows[4:6]] == [False, True]  # a timeout then a miss; a success at once
     assert trailing(rows, 20)[-1] == 1.0 and trailing(rows, 20)[4] == 0.0
     assert main([str(tmp_path / "learn.jsonl"), "--out", str(tmp_path / "out"), "--last", "50"]) == 0
     table = (tmp_path / "out" / "learning.md").read_text()
-    assert "| 95 (95%) | 50 / 50 | cycle 53, 5.4 min | 10.0 | 104 | — |" in table  # 49 of 50 up to cycle 53: 98 %
+    assert "| 95 (95%) | 50 / 50 | 50 / 50 | cycle 53, 5.4 min | 10.0 | 104 | — |" in table  # 49 of 50 to cycle 53
     assert (tmp_path / "out" / "learning.png").stat().st_size > 0
 
 
