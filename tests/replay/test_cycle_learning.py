@@ -67,6 +67,6 @@ def test_the_committed_three_seed_table_is_what_its_logs_say(tmp_path):
     from pathlib import Path
 
     results = Path(__file__).parents[2] / "docs" / "results" / "on-cell-seeds"
-    logs = [str(results / f"{run}-seed{s}.jsonl.gz") for run in ("frozen", "learn") for s in range(3)]
+    logs = [str(results / f"{run}-seed{s}.jsonl.gz") for run in ("frozen", "learn", "learn0") for s in range(3)]
     assert main([*logs, "--out", str(tmp_path)]) == 0
     assert (tmp_path / "learning.md").read_text() == (results / "learning.md").read_text()
