@@ -166,8 +166,6 @@ class PolicyVersions:
             offered = self._offered
         if self.gate.trying or not self.gate.may_try() or offered is None or offered[0] <= self._tried:
             return self.version
-        with self._lock:
-            self._offered = None if self._offered == offered else self._offered
         version, path = offered
         self._tried = version
         try:
